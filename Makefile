@@ -1,0 +1,41 @@
+# Every target builds its own virtual environment in .venv; nothing relies on what is installed.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+
+.PHONY: install demo test test-all bench lint check-install clean
+
+install: $(STAMP)
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+demo: install
+	$(VENV)/bin/rkhp conditions --order 5 --degenerate
+	$(VENV)/bin/rkhp trees --order 8 --degenerate --count
+
+test: install
+	$(PY) -m pytest -m "not slow" -q -p no:cacheprovider
+
+test-all: install
+	$(PY) -m pytest -q -p no:cacheprovider
+
+bench: install
+	-$(PY) -m pip install --quiet -e '.[bench]'
+	for b in benchmarks/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
+
+lint: install
+	$(VENV)/bin/ruff check .
+
+# Installs the project non-editably into a throw-away environment and runs the console script.
+check-install:
+	rm -rf /tmp/rkhp-check-install && $(PYTHON) -m venv /tmp/rkhp-check-install
+	/tmp/rkhp-check-install/bin/pip install --quiet .
+	cd /tmp && /tmp/rkhp-check-install/bin/rkhp conditions --order 3 && /tmp/rkhp-check-install/bin/python -c "import rkhp, rkhp_cli, importlib.util as u; assert u.find_spec('cli') is None"
+
+clean:
+	rm -rf $(VENV) build *.egg-info

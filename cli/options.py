@@ -1,0 +1,57 @@
+"""Options and helpers shared by the command modules (click only; no library imports here)."""
+
+from __future__ import annotations
+
+import click
+
+
+def format_option(*choices: str, default: str = "table"):
+    """The `--format` option every command has."""
+    return click.option(
+        "--format", "fmt", type=click.Choice(choices), default=default, show_default=True,
+        help="Output format: rich table for people, json with stable keys for programs.",
+    )
+
+
+def emit_json(obj) -> None:
+    """Write a JSON document to stdout (stable key order as given)."""
+    import json
+
+    click.echo(json.dumps(obj, indent=2, ensure_ascii=False))
+
+
+def console():
+    """A rich console on stdout (imported lazily)."""
+    from rich.console import Console
+
+    return Console(highlight=False)
+
+
+def progress(enabled: bool):
+    """A rich progress bar when stderr is a terminal and `enabled`; else a silent stand-in."""
+    import sys
+
+    if enabled and sys.stderr.isatty():
+        from rich.console import Console
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+        return Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                        TimeElapsedColumn(), console=Console(stderr=True), transient=True)
+    return _SilentProgress()
+
+
+class _SilentProgress:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def add_task(self, *args, **kwargs):
+        return 0
+
+    def update(self, *args, **kwargs):
+        pass
+
+    def advance(self, *args, **kwargs):
+        pass

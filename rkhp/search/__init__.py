@@ -1,0 +1,1 @@
+"""Tableau search: residual systems, multistart, polishing, recognition, proofs (issue 4)."""

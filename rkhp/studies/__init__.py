@@ -1,0 +1,1 @@
+"""Studies: references, convergence, work-precision, stress (issue 6)."""

@@ -1,0 +1,1 @@
+"""Poisson systems and their birealisations (NOTES §4, paper §2)."""

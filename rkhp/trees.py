@@ -1,0 +1,331 @@
+"""Rooted, non-planar (Butcher) trees: the value, bracket notation, sigma, gamma, enumeration.
+
+Paper §3 (trees T, the grading |t|, the coefficient e(t) of eq. (e)) and Theorem "superconvergence"
+(the subset T_0 of trees with no vertex whose only child is a leaf). Conventions: NOTES §1.
+
+A :class:`Tree` is immutable and hashable; equality is isomorphism. Its canonical identity is
+``key``: the canonical level sequence (root at level 1, children in decreasing key order), stored as
+bytes so that comparisons, hashing and concatenation run in C. Trees are ordered by decreasing
+key, the Beyer–Hedetniemi order, which is the order of the paper's Table 1 (tallest tree first).
+
+Enumeration builds every tree of order n as ``b[c1, *rest]`` from its largest child ``c1`` and the
+tree ``r = b[rest]`` (all children of r at most c1): sigma, gamma and the key follow in O(1) from
+those of c1 and r. T_0 is built the same way from T_0 trees directly (NOTES §1), never by filtering T.
+"""
+
+from __future__ import annotations
+
+from fractions import Fraction
+import gc
+from bisect import bisect_right
+from functools import lru_cache
+from math import factorial
+from operator import itemgetter
+
+from .errors import InputError
+
+#: Largest order that enumeration accepts (order 20 has 12,826,228 trees).
+MAX_ENUMERATION_ORDER = 20
+#: Largest order that counting accepts.
+MAX_COUNT_ORDER = 200
+
+_SHIFT = bytes([0] + [min(i + 1, 255) for i in range(1, 256)])
+
+
+class Tree(tuple):
+    """A rooted non-planar tree (paper §3), with its order, symmetry and density.
+
+    ``Tree(children)`` builds b[children...] in canonical form; :func:`parse_tree` reads the
+    bracket notation. The value is a tuple underneath (fast to build during enumeration), but only
+    the named attributes are its interface:
+
+    Attributes:
+        children: the subtrees at the root, in canonical (decreasing key) order.
+        order: |t|, the number of vertices.
+        sigma: the number of automorphisms, sigma(b[t1^m1..tk^mk]) = prod mi! sigma(ti)^mi.
+        gamma: the density, gamma(t) = |t| prod gamma(ti); the order condition is a(t) = 1/gamma.
+        key: the canonical level sequence as bytes (equality and ordering).
+    """
+
+    __slots__ = ()
+
+    children = property(itemgetter(0))
+    order = property(itemgetter(1))
+    sigma = property(itemgetter(2))
+    gamma = property(itemgetter(3))
+    key = property(itemgetter(4))
+    _lead = property(itemgetter(5))  # how many children equal the first one
+
+    def __new__(cls, children=()):
+        return from_children(children)
+
+    def __eq__(self, other):
+        return isinstance(other, Tree) and self[4] == other[4]
+
+    def __ne__(self, other):
+        return not self == other
+
+    def __hash__(self):
+        return hash(self[4])
+
+    # canonical order: t < u when t comes later in the Beyer–Hedetniemi order
+    def __lt__(self, other):
+        return self[4] < other[4]
+
+    def __le__(self, other):
+        return self[4] <= other[4]
+
+    def __gt__(self, other):
+        return self[4] > other[4]
+
+    def __ge__(self, other):
+        return self[4] >= other[4]
+
+    def __repr__(self):
+        return f"Tree({format_tree(self)!r})"
+
+    def __str__(self):
+        return format_tree(self)
+
+    def __reduce__(self):
+        return (parse_tree, (format_tree(self),))
+
+    @property
+    def e(self) -> Fraction:
+        """e(t) = 1/gamma(t), the coefficient of the exact flow (paper eq. (e))."""
+        return Fraction(1, self.gamma)
+
+    @property
+    def multiplicity(self) -> int:
+        """Butcher's alpha(t) = |t|!/(sigma(t) gamma(t)): the number of monotone labellings."""
+        return factorial(self.order) // (self.sigma * self.gamma)
+
+    @property
+    def is_leaf(self) -> bool:
+        return self.order == 1
+
+    @property
+    def in_t0(self) -> bool:
+        """Whether t is in T_0: no vertex has a leaf as its only child (paper, Thm. superconvergence)."""
+        return in_t0(self)
+
+    def latex(self) -> str:
+        """The paper's LaTeX form, e.g. ``\\forest{b[b,b[b]]}``."""
+        return "\\forest{" + format_tree(self) + "}"
+
+
+_new_tuple = tuple.__new__
+
+
+def _make(children: tuple[Tree, ...], order: int, sigma: int, gamma: int, key: bytes, lead: int) -> Tree:
+    return _new_tuple(Tree, (children, order, sigma, gamma, key, lead))
+
+
+#: The single vertex b.
+LEAF = _make((), 1, 1, 1, b"\x01", 0)
+
+
+def from_children(children) -> Tree:
+    """The tree b[children...] (any order of the children; the result is canonical)."""
+    kids = tuple(sorted(children, key=_key_of, reverse=True))
+    if not kids:
+        return LEAF
+    order = 1 + sum(c.order for c in kids)
+    gamma = order
+    sigma = 1
+    run = 0
+    for i, c in enumerate(kids):
+        gamma *= c.gamma
+        sigma *= c.sigma
+        run = run + 1 if i and kids[i - 1].key == c.key else 1
+        sigma *= run
+    lead = 1
+    while lead < len(kids) and kids[lead].key == kids[0].key:
+        lead += 1
+    key = b"\x01" + b"".join(c.key.translate(_SHIFT) for c in kids)
+    return _make(kids, order, sigma, gamma, key, lead)
+
+
+def _key_of(t: Tree) -> bytes:
+    return t.key
+
+
+def graft_child(c1: Tree, r: Tree) -> Tree:
+    """b[c1, *r.children] when c1 is at least every child of r (O(1) bookkeeping; no sorting)."""
+    order = c1.order + r.order
+    if r.children and r.children[0].key == c1.key:
+        lead = r._lead + 1
+    else:
+        lead = 1
+    sigma = r.sigma * c1.sigma * lead
+    gamma = r.gamma // r.order * order * c1.gamma
+    key = b"\x01" + c1.key.translate(_SHIFT) + r.key[1:]
+    return _make((c1,) + r.children, order, sigma, gamma, key, lead)
+
+
+# ----------------------------------------------------------------------------- notation
+
+
+def format_tree(t: Tree) -> str:
+    """Bracket notation with children in increasing order, as the paper writes ``b[b,b[b]]``."""
+    if not t.children:
+        return "b"
+    return "b[" + ",".join(format_tree(c) for c in reversed(t.children)) + "]"
+
+
+def parse_tree(text: str) -> Tree:
+    """Parse the paper's bracket notation: ``b``, ``b[t1,...,tn]``; any child order, spaces allowed.
+
+    Also accepts the LaTeX form ``\\forest{...}``. Raises InputError naming the problem.
+    """
+    if not isinstance(text, str):
+        raise InputError(f"a tree must be a string in bracket notation, got {type(text).__name__}")
+    s = "".join(text.split())
+    if s.startswith("\\forest{") and s.endswith("}"):
+        s = s[len("\\forest{"):-1]
+    if not s:
+        raise InputError("empty tree string (expected bracket notation such as b[b,b[b]])")
+    pos = 0
+
+    def fail(msg: str):
+        raise InputError(f"malformed tree {text.strip()!r}: {msg} at position {pos}")
+
+    def node() -> Tree:
+        nonlocal pos
+        if pos >= len(s) or s[pos] != "b":
+            fail("expected 'b'")
+        pos += 1
+        if pos < len(s) and s[pos] == "[":
+            pos += 1
+            kids = [node()]
+            while pos < len(s) and s[pos] == ",":
+                pos += 1
+                kids.append(node())
+            if pos >= len(s) or s[pos] != "]":
+                fail("expected ',' or ']'")
+            pos += 1
+            return from_children(kids)
+        return LEAF
+
+    t = node()
+    if pos != len(s):
+        fail("unexpected text after the tree")
+    return t
+
+
+def in_t0(t: Tree) -> bool:
+    """No vertex, root included, has a leaf as its only child (NOTES §1)."""
+    if len(t.children) == 1 and t.children[0].order == 1:
+        return False
+    return all(in_t0(c) for c in t.children)
+
+
+# ----------------------------------------------------------------------------- enumeration
+
+
+def check_order(n, maximum: int = MAX_ENUMERATION_ORDER, what: str = "order") -> int:
+    """Validate an order argument: an integer 1 <= n <= maximum."""
+    if isinstance(n, bool) or not isinstance(n, int):
+        raise InputError(f"{what} must be an integer, got {n!r}")
+    if n < 1:
+        raise InputError(f"{what} must be at least 1, got {n}")
+    if n > maximum:
+        raise InputError(f"{what} {n} is above the supported maximum {maximum}")
+    return n
+
+
+@lru_cache(maxsize=4)
+def _table(max_order: int, degenerate: bool) -> tuple[tuple[Tree, ...], ...]:
+    """Trees of orders 0..max_order (index 0 empty), each order in canonical decreasing order.
+
+    The cyclic garbage collector is paused meanwhile: trees hold no cycles, and its repeated
+    scans of the growing heap would otherwise take most of the time.
+    """
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        return _build_table(max_order, degenerate)
+    finally:
+        if enabled:
+            gc.enable()
+
+
+def _build_table(max_order: int, degenerate: bool) -> tuple[tuple[Tree, ...], ...]:
+    by_order: list[list[Tree]] = [[], [LEAF]]
+    # rests[m]: trees b[M] (M a multiset of admissible children) of order m, in increasing key
+    # order, with first_keys[m] the keys of their largest children (increasing too); for T_0 these
+    # are the T_0 trees plus b[b], since b[c1, b] is in T_0 whenever c1 is.
+    rests: list[list[Tree]] = [[], [LEAF]]
+    first_keys: list[list[bytes]] = [[], [b""]]
+    shift = _SHIFT
+    make = _new_tuple
+    for n in range(2, max_order + 1):
+        smaller = sorted((t for m in range(1, n) for t in by_order[m]), key=_key_of, reverse=True)
+        out: list[Tree] = []
+        append = out.append
+        for c1 in smaller:
+            # graft_child(c1, r), inlined on the tuple fields for speed
+            c1_kids, c1_order, c1_sigma, c1_gamma, c1_key, _ = c1
+            m = n - c1_order
+            shifted = b"\x01" + c1_key.translate(shift)
+            # rests whose children are all <= c1 form a prefix of the increasing list
+            stop = bisect_right(first_keys[m], c1_key)
+            rest_m = rests[m]
+            for i in range(stop - 1, -1, -1):
+                r_kids, r_order, r_sigma, r_gamma, r_key, r_lead = rest_m[i]
+                lead = r_lead + 1 if r_kids and r_kids[0][4] == c1_key else 1
+                append(make(Tree, ((c1,) + r_kids, n, r_sigma * c1_sigma * lead,
+                                   r_gamma // r_order * n * c1_gamma, shifted + r_key[1:], lead)))
+        if degenerate and n == 2:
+            out = []  # b[b] is not in T_0
+        by_order.append(out)
+        rest = out[::-1] if not (degenerate and n == 2) else [graft_child(LEAF, LEAF)]
+        rests.append(rest)
+        first_keys.append([r.children[0].key for r in rest])
+    return tuple(tuple(x) for x in by_order)
+
+
+def trees_of_order(n: int, degenerate: bool = False) -> tuple[Tree, ...]:
+    """All trees of order exactly n in T (or T_0 when degenerate), in canonical order."""
+    check_order(n)
+    return _table(_cache_size(n), degenerate)[n]
+
+
+def trees_up_to(n: int, degenerate: bool = False) -> list[Tree]:
+    """All trees of order 1..n in T (or T_0), grouped by increasing order, canonical within."""
+    check_order(n)
+    table = _table(_cache_size(n), degenerate)
+    return [t for m in range(1, n + 1) for t in table[m]]
+
+
+def _cache_size(n: int) -> int:
+    """Round the table size up so that repeated calls with nearby orders share one table."""
+    return max(n, 8)
+
+
+# ----------------------------------------------------------------------------- counting
+
+
+@lru_cache(maxsize=8)
+def _counts(max_order: int, degenerate: bool) -> tuple[int, ...]:
+    """Counts by order 0..max_order through the multiset (Euler) transform, no trees built.
+
+    T: t_{n+1} = [x^n] prod_k (1-x^k)^{-t_k} (OEIS A000081). T_0: a tree is a root with a multiset
+    of T_0 children other than {b}, so t0_{n+1} = [x^n] MSET(T_0) - [n == 1].
+    """
+    t = [0] * (max_order + 1)
+    t[1] = 1
+    # mset[n] = [x^n] prod_k (1-x^k)^{-t_k}, via n*m_n = sum_{j=1}^n c_j m_{n-j}, c_j = sum_{d|j} d t_d
+    mset = [1] + [0] * max_order
+    c = [0] * (max_order + 1)
+    for n in range(1, max_order):
+        c[n] = sum(d * t[d] for d in range(1, n + 1) if n % d == 0)
+        mset[n] = sum(c[j] * mset[n - j] for j in range(1, n + 1)) // n
+        t[n + 1] = mset[n] - (1 if degenerate and n == 1 else 0)
+    return tuple(t)
+
+
+def count_trees(n: int, degenerate: bool = False) -> int:
+    """Number of trees of order n in T (OEIS A000081) or in T_0, without building any tree."""
+    check_order(n, MAX_COUNT_ORDER)
+    return _counts(max(n, 16), degenerate)[n]

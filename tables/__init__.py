@@ -1,0 +1,1 @@
+"""Named Butcher tableaux shipped with rkhp, one TOML file per method (schema: README, "Tableau files")."""
