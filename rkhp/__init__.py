@@ -1,0 +1,34 @@
+"""rkhp: Runge–Kutta–Hamiltonian–Poisson integrators (Busnot Laurent & Cosserat).
+
+The package imports nothing heavy on start-up: the names below are loaded on first use.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+__version__ = "0.1.0"
+
+# public name -> module that defines it (loaded lazily, PEP 562)
+_LAZY = {
+    "Tree": "rkhp.trees",
+    "parse_tree": "rkhp.trees",
+    "trees_of_order": "rkhp.trees",
+    "trees_up_to": "rkhp.trees",
+    "count_trees": "rkhp.trees",
+    "order_conditions": "rkhp.conditions",
+    "InputError": "rkhp.errors",
+    "NumericalFailure": "rkhp.errors",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'rkhp' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))

@@ -1,0 +1,56 @@
+"""The result of an integration: states, Newton counts, and a status that names any failure.
+
+A failed run keeps only the states computed before the failure (never numbers past it), and says
+at which step and time it failed and why (paper §5.2: the implicit equation alpha(x, psi(x)) = y
+may have no solution for a large step).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import NumericalFailure
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """States y_0..y_k at times t_0..t_k of one run.
+
+    Attributes:
+        times: shape (k+1,).
+        states: shape (k+1, n); for a failed run, only the steps before the failure.
+        newton_iterations: shape (k,), Newton iterations per step (zeros for explicit peers).
+        status: "ok", or a failure message naming the step, the time and the cause.
+        failed_step: the index of the step that failed, or None.
+        compile_seconds: time spent compiling (first call of a compiled kernel), apart from run time.
+        run_seconds: wall time of the integration itself.
+        method: name of the method; system: name of the system.
+        extra: free-form details (e.g. Newton tolerance used).
+    """
+
+    times: np.ndarray
+    states: np.ndarray
+    newton_iterations: np.ndarray
+    status: str = "ok"
+    failed_step: int | None = None
+    compile_seconds: float = 0.0
+    run_seconds: float = 0.0
+    method: str = ""
+    system: str = ""
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    @property
+    def final_state(self) -> np.ndarray:
+        return self.states[-1]
+
+    def raise_if_failed(self) -> Trajectory:
+        """Return self when the run succeeded, else raise NumericalFailure with the status."""
+        if not self.ok:
+            raise NumericalFailure(self.status)
+        return self
