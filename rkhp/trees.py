@@ -24,8 +24,8 @@ from operator import itemgetter
 
 from .errors import InputError
 
-#: Largest order that enumeration accepts (order 20 has 12,826,228 trees).
-MAX_ENUMERATION_ORDER = 20
+#: Largest order that enumeration accepts (order 18 has 1,721,159 trees, about 1 GB).
+MAX_ENUMERATION_ORDER = 18
 #: Largest order that counting accepts.
 MAX_COUNT_ORDER = 200
 

@@ -1,0 +1,161 @@
+"""`rkhp trees` and `rkhp conditions`: enumerate Butcher trees and print order conditions."""
+
+from __future__ import annotations
+
+import click
+
+from rkhp.conditions import order_conditions
+from rkhp.trees import MAX_COUNT_ORDER, MAX_ENUMERATION_ORDER, check_order, count_trees, trees_up_to
+
+from .options import console, emit_json, format_option
+
+FORMATS = ("table", "json", "latex", "markdown")
+
+
+def _order_option(f):
+    return click.option("--order", "-n", "order", type=int, required=True,
+                        help=f"Largest tree order N (1..{MAX_ENUMERATION_ORDER}; "
+                             f"up to {MAX_COUNT_ORDER} with --count).")(f)
+
+
+def _class_of(degenerate: bool) -> str:
+    return "degenerate" if degenerate else "general"
+
+
+@click.command()
+@_order_option
+@click.option("--degenerate", is_flag=True, help="Trees of T_0 (degenerate birealisations) instead of T.")
+@click.option("--exact-order", is_flag=True, help="Only trees of order exactly N.")
+@click.option("--count", is_flag=True, help="Only the counts per order (no trees are built).")
+@format_option(*FORMATS)
+def trees(order, degenerate, exact_order, count, fmt):
+    """Enumerate the Butcher trees of order <= N over T or T_0 (paper §3, NOTES §1)."""
+    orders = [order] if exact_order else list(range(1, order + 1))
+    if count:
+        check_order(order, MAX_COUNT_ORDER)
+        counts = {str(n): count_trees(n, degenerate) for n in orders}
+        if fmt == "json":
+            emit_json({"order": order, "degenerate": degenerate, "counts": counts})
+        else:
+            _render_counts(counts, degenerate, fmt)
+        return
+    check_order(order, MAX_ENUMERATION_ORDER)
+    found = [t for t in trees_up_to(order, degenerate) if not exact_order or t.order == order]
+    counts = {str(n): sum(1 for t in found if t.order == n) for n in orders}
+    if fmt == "json":
+        emit_json({"order": order, "degenerate": degenerate, "counts": counts,
+                   "trees": [{"tree": str(t), "order": t.order, "sigma": t.sigma, "gamma": t.gamma}
+                             for t in found]})
+        return
+    rows = [(str(t.order), str(t), str(t.sigma), str(t.gamma)) for t in found]
+    header = ("Order", "Tree", "sigma", "gamma")
+    if fmt == "latex":
+        body = [(o, f"\\forest{{{t}}}", s, g) for o, t, s, g in rows]
+        click.echo(_latex_longtable(("\\text{Order}", "\\text{Tree}", "\\sigma", "\\gamma"), body))
+    elif fmt == "markdown":
+        click.echo(_markdown(header, rows))
+    else:
+        _rich_table(f"Trees of {'T_0' if degenerate else 'T'} up to order {order}", header, rows, counts)
+
+
+@click.command()
+@_order_option
+@click.option("--degenerate", is_flag=True, help="Conditions over T_0 (degeneracy condition, paper eq. (degen)).")
+@click.option("--exact-order", is_flag=True, help="Only the conditions of order exactly N.")
+@format_option(*FORMATS)
+def conditions(order, degenerate, exact_order, fmt):
+    """Print the RKHP order conditions a(t) = 1/gamma(t) of order <= N in Butcher's form.
+
+    Over all trees T (general birealisations) or, with --degenerate, over T_0 (paper, Table 1).
+    """
+    check_order(order, MAX_ENUMERATION_ORDER)
+    cls = _class_of(degenerate)
+    conds = order_conditions(order, cls, exact_order)
+    orders = [order] if exact_order else list(range(1, order + 1))
+    counts = {str(n): sum(1 for c in conds if c.order == n) for n in orders}
+    if fmt == "json":
+        emit_json({"order": order, "degenerate": degenerate, "counts": counts,
+                   "conditions": [_condition_json(c) for c in conds]})
+        return
+    if fmt == "latex":
+        click.echo(_latex_longtable(
+            ("\\text{Order}", "\\text{Butcher tree } \\tau", "\\text{Order condition } a(\\tau)=e(\\tau)"),
+            [(str(c.order), c.tree.latex(), c.latex()) for c in conds]))
+        return
+    rows = [(str(c.order), str(c.tree), c.text()) for c in conds]
+    header = ("Order", "Tree", "Order condition")
+    if fmt == "markdown":
+        click.echo(_markdown(header, [(o, f"`{t}`", f"`{x}`") for o, t, x in rows]))
+    else:
+        title = f"RKHP order conditions over {'T_0' if degenerate else 'T'} up to order {order}"
+        _rich_table(title, header, rows, counts)
+
+
+def _condition_json(c) -> dict:
+    t = c.tree
+    rhs = c.rhs
+    return {"tree": str(t), "order": t.order, "sigma": t.sigma, "gamma": t.gamma,
+            "rhs": f"{rhs.numerator}/{rhs.denominator}" if rhs.denominator != 1 else str(rhs.numerator),
+            "condition": c.text(), "latex": c.latex()}
+
+
+# ----------------------------------------------------------------------------- rendering
+
+
+def _rich_table(title, header, rows, counts) -> None:
+    from rich.table import Table
+    from rich.text import Text
+
+    table = Table(title=title, title_justify="left")
+    for h in header:
+        table.add_column(h, no_wrap=h != header[-1])
+    previous = None
+    for row in rows:
+        if previous is not None and row[0] != previous:
+            table.add_section()
+        cells = row if row[0] != previous else ("",) + tuple(row[1:])
+        table.add_row(*(Text(c) for c in cells))  # brackets are trees, not rich markup
+        previous = row[0]
+    out = console()
+    out.print(table)
+    total = sum(counts.values())
+    out.print("Count per order: " + ", ".join(f"{n}: {c}" for n, c in counts.items()) + f"; total {total}")
+
+
+def _render_counts(counts, degenerate, fmt) -> None:
+    header = ("Order", f"trees in {'T_0' if degenerate else 'T'}")
+    rows = list(counts.items())
+    if fmt == "latex":
+        click.echo(_latex_longtable(("\\text{Order}", "\\#" + ("T_0" if degenerate else "T")), rows))
+    elif fmt == "markdown":
+        click.echo(_markdown(header, rows))
+    else:
+        from rich.table import Table
+
+        table = Table(*header)
+        for n, c in rows:
+            table.add_row(n, str(c))
+        console().print(table)
+
+
+def _latex_longtable(header, rows) -> str:
+    """A longtable in the layout of the paper's Table 1 (a rule between orders)."""
+    cols = "|".join("C" for _ in header)
+    lines = [f"\\begin{{longtable}}{{{cols}}}", " & ".join(header) + "\\\\\\hline"]
+    previous = None
+    for row in rows:
+        if previous is not None and row[0] != previous:
+            lines.append("\\hline")
+        cells = row if row[0] != previous else ("",) + tuple(row[1:])
+        lines.append(" & ".join(cells) + "\\\\")
+        previous = row[0]
+    lines.append("\\end{longtable}")
+    return "\n".join(lines)
+
+
+def _markdown(header, rows) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
