@@ -1,0 +1,73 @@
+"""Order conditions in Butcher's form: the paper's Table 1 and the forms quoted in NOTES §2."""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import pytest
+
+from rkhp.conditions import butcher_form, conditions_of_order, latex_form, order_conditions
+from rkhp.errors import InputError
+from rkhp.trees import parse_tree as P
+
+# The paper's Table 1: the 8 trees of T_0 up to order 5 and their conditions (LaTeX as printed).
+PAPER_TABLE_1 = [
+    (1, "b", r"\sum_{i=1}^s b_i", Fraction(1)),
+    (3, "b[b,b]", r"\sum_{i=1}^s b_i c_i^2", Fraction(1, 3)),
+    (4, "b[b[b,b]]", r"\sum_{i,j=1}^s b_i a_{ij} c_j^2", Fraction(1, 12)),
+    (4, "b[b,b,b]", r"\sum_{i=1}^s b_i c_i^3", Fraction(1, 4)),
+    (5, "b[b[b[b,b]]]", r"\sum_{i,j,k=1}^s b_i a_{ij} a_{jk}c_k^2", Fraction(1, 60)),
+    (5, "b[b[b,b,b]]", r"\sum_{i,j=1}^s b_i a_{ij} c_j^3", Fraction(1, 20)),
+    (5, "b[b,b[b,b]]", r"\sum_{i,j=1}^s b_i c_i a_{ij} c_j^2", Fraction(1, 15)),
+    (5, "b[b,b,b,b]", r"\sum_{i=1}^s b_i c_i^4", Fraction(1, 5)),
+]
+
+
+def squash(s):
+    return "".join(s.split())
+
+
+def test_paper_table_1_exactly():
+    conds = order_conditions(5, "degenerate")
+    assert len(conds) == 8
+    for c, (order, tree, lhs, rhs) in zip(conds, PAPER_TABLE_1):
+        assert (c.order, str(c.tree), c.rhs) == (order, tree, rhs)
+        assert squash(latex_form(c.tree)) == squash(lhs)
+
+
+@pytest.mark.parametrize("tree, text", [
+    ("b[b,b]", "sum_i b_i c_i^2 = 1/3"),
+    ("b[b[b,b]]", "sum_{i,j} b_i a_ij c_j^2 = 1/12"),
+    ("b[b,b[b,b]]", "sum_{i,j} b_i c_i a_ij c_j^2 = 1/15"),
+    ("b[b[b]]", "sum_{i,j} b_i a_ij c_j = 1/6"),      # Hairer–Nørsett–Wanner Table II.2.1
+    ("b[b[b[b]]]", "sum_{i,j,k} b_i a_ij a_jk c_k = 1/24"),
+    ("b[b[b],b[b]]", "sum_{i,j,k} b_i a_ij c_j a_ik c_k = 1/20"),
+])
+def test_butcher_form_text(tree, text):
+    t = P(tree)
+    assert f"{butcher_form(t)} = {t.e.numerator}/{t.e.denominator}" == text
+
+
+def test_latex_of_issue_example():
+    c = [c for c in order_conditions(4) if str(c.tree) == "b[b[b,b]]"][0]
+    assert c.latex() == r"\sum_{i,j=1}^s b_i a_{ij} c_j^2 = \frac{1}{12}"
+
+
+def test_counts_per_class():
+    assert [len(conditions_of_order(n)) for n in range(1, 9)] == [1, 1, 2, 4, 9, 20, 48, 115]
+    assert [len(conditions_of_order(n, "degenerate")) for n in range(1, 9)] == [1, 0, 1, 2, 4, 8, 17, 36]
+    assert len(order_conditions(10)) == 1205  # sum of A000081 to 10
+    assert len(order_conditions(6, exact_order=True)) == 20
+
+
+def test_index_names_are_distinct_and_do_not_use_s():
+    t = P("b[b[b[b[b[b[b[b[b[b[b[b[b[b[b[b,b]]]]]]]]]]]]]]]")
+    form = butcher_form(t)
+    assert " s" not in form and "_s" not in form
+    assert t.order == 17 and form.count(" a_") == 14  # one a-factor per edge between non-leaves
+    assert len(set(form.split("}")[0][5:].split(","))) == 15
+
+
+def test_unknown_class_is_input_error():
+    with pytest.raises(InputError):
+        order_conditions(3, "bogus")
