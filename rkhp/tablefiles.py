@@ -1,0 +1,248 @@
+"""Tableau files: the built-in registry (``tables/*.toml``), TOML/JSON files, 60-digit text files.
+
+Schema (TOML, or the same keys in JSON; README "Tableau files"):
+
+    name = "rk4"                      # optional in a user file (default: the file name)
+    aliases = ["classical"]           # optional
+    reference = "Kutta (1901) ..."    # optional
+    order = 4                         # optional: the claimed (general) order
+    degenerate_order = 4              # optional: the claimed order over T_0
+    notes = "..."                     # optional
+    A = [["0", "0"], ["1/2", "0"]]    # s rows of s entries
+    b = ["0", "1"]
+    c = ["0", "1/2"]                  # optional; compared with the row sums of A
+
+Entries are numbers or strings (see :func:`rkhp.tableau.parse_entry`). The 60-digit text files
+(Feagin's format: sections ``c[k]``, ``b[k]``, ``bhat[k]``, ``A[k,j]``, 0-based indices, rows not
+listed are zero) load as well.
+"""
+
+from __future__ import annotations
+
+import difflib
+import json
+import re
+from functools import lru_cache
+from pathlib import Path
+
+from .errors import InputError
+from .tableau import Tableau, entry_text, parse_entry
+
+_KEYS = ("name", "aliases", "reference", "order", "degenerate_order", "notes", "A", "b", "c")
+_FILE_SUFFIXES = (".toml", ".json", ".txt")
+
+
+# ----------------------------------------------------------------------------- built-ins
+
+
+def _tables_dir():
+    from importlib.resources import files
+
+    return files("rkhp.tables")
+
+
+@lru_cache(maxsize=1)
+def _registry() -> dict[str, tuple[str, tuple[str, ...]]]:
+    """name -> (file name, aliases) for every built-in table, read once."""
+    import tomllib
+
+    out = {}
+    for entry in sorted(_tables_dir().iterdir(), key=lambda p: p.name):
+        if not entry.name.endswith(".toml"):
+            continue
+        data = tomllib.loads(entry.read_text(encoding="utf-8"))
+        name = data.get("name", entry.name[:-5])
+        out[name] = (entry.name, tuple(data.get("aliases", ())))
+    return out
+
+
+def builtin_names() -> list[str]:
+    """Names of the built-in tableaux (the files in ``tables/``), in file-name order."""
+    return list(_registry())
+
+
+def _alias_map() -> dict[str, str]:
+    out = {}
+    for name, (_, aliases) in _registry().items():
+        out[name.lower()] = name
+        for alias in aliases:
+            out[alias.lower()] = name
+    return out
+
+
+@lru_cache(maxsize=64)
+def _load_builtin(name: str) -> Tableau:
+    import tomllib
+
+    filename = _registry()[name][0]
+    text = (_tables_dir() / filename).read_text(encoding="utf-8")
+    return tableau_from_mapping(tomllib.loads(text), f"tables/{filename}", filename[:-5])
+
+
+def load_tableau(name_or_path) -> Tableau:
+    """A built-in tableau by name or alias (case-insensitive), or a .toml/.json/.txt file.
+
+    Raises InputError naming the file and the problem, or suggesting close built-in names.
+    """
+    if isinstance(name_or_path, Tableau):
+        return name_or_path
+    text = str(name_or_path)
+    path = Path(text)
+    aliases = _alias_map()
+    if text.lower() in aliases and not path.is_file():
+        return _load_builtin(aliases[text.lower()])
+    if path.suffix.lower() in _FILE_SUFFIXES or path.exists() or "/" in text:
+        return load_file(path)
+    close = difflib.get_close_matches(text.lower(), list(aliases), n=3, cutoff=0.6)
+    hint = (" (did you mean " + ", ".join(sorted({aliases[c] for c in close})) + "?)"
+            if close else "; see `rkhp tables` for the built-in names")
+    raise InputError(f"unknown tableau {text!r}{hint}")
+
+
+def load_file(path) -> Tableau:
+    """Read a tableau file (.toml, .json or a 60-digit .txt)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: cannot read the file ({exc})") from None
+    suffix = path.suffix.lower()
+    if suffix == ".json":
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise InputError(f"{path}: JSON syntax error: {exc}") from None
+    elif suffix == ".txt":
+        return parse_digits_file(text, str(path), path.stem)
+    else:
+        import tomllib
+
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise InputError(f"{path}: TOML syntax error: {exc}") from None
+    return tableau_from_mapping(data, str(path), path.stem)
+
+
+def tableau_from_mapping(data, where: str, default_name: str) -> Tableau:
+    """A tableau from the schema's keys (a parsed TOML or JSON document)."""
+    if not isinstance(data, dict):
+        raise InputError(f"{where}: expected a table of keys {', '.join(_KEYS)}")
+    unknown = sorted(set(data) - set(_KEYS))
+    if unknown:
+        raise InputError(f"{where}: unknown key {unknown[0]!r} (allowed: {', '.join(_KEYS)})")
+    for key in ("A", "b"):
+        if key not in data:
+            raise InputError(f"{where}: missing key {key!r}")
+    A = data["A"]
+    if not isinstance(A, list) or not all(isinstance(r, list) for r in A):
+        raise InputError(f"{where}: A must be a list of rows (lists of entries)")
+    for key in ("b", "c", "aliases"):
+        if key in data and not isinstance(data[key], list):
+            raise InputError(f"{where}: {key} must be a list")
+    for key in ("name", "reference", "notes"):
+        if key in data and not isinstance(data[key], str):
+            raise InputError(f"{where}: {key} must be a string")
+    if not all(isinstance(a, str) for a in data.get("aliases", [])):
+        raise InputError(f"{where}: aliases must be strings")
+    name = data.get("name", default_name)
+    A_ = tuple(tuple(parse_entry(x, f"{where}: A[{i + 1}][{j + 1}]") for j, x in enumerate(row))
+               for i, row in enumerate(A))
+    b_ = tuple(parse_entry(x, f"{where}: b[{i + 1}]") for i, x in enumerate(data["b"]))
+    c_ = (tuple(parse_entry(x, f"{where}: c[{i + 1}]") for i, x in enumerate(data["c"]))
+          if "c" in data else None)
+    return Tableau(name=name, A=A_, b=b_, c_given=c_, aliases=tuple(data.get("aliases", ())),
+                   reference=data.get("reference", ""), notes=data.get("notes", ""),
+                   claimed_order=data.get("order"),
+                   claimed_degenerate_order=data.get("degenerate_order"), source=where)
+
+
+# ----------------------------------------------------------------------------- 60-digit files
+
+_SECTION = re.compile(r"^\s*k\s+(j\s+)?(c|b|bhat|A)\[k(,j)?\]\s*$")
+
+
+def parse_digits_file(text: str, where: str, name: str) -> Tableau:
+    """Feagin's 60-digit format: ``c[k]``, ``b[k]``, optional ``bhat[k]``, then ``A[k,j]``.
+
+    Indices are 0-based, rows of A not listed are zero; ``bhat`` (embedded weights) is not kept.
+    Lines outside the sections (titles, remarks) are ignored.
+    """
+    sections: dict[str, dict] = {}
+    current = None
+    for lineno, line in enumerate(text.splitlines(), 1):
+        m = _SECTION.match(line)
+        if m:
+            current = m.group(2)
+            sections[current] = {}
+            continue
+        fields = line.split()
+        if current is None or not fields:
+            continue
+        width = 3 if current == "A" else 2
+        if not fields[0].isdigit():
+            current = None  # a remark after the data
+            continue
+        if len(fields) != width or not all(f.isdigit() for f in fields[:-1]):
+            raise InputError(f"{where}: line {lineno}: expected {width} fields in the {current} "
+                             f"section, got {line.strip()!r}")
+        index = tuple(int(f) for f in fields[:-1])
+        sections[current][index] = parse_entry(fields[-1], f"{where}: line {lineno}")
+    for key in ("b", "A"):
+        if key not in sections:
+            raise InputError(f"{where}: no {key} section (expected Feagin's 60-digit format)")
+    s = max(k for (k,) in sections["b"]) + 1
+    A = [[parse_entry(0)] * s for _ in range(s)]
+    for (k, j), value in sections["A"].items():
+        if k >= s or j >= s:
+            raise InputError(f"{where}: A[{k},{j}] outside the {s} stages given by b")
+        A[k][j] = value
+    b = [sections["b"].get((k,), parse_entry(0)) for k in range(s)]
+    c = [sections["c"].get((k,), parse_entry(0)) for k in range(s)] if "c" in sections else None
+    return Tableau(name=name, A=tuple(map(tuple, A)), b=tuple(b),
+                   c_given=None if c is None else tuple(c), source=where)
+
+
+# ----------------------------------------------------------------------------- writing
+
+
+def tableau_mapping(tableau: Tableau) -> dict:
+    """The schema's keys for a tableau, entries as strings that read back exactly."""
+    data: dict = {"name": tableau.name}
+    if tableau.aliases:
+        data["aliases"] = list(tableau.aliases)
+    if tableau.reference:
+        data["reference"] = tableau.reference
+    if tableau.claimed_order is not None:
+        data["order"] = tableau.claimed_order
+    if tableau.claimed_degenerate_order is not None:
+        data["degenerate_order"] = tableau.claimed_degenerate_order
+    if tableau.notes:
+        data["notes"] = tableau.notes
+    data["A"] = [[entry_text(x) for x in row] for row in tableau.A]
+    data["b"] = [entry_text(x) for x in tableau.b]
+    if tableau.c_given is not None:
+        data["c"] = [entry_text(x) for x in tableau.c_given]
+    return data
+
+
+def save_tableau(tableau: Tableau, path) -> None:
+    """Write a tableau as TOML or JSON (by the file's extension)."""
+    path = Path(path)
+    data = tableau_mapping(tableau)
+    suffix = path.suffix.lower()
+    if suffix == ".json":
+        text = json.dumps(data, indent=2, ensure_ascii=False) + "\n"
+    elif suffix == ".toml":
+        import tomli_w
+
+        text = tomli_w.dumps(data, multiline_strings=False)
+    else:
+        raise InputError(f"{path}: cannot write a tableau as {suffix or 'a file without extension'}"
+                         " (use .toml or .json)")
+    try:
+        path.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write the file ({exc})") from None
