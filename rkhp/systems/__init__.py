@@ -1,1 +1,12 @@
-"""Poisson systems and their birealisations (NOTES §4, paper §2)."""
+"""Poisson systems and their birealisations (NOTES §4, paper §2).
+
+`get_system(name_or_path, realisation="symmetric")` returns a :class:`PoissonSystem`;
+`builtin_systems()` lists the built-in names. Constructors for the three families are in
+`rkhp.systems.families`; spec files in `rkhp.systems.spec`.
+"""
+
+from .builtins import builtin_systems, get_system
+from .core import REALISATIONS, PoissonSystem, register_realisation, shift_matrix
+
+__all__ = ["PoissonSystem", "get_system", "builtin_systems", "REALISATIONS",
+           "register_realisation", "shift_matrix"]

@@ -1,0 +1,406 @@
+"""Truncated multivariate Taylor arithmetic ("jets") and the compiled tape interpreter (NOTES §7).
+
+A jet in m variables truncated at total degree D is the array of its Taylor coefficients over the
+monomials of degree <= D, in graded order (degree 0, then the m monomials of degree 1 in the order
+of the variables, ...). Products run over a precomputed list of index pairs sorted by the degree of
+the result, so truncating at any D <= Dmax uses a prefix of every table. Univariate functions of a
+jet u = u0 + v are evaluated by Horner's rule on their Taylor coefficients at u0:
+f(u) = sum_k f^(k)(u0)/k! v^k (v has no constant term, so the sum stops at k = D).
+
+Everything here is compiled with numba (`cache=True`; compiled code persists in numba's cache,
+see `rkhp.integrators.cache`). The interpreter takes tapes as data (`rkhp.systems.tape`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+from math import comb
+
+import numpy as np
+
+from . import cache  # noqa: F401  (sets NUMBA_CACHE_DIR before numba is imported)
+
+import numba as nb  # noqa: E402
+
+from ..systems.tape import (  # noqa: E402
+    ADD, ADDC, CONST, COS, CRB, DIV, EXP, LOG, MUL, MULC, NEG, PHIMV, POWI, POWR, SIN, SQRT, SUB,
+)
+
+NJIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
+
+
+def _bernoulli_tables():
+    import mpmath
+
+    mpmath.mp.dps = 50
+    phi = [mpmath.bernoulli(k) / mpmath.factorial(k) for k in range(200)]
+    phi[1] = -phi[1]  # z / (1 - e^{-z}) has B_1^+ = +1/2
+    series = [(-1) ** j * mpmath.bernoulli(2 * j + 2) / mpmath.factorial(2 * j + 2)
+              for j in range(48)]
+    return np.array([float(v) for v in phi]), np.array([float(v) for v in series])
+
+
+#: PHI_COEF[k]: Taylor coefficients of phi(z) = z / (1 - exp(-z)); radius 2 pi.
+#: CRB_SERIES[j]: c(u) = sum_j CRB_SERIES[j] u^j, c(u) = (1 - (r/2) cot(r/2)) / r^2, u = r^2.
+PHI_COEF, CRB_SERIES = _bernoulli_tables()
+CRB_SERIES_LIMIT = 4.0  # series for |u| < 4 (ratio <= 4 / (4 pi^2) per term), closed form above
+TWO_PI = 2.0 * math.pi
+
+
+@dataclass(frozen=True, eq=False)
+class JetSpace:
+    """Tables for jets in `n_vars` variables truncated at degree <= `degree`.
+
+    counts[d]: number of monomials of degree <= d; pair_counts[d]: number of product pairs whose
+    result has degree <= d; pa, pb, pc: the pairs (a, b -> c); up[m, k]: index of m + e_k (or -1);
+    expo[m, k]: exponent of variable k in monomial m.
+    """
+
+    n_vars: int
+    degree: int
+    counts: np.ndarray
+    pair_counts: np.ndarray
+    pa: np.ndarray
+    pb: np.ndarray
+    pc: np.ndarray
+    up: np.ndarray
+    expo: np.ndarray
+
+    def packed(self):
+        return (self.counts, self.pair_counts, self.pa, self.pb, self.pc, self.up, self.expo)
+
+    @property
+    def size(self) -> int:
+        return int(self.counts[-1])
+
+
+def _monomials(n: int, degree: int) -> list[tuple[int, ...]]:
+    out: list[tuple[int, ...]] = []
+
+    def rec(prefix, left, k):
+        if k == n - 1:
+            out_d.append(prefix + (left,))
+            return
+        for e in range(left, -1, -1):
+            rec(prefix + (e,), left - e, k + 1)
+
+    for d in range(degree + 1):
+        out_d: list[tuple[int, ...]] = []
+        if n == 0:
+            out_d.append(())
+        else:
+            rec((), d, 0)
+        out.extend(out_d)
+    return out
+
+
+@lru_cache(maxsize=64)
+def jet_space(n_vars: int, degree: int) -> JetSpace:
+    """The tables for jets in `n_vars` variables up to total degree `degree` (cached)."""
+    monos = _monomials(n_vars, degree)
+    index = {m: i for i, m in enumerate(monos)}
+    deg = [sum(m) for m in monos]
+    counts = np.array([comb(n_vars + d, d) for d in range(degree + 1)], dtype=np.int64)
+    pairs = []
+    for i, mi in enumerate(monos):
+        for j, mj in enumerate(monos):
+            if deg[i] + deg[j] <= degree:
+                k = index[tuple(a + b for a, b in zip(mi, mj, strict=True))]
+                pairs.append((deg[k], k, i, j))
+    pairs.sort()
+    arr = np.array(pairs, dtype=np.int64).reshape(-1, 4)
+    pair_counts = np.array([np.searchsorted(arr[:, 0], d, side="right")
+                            for d in range(degree + 1)], dtype=np.int64)
+    up = -np.ones((len(monos), max(n_vars, 1)), dtype=np.int64)
+    expo = np.zeros((len(monos), max(n_vars, 1)), dtype=np.int64)
+    for i, m in enumerate(monos):
+        for k in range(n_vars):
+            expo[i, k] = m[k]
+            if deg[i] < degree:
+                up[i, k] = index[tuple(e + (1 if q == k else 0) for q, e in enumerate(m))]
+    return JetSpace(n_vars, degree, counts, pair_counts, arr[:, 2].copy(), arr[:, 3].copy(),
+                    arr[:, 1].copy(), up, expo)
+
+
+# ----------------------------------------------------------------------------------------------
+# jet kernels
+
+
+@nb.njit(**NJIT)
+def jet_mul(a, b, out, D, space):
+    """out = a * b truncated at degree D (out must not alias a or b)."""
+    counts, pair_counts, pa, pb, pc = space[0], space[1], space[2], space[3], space[4]
+    for m in range(counts[D]):
+        out[m] = 0.0
+    for t in range(pair_counts[D]):
+        out[pc[t]] += a[pa[t]] * b[pb[t]]
+
+
+@nb.njit(**NJIT)
+def jet_compose(coef, a, out, D, space, scratch):
+    """out = sum_k coef[k] (a - a[0])^k, truncated at degree D (Horner; out may alias a)."""
+    M = space[0][D]
+    v = scratch[0]
+    r = scratch[1]
+    t = scratch[2]
+    for m in range(M):
+        v[m] = a[m]
+        r[m] = 0.0
+    v[0] = 0.0
+    r[0] = coef[D]
+    for k in range(D - 1, -1, -1):
+        jet_mul(r, v, t, D - k, space)
+        for m in range(space[0][D - k]):
+            r[m] = t[m]
+        r[0] += coef[k]
+    for m in range(M):
+        out[m] = r[m]
+
+
+@nb.njit(**NJIT)
+def _pow_coef(u0, power, D, coef):
+    coef[0] = u0 ** power
+    for k in range(1, D + 1):
+        coef[k] = coef[k - 1] * (power - k + 1) / (k * u0)
+
+
+@nb.njit(**NJIT)
+def _uni_mul(a, b, D):
+    c = np.zeros(D + 1)
+    for i in range(D + 1):
+        for j in range(D + 1 - i):
+            c[i + j] += a[i] * b[j]
+    return c
+
+
+@nb.njit(**NJIT)
+def _uni_compose(coef, a, D):
+    v = a.copy()
+    v[0] = 0.0
+    r = np.zeros(D + 1)
+    r[0] = coef[D]
+    for k in range(D - 1, -1, -1):
+        r = _uni_mul(r, v, D)
+        r[0] += coef[k]
+    return r
+
+
+@nb.njit(**NJIT)
+def crb_coef(u0, D, coef):
+    """Taylor coefficients at u0 of c(u) = (1 - (sqrt(u)/2) cot(sqrt(u)/2)) / u (NOTES §4).
+
+    Power series (exact to round-off) for |u0| < 4; closed form in univariate jets for
+    4 <= u0 < (2 pi)^2; NaN beyond the first pole u = (2 pi)^2.
+    """
+    if abs(u0) < CRB_SERIES_LIMIT:
+        for m in range(D + 1):
+            s = 0.0
+            for j in range(CRB_SERIES.shape[0] - 1, m - 1, -1):
+                s = s * u0 + CRB_SERIES[j] * _binom(j, m)
+            coef[m] = s
+        return
+    if not (u0 < TWO_PI * TWO_PI):
+        for m in range(D + 1):
+            coef[m] = np.nan
+        return
+    c = np.zeros(D + 1)
+    u = np.zeros(D + 1)
+    u[0] = u0
+    if D >= 1:
+        u[1] = 1.0
+    _pow_coef(u0, 0.5, D, c)
+    w = _uni_compose(c, u, D) * 0.5
+    w0 = w[0]
+    sc = np.zeros(D + 1)
+    cc = np.zeros(D + 1)
+    f = 1.0
+    for k in range(D + 1):
+        if k > 0:
+            f /= k
+        sc[k] = math.sin(w0 + 0.5 * math.pi * k) * f
+        cc[k] = math.cos(w0 + 0.5 * math.pi * k) * f
+    sw = _uni_compose(sc, w, D)
+    cw = _uni_compose(cc, w, D)
+    _pow_coef(sw[0], -1.0, D, c)
+    cot = _uni_mul(cw, _uni_compose(c, sw, D), D)
+    num = -_uni_mul(w, cot, D)
+    num[0] += 1.0
+    _pow_coef(u0, -1.0, D, c)
+    res = _uni_mul(num, _uni_compose(c, u, D), D)
+    for m in range(D + 1):
+        coef[m] = res[m]
+
+
+@nb.njit(**NJIT)
+def _binom(j, m):
+    r = 1.0
+    for i in range(m):
+        r = r * (j - i) / (i + 1)
+    return r
+
+
+@nb.njit(**NJIT)
+def _phimv(W, ops_row, args, D, space, scratch, coef):
+    """phi(K) x by its power series sum_k PHI_COEF[k] K^k x, for ||K0||_F < 0.9 * 2 pi."""
+    out, start, n = ops_row[1], ops_row[2], ops_row[4]
+    M = space[0][D]
+    norm = 0.0
+    for i in range(n * n):
+        norm += W[args[start + i], 0] ** 2
+    norm = math.sqrt(norm)
+    ratio = norm / TWO_PI
+    if not (ratio < 0.9):
+        for i in range(n):
+            for m in range(M):
+                W[out + i, m] = np.nan
+        return
+    # K^k x has degree-m coefficients of size ~ binom(k, m) |K0|^(k-m): keep every k <= D, then
+    # stop when the tail bound is below round-off
+    terms = max(D, 1)
+    while terms < PHI_COEF.shape[0] - 1:
+        if 2.0 * (terms + 1.0) ** D * ratio ** (terms + 1 - D) < 1e-18:
+            break
+        terms += 1
+    # scratch rows 3..3+n: current vector v = K^k x; rows 3+n..3+2n: K v
+    for i in range(n):
+        xi = args[start + n * n + i]
+        for m in range(M):
+            scratch[3 + i, m] = W[xi, m]
+            W[out + i, m] = W[xi, m]
+    for k in range(1, terms + 1):
+        for i in range(n):
+            acc = scratch[3 + 2 * n + 0]
+            for m in range(M):
+                scratch[3 + n + i, m] = 0.0
+            for j in range(n):
+                jet_mul(W[args[start + i * n + j]], scratch[3 + j], acc, D, space)
+                for m in range(M):
+                    scratch[3 + n + i, m] += acc[m]
+        c = PHI_COEF[k]
+        for i in range(n):
+            for m in range(M):
+                scratch[3 + i, m] = scratch[3 + n + i, m]
+                W[out + i, m] += c * scratch[3 + i, m]
+
+
+@nb.njit(**NJIT)
+def run_tape(tape, W, D, space, scratch):
+    """Evaluate a tape at truncation degree D; inputs are W[0:n_inputs] (already set)."""
+    ops, fpar, args = tape[0], tape[1], tape[2]
+    M = space[0][D]
+    coef = np.empty(D + 1)
+    for r in range(ops.shape[0]):
+        code, out, a, b, k = ops[r, 0], ops[r, 1], ops[r, 2], ops[r, 3], ops[r, 4]
+        o = W[out]
+        if code == CONST:
+            for m in range(M):
+                o[m] = 0.0
+            o[0] = fpar[r]
+        elif code == ADD:
+            for m in range(M):
+                o[m] = W[a, m] + W[b, m]
+        elif code == SUB:
+            for m in range(M):
+                o[m] = W[a, m] - W[b, m]
+        elif code == MUL:
+            jet_mul(W[a], W[b], o, D, space)
+        elif code == NEG:
+            for m in range(M):
+                o[m] = -W[a, m]
+        elif code == MULC:
+            f = fpar[r]
+            for m in range(M):
+                o[m] = f * W[a, m]
+        elif code == ADDC:
+            for m in range(M):
+                o[m] = W[a, m]
+            o[0] += fpar[r]
+        elif code == DIV:
+            _pow_coef(W[b, 0], -1.0, D, coef)
+            jet_compose(coef, W[b], scratch[3], D, space, scratch)
+            jet_mul(W[a], scratch[3], o, D, space)
+        elif code == EXP:
+            e = math.exp(W[a, 0])
+            f = 1.0
+            for q in range(D + 1):
+                if q > 0:
+                    f /= q
+                coef[q] = e * f
+            jet_compose(coef, W[a], o, D, space, scratch)
+        elif code == LOG:
+            u0 = W[a, 0]
+            coef[0] = math.log(u0) if u0 > 0.0 else np.nan
+            for q in range(1, D + 1):
+                coef[q] = (-1.0) ** (q + 1) / (q * u0 ** q)
+            jet_compose(coef, W[a], o, D, space, scratch)
+        elif code == SIN or code == COS:
+            u0 = W[a, 0] + (0.5 * math.pi if code == COS else 0.0)
+            f = 1.0
+            for q in range(D + 1):
+                if q > 0:
+                    f /= q
+                coef[q] = math.sin(u0 + 0.5 * math.pi * q) * f
+            jet_compose(coef, W[a], o, D, space, scratch)
+        elif code == SQRT or code == POWR:
+            u0 = W[a, 0]
+            power = 0.5 if code == SQRT else fpar[r]
+            if u0 > 0.0:
+                _pow_coef(u0, power, D, coef)
+            elif u0 == 0.0 and D == 0 and power > 0.0:
+                coef[0] = 0.0
+            else:
+                for q in range(D + 1):
+                    coef[q] = np.nan
+            jet_compose(coef, W[a], o, D, space, scratch)
+        elif code == POWI:
+            if k == 0:
+                for m in range(M):
+                    o[m] = 0.0
+                o[0] = 1.0
+            elif k > 0:
+                t = scratch[3]
+                for m in range(M):
+                    t[m] = W[a, m]
+                for _ in range(k - 1):
+                    jet_mul(t, W[a], o, D, space)
+                    for m in range(M):
+                        t[m] = o[m]
+                for m in range(M):
+                    o[m] = t[m]
+            else:
+                _pow_coef(W[a, 0], float(k), D, coef)
+                jet_compose(coef, W[a], o, D, space, scratch)
+        elif code == CRB:
+            crb_coef(W[a, 0], D, coef)
+            jet_compose(coef, W[a], o, D, space, scratch)
+        elif code == PHIMV:
+            _phimv(W, ops[r], args, D, space, scratch, coef)
+
+
+def scratch_rows(n: int) -> int:
+    """Rows of scratch space `run_tape` needs for a system of dimension n."""
+    return 4 + 2 * n + 1
+
+
+def evaluate(tape, inputs: np.ndarray, degree: int = 0, n_vars: int = 0):
+    """Evaluate a tape (Python-level helper).
+
+    With degree 0 returns the output values for the given input values. With degree 1 and
+    n_vars = len(inputs) returns (values, Jacobian (outputs x inputs)) by forward mode.
+    """
+    inputs = np.asarray(inputs, dtype=np.float64)
+    nv = n_vars if degree > 0 else 0
+    space = jet_space(nv, degree)
+    W = np.zeros((tape.n_slots, space.size))
+    W[: len(inputs), 0] = inputs
+    if degree > 0:
+        for i in range(len(inputs)):
+            W[i, 1 + i] = 1.0
+    scratch = np.zeros((scratch_rows(tape.n_inputs) + tape.n_inputs, space.size))
+    run_tape(tape.packed(), W, degree, space.packed(), scratch)
+    out = W[tape.outputs]
+    if degree == 0:
+        return out[:, 0].copy()
+    return out[:, 0].copy(), out[:, 1: 1 + nv].copy()

@@ -1,0 +1,106 @@
+"""Built-in systems (NOTES §6): the rigid body, Lotka–Volterra (3 species) and the pendulum."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from ..errors import InputError
+from . import tape as tp
+from .core import PoissonSystem
+from .families import constant, log_canonical, so3
+
+RIGID_BODY_I = (2.0, 1.0, 2.0 / 3.0)
+RIGID_BODY_X0 = (math.cos(1.1), 0.0, math.sin(1.1))
+LV_LAMBDA = ((0.0, 1.0, 2.0), (-1.0, 0.0, 1.0), (-2.0, -1.0, 0.0))
+LV_X0 = (0.5, 1.0, 2.0)
+PENDULUM_X0 = (1.5, 0.0)
+
+
+def rigid_body_exact(inertia, x0) -> Callable | None:
+    """Exact solution of xdot = x cross (I^-1 x) by Jacobi elliptic functions, or None.
+
+    Valid for I1 > I2 > I3 (a_i = 1/I_i increasing), x0 = (A, 0, C) with C != 0 and energy
+    above the middle axis (sum a_i x_i^2 > a2 |x|^2): then x1 = A cn(tau), x2 = B sn(tau),
+    x3 = C dn(tau), tau = lam t, lam = |C| sqrt((a3 - a2)(a3 - a1)) sign(C),
+    B = (a1 - a3) A C / lam, k^2 = (a2 - a1) A^2 / ((a3 - a2) C^2)  (from Euler's equations
+    x1' = (a3-a2) x2 x3, x2' = (a1-a3) x3 x1, x3' = (a2-a1) x1 x2).
+    """
+    a1, a2, a3 = (1.0 / v for v in inertia)
+    A, x2, C = (float(v) for v in x0)
+    if not (a1 < a2 < a3) or x2 != 0.0 or C == 0.0:
+        return None
+    energy = a1 * A * A + a3 * C * C
+    if not energy > a2 * (A * A + C * C):
+        return None
+    lam = C * math.sqrt((a3 - a2) * (a3 - a1))
+    B = (a1 - a3) * A * C / lam
+    m = (a2 - a1) * A * A / ((a3 - a2) * C * C)
+
+    def solution(t):
+        from scipy.special import ellipj
+
+        sn, cn, dn, _ = ellipj(lam * np.asarray(t, dtype=np.float64), m)
+        return np.stack([A * cn, B * sn, C * dn], axis=-1)
+
+    return solution
+
+
+def rigid_body(realisation: str = "symmetric") -> PoissonSystem:
+    """Free rigid body on so(3)*, H = sum x_i^2 / (2 I_i), I = (2, 1, 2/3) (HLW, NOTES §6)."""
+    inertia = RIGID_BODY_I
+    return so3(lambda x: sum((0.5 / inertia[i]) * (x[i] * x[i]) for i in range(3)),
+               name="rigid-body", x0=RIGID_BODY_X0, t_final=10.0, realisation=realisation,
+               exact_solution=rigid_body_exact(inertia, RIGID_BODY_X0),
+               description="free rigid body, so(3)*, I = (2, 1, 2/3)")
+
+
+def lotka_volterra(realisation: str = "symmetric") -> PoissonSystem:
+    """3-species Lotka–Volterra, log-canonical, H = sum (x_i - log x_i) (NOTES §6)."""
+    return log_canonical(
+        LV_LAMBDA, lambda x: sum(x[i] - tp.log(x[i]) for i in range(3)), name="lotka-volterra",
+        x0=LV_X0, t_final=10.0, realisation=realisation,
+        casimirs=(lambda x: float(np.log(x[0]) - 2.0 * np.log(x[1]) + np.log(x[2])),),
+        casimir_names=("log x1 - 2 log x2 + log x3",),
+        description="3-species Lotka-Volterra, log-canonical, lambda = [[0,1,2],[-1,0,1],[-2,-1,0]]")
+
+
+def pendulum(realisation: str = "symmetric") -> PoissonSystem:
+    """Mathematical pendulum, canonical pi = [[0, 1], [-1, 0]], H = p^2/2 - cos q, x = (q, p)."""
+    return constant(((0.0, 1.0), (-1.0, 0.0)), lambda x: 0.5 * (x[1] * x[1]) - tp.cos(x[0]),
+                    name="pendulum", x0=PENDULUM_X0, t_final=10.0, realisation=realisation,
+                    description="pendulum, canonical (constant pi), H = p^2/2 - cos q")
+
+
+BUILTINS: dict[str, Callable[[str], PoissonSystem]] = {
+    "rigid-body": rigid_body,
+    "lotka-volterra": lotka_volterra,
+    "pendulum": pendulum,
+}
+
+
+def builtin_systems() -> tuple[str, ...]:
+    """Names of the built-in systems."""
+    return tuple(BUILTINS)
+
+
+def get_system(name_or_path, realisation: str = "symmetric") -> PoissonSystem:
+    """A built-in system by name, or a system from a spec file (.toml or .json)."""
+    from pathlib import Path
+
+    key = str(name_or_path)
+    if key in BUILTINS:
+        return BUILTINS[key](realisation)
+    path = Path(key)
+    if path.suffix.lower() in (".toml", ".json"):
+        from .spec import load_spec
+
+        return load_spec(path, realisation)
+    import difflib
+
+    close = difflib.get_close_matches(key, BUILTINS, n=2)
+    hint = f"; did you mean {' or '.join(close)}?" if close else ""
+    raise InputError(f"unknown system {key!r} (built-ins: {', '.join(BUILTINS)}, or a .toml/.json "
+                     f"spec file){hint}")

@@ -1,0 +1,196 @@
+"""The Poisson system value and its realisations (NOTES §4, paper §2).
+
+A system is given by its Poisson matrix pi(x), its Hamiltonian H and a *base* birealisation
+(alpha, beta) that is symmetric, beta(x, p) = alpha(x, -p). A realisation composes the base with a
+symplectomorphism of T*M fixing the zero section, (x, p) -> (x + s(p), p):
+
+- ``symmetric``: s = 0 (degenerate: d_p alpha(x, 0) = -pi(x)/2 is antisymmetric);
+- ``shifted``: s(p) = Q p with the constant symmetric matrix Q = SHIFT_Q (diagonal 1/2,
+  off-diagonal 1/4; NOTES §4), which breaks the degeneracy: d_p alpha(x, 0) = -pi(x)/2 + Q;
+- further kinds join with :func:`register_realisation` (e.g. issue 7's ``quartic``,
+  s(p) = grad K(p) with K(p) even in p, which stays degenerate).
+
+H, alpha and beta are recorded as tapes (`rkhp.systems.tape`) that the compiled engine evaluates
+in Taylor arithmetic; the numpy-level callables below evaluate the same tapes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InputError
+from . import tape as tp
+
+FAMILIES = ("lie-poisson", "log-canonical", "constant")
+DOMAINS = {"R^n": 0, "positive orthant": 1}
+
+
+def shift_matrix(n: int) -> np.ndarray:
+    """SHIFT_Q of the ``shifted`` realisation: 1/2 on the diagonal, 1/4 off it (symmetric)."""
+    return 0.25 * np.ones((n, n)) + 0.25 * np.eye(n)
+
+
+def _no_shift(p):
+    return None
+
+
+def _q_shift(p):
+    Q = shift_matrix(len(p))
+    return [sum(Q[i, j] * p[j] for j in range(len(p))) for i in range(len(p))]
+
+
+@dataclass(frozen=True)
+class Realisation:
+    """How the base (symmetric) birealisation is composed: x -> x + shift(p) (shift of tape Vars,
+    None for no shift), and whether the result is degenerate (d_p alpha(x,0) antisymmetric)."""
+
+    name: str
+    shift: Callable
+    degenerate: bool
+    description: str
+
+
+REALISATIONS: dict[str, Realisation] = {}
+
+
+def register_realisation(name: str, shift: Callable, degenerate: bool, description: str) -> None:
+    """Add a realisation kind (shift: list of n tape Vars p -> list of n shifts, or None)."""
+    REALISATIONS[name] = Realisation(name, shift, degenerate, description)
+
+
+register_realisation("symmetric", _no_shift, True, "beta(x, p) = alpha(x, -p) (NOTES §4)")
+register_realisation("shifted", _q_shift, False,
+                     "alpha(x + Q p, p), Q = 1/2 on the diagonal and 1/4 off it (NOTES §4)")
+
+
+def realisation(name: str) -> Realisation:
+    if name not in REALISATIONS:
+        raise InputError(f"unknown realisation {name!r}; choose one of {', '.join(REALISATIONS)}")
+    return REALISATIONS[name]
+
+
+@dataclass(frozen=True, eq=False)
+class PoissonSystem:
+    """A Poisson system xdot = pi(x) grad H(x) with a birealisation (alpha, beta).
+
+    Numpy-level callables take float arrays of shape (n,): `poisson(x) -> (n, n)`,
+    `hamiltonian(x) -> float`, `grad_hamiltonian(x) -> (n,)`, `casimirs` (x -> float each),
+    `alpha(x, p)`, `beta(x, p)`, `in_domain(x) -> bool`, `vector_field(x) -> (n,)`.
+    `exact_solution(t)` (or None) is the exact solution from the system's own `x0`.
+    The engine uses the tapes: `h_tape` (H), `f_tape` (H o alpha), `alpha_tape`, `beta_tape`,
+    all over the 2n inputs (x, p), and `domain_code` (0: R^n, 1: positive orthant).
+    """
+
+    name: str
+    dim: int
+    family: str
+    realisation: str
+    degenerate: bool
+    poisson: Callable
+    x0: np.ndarray
+    t_final: float
+    h_tape: tp.Tape
+    f_tape: tp.Tape
+    alpha_tape: tp.Tape
+    beta_tape: tp.Tape
+    domain: str = "R^n"
+    casimirs: tuple = ()
+    casimir_names: tuple = ()
+    exact_solution: Callable | None = None
+    description: str = ""
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def domain_code(self) -> int:
+        return DOMAINS[self.domain]
+
+    def _xp(self, x, p=None) -> np.ndarray:
+        x = np.asarray(x, dtype=np.float64).reshape(-1)
+        p = np.zeros(self.dim) if p is None else np.asarray(p, dtype=np.float64).reshape(-1)
+        if x.shape != (self.dim,) or p.shape != (self.dim,):
+            raise InputError(f"{self.name}: expected vectors of size {self.dim}")
+        return np.concatenate([x, p])
+
+    def hamiltonian(self, x) -> float:
+        from ..integrators.jets import evaluate
+
+        return float(evaluate(self.h_tape, self._xp(x))[0])
+
+    def grad_hamiltonian(self, x) -> np.ndarray:
+        from ..integrators.jets import evaluate
+
+        _, jac = evaluate(self.h_tape, self._xp(x), degree=1, n_vars=2 * self.dim)
+        return jac[0, : self.dim]
+
+    def vector_field(self, x) -> np.ndarray:
+        """pi(x) grad H(x)."""
+        return self.poisson(np.asarray(x, dtype=np.float64)) @ self.grad_hamiltonian(x)
+
+    def alpha(self, x, p) -> np.ndarray:
+        from ..integrators.jets import evaluate
+
+        return evaluate(self.alpha_tape, self._xp(x, p))
+
+    def beta(self, x, p) -> np.ndarray:
+        from ..integrators.jets import evaluate
+
+        return evaluate(self.beta_tape, self._xp(x, p))
+
+    def in_domain(self, x) -> bool:
+        x = np.asarray(x, dtype=np.float64)
+        if x.shape != (self.dim,) or not np.all(np.isfinite(x)):
+            return False
+        return bool(np.all(x > 0)) if self.domain == "positive orthant" else True
+
+    def casimir_values(self, x) -> np.ndarray:
+        return np.array([c(np.asarray(x, dtype=np.float64)) for c in self.casimirs])
+
+    def with_x0(self, x0) -> PoissonSystem:
+        """The same system started elsewhere (checked: size and domain; no exact solution)."""
+        from dataclasses import replace
+
+        x0 = np.asarray(x0, dtype=np.float64).reshape(-1)
+        if x0.shape != (self.dim,):
+            raise InputError(f"x0 has {x0.size} components; {self.name} has dimension {self.dim}")
+        if not self.in_domain(x0):
+            raise InputError(f"x0 = {x0.tolist()} is outside the domain ({self.domain}) of "
+                             f"{self.name}")
+        same = np.array_equal(x0, self.x0)
+        return replace(self, x0=x0, exact_solution=self.exact_solution if same else None)
+
+
+def build_system(*, name: str, family: str, dim: int, poisson: Callable, hamiltonian: Callable,
+                 base_alpha: Callable, base_beta: Callable, x0, t_final: float,
+                 realisation_name: str = "symmetric", domain: str = "R^n",
+                 casimirs: tuple = (), casimir_names: tuple = (),
+                 exact_solution: Callable | None = None, description: str = "") -> PoissonSystem:
+    """Record the tapes of a system from programs over tape Vars.
+
+    hamiltonian(x) -> Var; base_alpha(x, p), base_beta(x, p) -> lists of n Vars: the symmetric
+    base birealisation; the realisation named `realisation_name` is composed on top.
+    """
+    kind = realisation(realisation_name)
+
+    def shifted(x, p):
+        s = kind.shift(p)
+        return x if s is None else [xi + si for xi, si in zip(x, s, strict=True)]
+
+    def alpha(x, p):
+        return base_alpha(shifted(x, p), p)
+
+    def beta(x, p):
+        return base_beta(shifted(x, p), p)
+
+    x0 = np.asarray(x0, dtype=np.float64)
+    return PoissonSystem(
+        name=name, dim=dim, family=family, realisation=kind.name, degenerate=kind.degenerate,
+        poisson=poisson, x0=x0, t_final=float(t_final),
+        h_tape=tp.record(dim, lambda x, p: [hamiltonian(x)]),
+        f_tape=tp.record(dim, lambda x, p: [hamiltonian(alpha(x, p))]),
+        alpha_tape=tp.record(dim, alpha), beta_tape=tp.record(dim, beta),
+        domain=domain, casimirs=tuple(casimirs), casimir_names=tuple(casimir_names),
+        exact_solution=exact_solution, description=description,
+    )
