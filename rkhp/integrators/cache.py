@@ -23,3 +23,7 @@ def _configure() -> None:
 
 
 _configure()
+
+import numba  # noqa: E402  (after the cache folder is set)
+
+__all__ = ["numba"]

@@ -20,13 +20,26 @@ from math import comb
 
 import numpy as np
 
-from . import cache  # noqa: F401  (sets NUMBA_CACHE_DIR before numba is imported)
-
-import numba as nb  # noqa: E402
-
-from ..systems.tape import (  # noqa: E402
-    ADD, ADDC, CONST, COS, CRB, DIV, EXP, LOG, MUL, MULC, NEG, PHIMV, POWI, POWR, SIN, SQRT, SUB,
+from ..systems.tape import (
+    ADD,
+    ADDC,
+    CONST,
+    COS,
+    CRB,
+    DIV,
+    EXP,
+    LOG,
+    MUL,
+    MULC,
+    NEG,
+    PHIMV,
+    POWI,
+    POWR,
+    SIN,
+    SQRT,
+    SUB,
 )
+from .cache import numba as nb
 
 NJIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 

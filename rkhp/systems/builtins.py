@@ -64,7 +64,8 @@ def lotka_volterra(realisation: str = "symmetric") -> PoissonSystem:
         x0=LV_X0, t_final=10.0, realisation=realisation,
         casimirs=(lambda x: float(np.log(x[0]) - 2.0 * np.log(x[1]) + np.log(x[2])),),
         casimir_names=("log x1 - 2 log x2 + log x3",),
-        description="3-species Lotka-Volterra, log-canonical, lambda = [[0,1,2],[-1,0,1],[-2,-1,0]]")
+        description="3-species Lotka-Volterra, log-canonical, "
+                    "lambda = [[0,1,2],[-1,0,1],[-2,-1,0]]")
 
 
 def pendulum(realisation: str = "symmetric") -> PoissonSystem:
