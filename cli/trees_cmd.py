@@ -18,8 +18,13 @@ def _order_option(f):
                              f"up to {MAX_COUNT_ORDER} with --count).")(f)
 
 
-def _class_of(degenerate: bool) -> str:
-    return "degenerate" if degenerate else "general"
+def _class_of(degenerate: bool, symmetric: bool = False) -> str:
+    if degenerate and symmetric:
+        raise click.UsageError("--symmetric and --degenerate are exclusive: choose one condition class")
+    return "symmetric" if symmetric else "degenerate" if degenerate else "general"
+
+
+_CLASS_TREES = {"general": "T", "degenerate": "T_0", "symmetric": "T_0 (symmetric birealisations)"}
 
 
 @click.command()
@@ -61,42 +66,51 @@ def trees(order, degenerate, exact_order, count, fmt):
 @click.command()
 @_order_option
 @click.option("--degenerate", is_flag=True, help="Conditions over T_0 (degeneracy condition, paper eq. (degen)).")
+@click.option("--symmetric", is_flag=True,
+              help="Reduced conditions of symmetric birealisations (combinations of T_0 residuals).")
 @click.option("--exact-order", is_flag=True, help="Only the conditions of order exactly N.")
 @format_option(*FORMATS)
-def conditions(order, degenerate, exact_order, fmt):
+def conditions(order, degenerate, symmetric, exact_order, fmt):
     """Print the RKHP order conditions a(t) = 1/gamma(t) of order <= N in Butcher's form.
 
-    Over all trees T (general birealisations) or, with --degenerate, over T_0 (paper, Table 1).
+    Over all trees T (general birealisations), with --degenerate over T_0 (paper, Table 1), or
+    with --symmetric the fewer conditions of symmetric birealisations, as combinations of the
+    residuals r(t) = gamma(t) a(t) - 1 over T_0.
     """
+    cls = _class_of(degenerate, symmetric)
     check_order(order, MAX_ENUMERATION_ORDER)
-    cls = _class_of(degenerate)
     conds = order_conditions(order, cls, exact_order)
     orders = [order] if exact_order else list(range(1, order + 1))
     counts = {str(n): sum(1 for c in conds if c.order == n) for n in orders}
     if fmt == "json":
-        emit_json({"order": order, "degenerate": degenerate, "counts": counts,
+        emit_json({"order": order, "degenerate": degenerate, "class": cls, "counts": counts,
                    "conditions": [_condition_json(c) for c in conds]})
         return
     if fmt == "latex":
         click.echo(_latex_longtable(
-            ("\\text{Order}", "\\text{Butcher tree } \\tau", "\\text{Order condition } a(\\tau)=e(\\tau)"),
-            [(str(c.order), c.tree.latex(), c.latex()) for c in conds]))
+            ("\\text{Order}", "\\text{Butcher tree } \\tau", "\\text{Order condition}"),
+            [(str(c.order), " ".join(t.latex() for t in c.trees), c.latex()) for c in conds]))
         return
-    rows = [(str(c.order), str(c.tree), c.text()) for c in conds]
+    rows = [(str(c.order), " ".join(str(t) for t in c.trees), c.text()) for c in conds]
     header = ("Order", "Tree", "Order condition")
     if fmt == "markdown":
         click.echo(_markdown(header, [(o, f"`{t}`", f"`{x}`") for o, t, x in rows]))
     else:
-        title = f"RKHP order conditions over {'T_0' if degenerate else 'T'} up to order {order}"
+        title = f"RKHP order conditions over {_CLASS_TREES[cls]} up to order {order}"
         _rich_table(title, header, rows, counts)
 
 
 def _condition_json(c) -> dict:
-    t = c.tree
+    """One condition; a combined (symmetric) condition also lists its trees and weights."""
     rhs = c.rhs
-    return {"tree": str(t), "order": t.order, "sigma": t.sigma, "gamma": t.gamma,
-            "rhs": f"{rhs.numerator}/{rhs.denominator}" if rhs.denominator != 1 else str(rhs.numerator),
-            "condition": c.text(), "latex": c.latex()}
+    rhs_text = f"{rhs.numerator}/{rhs.denominator}" if rhs.denominator != 1 else str(rhs.numerator)
+    if c.is_single:
+        t = c.tree
+        return {"tree": str(t), "order": t.order, "sigma": t.sigma, "gamma": t.gamma,
+                "rhs": rhs_text, "condition": c.text(), "latex": c.latex()}
+    return {"tree": None, "order": c.order, "trees": [str(t) for t in c.trees],
+            "weights": [str(w) for w in c.weights], "rhs": rhs_text, "condition": c.text(),
+            "latex": c.latex()}
 
 
 # ----------------------------------------------------------------------------- rendering

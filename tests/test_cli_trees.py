@@ -11,7 +11,8 @@ def test_conditions_json_keys_and_table_1(run_cli):
     rc, out, err = run_cli("conditions", "--order", "5", "--degenerate", "--format", "json")
     assert rc == 0, err
     doc = json.loads(out)
-    assert list(doc) == ["order", "degenerate", "counts", "conditions"]
+    assert list(doc) == ["order", "degenerate", "class", "counts", "conditions"]
+    assert doc["class"] == "degenerate"
     assert doc["counts"] == {"1": 1, "2": 0, "3": 1, "4": 2, "5": 4}
     first = doc["conditions"][1]
     assert first == {"tree": "b[b,b]", "order": 3, "sigma": 2, "gamma": 3, "rhs": "1/3",
@@ -71,3 +72,8 @@ def test_conditions_does_not_import_heavy_modules(run_cli):
             "from rkhp_cli.main import main; main()")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert "HEAVY:" in proc.stderr and proc.stderr.split("HEAVY:")[1].strip() == ""
+
+
+def test_symmetric_and_degenerate_conflict(run_cli):
+    rc, _, err = run_cli("conditions", "--order", "4", "--symmetric", "--degenerate")
+    assert rc == 2 and err.count("\n") == 1 and "exclusive" in err
