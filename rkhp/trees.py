@@ -15,9 +15,9 @@ those of c1 and r. T_0 is built the same way from T_0 trees directly (NOTES §1)
 
 from __future__ import annotations
 
-from fractions import Fraction
 import gc
 from bisect import bisect_right
+from fractions import Fraction
 from functools import lru_cache
 from math import factorial
 from operator import itemgetter

@@ -18,7 +18,8 @@ from rkhp.algebra import (
     hamilton_jacobi_expansion,
     inverse,
 )
-from rkhp.trees import LEAF, parse_tree as P, trees_of_order, trees_up_to
+from rkhp.trees import LEAF, trees_of_order, trees_up_to
+from rkhp.trees import parse_tree as P
 
 
 def combo(d):
