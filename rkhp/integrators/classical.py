@@ -1,0 +1,348 @@
+"""Classical peers of the RKHP integrators, in the same harness (paper §5; NOTES §4).
+
+Both integrate the Poisson ODE ``xdot = f(x) = pi(x) grad H(x)`` of a
+:class:`rkhp.systems.PoissonSystem` directly, without the birealisation:
+
+- :func:`integrate_classical`: an explicit Runge–Kutta method with any explicit tableau (e.g. the
+  classical RK4). It keeps neither the Casimirs nor the symplectic leaf; it is the baseline the
+  RKHP methods are compared with in ``rkhp converge``, ``rkhp bench`` and ``rkhp stress``.
+- :func:`integrate_midpoint`: the implicit midpoint rule, solved by Newton's method with a
+  finite-difference Jacobian of ``f``. It equals RKHP Euler when ``pi`` is constant (NOTES §5)
+  and keeps quadratic Casimirs (e.g. ``|x|^2`` of the rigid body).
+
+The whole loop is one numba-compiled function (cached on disk like the RKHP engine, see
+:mod:`rkhp.integrators.cache`), generic over systems: ``grad H`` is read off the system's
+Hamiltonian tape evaluated in first-order jets, and ``pi(x) = D^T - D`` with
+``D = d_p alpha(x, 0)`` off its alpha tape (NOTES §4), so the tableau and the system are data.
+
+Both return a :class:`~rkhp.integrators.trajectory.Trajectory`; a failure (Newton not converging,
+non-finite values, leaving the system's domain) ends the run and is named in its status with the
+step and the time, keeping only the states computed before it.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ..errors import InputError
+from .jets import NJIT, jet_space, nb, run_tape, scratch_rows
+from .trajectory import Trajectory
+
+NEWTON_TOLERANCE = 1e-14
+"""Relative size of the last Newton correction at which the implicit midpoint rule stops."""
+
+NEWTON_MAX_ITERATIONS = 30
+"""Newton iterations after which a step of the implicit midpoint rule is declared failed."""
+
+_CAUSES = {
+    1: "non-finite state",
+    2: "state left the domain of the system",
+    3: f"Newton did not converge in {NEWTON_MAX_ITERATIONS} iterations",
+    4: "Newton diverged",
+    5: "singular Newton matrix",
+    6: "Newton iterate became non-finite",
+}
+
+
+# ----------------------------------------------------------------------------------------------
+# compiled kernels
+
+
+@nb.njit(**NJIT)
+def _field(x, htape, atape, space, Wh, Wa, sh, sa, out):
+    """out = pi(x) grad H(x): grad H from the H tape, pi = D^T - D from the alpha tape."""
+    n = x.shape[0]
+    Wh[:, :] = 0.0
+    Wa[:, :] = 0.0
+    for i in range(n):
+        Wh[i, 0] = x[i]
+        Wh[i, 1 + i] = 1.0
+        Wa[i, 0] = x[i]
+        Wa[n + i, 1 + i] = 1.0
+    run_tape(htape, Wh, 1, space, sh)
+    run_tape(atape, Wa, 1, space, sa)
+    ho = htape[3][0]
+    ao = atape[3]
+    for i in range(n):
+        acc = 0.0
+        for j in range(n):
+            acc += (Wa[ao[j], 1 + i] - Wa[ao[i], 1 + j]) * Wh[ho, 1 + j]
+        out[i] = acc
+
+
+@nb.njit(**NJIT)
+def _bad_state(x, positive):
+    """0 when x is acceptable, else the failure code (1 non-finite, 2 outside the domain)."""
+    for q in range(x.shape[0]):
+        if not math.isfinite(x[q]):
+            return 1
+        if positive and not x[q] > 0.0:
+            return 2
+    return 0
+
+
+@nb.njit(**NJIT)
+def _rk_loop(htape, atape, space, A, b, h, n_steps, x0, positive, states, Wh, Wa, sh, sa):
+    """Explicit RK steps; returns (steps done, failure code)."""
+    n = x0.shape[0]
+    s = b.shape[0]
+    K = np.empty((s, n))
+    xi = np.empty(n)
+    x = x0.copy()
+    states[0] = x
+    for k in range(n_steps):
+        for i in range(s):
+            for q in range(n):
+                xi[q] = x[q]
+            for j in range(i):
+                a = h * A[i, j]
+                if a != 0.0:
+                    for q in range(n):
+                        xi[q] += a * K[j, q]
+            _field(xi, htape, atape, space, Wh, Wa, sh, sa, K[i])
+        for i in range(s):
+            w = h * b[i]
+            if w != 0.0:
+                for q in range(n):
+                    x[q] += w * K[i, q]
+        code = _bad_state(x, positive)
+        if code:
+            return k, code
+        states[k + 1] = x
+    return n_steps, 0
+
+
+@nb.njit(**NJIT)
+def _midpoint_loop(htape, atape, space, h, n_steps, x0, positive, tol, max_it, states, newton,
+                   Wh, Wa, sh, sa):
+    """Implicit midpoint steps, Newton on the midpoint; returns (steps done, failure code)."""
+    n = x0.shape[0]
+    x = x0.copy()
+    m = np.empty(n)
+    g = np.empty(n)
+    fp = np.empty(n)
+    fm = np.empty(n)
+    J = np.empty((n, n))
+    inv = np.empty((n, n))
+    y = np.empty(n)
+    states[0] = x
+    for k in range(n_steps):
+        _field(x, htape, atape, space, Wh, Wa, sh, sa, g)
+        for q in range(n):
+            m[q] = x[q] + 0.5 * h * g[q]
+        fresh = True
+        previous = np.inf
+        done = False
+        for it in range(1, max_it + 1):
+            newton[k] = it
+            if _bad_state(m, False):
+                return k, 6
+            if fresh:
+                # Newton matrix I - (h/2) Df(m), central differences (step cbrt(eps) scaled)
+                for j in range(n):
+                    d = 6.055e-6 * max(1.0, abs(m[j]))
+                    for q in range(n):
+                        y[q] = m[q]
+                    y[j] = m[j] + d
+                    _field(y, htape, atape, space, Wh, Wa, sh, sa, fp)
+                    y[j] = m[j] - d
+                    _field(y, htape, atape, space, Wh, Wa, sh, sa, fm)
+                    for q in range(n):
+                        J[q, j] = (1.0 if q == j else 0.0) - 0.5 * h * (fp[q] - fm[q]) / (2.0 * d)
+                if abs(np.linalg.det(J)) < 1e-300:
+                    return k, 5
+                inv[:, :] = np.linalg.inv(J)
+                fresh = False
+            _field(m, htape, atape, space, Wh, Wa, sh, sa, g)
+            size = 0.0
+            scale = 1.0
+            for q in range(n):
+                y[q] = m[q] - x[q] - 0.5 * h * g[q]
+            for q in range(n):
+                dq = 0.0
+                for j in range(n):
+                    dq += inv[q, j] * y[j]
+                if not math.isfinite(dq):
+                    return k, 6
+                m[q] -= dq
+                size = max(size, abs(dq))
+                scale = max(scale, abs(m[q]))
+            if size <= tol * scale or (size <= 1e-12 * scale and size >= previous):
+                done = True
+                break
+            if size > 1e3 * scale:
+                return k, 4
+            if size > 0.25 * previous:
+                fresh = True  # slow contraction: recompute the Newton matrix
+            previous = size
+        if not done:
+            return k, 3
+        for q in range(n):
+            x[q] = 2.0 * m[q] - x[q]
+        code = _bad_state(x, positive)
+        if code:
+            return k, code
+        states[k + 1] = x
+    return n_steps, 0
+
+
+@nb.njit(**NJIT)
+def _hamiltonian_loop(htape, space, states, W, scratch, out):
+    n = states.shape[1]
+    ho = htape[3][0]
+    for r in range(states.shape[0]):
+        W[:, :] = 0.0
+        for i in range(n):
+            W[i, 0] = states[r, i]
+        run_tape(htape, W, 0, space, scratch)
+        out[r] = W[ho, 0]
+
+
+# ----------------------------------------------------------------------------------------------
+# Python API
+
+
+def check_step(h, n_steps) -> tuple[float, int]:
+    """Validate a step size and a number of steps (InputError naming the bad value)."""
+    try:
+        h = float(h)
+    except (TypeError, ValueError):
+        raise InputError(f"step size h must be a number, got {h!r}") from None
+    if not math.isfinite(h) or h <= 0:
+        raise InputError(f"step size h must be positive and finite, got {h}")
+    if int(n_steps) != n_steps or n_steps < 1:
+        raise InputError(f"number of steps must be a positive integer, got {n_steps}")
+    return h, int(n_steps)
+
+
+def initial_state(system, x0) -> np.ndarray:
+    """``x0`` as a float64 vector of the system's dimension (the system's default when None)."""
+    x = np.array(system.x0 if x0 is None else x0, dtype=np.float64).reshape(-1)
+    if x.shape != (system.dim,):
+        raise InputError(f"x0 has {x.size} components; system {system.name} has dimension {system.dim}")
+    if not system.in_domain(x):
+        raise InputError(f"x0 = {x.tolist()} lies outside the domain of system {system.name}")
+    return x
+
+
+def _workspace(system):
+    """Jet tables and buffers for first-order jets in n variables of the H and alpha tapes."""
+    space = jet_space(system.dim, 1)
+    M = space.size
+    ht, at = system.h_tape, system.alpha_tape
+    return (ht.packed(), at.packed(), space.packed(),
+            np.zeros((ht.n_slots, M)), np.zeros((at.n_slots, M)),
+            np.zeros((scratch_rows(ht.n_inputs) + ht.n_inputs, M)),
+            np.zeros((scratch_rows(at.n_inputs) + at.n_inputs, M)))
+
+
+def _compiled(kernel) -> bool:
+    return bool(kernel.signatures)
+
+
+def _trajectory(system, method, h, k_done, code, states, newton, started, compile_s, extra=None):
+    status, failed = "ok", None
+    if code:
+        failed = k_done + 1
+        status = f"failed at step {failed} (t = {failed * h:.6g}): {_CAUSES[code]}"
+    n = k_done + 1
+    return Trajectory(times=h * np.arange(n, dtype=np.float64), states=states[:n].copy(),
+                      newton_iterations=newton[:k_done].copy(), status=status, failed_step=failed,
+                      compile_seconds=compile_s, run_seconds=time.perf_counter() - started - compile_s,
+                      method=method, system=system.name, extra=extra or {})
+
+
+def _warm_up(kernel, args_of_one_step) -> float:
+    """Compile ``kernel`` (or load it from the cache) by a one-step call; returns the seconds."""
+    if _compiled(kernel):
+        return 0.0
+    start = time.perf_counter()
+    kernel(*args_of_one_step)
+    return time.perf_counter() - start
+
+
+def integrate_classical(system, tableau, h, n_steps, x0=None) -> Trajectory:
+    """Explicit Runge–Kutta on ``xdot = pi(x) grad H(x)`` with an explicit ``tableau``.
+
+    Args:
+        system: a PoissonSystem; tableau: an explicit :class:`rkhp.tableau.Tableau`;
+        h: step size (> 0); n_steps: number of steps (>= 1); x0: start (default ``system.x0``).
+
+    Returns:
+        A Trajectory (``newton_iterations`` all zero); a non-finite state or one outside the
+        domain ends the run with a failure status. ``compile_seconds`` is the first call's
+        compilation (or cache load), apart from ``run_seconds``.
+    """
+    h, n_steps = check_step(h, n_steps)
+    if not tableau.is_explicit:
+        raise InputError(f"tableau {tableau.name} is {tableau.kind}; the classical peer needs an explicit one")
+    A = np.ascontiguousarray(tableau.A_float, dtype=np.float64)
+    b = np.ascontiguousarray(tableau.b_float, dtype=np.float64)
+    x = initial_state(system, x0)
+    ht, at, space, Wh, Wa, sh, sa = _workspace(system)
+    positive = system.domain_code == 1
+    states = np.empty((n_steps + 1, x.size))
+    started = time.perf_counter()
+    compile_s = _warm_up(_rk_loop, (ht, at, space, A, b, h, 1, x, positive, np.empty((2, x.size)), Wh, Wa, sh, sa))
+    k_done, code = _rk_loop(ht, at, space, A, b, h, n_steps, x, positive, states, Wh, Wa, sh, sa)
+    newton = np.zeros(n_steps, dtype=np.int64)
+    return _trajectory(system, f"classical {tableau.name}", h, k_done, code, states, newton, started, compile_s)
+
+
+def integrate_midpoint(system, h, n_steps, x0=None) -> Trajectory:
+    """The implicit midpoint rule ``x1 = x + h f((x + x1)/2)`` (order 2), Newton per step.
+
+    Newton on the midpoint m, started at the explicit Euler predictor; the Newton matrix
+    ``I - (h/2) Df(m)`` (central differences) is kept while corrections shrink at least 4-fold
+    and recomputed otherwise. A step stops when the correction is below 1e-14 max(1, |m|), or
+    stagnates at round-off level (below 1e-12 max(1, |m|) and not smaller than the previous one);
+    no convergence in 30 iterations, divergence or a non-finite iterate is a failure.
+
+    Args:
+        system: a PoissonSystem; h: step size (> 0); n_steps: number of steps;
+        x0: start (default ``system.x0``).
+
+    Returns:
+        A Trajectory with the Newton iterations of every step and a status naming any failure.
+    """
+    h, n_steps = check_step(h, n_steps)
+    x = initial_state(system, x0)
+    ht, at, space, Wh, Wa, sh, sa = _workspace(system)
+    positive = system.domain_code == 1
+    states = np.empty((n_steps + 1, x.size))
+    newton = np.zeros(n_steps, dtype=np.int64)
+    tol, max_it = NEWTON_TOLERANCE, NEWTON_MAX_ITERATIONS
+    started = time.perf_counter()
+    compile_s = _warm_up(_midpoint_loop, (ht, at, space, h, 1, x, positive, tol, max_it, np.empty((2, x.size)),
+                                          np.zeros(1, dtype=np.int64), Wh, Wa, sh, sa))
+    k_done, code = _midpoint_loop(ht, at, space, h, n_steps, x, positive, tol, max_it, states, newton,
+                                  Wh, Wa, sh, sa)
+    extra = {"newton_tolerance": tol, "newton_max_iterations": max_it}
+    return _trajectory(system, "implicit midpoint", h, k_done, code, states, newton, started, compile_s, extra)
+
+
+def vector_field(system):
+    """The compiled Poisson vector field ``x -> pi(x) grad H(x)`` of a system (NOTES §4)."""
+    ht, at, space, Wh, Wa, sh, sa = _workspace(system)
+
+    def f(x):
+        out = np.empty(system.dim)
+        _field(np.ascontiguousarray(x, dtype=np.float64), ht, at, space, Wh, Wa, sh, sa, out)
+        return out
+
+    return f
+
+
+def hamiltonian_values(system, states) -> np.ndarray:
+    """H at every row of ``states`` (compiled loop over the system's Hamiltonian tape)."""
+    states = np.ascontiguousarray(states, dtype=np.float64).reshape(-1, system.dim)
+    space = jet_space(0, 0)
+    ht = system.h_tape
+    W = np.zeros((ht.n_slots, space.size))
+    scratch = np.zeros((scratch_rows(ht.n_inputs) + ht.n_inputs, space.size))
+    out = np.empty(len(states))
+    _hamiltonian_loop(ht.packed(), space.packed(), states, W, scratch, out)
+    return out
