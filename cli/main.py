@@ -14,6 +14,7 @@ import click
 COMMANDS: dict[str, tuple[str, str, str]] = {
     "trees": ("rkhp_cli.trees_cmd", "trees", "Enumerate Butcher trees of T or T_0."),
     "conditions": ("rkhp_cli.trees_cmd", "conditions", "Print the order conditions (Butcher form, LaTeX)."),
+    "relations": ("rkhp_cli.relations_cmd", "relations", "Relations of symmetric birealisations (NOTES §8)."),
 }
 
 

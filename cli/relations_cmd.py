@@ -1,0 +1,68 @@
+"""`rkhp relations`: linear relations among elementary differentials of symmetric birealisations
+and the symmetric order conditions they leave (NOTES §8)."""
+
+from __future__ import annotations
+
+import click
+
+from .options import console, emit_json, format_option, progress
+
+
+@click.command()
+@click.option("--order", "-n", "order", type=int, required=True,
+              help="Largest order N (shipped up to 8; up to 10 with --regenerate).")
+@click.option("--regenerate", is_flag=True,
+              help="Derive the relations from scratch (exact arithmetic modulo primes) instead of reading "
+                   "the shipped data.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the random instances (--regenerate).")
+@click.option("--output", type=click.Path(dir_okay=False, writable=True),
+              help="Write the relations document (the shipped format) to this JSON file.")
+@format_option("table", "json")
+def relations(order, regenerate, seed, output, fmt):
+    """Relations among F(t), t in T_0, valid for every symmetric birealisation, per order.
+
+    For each order: the number of T_0 trees, of relations and of symmetric order conditions, the
+    relations (sum c_t F(t) = 0) and the conditions (sum w_t r(t) = 0, r(t) = gamma(t) a(t) - 1).
+    """
+    from rkhp.relations import relations_for
+
+    if output and not regenerate:
+        raise click.UsageError("--output writes freshly derived relations: add --regenerate")
+    with progress(fmt != "json") as bar:
+        task = bar.add_task("deriving relations", total=None)
+        data = relations_for(order, regenerate=regenerate, seed=seed,
+                             progress=(lambda step: bar.update(task, description=step)) if regenerate else None)
+    doc = data.to_json()
+    doc["source"] = "regenerated" if regenerate else "shipped"
+    if output:
+        import json
+
+        with open(output, "w", encoding="utf-8") as fh:
+            json.dump(data.to_json(), fh, indent=1, ensure_ascii=False)
+            fh.write("\n")
+    if fmt == "json":
+        emit_json(doc)
+        return
+    _render(data, doc["source"])
+
+
+def _render(data, source: str) -> None:
+    from rich.table import Table
+
+    from rkhp.relations import condition_text, relation_text
+
+    out = console()
+    summary = Table(title=f"Symmetric birealisations: relations among F(t), t in T_0 ({source})")
+    for col in ("Order", "T_0 trees", "Relations", "Symmetric conditions"):
+        summary.add_column(col, justify="right")
+    for o in data.orders:
+        summary.add_row(str(o.order), str(len(o.trees)), str(len(o.relations)), str(len(o.conditions)))
+    out.print(summary)
+    for o in data.orders:
+        if not o.trees:
+            continue
+        out.print(f"\n[bold]Order {o.order}[/bold]")
+        for k in range(len(o.relations)):
+            out.print(f"  relation   {relation_text(o, k)}", soft_wrap=True, markup=False)
+        for trees, weights in o.conditions:
+            out.print(f"  condition  {condition_text(trees, weights)}", soft_wrap=True, markup=False)

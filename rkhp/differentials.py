@@ -1,0 +1,361 @@
+"""Elementary differentials F(t) on truncated Taylor jets, exactly (NOTES §5 and §8).
+
+F(b) = H and F(b[t1..tk])(x) = d^k_p f(x, 0)[grad F(t1)(x), ..., grad F(tk)(x)] with
+f = H o alpha (paper §5.1, Theorem "superconvergence"). Every function of x is held as its Taylor
+polynomial at the base point, truncated at the degree that the trees still need: a subtree s of a
+tree of order <= N sits at depth <= N - |s|, so F(s) is needed to degree N - |s| and H to degree
+N - 1. Coefficients are residues modulo a prime below 2^31 (numpy int64, vectorised over a batch
+of random instances) or exact Python integers (``p=None``, object arrays).
+
+Two families of symmetric birealisations (NOTES §4):
+- constant pi: alpha = x - pi p / 2, so d^k_p f(x,0)[v1..vk] = (-1/2)^k D^k H(x)[pi v1, ..., pi vk];
+  the factor (-1/2)^(|t|-1) is common to all trees of one order and is left out (integers stay
+  integers, relations are unchanged);
+- a general alpha(x, p) given as a truncated series in (x - x0, p): Lie–Poisson
+  alpha = phi(K(p)) x, phi(z) = z / (1 - e^-z), and log-canonical
+  alpha_i = x_i exp(-(1/2) sum_j lambda_ij x_j p_j).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from fractions import Fraction
+from functools import lru_cache
+from itertools import combinations_with_replacement
+from math import comb, factorial
+
+import numpy as np
+
+from .trees import Tree
+
+# ----------------------------------------------------------------------------- monomial bases
+
+
+@dataclass(frozen=True, eq=False)
+class MonomialBasis:
+    """Monomials in ``nvars`` variables of degree <= ``degree``, graded (degree 0 first).
+
+    A polynomial truncated at degree m is the prefix of length ``sizes[m]`` of its coefficient
+    vector, so truncation is slicing.
+    """
+
+    nvars: int
+    degree: int
+    exponents: np.ndarray  # (M, nvars)
+    sizes: tuple[int, ...]  # sizes[m] = number of monomials of degree <= m
+    index: dict
+
+
+@lru_cache(maxsize=None)
+def monomial_basis(nvars: int, degree: int) -> MonomialBasis:
+    exps = []
+    for d in range(degree + 1):
+        for combo in combinations_with_replacement(range(nvars), d):
+            e = [0] * nvars
+            for v in combo:
+                e[v] += 1
+            exps.append(tuple(e))
+    exps.sort(key=lambda e: (sum(e), tuple(-x for x in e)))
+    sizes = tuple(comb(m + nvars, nvars) for m in range(degree + 1))
+    index = {e: i for i, e in enumerate(exps)}
+    return MonomialBasis(nvars, degree, np.array(exps, dtype=np.int64), sizes, index)
+
+
+@lru_cache(maxsize=None)
+def _derivative_table(basis: MonomialBasis, var: int) -> tuple[np.ndarray, np.ndarray]:
+    """(source index, factor) for each monomial of degree <= degree - 1: d/dx_var of sum c_e x^e."""
+    src, fac = [], []
+    for e in basis.exponents[: basis.sizes[basis.degree - 1]] if basis.degree else []:
+        up = list(int(x) for x in e)
+        up[var] += 1
+        src.append(basis.index[tuple(up)])
+        fac.append(up[var])
+    return np.array(src, dtype=np.int64), np.array(fac, dtype=np.int64)
+
+
+@lru_cache(maxsize=None)
+def _product_table(basis: MonomialBasis, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(ia, ib, starts): the pairs of monomials with degree sum <= m, grouped by their product.
+
+    ``np.add.reduceat(a[ia] * b[ib], starts)`` is the product truncated at degree m.
+    """
+    size = basis.sizes[m]
+    exps = basis.exponents[:size]
+    deg = exps.sum(axis=1)
+    ia, ib, out = [], [], []
+    for i in range(size):
+        j = np.nonzero(deg <= m - deg[i])[0]
+        prod = exps[j] + exps[i]
+        ia.append(np.full(j.size, i))
+        ib.append(j)
+        out.append([basis.index[tuple(map(int, e))] for e in prod])
+    ia, ib, out = np.concatenate(ia), np.concatenate(ib), np.concatenate(out)
+    order = np.argsort(out, kind="stable")
+    starts = np.searchsorted(out[order], np.arange(size))
+    return ia[order], ib[order], starts
+
+
+class JetRing:
+    """Truncated polynomials with coefficients mod p (int64) or exact integers (p None).
+
+    Arrays have shape (M, batch): one column per random instance.
+    """
+
+    def __init__(self, basis: MonomialBasis, p: int | None):
+        if p is not None and not 2 < p < 2**31:
+            raise ValueError("the modulus must be a prime below 2^31")
+        self.basis = basis
+        self.p = p
+        self.dtype = np.int64 if p is not None else object
+
+    def reduce(self, a: np.ndarray) -> np.ndarray:
+        return a % self.p if self.p is not None else a
+
+    def size(self, m: int) -> int:
+        return self.basis.sizes[m]
+
+    def mul(self, a: np.ndarray, b: np.ndarray, m: int) -> np.ndarray:
+        """The product of a and b truncated at degree m."""
+        if m == 0:
+            return self.reduce(a[:1] * b[:1])
+        ia, ib, starts = _product_table(self.basis, m)
+        return self.reduce(np.add.reduceat(self.reduce(a[ia] * b[ib]), starts, axis=0))
+
+    def derivative(self, a: np.ndarray, var: int, m: int) -> np.ndarray:
+        """d/dx_var of a, truncated at degree m (a must hold degree m + 1)."""
+        src, fac = _derivative_table(self.basis, var)
+        size = self.basis.sizes[m]
+        return self.reduce(a[src[:size]] * fac[:size, None])
+
+
+# ----------------------------------------------------------------------------- elementary differentials
+
+
+def _multisets(nvars: int, k: int):
+    return list(combinations_with_replacement(range(nvars), k))
+
+
+def _sorted_insert(J: tuple[int, ...], i: int) -> tuple[int, ...]:
+    return tuple(sorted(J + (i,)))
+
+
+def elementary_differentials(trees, max_order: int, ring: JetRing, partials, transform):
+    """Values at the base point of F(t) for the trees given (and all their subtrees).
+
+    ``partials(J, m)``: d_p^J f(x, 0) for a sorted index tuple J as a jet truncated at degree m
+    (shape (size(m), batch)); ``transform(grad, m)``: the vectors that fill the slots from the
+    gradient list of a child (identity for the general form, pi grad for constant pi).
+    Returns a dict tree -> array (batch,) of F(t) at the base point.
+    """
+    nvars = ring.basis.nvars
+    jets: dict[Tree, np.ndarray] = {}
+    slots: dict[Tree, list[np.ndarray]] = {}
+
+    def need(t: Tree) -> int:
+        return max_order - t.order
+
+    def jet(t: Tree) -> np.ndarray:
+        if t in jets:
+            return jets[t]
+        m = need(t)
+        if not t.children:
+            value = partials((), m)
+        else:
+            k = len(t.children)
+            table = {J: partials(J, m) for J in _multisets(nvars, k)}
+            for pos in range(k - 1, -1, -1):
+                u = vectors(t.children[pos], m)
+                table = {
+                    J: _sum(ring, [ring.mul(u[i], table[_sorted_insert(J, i)], m) for i in range(nvars)])
+                    for J in _multisets(nvars, pos)
+                }
+            value = table[()]
+        jets[t] = value
+        return value
+
+    def vectors(s: Tree, m: int) -> list[np.ndarray]:
+        if s not in slots:
+            f = jet(s)
+            grad = [ring.derivative(f, i, need(s) - 1) for i in range(nvars)]
+            slots[s] = transform(grad, need(s) - 1)
+        size = ring.size(m)
+        return [v[:size] for v in slots[s]]
+
+    out = {}
+    for t in trees:
+        out[t] = jet(t)[0]
+    return out
+
+
+def _sum(ring: JetRing, terms: list[np.ndarray]) -> np.ndarray:
+    total = terms[0].copy()
+    for x in terms[1:]:
+        total += x
+    return ring.reduce(total)
+
+
+# ----------------------------------------------------------------------------- random instances
+
+
+def _random_residues(rng: np.random.Generator, shape, p: int | None, bound: int):
+    """Uniform residues mod p, or integers in [-bound, bound] (exact mode)."""
+    if p is not None:
+        return rng.integers(0, p, size=shape, dtype=np.int64)
+    return np.array(rng.integers(-bound, bound + 1, size=shape), dtype=object)
+
+
+def constant_pi_values(trees, max_order: int, dim: int, batch: int, rng: np.random.Generator,
+                       p: int | None, bound: int = 3) -> dict[Tree, np.ndarray]:
+    """F(t)(0) * (-2)^(|t|-1) on ``batch`` random systems with constant pi in dimension ``dim``.
+
+    Each instance: a random antisymmetric pi and a random polynomial H of degree max_order - 1
+    (its Taylor jet at 0); residues mod p, or small integers when p is None.
+    """
+    basis = monomial_basis(dim, max(max_order - 1, 0))
+    ring = JetRing(basis, p)
+    H = _random_residues(rng, (basis.sizes[-1], batch), p, bound)
+    upper = _random_residues(rng, (dim, dim, batch), p, bound)
+    pi = upper - upper.transpose(1, 0, 2)
+    pi = ring.reduce(pi)
+    cache: dict[tuple[int, ...], np.ndarray] = {(): H}
+
+    def dH(J):
+        if J not in cache:
+            cache[J] = ring.derivative(dH(J[:-1]), J[-1], basis.degree - len(J))
+        return cache[J]
+
+    def partials(J, m):
+        return dH(J)[: ring.size(m)]
+
+    def transform(grad, m):
+        return [_sum(ring, [ring.reduce(pi[i, j][None, :] * grad[j]) for j in range(dim)]) for i in range(dim)]
+
+    return elementary_differentials(trees, max_order, ring, partials, transform)
+
+
+def _bernoulli_plus(n: int) -> list[Fraction]:
+    """B_0..B_n with B_1 = +1/2: phi(z) = z / (1 - e^-z) = sum B_k^+ z^k / k!."""
+    B = [Fraction(1)]
+    for m in range(1, n + 1):
+        B.append(-sum(comb(m + 1, k) * B[k] for k in range(m)) / (m + 1))
+    if n >= 1:
+        B[1] = Fraction(1, 2)
+    return B
+
+
+def _composite_partials(alpha_increment, H, dim: int, max_order: int, ring2: JetRing, p: int):
+    """partials(J, m) = d_p^J f(x0 + xi, 0) for f = H(x0 + y(xi, p)), y = alpha - x0 as jets in (xi, p)."""
+    basis2 = ring2.basis
+    D = basis2.degree
+    y = alpha_increment  # list of dim jets in 2*dim variables, zero constant term
+    # powers y^a for every exponent a of H's basis, by multiplying one factor at a time
+    hbasis = monomial_basis(dim, D)
+    batch = H.shape[1]
+    one = np.zeros((basis2.sizes[D], batch), dtype=ring2.dtype)
+    one[0] = 1
+    powers = {tuple([0] * dim): one}
+    f = ring2.reduce(one * H[0][None, :])
+    for idx in range(1, hbasis.sizes[D]):
+        e = tuple(int(x) for x in hbasis.exponents[idx])
+        v = next(i for i in range(dim) if e[i])
+        lower = list(e)
+        lower[v] -= 1
+        powers[e] = ring2.mul(powers[tuple(lower)], y[v], D)
+        f = ring2.reduce(f + ring2.reduce(powers[e] * H[idx][None, :]))
+    index2 = basis2.index
+    xi_basis = monomial_basis(dim, D)
+
+    @lru_cache(maxsize=None)
+    def rows(J, m):
+        pexp = [0] * dim
+        for j in J:
+            pexp[j] += 1
+        scale = 1
+        for c in pexp:
+            scale *= factorial(c)
+        ids = [index2[tuple(int(x) for x in xi_basis.exponents[i]) + tuple(pexp)]
+               for i in range(xi_basis.sizes[m])]
+        return np.array(ids, dtype=np.int64), scale
+
+    def partials(J, m):
+        ids, scale = rows(J, m)
+        return ring2.reduce(f[ids] * scale)
+
+    return partials
+
+
+def general_values(trees, max_order: int, family: str, batch: int, rng: np.random.Generator,
+                   p: int, dim: int = 3) -> dict[Tree, np.ndarray]:
+    """F(t) at a random base point x0 for random Hamiltonian jets, modulo p, on a symmetric
+    Lie–Poisson (so(3)*, ``family="lie-poisson"``) or log-canonical (dimension ``dim``) system."""
+    D = max(max_order - 1, 1)
+    basis2 = monomial_basis(2 * dim, D)
+    ring2 = JetRing(basis2, p)
+    size2 = basis2.sizes[D]
+
+    def variable(k):
+        v = np.zeros((size2, batch), dtype=np.int64)
+        e = [0] * (2 * dim)
+        e[k] = 1
+        v[basis2.index[tuple(e)]] = 1
+        return v
+
+    xi = [variable(i) for i in range(dim)]
+    pv = [variable(dim + i) for i in range(dim)]
+    x0 = rng.integers(1, p, size=(dim, batch), dtype=np.int64)
+    x = [ring2.reduce(xi[i] + _constant(x0[i], size2)) for i in range(dim)]
+    if family == "lie-poisson":
+        if dim != 3:
+            raise ValueError("the Lie–Poisson family here is so(3)*, dimension 3")
+        # K(p) x = p cross x; alpha = sum_k B_k^+/k! K^k x
+        coeffs = [to_mod(b / factorial(k), p) for k, b in enumerate(_bernoulli_plus(D))]
+        term = x
+        y = [xi[i].copy() for i in range(dim)]  # alpha - x0 = xi + sum_k>=1 ...
+        for k in range(1, D + 1):
+            term = _cross(ring2, pv, term, D)
+            y = [ring2.reduce(y[i] + term[i] * coeffs[k]) for i in range(dim)]
+    elif family == "log-canonical":
+        upper = rng.integers(0, p, size=(dim, dim, batch), dtype=np.int64)
+        lam = (upper - upper.transpose(1, 0, 2)) % p
+        half = to_mod(Fraction(-1, 2), p)
+        y = []
+        for i in range(dim):
+            w = _sum(ring2, [ring2.reduce(ring2.mul(x[j], pv[j], D) * lam[i, j][None, :]) for j in range(dim)])
+            w = ring2.reduce(w * half)
+            y.append(ring2.reduce(ring2.mul(x[i], _exp(ring2, w, D), D) - _constant(x0[i], size2)))
+    else:
+        raise ValueError(f"unknown family {family!r}")
+    hbasis = monomial_basis(dim, D)
+    H = rng.integers(0, p, size=(hbasis.sizes[D], batch), dtype=np.int64)
+    partials = _composite_partials(y, H, dim, max_order, ring2, p)
+    ring = JetRing(monomial_basis(dim, D), p)
+    return elementary_differentials(trees, max_order, ring, partials, lambda grad, m: grad)
+
+
+def to_mod(x: Fraction, p: int) -> int:
+    return x.numerator * pow(x.denominator, -1, p) % p
+
+
+def _constant(values: np.ndarray, size: int) -> np.ndarray:
+    c = np.zeros((size, values.shape[0]), dtype=np.int64)
+    c[0] = values
+    return c
+
+
+def _cross(ring: JetRing, a, b, m):
+    def term(i, j):
+        return ring.mul(a[i], b[j], m)
+
+    return [ring.reduce(term(1, 2) - term(2, 1)), ring.reduce(term(2, 0) - term(0, 2)),
+            ring.reduce(term(0, 1) - term(1, 0))]
+
+
+def _exp(ring: JetRing, w: np.ndarray, m: int) -> np.ndarray:
+    """exp(w) truncated at degree m for a jet w with zero constant term."""
+    total = np.zeros_like(w)
+    total[0] = 1
+    power = total.copy()
+    for k in range(1, m + 1):
+        power = ring.reduce(ring.mul(power, w, m) * to_mod(Fraction(1, k), ring.p))
+        total = ring.reduce(total + power)
+    return total
