@@ -15,6 +15,9 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "trees": ("rkhp_cli.trees_cmd", "trees", "Enumerate Butcher trees of T or T_0."),
     "conditions": ("rkhp_cli.trees_cmd", "conditions", "Print the order conditions (Butcher form, LaTeX)."),
     "relations": ("rkhp_cli.relations_cmd", "relations", "Relations of symmetric birealisations (NOTES §8)."),
+    "converge": ("rkhp_cli.studies_cmd", "converge", "Convergence study: error against h, observed orders."),
+    "bench": ("rkhp_cli.studies_cmd", "bench", "Work-precision: wall time against error, with scipy peers."),
+    "stress": ("rkhp_cli.studies_cmd", "stress", "Stress tests: Newton failure, long-run drift, round-off."),
 }
 
 
