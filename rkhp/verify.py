@@ -1,0 +1,382 @@
+"""Order verification of a tableau in every class of conditions (paper §5, Theorems 5.1–5.2).
+
+A tableau has order p in a class when every condition of order <= p holds: in the general class
+a(t) = 1/gamma(t) for all t in T, in the degenerate class for t in T_0, in the symmetric class
+the combinations of :func:`rkhp.conditions.conditions_of_order` (NOTES §2, §8). Every condition
+up to the order found plus one is checked (or up to ``max_order``), from the elementary weights of
+all trees of T computed in one pass (:mod:`rkhp.weights`).
+
+How each residual is decided (``Verification.tolerance_rule``):
+
+- ``exact``: the residual is computed in Q or in an algebraic number field and compared with 0;
+- ``float`` / D digits: |residual| <= tolerance = 10^4 u, with u = 2^-52 in float64 and
+  u = 10^(1-D) at D digits (D at most the digits the entries are given with). The pass itself
+  runs with 32 guard bits, so u is the rounding of the given coefficients.
+
+The residual of a single-tree condition is a(t) - 1/gamma(t); of a combination
+sum_k w_k r(t_k) = 0 (r = gamma a - 1) it is that sum divided by sum_k |w_k| gamma(t_k), which is
+the same thing for one tree. The principal error of a class of order p is the 2-norm of the
+residuals divided by sigma (of the condition's first tree) over the conditions of order p + 1.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from fractions import Fraction
+from typing import NamedTuple
+
+import numpy as np
+
+from .conditions import CLASSES, OrderCondition, conditions_of_order
+from .errors import InputError
+from .tableau import Tableau
+from .trees import MAX_ENUMERATION_ORDER, Tree, check_order
+from .weights import ExactArithmetic, arithmetic_for, tree_plan, weights_by_order
+
+#: Tolerance factor on the rounding unit u (float64 or the given digits).
+TOLERANCE_FACTOR = 1e4
+#: Without --max-order, the check grows up to this order at most.
+AUTO_MAX_ORDER = 16
+
+
+class Failure(NamedTuple):
+    """A failing condition: the tree (single-tree classes) or the OrderCondition, and its residual.
+
+    The residual is a float; in exact precision ``Verification.failing_exact`` holds its exact
+    value, in the same order.
+    """
+
+    item: Tree | OrderCondition
+    residual: float
+
+    @property
+    def label(self) -> str:
+        """The tree in bracket notation, or the combination ``w1*t1 + w2*t2``."""
+        if isinstance(self.item, Tree):
+            return str(self.item)
+        return combination_label(self.item)
+
+
+class FailureList(Sequence):
+    """The failures of one class, largest residual first; Failure values built on access."""
+
+    def __init__(self, items=(), residuals=()):
+        self._items = items
+        self._residuals = np.asarray(residuals, dtype=float)
+
+    def __len__(self) -> int:
+        return len(self._residuals)
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return [self[i] for i in range(*k.indices(len(self)))]
+        return Failure(self._items[k], float(self._residuals[k]))
+
+    def __repr__(self) -> str:
+        return f"FailureList({len(self)} failures)"
+
+
+@dataclass(frozen=True)
+class Verification:
+    """The verified orders of a tableau, with the evidence (issue 3, item 4)."""
+
+    name: str
+    stages: int
+    kind: str
+    orders: dict[str, int]
+    checked_up_to: int
+    precision: str
+    tolerance: float
+    tolerance_rule: str
+    failing: dict[str, FailureList]
+    principal_error: dict[str, float | None]
+    principal_error_max: dict[str, float | None]
+    claimed: dict[str, int | None]
+    claims: dict[str, str]
+    c_mismatch: tuple[tuple[int, float], ...] = field(default=())
+    class_checked_up_to: dict[str, int] = field(default_factory=dict)
+    failing_exact: dict[str, tuple[str, ...]] = field(default_factory=dict)
+
+    @property
+    def order(self) -> int:
+        """General order (over T)."""
+        return self.orders["general"]
+
+    @property
+    def degenerate_order(self) -> int:
+        """Degenerate order (over T_0)."""
+        return self.orders["degenerate"]
+
+    @property
+    def claim_ok(self) -> bool:
+        """Whether every claimed order equals the verified one."""
+        return all(v == "ok" for v in self.claims.values())
+
+    def is_lower_bound(self, cls: str) -> bool:
+        """Whether the order in ``cls`` reached the end of the check (so is only a lower bound)."""
+        return self.orders[cls] >= self.class_checked_up_to.get(cls, self.checked_up_to)
+
+    def _failing_json(self, cls: str) -> list[dict]:
+        exact = self.failing_exact.get(cls)
+        out = [{"tree": f.label, "residual": f.residual} for f in self.failing[cls]]
+        if exact:
+            for item, text in zip(out, exact, strict=True):
+                item["exact"] = text
+        return out
+
+    def to_json(self) -> dict:
+        """The issue's JSON keys (plus the extras after ``claim_ok``)."""
+        return {
+            "name": self.name,
+            "stages": self.stages,
+            "kind": self.kind,
+            "order": self.order,
+            "degenerate_order": self.degenerate_order,
+            "checked_up_to": self.checked_up_to,
+            "precision": self.precision,
+            "tolerance": self.tolerance,
+            "principal_error": dict(self.principal_error),
+            "failing": {cls: self._failing_json(cls) for cls in self.failing},
+            "claimed": {"order": self.claimed.get("general"),
+                        "degenerate_order": self.claimed.get("degenerate")},
+            "claim_ok": self.claim_ok,
+            "orders": dict(self.orders),
+            "claims": dict(self.claims),
+            "tolerance_rule": self.tolerance_rule,
+            "principal_error_max": dict(self.principal_error_max),
+            "class_checked_up_to": dict(self.class_checked_up_to),
+            "c_mismatch": [{"stage": i + 1, "difference": d} for i, d in self.c_mismatch],
+        }
+
+
+
+
+def combination_label(condition: OrderCondition) -> str:
+    """``r(t1) - 2 r(t2) = 0`` style text of a combined condition, r(t) = gamma(t) a(t) - 1."""
+    parts = []
+    for k, (w, t) in enumerate(zip(condition.weights, condition.trees, strict=True)):
+        sign = "-" if w < 0 else "+"
+        mag = "" if abs(w) == 1 else f"{abs(w)} "
+        head = ("-" if sign == "-" else "") if k == 0 else f" {sign} "
+        parts.append(f"{head}{mag}r({t})")
+    return "".join(parts)
+
+
+# ----------------------------------------------------------------------------- precision
+
+
+def default_precision(tableau: Tableau):
+    """exact when every entry is exact, else the digits given when above 17, else float."""
+    if tableau.is_exact:
+        return "exact"
+    if tableau.digits is not None and tableau.digits > 17:
+        return tableau.digits
+    return "float"
+
+
+def parse_precision(text):
+    """``float``, ``exact`` or a number of digits (as text or int); None stays None."""
+    if text is None or isinstance(text, int):
+        return text
+    s = str(text).strip().lower()
+    if s in ("float", "exact"):
+        return s
+    if s.isdigit():
+        return int(s)
+    raise InputError(f"precision must be float, exact or a number of digits, got {text!r}")
+
+
+def _tolerance(arithmetic, tableau: Tableau) -> tuple[float, str]:
+    if arithmetic.exact:
+        K = arithmetic.field
+        field_ = "Q" if K is None else f"Q({', '.join(map(str, K.orig_ext))})"
+        return 0.0, f"exact: each residual computed in {field_} and compared with 0"
+    if arithmetic.name == "float":
+        return TOLERANCE_FACTOR * arithmetic.unit, \
+            "|a(t) - 1/gamma(t)| <= 1e4 u, u = 2^-52 (float64)"
+    digits = min(arithmetic.digits, tableau.digits or arithmetic.digits)
+    unit = 10.0 ** (1 - digits)
+    return TOLERANCE_FACTOR * unit, \
+        f"|a(t) - 1/gamma(t)| <= 1e4 u, u = 10^(1-{digits}) ({digits} digits; fixed point " \
+        f"with {arithmetic.bits} bits)"
+
+
+# ----------------------------------------------------------------------------- classes
+
+
+def available_classes() -> tuple[str, ...]:
+    """The condition classes whose conditions can be built (symmetric needs rkhp.relations)."""
+    out = []
+    for cls in CLASSES:
+        try:
+            conditions_of_order(1, cls)
+        except ImportError:
+            continue
+        out.append(cls)
+    return tuple(out)
+
+
+def _single_tree_class(cls: str) -> bool:
+    """general and degenerate: one condition a(t) = 1/gamma(t) per tree of T or T_0."""
+    return cls in ("general", "degenerate")
+
+
+@dataclass
+class _ClassState:
+    cls: str
+    order: int | None = None  # set at the first failing order
+    limit: int | None = None  # set when the class has no conditions beyond this order
+    failing: FailureList = field(default_factory=FailureList)
+    failing_exact: tuple = ()
+    principal: float | None = None
+    principal_max: float | None = None
+
+    @property
+    def done(self) -> bool:
+        return self.order is not None or self.limit is not None
+
+
+def _evaluate_class(state, n, blk, R, plan, arithmetic, tol):
+    """Check the conditions of order n of one class; record the first failing order."""
+    gammas = plan.gamma[blk]
+    sigmas = plan.sigma[blk]
+    if _single_tree_class(state.cls):
+        mask = np.ones(len(gammas), dtype=bool) if state.cls == "general" else plan.in_t0[blk]
+        positions = np.nonzero(mask)[0]
+        trees = plan.trees[blk]
+        conditions = [trees[k] for k in positions]
+        R_sel = R[positions]
+        denominators = np.array(gammas, dtype=float)[positions]
+        sig = np.array(sigmas, dtype=float)[positions]
+    else:
+        try:
+            conditions = list(conditions_of_order(n, state.cls))
+        except InputError:  # e.g. symmetric relations shipped only up to some order
+            state.limit = n - 1
+            return
+        start = plan.starts[n]
+        R_sel = [_combine(arithmetic, [R[plan.index(t) - start] for t in c.trees], c.weights)
+                 for c in conditions]
+        denominators = np.array([float(sum(abs(w) * t.gamma for w, t in
+                                           zip(c.weights, c.trees, strict=True)))
+                                 for c in conditions])
+        sig = np.array([c.trees[0].sigma for c in conditions], dtype=float)
+    if not conditions:
+        return
+    residuals = arithmetic.to_floats(R_sel) / denominators
+    if arithmetic.exact:
+        bad = np.array([not arithmetic.is_zero(x) for x in R_sel])
+    else:
+        bad = ~(np.abs(residuals) <= tol)
+    if not bad.any():
+        return
+    state.order = n - 1
+    weighted = residuals / sig
+    state.principal = float(np.linalg.norm(weighted))
+    state.principal_max = float(np.abs(weighted).max())
+    order = np.argsort(-np.abs(residuals[bad]), kind="stable")
+    failing = np.nonzero(bad)[0][order]
+    state.failing = FailureList([conditions[k] for k in failing], residuals[failing])
+    if arithmetic.exact:
+        state.failing_exact = tuple(str(_exact_residual(arithmetic, R_sel[k], denominators[k]))
+                                    for k in failing)
+
+
+def _combine(arithmetic, values, weights):
+    if arithmetic.exact:
+        return sum((arithmetic.scale(x, w) for x, w in zip(values, weights, strict=True)),
+                   arithmetic.scale(values[0], Fraction(0)))
+    if arithmetic.name == "float":
+        return sum(float(w) * x for x, w in zip(values, weights, strict=True))
+    return sum((w * x for x, w in zip(values, weights, strict=True)), Fraction(0))
+
+
+def _exact_residual(arithmetic: ExactArithmetic, R, denominator: float):
+    import sympy
+
+    return sympy.nsimplify(arithmetic.to_sympy(R) / int(denominator)) \
+        if arithmetic.field is None else sympy.radsimp(arithmetic.to_sympy(R) / int(denominator))
+
+
+# ----------------------------------------------------------------------------- verify
+
+
+def verify(tableau, max_order: int | None = None, precision=None, classes=None,
+           on_order=None) -> Verification:
+    """Verify the orders of a tableau (a Tableau, a built-in name or a file) in every class.
+
+    ``precision``: "float", "exact", a number of digits, or None for :func:`default_precision`.
+    ``max_order``: check every condition up to this order; by default up to the order found plus
+    one (at most AUTO_MAX_ORDER). ``on_order(n, N)`` is called after each order (progress).
+    """
+    from .tablefiles import load_tableau
+
+    tableau = load_tableau(tableau)
+    precision = parse_precision(precision)
+    if precision is None:
+        precision = default_precision(tableau)
+    arithmetic = arithmetic_for(tableau, precision)
+    tolerance, rule = _tolerance(arithmetic, tableau)
+    classes = tuple(classes) if classes else available_classes()
+    if max_order is not None:
+        check_order(max_order, MAX_ENUMERATION_ORDER, "max order")
+        states, N = _run(tableau, max_order, arithmetic, tolerance, classes, on_order)
+    else:
+        claimed = [x for x in (tableau.claimed_order, tableau.claimed_degenerate_order) if x]
+        N = min(max(claimed, default=5) + 1, AUTO_MAX_ORDER)
+        while True:
+            states, checked = _run(tableau, N, arithmetic, tolerance, classes, on_order)
+            if all(s.done for s in states.values()) or N >= AUTO_MAX_ORDER:
+                N = checked
+                break
+            N = min(N + 2, AUTO_MAX_ORDER)
+    orders = {cls: _found(s, N) for cls, s in states.items()}
+    class_checked = {cls: (s.limit if s.limit is not None else N) for cls, s in states.items()}
+    claimed = {"general": tableau.claimed_order, "degenerate": tableau.claimed_degenerate_order}
+    claims = {cls: _claim_status(claimed[cls], orders[cls], class_checked[cls])
+              for cls in claimed if claimed[cls] is not None}
+    return Verification(
+        name=tableau.name, stages=tableau.stages, kind=tableau.kind, orders=orders,
+        checked_up_to=N, precision=arithmetic.name, tolerance=tolerance, tolerance_rule=rule,
+        failing={cls: s.failing for cls, s in states.items()},
+        principal_error={cls: s.principal for cls, s in states.items()},
+        principal_error_max={cls: s.principal_max for cls, s in states.items()},
+        claimed=claimed, claims=claims, c_mismatch=tuple(tableau.c_mismatch()),
+        class_checked_up_to=class_checked,
+        failing_exact={cls: s.failing_exact for cls, s in states.items() if s.failing_exact})
+
+
+def _found(state: _ClassState, N: int) -> int:
+    if state.order is not None:
+        return state.order
+    return state.limit if state.limit is not None else N
+
+
+def _claim_status(claimed: int, found: int, checked: int) -> str:
+    if found >= checked and claimed > found:
+        return f"not verified (checked up to order {checked})"
+    if claimed > found:
+        return "overstated"
+    if claimed < found:
+        return "understated"
+    return "ok"
+
+
+def _run(tableau, N, arithmetic, tolerance, classes, on_order):
+    """Check every class order by order up to N; stop once each class has failed.
+
+    Returns the class states and the last order checked.
+    """
+    plan = tree_plan(N)
+    states = {cls: _ClassState(cls) for cls in classes}
+    for n, blk, a in weights_by_order(tableau, N, arithmetic):
+        R = arithmetic.residuals(a, plan.gamma[blk])
+        for state in states.values():
+            if state.done is False:
+                _evaluate_class(state, n, blk, R, plan, arithmetic, tolerance)
+        if on_order is not None:
+            on_order(n, N)
+        if all(s.done for s in states.values()):
+            break
+    return states, n
