@@ -14,6 +14,11 @@ import click
 COMMANDS: dict[str, tuple[str, str, str]] = {
     "trees": ("rkhp_cli.trees_cmd", "trees", "Enumerate Butcher trees of T or T_0."),
     "conditions": ("rkhp_cli.trees_cmd", "conditions", "Print the order conditions (Butcher form, LaTeX)."),
+    "verify": ("rkhp_cli.verify_cmd", "verify", "Verify a tableau's orders over T and T_0 (exact or stated tolerance)."),
+    "tables": ("rkhp_cli.verify_cmd", "tables", "List the built-in tableaux with their verified orders."),
+    "systems": ("rkhp_cli.systems_cmd", "systems", "List the built-in Poisson systems."),
+    "check": ("rkhp_cli.systems_cmd", "check", "Check a system's birealisation axioms (AD)."),
+    "integrate": ("rkhp_cli.systems_cmd", "integrate", "Integrate a Poisson system with an RKHP method."),
     "relations": ("rkhp_cli.relations_cmd", "relations", "Relations of symmetric birealisations (NOTES §8)."),
     "converge": ("rkhp_cli.studies_cmd", "converge", "Convergence study: error against h, observed orders."),
     "bench": ("rkhp_cli.studies_cmd", "bench", "Work-precision: wall time against error, with scipy peers."),

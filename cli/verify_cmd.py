@@ -1,0 +1,132 @@
+"""`rkhp verify` and `rkhp tables`: verified orders of a tableau, and the built-in tableaux."""
+
+from __future__ import annotations
+
+import click
+
+from .options import console, emit_json, format_option, progress
+
+_PRECISION_HELP = ("float, exact, or a number of decimal digits (fixed point). Default: exact when "
+                   "every entry is exact, else the digits given when above 17, else float.")
+_CLASS_SETS = {"general": "general (T)", "degenerate": "degenerate (T_0)"}
+
+
+@click.command()
+@click.argument("tableau", metavar="NAME|FILE")
+@click.option("--max-order", type=int, default=None,
+              help="Check every condition up to this order (default: the order found plus one).")
+@click.option("--precision", default=None, metavar="float|exact|DIGITS", help=_PRECISION_HELP)
+@click.option("--show", type=int, default=10, show_default=True,
+              help="Failing conditions listed per class in the table view (JSON lists all).")
+@format_option("table", "json")
+def verify(tableau, max_order, precision, show, fmt):
+    """Verify the order of a tableau over T (general) and T_0 (degenerate), exactly or at a
+    stated tolerance, with the failing trees and the principal error (paper §5)."""
+    from rkhp.tablefiles import load_tableau
+    from rkhp.verify import verify as run_verify
+
+    tab = load_tableau(tableau)
+    with progress(fmt != "json") as bar:
+        task = bar.add_task(f"verifying {tab.name}", total=None)
+        result = run_verify(tab, max_order=max_order, precision=precision,
+                            on_order=lambda n, N: bar.update(task, completed=n, total=N))
+    if fmt == "json":
+        emit_json(result.to_json())
+        return
+    _render(result, tab, show)
+
+
+def _render(result, tab, show: int) -> None:
+    from rich.markup import escape
+    from rich.table import Table
+
+    out = console()
+    out.print(f"[bold]{escape(result.name)}[/bold]: {result.stages} stages, {result.kind}"
+              + (f" — {escape(tab.reference)}" if tab.reference else ""))
+    out.print(f"precision: {result.precision}; {escape(result.tolerance_rule)}")
+    for stage, diff in result.c_mismatch:
+        out.print(f"[yellow]warning:[/yellow] the given c[{stage + 1}] differs from the row sum "
+                  f"of A by {diff:.3g}; the row sums are used")
+    table = Table(title=None)
+    for col in ("class", "order", "checked to", "claimed", "principal error", "largest"):
+        table.add_column(col, justify="left" if col in ("class", "claimed") else "right")
+    for cls, order in result.orders.items():
+        checked = result.class_checked_up_to.get(cls, result.checked_up_to)
+        lower = ">= " if result.is_lower_bound(cls) else ""
+        pe = result.principal_error.get(cls)
+        pm = result.principal_error_max.get(cls)
+        claimed = result.claimed.get(cls)
+        claim = "" if claimed is None else f"{claimed} ({result.claims[cls]})"
+        table.add_row(_CLASS_SETS.get(cls, cls), f"{lower}{order}", str(checked), escape(claim),
+                      "" if pe is None else f"{pe:.3e}", "" if pm is None else f"{pm:.3e}")
+    out.print(table)
+    for cls, failures in result.failing.items():
+        if not len(failures):
+            continue
+        exact = result.failing_exact.get(cls, ())
+        t = Table(title=f"{cls}: failing conditions of order {result.orders[cls] + 1} "
+                        f"({len(failures)})", title_justify="left")
+        t.add_column("tree" if cls != "symmetric" else "condition")
+        t.add_column("residual a(t) - 1/gamma(t)", justify="right")
+        if exact:
+            t.add_column("exact")
+        for k, f in enumerate(failures[:show]):
+            row = [escape(f.label), f"{f.residual:.6e}"]
+            if exact:
+                row.append(escape(exact[k]))
+            t.add_row(*row)
+        if len(failures) > show:
+            t.caption = f"... and {len(failures) - show} more (--show N, or --format json)"
+        out.print(t)
+    if not result.claim_ok:
+        out.print("[red]claimed orders do not match:[/red] "
+                  + ", ".join(f"{cls}: {status}" for cls, status in result.claims.items()
+                              if status != "ok"))
+
+
+@click.command()
+@click.option("--precision", default="float", show_default=True,
+              metavar="float|exact|DIGITS|default",
+              help="Precision of the verification (default: each table's own default, slower "
+                   "for the 60-digit ones).")
+@format_option("table", "json")
+def tables(precision, fmt):
+    """List the built-in tableaux with stages, kind, verified and claimed orders."""
+    from rkhp.tablefiles import builtin_names, load_tableau
+    from rkhp.verify import verify as run_verify
+
+    names = builtin_names()
+    rows = []
+    with progress(fmt != "json") as bar:
+        task = bar.add_task("verifying the built-in tableaux", total=len(names))
+        for name in names:
+            tab = load_tableau(name)
+            chosen = None if precision == "default" else precision
+            if chosen == "exact" and not tab.is_exact:
+                chosen = None
+            result = run_verify(tab, precision=chosen)
+            rows.append((tab, result))
+            bar.advance(task)
+    if fmt == "json":
+        emit_json([{"name": tab.name, "aliases": list(tab.aliases), "stages": tab.stages,
+                    "kind": tab.kind, "order": r.order, "degenerate_order": r.degenerate_order,
+                    "orders": dict(r.orders), "precision": r.precision,
+                    "claimed": {"order": tab.claimed_order,
+                                "degenerate_order": tab.claimed_degenerate_order},
+                    "claim_ok": r.claim_ok, "reference": tab.reference} for tab, r in rows])
+        return
+    from rich.table import Table
+
+    table = Table(title=f"Built-in tableaux (verified orders; precision: {precision})")
+    for col in ("name", "stages", "kind", "order", "degenerate", "symmetric", "claimed"):
+        table.add_column(col, justify="right" if col in ("stages", "order", "degenerate",
+                                                         "symmetric") else "left")
+    for tab, r in rows:
+        claimed = "/".join("-" if x is None else str(x)
+                           for x in (tab.claimed_order, tab.claimed_degenerate_order))
+        if not r.claim_ok:
+            claimed += " (mismatch)"
+        orders = [(">=" if r.is_lower_bound(c) else "") + str(r.orders[c]) if c in r.orders else ""
+                  for c in ("general", "degenerate", "symmetric")]
+        table.add_row(tab.name, str(tab.stages), tab.kind, *orders, claimed)
+    console().print(table)
