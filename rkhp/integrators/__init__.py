@@ -1,1 +1,27 @@
-"""RKHP integrators: Taylor-tower step, Newton, compiled loops, classical peers (paper §5.2)."""
+"""RKHP integrators: Taylor-tower step, Newton, compiled loops, classical peers (paper §5.2).
+
+Names load lazily (numba is imported only when an integrator runs):
+`integrate`, `integrate_ensemble` (RKHP, explicit tableaux), `integrate_taylor` (THP, paper
+Thm 5.1), `integrate_classical`, `integrate_midpoint` (peers), `Trajectory`.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+_LAZY = {
+    "integrate": "rkhp.integrators.rkhp_method",
+    "integrate_ensemble": "rkhp.integrators.rkhp_method",
+    "integrate_taylor": "rkhp.integrators.taylor",
+    "integrate_classical": "rkhp.integrators.classical",
+    "integrate_midpoint": "rkhp.integrators.classical",
+    "Trajectory": "rkhp.integrators.trajectory",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'rkhp.integrators' has no attribute {name!r}")

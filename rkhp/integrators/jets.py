@@ -66,23 +66,22 @@ TWO_PI = 2.0 * math.pi
 class JetSpace:
     """Tables for jets in `n_vars` variables truncated at degree <= `degree`.
 
-    counts[d]: number of monomials of degree <= d; pair_counts[d]: number of product pairs whose
-    result has degree <= d; pa, pb, pc: the pairs (a, b -> c); up[m, k]: index of m + e_k (or -1);
-    expo[m, k]: exponent of variable k in monomial m.
+    counts[d]: number of monomials of degree <= d; the product pairs (pa[t], pb[t]) of monomial c
+    are t in start[c]:start[c + 1]; up[m, k]: index of m + e_k (or -1); expo[m, k]: exponent of
+    variable k in monomial m.
     """
 
     n_vars: int
     degree: int
     counts: np.ndarray
-    pair_counts: np.ndarray
+    start: np.ndarray
     pa: np.ndarray
     pb: np.ndarray
-    pc: np.ndarray
     up: np.ndarray
     expo: np.ndarray
 
     def packed(self):
-        return (self.counts, self.pair_counts, self.pa, self.pb, self.pc, self.up, self.expo)
+        return (self.counts, self.start, self.pa, self.pb, self.pa, self.up, self.expo)
 
     @property
     def size(self) -> int:
@@ -121,11 +120,10 @@ def jet_space(n_vars: int, degree: int) -> JetSpace:
         for j, mj in enumerate(monos):
             if deg[i] + deg[j] <= degree:
                 k = index[tuple(a + b for a, b in zip(mi, mj, strict=True))]
-                pairs.append((deg[k], k, i, j))
+                pairs.append((k, i, j))
     pairs.sort()
-    arr = np.array(pairs, dtype=np.int64).reshape(-1, 4)
-    pair_counts = np.array([np.searchsorted(arr[:, 0], d, side="right")
-                            for d in range(degree + 1)], dtype=np.int64)
+    arr = np.array(pairs, dtype=np.int64).reshape(-1, 3)
+    start = np.searchsorted(arr[:, 0], np.arange(len(monos) + 1)).astype(np.int64)
     up = -np.ones((len(monos), max(n_vars, 1)), dtype=np.int64)
     expo = np.zeros((len(monos), max(n_vars, 1)), dtype=np.int64)
     for i, m in enumerate(monos):
@@ -133,8 +131,7 @@ def jet_space(n_vars: int, degree: int) -> JetSpace:
             expo[i, k] = m[k]
             if deg[i] < degree:
                 up[i, k] = index[tuple(e + (1 if q == k else 0) for q, e in enumerate(m))]
-    return JetSpace(n_vars, degree, counts, pair_counts, arr[:, 2].copy(), arr[:, 3].copy(),
-                    arr[:, 1].copy(), up, expo)
+    return JetSpace(n_vars, degree, counts, start, arr[:, 1].copy(), arr[:, 2].copy(), up, expo)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -144,11 +141,19 @@ def jet_space(n_vars: int, degree: int) -> JetSpace:
 @nb.njit(**NJIT)
 def jet_mul(a, b, out, D, space):
     """out = a * b truncated at degree D (out must not alias a or b)."""
-    counts, pair_counts, pa, pb, pc = space[0], space[1], space[2], space[3], space[4]
-    for m in range(counts[D]):
-        out[m] = 0.0
-    for t in range(pair_counts[D]):
-        out[pc[t]] += a[pa[t]] * b[pb[t]]
+    counts, start, pa, pb = space[0], space[1], space[2], space[3]
+    for c in range(counts[D]):
+        acc0 = 0.0
+        acc1 = 0.0
+        t = start[c]
+        end = start[c + 1]
+        while t + 1 < end:
+            acc0 += a[pa[t]] * b[pb[t]]
+            acc1 += a[pa[t + 1]] * b[pb[t + 1]]
+            t += 2
+        if t < end:
+            acc0 += a[pa[t]] * b[pb[t]]
+        out[c] = acc0 + acc1
 
 
 @nb.njit(**NJIT)
@@ -393,8 +398,8 @@ def run_tape(tape, W, D, space, scratch):
 
 
 def scratch_rows(n: int) -> int:
-    """Rows of scratch space `run_tape` needs for a system of dimension n."""
-    return 4 + 2 * n + 1
+    """Rows of scratch space `run_tape` needs for a system of dimension n (engine: 5 + 2n)."""
+    return 5 + 2 * n
 
 
 def evaluate(tape, inputs: np.ndarray, degree: int = 0, n_vars: int = 0):

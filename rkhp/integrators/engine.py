@@ -1,0 +1,261 @@
+"""The explicit RKHP step as a compiled "Taylor tower" (paper §5.2, NOTES §5 and §7).
+
+At the Newton iterate x0, each stage function g_i(x) = f(x, Z_i(x)), f = H o alpha, is held as its
+Taylor polynomial in dx = x - x0, truncated at degree s + 2 - i (1-based i); g_1 = H;
+Z_i = h sum_{j<i} a_ij grad g_j is read off the coefficients. psi = h sum_i b_i grad g_i and its
+Jacobian are the degree-0 and degree-1 coefficients. Newton solves alpha(x, psi(x)) = y (Jacobian
+by the same jets), stopping when the correction, or the correction Newton's quadratic rate
+predicts for the next iterate, is below the tolerance (then psi + Dpsi dx is reused at the new x,
+NOTES §7); y_next = beta(x, psi(x)). Each stage is computed once: the cost is polynomial in s.
+
+The tableau, h and the states are data: one compilation serves every system and tableau.
+Failure codes: 0 ok, 1 Newton did not converge, 2 non-finite values, 3 left the domain.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .cache import numba as nb
+from .jets import NJIT, run_tape
+
+OK, NO_CONVERGENCE, NON_FINITE, LEFT_DOMAIN = 0, 1, 2, 3
+
+
+@nb.njit(**NJIT)
+def solve_small(J, r, out):
+    """out = J^{-1} r by Gaussian elimination with partial pivoting (J, r copied)."""
+    n = r.shape[0]
+    M = J.copy()
+    v = r.copy()
+    for c in range(n):
+        piv = c
+        for i in range(c + 1, n):
+            if abs(M[i, c]) > abs(M[piv, c]):
+                piv = i
+        if piv != c:
+            for j in range(n):
+                M[c, j], M[piv, j] = M[piv, j], M[c, j]
+            v[c], v[piv] = v[piv], v[c]
+        for i in range(c + 1, n):
+            f = M[i, c] / M[c, c]
+            for j in range(c, n):
+                M[i, j] -= f * M[c, j]
+            v[i] -= f * v[c]
+    for i in range(n - 1, -1, -1):
+        acc = v[i]
+        for j in range(i + 1, n):
+            acc -= M[i, j] * out[j]
+        out[i] = acc / M[i, i]
+
+
+@nb.njit(**NJIT)
+def _set_x(W, x0, n, D):
+    for k in range(n):
+        for m in range(W.shape[1]):
+            W[k, m] = 0.0
+        W[k, 0] = x0[k]
+        if D >= 1:
+            W[k, 1 + k] = 1.0
+
+
+@nb.njit(**NJIT)
+def tower(x0, A, b, h, tapes, space, W, G, scratch, psi, Jpsi, alpha, Jalpha):
+    """psi, its Jacobian, alpha(x0, psi(x0)) and d/dx of alpha(x, psi(x)) at x0 (see module)."""
+    ftape, htape, atape = tapes[0], tapes[1], tapes[2]
+    counts, up, expo = space[0], space[5], space[6]
+    s = b.shape[0]
+    n = x0.shape[0]
+    for i in range(s):
+        D = s + 1 - i
+        M = counts[D]
+        _set_x(W, x0, n, D)
+        zero_row = True
+        for j in range(i):
+            if A[i, j] != 0.0:
+                zero_row = False
+        for k in range(n):
+            row = W[n + k]
+            for m in range(M):
+                row[m] = 0.0
+            for j in range(i):
+                c = h * A[i, j]
+                if c != 0.0:
+                    for m in range(M):
+                        row[m] += c * G[j, k, m]
+        tape = htape if zero_row else ftape
+        run_tape(tape, W, D, space, scratch)
+        g = W[tape[3][0]]
+        for k in range(n):
+            for m in range(counts[D - 1]):
+                G[i, k, m] = (expo[m, k] + 1) * g[up[m, k]]
+    for k in range(n):
+        psi[k] = 0.0
+        for l in range(n):
+            Jpsi[k, l] = 0.0
+        for i in range(s):
+            c = h * b[i]
+            psi[k] += c * G[i, k, 0]
+            for l in range(n):
+                Jpsi[k, l] += c * G[i, k, 1 + l]
+    _set_x(W, x0, n, 1)
+    for k in range(n):
+        row = W[n + k]
+        for m in range(W.shape[1]):
+            row[m] = 0.0
+        row[0] = psi[k]
+        for l in range(n):
+            row[1 + l] = Jpsi[k, l]
+    run_tape(atape, W, 1, space, scratch)
+    for k in range(n):
+        a = W[atape[3][k]]
+        alpha[k] = a[0]
+        for l in range(n):
+            Jalpha[k, l] = a[1 + l]
+
+
+@nb.njit(**NJIT)
+def _max_abs(v):
+    r = 0.0
+    for q in range(v.shape[0]):
+        a = abs(v[q])
+        if not a <= r:  # also catches NaN
+            r = a
+    return r
+
+
+@nb.njit(**NJIT)
+def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next):
+    """One RKHP step from y into y_next; returns (failure code, Newton iterations)."""
+    W, G, scratch, psi, Jpsi, alpha, Jalpha, x, delta, res = buf
+    n = y.shape[0]
+    scale = max(1.0, _max_abs(y))
+    for k in range(n):
+        x[k] = y[k]
+    previous = np.inf
+    converged = False
+    it = 0
+    while it < max_iter:
+        it += 1
+        tower(x, A, b, h, tapes, space, W, G, scratch, psi, Jpsi, alpha, Jalpha)
+        for k in range(n):
+            res[k] = y[k] - alpha[k]
+        solve_small(Jalpha, res, delta)
+        size = _max_abs(delta)
+        if not np.isfinite(size):
+            return NON_FINITE, it
+        for k in range(n):
+            x[k] += delta[k]
+        predicted = size * size * size / (previous * previous) if previous < np.inf else np.inf
+        if size <= tol * scale or (size < 0.5 * previous and predicted <= tol * scale):
+            converged = True
+            for k in range(n):
+                acc = psi[k]
+                for l in range(n):
+                    acc += Jpsi[k, l] * delta[l]
+                res[k] = acc
+            break
+        if size > 1e8 * scale:
+            break
+        previous = size
+    if not converged:
+        return NO_CONVERGENCE, it
+    _polish(y, x, res, tapes[2], space, W, scratch, Jalpha, alpha, delta, scale)
+    btape = tapes[3]
+    for k in range(n):
+        W[k, 0] = x[k]
+        W[n + k, 0] = res[k]
+    run_tape(btape, W, 0, space, scratch)
+    for k in range(n):
+        y_next[k] = W[btape[3][k], 0]
+    if not np.isfinite(_max_abs(y_next)):
+        return NON_FINITE, it
+    return OK, it
+
+
+@nb.njit(**NJIT)
+def _polish(y, x, p, atape, space, W, scratch, J, alpha, delta, scale):
+    """Solve alpha(x, p) = y for x with p fixed, to round-off (at most 3 cheap Newton steps).
+
+    With p fixed, C(beta(x, p)) = C(alpha(x, p)) for every Casimir C, so this keeps the Casimirs
+    to round-off whatever the accuracy of psi (NOTES §4): only alpha's residual matters.
+    """
+    n = y.shape[0]
+    for _ in range(3):
+        _set_x(W, x, n, 1)
+        for k in range(n):
+            row = W[n + k]
+            for m in range(W.shape[1]):
+                row[m] = 0.0
+            row[0] = p[k]
+        run_tape(atape, W, 1, space, scratch)
+        for k in range(n):
+            a = W[atape[3][k]]
+            alpha[k] = y[k] - a[0]
+            for l in range(n):
+                J[k, l] = a[1 + l]
+        solve_small(J, alpha, delta)
+        for k in range(n):
+            x[k] += delta[k]
+        if not _max_abs(delta) > 4e-16 * scale:
+            break
+
+
+@nb.njit(**NJIT)
+def make_buffers(n, s, n_slots, space):
+    size = space[0][space[0].shape[0] - 1]
+    return (np.zeros((n_slots, size)), np.zeros((s, n, size)),
+            np.zeros((5 + 2 * n, size)), np.zeros(n), np.zeros((n, n)), np.zeros(n),
+            np.zeros((n, n)), np.zeros(n), np.zeros(n), np.zeros(n))
+
+
+@nb.njit(**NJIT)
+def in_domain(y, domain):
+    if domain == 1:
+        for k in range(y.shape[0]):
+            if not y[k] > 0.0:
+                return False
+    return True
+
+
+@nb.njit(**NJIT)
+def rkhp_run(y0, A, b, h, n_steps, tapes, space, n_slots, domain, tol, max_iter, states,
+             iterations, keep_all):
+    """Integrate n_steps; states[k] = y_k (keep_all) or states[0] = the last state.
+
+    Returns (number of completed steps, failure code of the step after them or 0).
+    """
+    n = y0.shape[0]
+    buf = make_buffers(n, b.shape[0], n_slots, space)
+    y = y0.copy()
+    y_next = np.zeros(n)
+    states[0, :] = y
+    for step in range(n_steps):
+        code, it = rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next)
+        iterations[step] = it
+        if code == OK and not in_domain(y_next, domain):
+            code = LEFT_DOMAIN
+        if code != OK:
+            return step, code
+        for k in range(n):
+            y[k] = y_next[k]
+        states[step + 1 if keep_all else 0, :] = y
+    return n_steps, OK
+
+
+@nb.njit(parallel=True, cache=True)
+def rkhp_ensemble(x0s, A, b, h, n_steps, tapes, space, n_slots, domain, tol, max_iter):
+    """Many initial conditions at once (the "vmap"): final states, completed steps, codes."""
+    m, n = x0s.shape
+    finals = np.empty((m, n))
+    done = np.zeros(m, dtype=np.int64)
+    codes = np.zeros(m, dtype=np.int64)
+    for t in nb.prange(m):
+        last = np.zeros((1, n))
+        iters = np.zeros(max(n_steps, 1), dtype=np.int64)
+        k, c = rkhp_run(x0s[t], A, b, h, n_steps, tapes, space, n_slots, domain, tol, max_iter,
+                        last, iters, False)
+        finals[t, :] = last[0]
+        done[t] = k
+        codes[t] = c
+    return finals, done, codes

@@ -1,0 +1,146 @@
+"""RKHP integration of a Poisson system with an explicit tableau (paper §5.2): the Python API.
+
+`integrate(system, tableau, h, n_steps, x0=None)` runs the compiled loop of
+`rkhp.integrators.engine` and returns a :class:`Trajectory`; `integrate_ensemble` runs many
+initial conditions at once (numba `prange`). Compile time (first call in a process: compiling, or
+loading numba's cache) is measured apart from run time.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ..errors import InputError
+from .trajectory import Trajectory
+
+NEWTON_TOLERANCE = 1e-15
+"""Newton stops when the (predicted) correction is below this, relative to max(1, |y|_inf)."""
+NEWTON_MAX_ITERATIONS = 20
+MAX_PRODUCT_PAIRS = 2_000_000
+"""Largest product table the Taylor tower accepts (n variables, degree s + 1)."""
+
+CAUSES = {1: "Newton did not converge (the step h may be too large)",
+          2: "non-finite values",
+          3: "left the domain"}
+
+
+def resolve_tableau(tableau):
+    """A Tableau from a Tableau, a built-in name or a file path."""
+    if isinstance(tableau, str):
+        from ..tablefiles import load_tableau
+
+        return load_tableau(tableau)
+    return tableau
+
+
+def explicit_arrays(tableau) -> tuple[np.ndarray, np.ndarray]:
+    """The float64 (A, b) of an explicit tableau; InputError for an implicit one."""
+    A = np.ascontiguousarray(tableau.A_float, dtype=np.float64)
+    b = np.ascontiguousarray(tableau.b_float, dtype=np.float64)
+    if np.any(np.triu(A) != 0.0):
+        raise InputError(f"method {getattr(tableau, 'name', '?')!r} is not explicit; the RKHP "
+                         "engine integrates with explicit tableaux")
+    return A, b
+
+
+def check_step(h, n_steps) -> tuple[float, int]:
+    try:
+        h = float(h)
+    except (TypeError, ValueError):
+        raise InputError(f"step size h must be a number, got {h!r}") from None
+    if not math.isfinite(h) or h <= 0.0:
+        raise InputError(f"step size h must be positive and finite, got {h}")
+    if int(n_steps) != n_steps or n_steps < 0:
+        raise InputError(f"number of steps must be a non-negative integer, got {n_steps}")
+    return h, int(n_steps)
+
+
+def start_state(system, x0) -> np.ndarray:
+    if x0 is None:
+        return np.array(system.x0, dtype=np.float64)
+    return system.with_x0(x0).x0
+
+
+def engine_data(system, stages: int, degree: int | None = None):
+    """(tapes, jet space, number of slots) for the compiled engine."""
+    from .jets import jet_space
+
+    degree = stages + 1 if degree is None else degree
+    space = jet_space(system.dim, degree)
+    if len(space.pa) > MAX_PRODUCT_PAIRS:
+        raise InputError(f"{stages} stages need Taylor polynomials of degree {degree} in "
+                         f"{system.dim} variables ({len(space.pa)} product terms): too large")
+    tapes = (system.f_tape, system.h_tape, system.alpha_tape, system.beta_tape)
+    n_slots = max(t.n_slots for t in tapes)
+    return tuple(t.packed() for t in tapes), space.packed(), n_slots
+
+
+def failure_status(code: int, step: int, h: float, system) -> str:
+    cause = CAUSES[code]
+    if code == 3:
+        cause += f" ({system.domain})"
+    return f"failed at step {step + 1} (t = {step * h:.6g} -> {(step + 1) * h:.6g}): {cause}"
+
+
+def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLERANCE,
+              max_iter: int = NEWTON_MAX_ITERATIONS) -> Trajectory:
+    """Integrate `system` with the RKHP method of an explicit `tableau` (paper §5.2).
+
+    Returns a Trajectory with states y_0..y_k, Newton iterations per step, and a status naming
+    the failing step, time and cause if a step failed (then only the states before it are kept).
+    """
+    from .engine import rkhp_run
+
+    tableau = resolve_tableau(tableau)
+    h, n_steps = check_step(h, n_steps)
+    y0 = start_state(system, x0)
+    A, b = explicit_arrays(tableau)
+    tapes, space, n_slots = engine_data(system, len(b))
+    args = (A, b, h)
+    rest = (tapes, space, n_slots, system.domain_code, float(tol), int(max_iter))
+    t0 = time.perf_counter()
+    rkhp_run(y0, *args, 0, *rest, np.zeros((1, y0.size)), np.zeros(1, np.int64), True)
+    compile_seconds = time.perf_counter() - t0
+    states = np.empty((n_steps + 1, y0.size))
+    iterations = np.zeros(max(n_steps, 1), dtype=np.int64)
+    t0 = time.perf_counter()
+    done, code = rkhp_run(y0, *args, n_steps, *rest, states, iterations, True)
+    run_seconds = time.perf_counter() - t0
+    status = "ok" if code == 0 else failure_status(code, done, h, system)
+    return Trajectory(
+        times=h * np.arange(done + 1), states=states[: done + 1],
+        newton_iterations=iterations[: done + (code != 0)], status=status,
+        failed_step=None if code == 0 else done, compile_seconds=compile_seconds,
+        run_seconds=run_seconds, method=getattr(tableau, "name", "custom"), system=system.name,
+        extra={"newton_tolerance": tol, "newton_max_iterations": max_iter,
+               "realisation": system.realisation})
+
+
+def integrate_ensemble(system, tableau, h, n_steps, x0s, *, tol: float = NEWTON_TOLERANCE,
+                       max_iter: int = NEWTON_MAX_ITERATIONS) -> np.ndarray:
+    """Final states of many trajectories at once (shape (m, n)); NumericalFailure naming the
+    first failing trajectory if any fails."""
+    from ..errors import NumericalFailure
+    from .engine import rkhp_ensemble
+
+    tableau = resolve_tableau(tableau)
+    h, n_steps = check_step(h, n_steps)
+    x0s = np.ascontiguousarray(x0s, dtype=np.float64)
+    if x0s.ndim != 2 or x0s.shape[1] != system.dim:
+        raise InputError(f"initial conditions must have shape (m, {system.dim}), got {x0s.shape}")
+    for i, x in enumerate(x0s):
+        if not system.in_domain(x):
+            raise InputError(f"initial condition {i} = {x.tolist()} is outside the domain")
+    A, b = explicit_arrays(tableau)
+    tapes, space, n_slots = engine_data(system, len(b))
+    finals, done, codes = rkhp_ensemble(x0s, A, b, h, n_steps, tapes, space, n_slots,
+                                        system.domain_code, float(tol), int(max_iter))
+    bad = np.flatnonzero(codes)
+    if bad.size:
+        i = int(bad[0])
+        raise NumericalFailure(f"trajectory {i} of {len(x0s)}: "
+                               + failure_status(int(codes[i]), int(done[i]), h, system))
+    return finals
