@@ -19,6 +19,7 @@ _LAZY = {
     "order_conditions": "rkhp.conditions",
     "InputError": "rkhp.errors",
     "NumericalFailure": "rkhp.errors",
+    "integrate": "rkhp.integrators.rkhp_method",
 }
 
 __all__ = sorted(_LAZY)
