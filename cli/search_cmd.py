@@ -1,0 +1,147 @@
+"""`rkhp search`: minimal-stage tableaux by seeded multistart, polished, verified, proved."""
+
+from __future__ import annotations
+
+import click
+
+from .options import console, emit_json, format_option, progress
+
+
+def _class_of(degenerate: bool, symmetric: bool) -> str:
+    if degenerate and symmetric:
+        raise click.UsageError("--symmetric and --degenerate are exclusive: choose one condition class")
+    return "symmetric" if symmetric else "degenerate" if degenerate else "general"
+
+
+@click.command()
+@click.option("--stages", "-s", type=int, required=True, help="Number of stages S (1..16).")
+@click.option("--order", "-n", type=int, default=None,
+              help="Order N to reach (1..8); without it, the highest order reachable with S stages.")
+@click.option("--degenerate", is_flag=True, help="Conditions over T_0 (degenerate birealisations).")
+@click.option("--symmetric", is_flag=True, help="Reduced conditions of symmetric birealisations.")
+@click.option("--implicit", is_flag=True, help="Full matrix A (implicit methods) instead of explicit.")
+@click.option("--restarts", type=int, default=50, show_default=True,
+              help="Restart budget per order (random starts).")
+@click.option("--time-limit", type=float, default=None,
+              help="Seconds allowed to the restarts of each order and to the proof (default: "
+                   "no limit for restarts, 60 s for --prove).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed: restart k of order N "
+              "starts from numpy default_rng([seed, S, N, k]).")
+@click.option("--workers", type=int, default=1, show_default=True, help="Processes for the restarts.")
+@click.option("--optimize", type=click.Choice(["error"]), default=None,
+              help="Minimise the principal error norm at order N+1 on the solution family.")
+@click.option("--digits", type=int, default=30, show_default=True,
+              help="Digits D of the mpmath polishing and verification (20..500).")
+@click.option("--prove", is_flag=True,
+              help="When an order is not reached, try to prove that no tableau exists (Groebner).")
+@click.option("--save", type=click.Path(dir_okay=False), default=None,
+              help="Write the tableau found to a .toml or .json file (loadable by verify).")
+@format_option("table", "json")
+def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit, seed, workers,
+           optimize, digits, prove, save, fmt):
+    """Search Runge–Kutta tableaux meeting the RKHP order conditions (paper §5).
+
+    Solves the order conditions over T (general), T_0 (--degenerate) or the symmetric class from
+    seeded random starts (scipy least squares, exact Jacobian), polishes each success by Newton's
+    method in mpmath to D digits, recognises closed forms (kept only when exactly verified) and
+    verifies the result with the verify engine. --prove looks for a Groebner certificate that
+    the first order not reached is impossible.
+    """
+    from rkhp.errors import InputError
+    from rkhp.search.driver import SearchOptions, search as run_search
+    from rkhp.search.system import check_problem
+
+    cls = _class_of(degenerate, symmetric)
+    check_problem(stages, order)
+    if optimize and prove and order is not None:
+        raise click.UsageError("--optimize needs --order N to be reached while --prove needs it "
+                               "to fail: give one of them")
+    if save and not save.lower().endswith((".toml", ".json")):
+        raise InputError(f"--save {save}: the file name must end in .toml or .json")
+    options = SearchOptions(restarts=restarts, seed=seed, workers=workers, time_limit=time_limit,
+                            digits=digits, optimize=optimize, prove=prove)
+    options.check()
+    with progress(fmt != "json") as bar:
+        tasks: dict[int, int] = {}
+
+        def on_progress(n, done, total):
+            if n not in tasks:
+                tasks[n] = bar.add_task(f"order {n}", total=total)
+            bar.update(tasks[n], completed=done)
+
+        result = run_search(stages, order, cls, implicit, options, on_progress)
+    if save and result.found is not None:
+        _save(result, save)
+    if fmt == "json":
+        emit_json(result.to_json())
+    else:
+        _render(result, save)
+    if result.interrupted:
+        click.echo("rkhp: interrupted: the best found so far is shown", err=True)
+    if save and result.found is None:
+        raise click.ClickException(f"nothing found, so nothing was saved to {save}")
+
+
+def _save(result, path) -> None:
+    import dataclasses
+
+    from rkhp.tablefiles import save_tableau
+
+    found = result.found
+    ver = found.verification
+    how = ver.tolerance_rule
+    tab = dataclasses.replace(
+        found.tableau, claimed_order=ver.orders["general"],
+        claimed_degenerate_order=ver.orders["degenerate"],
+        reference=f"rkhp search --stages {result.stages} --order {found.order} "
+                  f"(class {result.cls}, seed {result.options.seed}, restart {found.restart})",
+        notes=f"verified: {how}")
+    save_tableau(tab, path)
+
+
+def _render(result, save) -> None:
+    from rich.table import Table
+
+    con = console()
+    data = result.to_json()
+    kind = "implicit" if result.implicit else "explicit"
+    head = f"{result.stages} stages, {kind}, class {result.cls}"
+    if result.found is None:
+        con.print(f"[bold]No tableau found[/bold] ({head}, order {result.order}): "
+                  f"{data['restarts']} restarts, {data['seconds']:.2f} s")
+    else:
+        con.print(f"[bold]Order {result.found.order}[/bold] ({head}): found in "
+                  f"{data['restarts']} restarts ({data['successes']} successes), "
+                  f"{data['seconds']:.2f} s")
+        tab = data["tableau"]
+        table = Table(show_header=False, box=None, padding=(0, 1))
+        s = result.stages
+        for i in range(s):
+            table.add_row(tab["c"][i], "│", *tab["A"][i])
+        table.add_row("", "│", *(["─" * 4] * s))
+        table.add_row("", "│", *tab["b"])
+        con.print(table)
+        con.print(f"residual {data['residual']:.3g}; principal error (order "
+                  f"{result.found.order + 1}) {data['principal_error']:.6g}")
+        con.print(f"verified orders {data['verified_orders']}; decided by: {data['decided_by']}")
+        if save:
+            con.print(f"saved to {save}")
+    if result.optimisation is not None:
+        opt = result.optimisation
+        rows = Table("method", "principal error norm", title="Error norms at order N+1")
+        rows.add_row("optimum found", f"{opt.error_norm:.6g}")
+        for k in opt.known:
+            rows.add_row(k.name, f"{k.error_norm:.6g}")
+        con.print(rows)
+    ev = data["evidence_next_order"]
+    if ev is not None:
+        con.print(f"order {ev['order']} not reached: {ev['restarts']} restarts, best max residual "
+                  f"{ev['best_residual']:.3g}")
+    if result.proof is not None:
+        con.print(f"proof (order {result.proof_order}): {data['proof']['result']}")
+        con.print(f"  method: {data['proof']['method']}")
+        if result.proof.proved:
+            con.print("  certificate: the ideal generated by")
+            for p in result.proof.polynomials:
+                con.print(f"    {p}")
+            con.print("  has reduced Groebner basis [1]")

@@ -1,0 +1,299 @@
+"""The tableau search: restarts order by order, polishing, verification, closed forms, proofs.
+
+``search(stages, order)`` looks for an explicit (or implicit) tableau with ``stages`` stages meeting
+the order conditions of a class (paper, Theorems 5.1–5.2: "general" over T, "degenerate" over
+T_0; NOTES §8 for "symmetric") up to ``order``; without an order it raises N until the restarts
+fail and reports the evidence against the first order not reached. Every reported tableau has
+been verified by :func:`rkhp.verify.verify`, exactly when a closed form was recognised, else at D
+digits after Newton polishing; ``decided_by`` says which.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InputError
+from .multistart import Problem, Restarts, run_restarts
+from .optimise import KnownMethod, known_methods, minimise_error
+from .polish import polish
+from .prove import Proof, prove_impossible
+from .system import MAX_SEARCH_ORDER, check_problem
+
+#: Digits of the polished solutions unless asked otherwise, and the accepted range.
+DEFAULT_DIGITS = 30
+MIN_DIGITS, MAX_DIGITS = 20, 500
+#: Proof time limit when no --time-limit is given (seconds).
+DEFAULT_PROOF_SECONDS = 60.0
+#: Solutions collected as starting points for --optimize error.
+OPTIMISATION_STARTS = 8
+
+
+@dataclass(frozen=True)
+class SearchOptions:
+    """How to search: restart budget, seed, workers, time limit (per order and for the proof),
+    digits D, ``optimize`` ("error" or None), ``prove``, ``closed_form`` (recognition)."""
+
+    restarts: int = 50
+    seed: int = 0
+    workers: int = 1
+    time_limit: float | None = None
+    digits: int = DEFAULT_DIGITS
+    optimize: str | None = None
+    prove: bool = False
+    closed_form: bool = True
+
+    def check(self) -> None:
+        for name, value, low in (("restarts", self.restarts, 1), ("workers", self.workers, 1)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise InputError(f"--{name} must be an integer >= {low}, got {value!r}")
+        if self.time_limit is not None and not self.time_limit > 0:
+            raise InputError(f"--time-limit must be positive, got {self.time_limit!r}")
+        if not MIN_DIGITS <= self.digits <= MAX_DIGITS:
+            raise InputError(f"--digits must be between {MIN_DIGITS} and {MAX_DIGITS}, "
+                             f"got {self.digits}")
+        if self.optimize not in (None, "error"):
+            raise InputError(f"--optimize must be 'error', got {self.optimize!r}")
+
+
+@dataclass(frozen=True)
+class Found:
+    """A verified tableau of order ``order`` in the searched class.
+
+    Attributes:
+        tableau: rkhp.tableau.Tableau (exact entries when a closed form verified, else D digits).
+        verification: rkhp.verify.Verification of that tableau.
+        residual: max |order-condition residual| of the polished solution (0 when exact).
+        restart: index of the restart it came from (None for an optimum).
+    """
+
+    order: int
+    tableau: object
+    verification: object
+    residual: float
+    restart: int | None
+
+    @property
+    def exact(self) -> bool:
+        return self.verification.precision == "exact"
+
+
+@dataclass(frozen=True)
+class Optimisation:
+    """--optimize error: the optimum's principal error norm beside known methods' norms."""
+
+    error_norm: float
+    starts: int
+    known: tuple[KnownMethod, ...]
+
+
+@dataclass(frozen=True)
+class SearchResult:
+    """Everything a search found, with the evidence (issue 4's JSON via :meth:`to_json`)."""
+
+    stages: int
+    cls: str
+    implicit: bool
+    requested_order: int | None
+    found: Found | None
+    runs: tuple[Restarts, ...]
+    seconds: float
+    options: SearchOptions
+    proof: Proof | None = None
+    proof_order: int | None = None
+    optimisation: Optimisation | None = None
+    interrupted: bool = False
+    seconds_to_first: dict[int, float] = field(default_factory=dict)
+
+    @property
+    def order(self) -> int | None:
+        """The requested order, or (without one) the highest order reached."""
+        if self.requested_order is not None:
+            return self.requested_order
+        return self.found.order if self.found else None
+
+    @property
+    def failed_run(self) -> Restarts | None:
+        """The restarts of the first order not reached (the evidence against it), if any."""
+        for run in self.runs:
+            if run.first is None:
+                return run
+        return None
+
+    @property
+    def principal_error(self) -> float | None:
+        if self.found is None:
+            return None
+        return self.found.verification.principal_error.get(self.cls)
+
+    def to_json(self) -> dict:
+        """The issue's keys, then extras (decided_by, verified orders, optimisation, proof text)."""
+        from ..tableau import entry_text
+
+        tab = None
+        if self.found is not None:
+            t = self.found.tableau
+            tab = {"A": [[entry_text(x) for x in row] for row in t.A],
+                   "b": [entry_text(x) for x in t.b], "c": [entry_text(x) for x in t.c]}
+        failed = self.failed_run
+        evidence = None
+        if failed is not None:
+            evidence = {"order": failed.problem.order, "restarts": len(failed.attempts),
+                        "best_residual": failed.best_residual}
+        proof = None
+        if self.proof is not None:
+            proof = {"method": self.proof.method,
+                     "result": self.proof.result_text(self.stages, self.proof_order, self.cls)}
+        restarts = sum(len(r.attempts) for r in self.runs)
+        successes = sum(len(r.successes) for r in self.runs)
+        out = {
+            "stages": self.stages,
+            "degenerate": self.cls != "general",
+            "implicit": self.implicit,
+            "order": self.order,
+            "found": self.found is not None,
+            "tableau": tab,
+            "residual": None if self.found is None else self.found.residual,
+            "restarts": restarts,
+            "successes": successes,
+            "seconds": round(self.seconds, 3),
+            "principal_error": self.principal_error,
+            "proof": proof,
+            "evidence_next_order": evidence,
+            # extras
+            "class": self.cls,
+            "decided_by": None if self.found is None else self.found.verification.tolerance_rule,
+            "verified_orders": None if self.found is None else dict(self.found.verification.orders),
+            "seed": self.options.seed,
+            "interrupted": self.interrupted,
+            "optimization": None if self.optimisation is None else {
+                "error_norm": self.optimisation.error_norm, "starts": self.optimisation.starts,
+                "known": [{"name": k.name, "principal_error": k.error_norm}
+                          for k in self.optimisation.known]},
+            "proof_detail": None if self.proof is None else {
+                "order": self.proof_order, "status": self.proof.status,
+                "seconds": round(self.proof.seconds, 3), "time_limit": self.proof.time_limit,
+                "polynomials": list(self.proof.polynomials), "basis": list(self.proof.basis)},
+        }
+        return out
+
+
+def make_tableau(problem: Problem, entries, name: str):
+    """A Tableau from the unknowns (strings of D digits, or sympy closed forms)."""
+    from ..tableau import Tableau
+
+    system = problem.system()
+    s = problem.stages
+    A = [["0"] * s for _ in range(s)]
+    for (i, j), v in zip(system.pattern, entries, strict=False):
+        A[i][j] = v
+    b = list(entries[len(system.pattern):])
+    return Tableau.from_arrays(A, b, name=name)
+
+
+def verified(problem: Problem, x_float, polished, digits: int, closed: bool, name: str,
+             restart: int | None) -> Found | None:
+    """Verify a polished solution (after trying a closed form); None if verification disagrees."""
+    from ..verify import verify
+
+    if closed:
+        from .recognise import closed_form
+
+        exact, pol = closed_form(problem.system(), x_float, digits)
+        if exact is not None:
+            tab = make_tableau(problem, exact, name)
+            ver = verify(tab, max_order=problem.order + 1, precision="exact")
+            if ver.orders[problem.cls] >= problem.order:
+                return Found(problem.order, tab, ver, 0.0, restart)
+    tab = make_tableau(problem, list(polished.x), name)
+    ver = verify(tab, max_order=problem.order + 1, precision=digits)
+    if ver.orders[problem.cls] >= problem.order:
+        return Found(problem.order, tab, ver, polished.residual, restart)
+    return None
+
+
+def method_name(problem: Problem) -> str:
+    kind = "implicit" if problem.implicit else "explicit"
+    return f"search-{problem.cls}-o{problem.order}-s{problem.stages}-{kind}"
+
+
+def search(stages: int, order: int | None = None, cls: str = "general", implicit: bool = False,
+           options: SearchOptions = SearchOptions(), on_progress=None) -> SearchResult:
+    """Search tableaux (see the module docstring). ``on_progress(order, done, total)``."""
+    from ..conditions import check_class
+
+    check_problem(stages, order)
+    check_class(cls)
+    options.check()
+    t0 = time.perf_counter()
+    orders = [order] if order is not None else list(range(1, MAX_SEARCH_ORDER + 1))
+    runs: list[Restarts] = []
+    best: Found | None = None
+    firsts: dict[int, float] = {}
+    interrupted = False
+    optimisation = None
+    try:
+        for n in orders:
+            problem = Problem(stages, n, cls, implicit)
+            want_many = options.optimize and (order is None or n == order)
+            run = run_restarts(
+                problem, options.restarts, options.seed, options.workers, options.time_limit,
+                options.digits, stop_after=OPTIMISATION_STARTS if want_many else 1,
+                on_progress=None if on_progress is None else
+                (lambda d, tot, n=n: on_progress(n, d, tot)))
+            runs.append(run)
+            interrupted = run.interrupted
+            first = run.first
+            if first is None or interrupted:
+                break
+            found = verified(problem, first.x, first.polished, options.digits,
+                             options.closed_form and order is not None, method_name(problem),
+                             first.index)
+            if found is None:
+                break
+            firsts[n] = time.perf_counter() - t0
+            best = found
+        if best is not None and order is None and options.closed_form and not interrupted:
+            problem = Problem(stages, best.order, cls, implicit)
+            run = next(r for r in runs if r.problem.order == best.order)
+            best = verified(problem, run.first.x, run.first.polished, options.digits, True,
+                            method_name(problem), run.first.index) or best
+        if best is not None and options.optimize == "error" and not interrupted:
+            best, optimisation = _optimise(Problem(stages, best.order, cls, implicit),
+                                           runs[[r.problem.order for r in runs].index(best.order)],
+                                           options, best)
+    except KeyboardInterrupt:
+        interrupted = True
+    proof = proof_order = None
+    result_runs = tuple(runs)
+    failed = next((r for r in result_runs if r.first is None), None)
+    if options.prove and failed is not None and not interrupted:
+        proof_order = failed.problem.order
+        try:
+            proof = prove_impossible(failed.problem.system(),
+                                     options.time_limit or DEFAULT_PROOF_SECONDS)
+        except KeyboardInterrupt:
+            interrupted = True
+    return SearchResult(stages, cls, implicit, order, best, result_runs,
+                        time.perf_counter() - t0, options, proof, proof_order, optimisation,
+                        interrupted, firsts)
+
+
+def _optimise(problem: Problem, run: Restarts, options: SearchOptions, found: Found):
+    """Minimise the principal error from the run's successes; the optimum (verified) if better."""
+    system = problem.system()
+    starts = [a.x for a in run.successes]
+    opt = minimise_error(system, starts)
+    known = tuple(known_methods(system))
+    if opt is None:
+        return found, Optimisation(float("nan"), len(starts), known)
+    pol = polish(system, np.array(opt.x), options.digits)
+    candidate = None
+    if pol.converged:
+        name = method_name(problem) + "-min-error"
+        candidate = verified(problem, opt.x, pol, options.digits, False, name, None)
+    best = candidate or found
+    norm = best.verification.principal_error.get(problem.cls)
+    return best, Optimisation(norm, len(starts), known)

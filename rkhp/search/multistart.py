@@ -1,0 +1,250 @@
+"""Seeded multistart: least-squares solves of the order conditions from random starts.
+
+Restart k of a problem starts from ``numpy.random.default_rng([seed, stages, order, k])``, so every
+restart is reproducible on its own, whatever the number of workers or the order they finish in.
+A restart succeeds when scipy's least_squares (trust region, exact Jacobian) brings every residual
+below 1e-9 with coefficients bounded by ``bound``, and Newton in mpmath then polishes it to D digits.
+Restarts run in a process pool with ``workers`` > 1; Ctrl-C stops and returns what was found.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from .polish import Polished, polish
+from .system import ResidualSystem
+
+#: A float64 solve counts as a candidate when every residual is below this.
+FLOAT_TOLERANCE = 1e-9
+#: Largest |coefficient| accepted: larger ones signal a solution escaping to infinity.
+COEFFICIENT_BOUND = 20.0
+
+
+@dataclass(frozen=True)
+class Problem:
+    """What is searched: ``stages``, conditions of ``cls`` up to ``order``, explicit or implicit."""
+
+    stages: int
+    order: int
+    cls: str = "general"
+    implicit: bool = False
+
+    def system(self) -> ResidualSystem:
+        return _system(self)
+
+
+@lru_cache(maxsize=16)
+def _system(problem: Problem) -> ResidualSystem:
+    return ResidualSystem.build(problem.stages, problem.order, problem.cls, problem.implicit,
+                                with_error=True)
+
+
+@dataclass(frozen=True)
+class Attempt:
+    """One restart.
+
+    Attributes:
+        index: restart number k (its seed is [seed, stages, order, k]).
+        residual: max |residual| reached in float64.
+        x: the float64 end point (unknowns: a_ij by rows, then b).
+        polished: the mpmath polish of a float64 candidate, else None.
+        seconds: wall time of this restart.
+    """
+
+    index: int
+    residual: float
+    x: tuple[float, ...]
+    polished: Polished | None
+    seconds: float
+
+    @property
+    def success(self) -> bool:
+        return self.polished is not None and self.polished.converged
+
+
+class _Cached:
+    """Residuals and Jacobian at the last point, so least_squares' fun and jac share one pass."""
+
+    def __init__(self, system: ResidualSystem):
+        self.system = system
+        self.x = None
+        self.value = None
+
+    def _eval(self, x):
+        if self.x is None or not np.array_equal(x, self.x):
+            self.x = x.copy()
+            self.value = self.system.residuals(x)
+        return self.value
+
+    def fun(self, x):
+        return self._eval(x)[0]
+
+    def jac(self, x):
+        return self._eval(x)[1]
+
+
+def start_point(problem: Problem, seed: int, index: int) -> np.ndarray:
+    """The starting point of restart ``index`` (reproducible)."""
+    rng = np.random.default_rng([seed, problem.stages, problem.order, index])
+    return problem.system().random_start(rng)
+
+
+def solve_float(system: ResidualSystem, x0: np.ndarray, max_nfev: int = 400):
+    """scipy least_squares (trf, exact Jacobian) from x0: (end point, max |residual|)."""
+    from scipy.optimize import least_squares
+
+    cached = _Cached(system)
+    with np.errstate(all="ignore"):
+        sol = least_squares(cached.fun, x0, jac=cached.jac, method="trf", xtol=1e-15, ftol=1e-15,
+                            gtol=1e-15, max_nfev=max_nfev)
+    residual = float(np.max(np.abs(sol.fun))) if sol.fun.size else 0.0
+    if not np.isfinite(residual):
+        residual = float("inf")
+    return sol.x, residual
+
+
+def attempt(problem: Problem, seed: int, index: int, digits: int = 30) -> Attempt:
+    """Run restart ``index``: float64 least squares, then mpmath polishing of a candidate."""
+    t0 = time.perf_counter()
+    system = problem.system()
+    x, residual = solve_float(system, start_point(problem, seed, index))
+    polished = None
+    if residual < FLOAT_TOLERANCE and np.max(np.abs(x)) <= COEFFICIENT_BOUND:
+        polished = polish(system, x, digits)
+    return Attempt(index, residual, tuple(float(v) for v in x), polished, time.perf_counter() - t0)
+
+
+@dataclass(frozen=True)
+class Restarts:
+    """The restarts run for one problem.
+
+    Attributes:
+        problem: what was searched.
+        attempts: the restarts that finished, by index.
+        seconds: wall time.
+        interrupted: Ctrl-C stopped the run.
+        timed_out: the time limit stopped the run before the restart budget was used.
+        seconds_to_first: wall time until the first success was known, or None.
+    """
+
+    problem: Problem
+    attempts: tuple[Attempt, ...]
+    seconds: float
+    interrupted: bool
+    timed_out: bool
+    seconds_to_first: float | None
+
+    @property
+    def successes(self) -> tuple[Attempt, ...]:
+        return tuple(a for a in self.attempts if a.success)
+
+    @property
+    def first(self) -> Attempt | None:
+        """The successful restart of lowest index."""
+        wins = self.successes
+        return wins[0] if wins else None
+
+    @property
+    def best_residual(self) -> float:
+        """Smallest float64 max-residual over the restarts (inf when none ran)."""
+        return min((a.residual for a in self.attempts), default=float("inf"))
+
+
+def _ignore_sigint() -> None:
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def run_restarts(problem: Problem, restarts: int, seed: int = 0, workers: int = 1,
+                 time_limit: float | None = None, digits: int = 30, stop_after: int | None = 1,
+                 on_progress=None) -> Restarts:
+    """Run up to ``restarts`` restarts (indices 0..restarts-1), stopping after ``stop_after``
+    successes (None: run them all).
+
+    The restarts kept are those of index up to the ``stop_after``-th success, and every one of
+    them has run, so the answer does not depend on ``workers`` (only the time does).
+    ``on_progress(done, total)`` is called after each restart.
+    """
+    t0 = time.perf_counter()
+    deadline = None if time_limit is None else t0 + time_limit
+    done: dict[int, Attempt] = {}
+    interrupted = timed_out = False
+    first_at = None
+
+    def record(a: Attempt) -> None:
+        nonlocal first_at
+        done[a.index] = a
+        if a.success and first_at is None:
+            first_at = time.perf_counter() - t0
+        if on_progress is not None:
+            on_progress(len(done), restarts)
+
+    def last_needed():
+        """Index of the stop_after-th success so far (None while there are fewer)."""
+        if stop_after is None:
+            return None
+        wins = sorted(k for k, a in done.items() if a.success)
+        return wins[stop_after - 1] if len(wins) >= stop_after else None
+
+    problem.system()  # build once here (and in forked workers' memory)
+    try:
+        if workers <= 1:
+            for k in range(restarts):
+                if deadline is not None and time.perf_counter() > deadline:
+                    timed_out = True
+                    break
+                record(attempt(problem, seed, k, digits))
+                if last_needed() is not None:
+                    break
+        else:
+            timed_out = _run_pool(problem, restarts, seed, workers, deadline, digits, record,
+                                  last_needed)
+    except KeyboardInterrupt:
+        interrupted = True
+    attempts = tuple(done[k] for k in sorted(done))
+    last = last_needed()
+    if last is not None:
+        attempts = tuple(a for a in attempts if a.index <= last)
+    return Restarts(problem, attempts, time.perf_counter() - t0, interrupted, timed_out, first_at)
+
+
+def _run_pool(problem, restarts, seed, workers, deadline, digits, record, last_needed) -> bool:
+    """Process-pool loop of :func:`run_restarts`; returns whether the time limit stopped it."""
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    ctx = multiprocessing.get_context("fork")
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_ignore_sigint)
+    pending: dict = {}
+    next_index = 0
+    timed_out = False
+    try:
+        while True:
+            win = last_needed()
+            while (len(pending) < 2 * workers and next_index < restarts
+                   and (win is None or next_index < win)):
+                if deadline is not None and time.perf_counter() > deadline:
+                    timed_out = True
+                    break
+                fut = pool.submit(attempt, problem, seed, next_index, digits)
+                pending[fut] = next_index
+                next_index += 1
+            if win is not None:
+                for fut, k in list(pending.items()):
+                    if k > win and fut.cancel():
+                        del pending[fut]
+            if not pending:
+                break
+            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                del pending[fut]
+                if not fut.cancelled():
+                    record(fut.result())
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+    return timed_out

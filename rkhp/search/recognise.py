@@ -1,0 +1,167 @@
+"""Closed forms: fix the free parameters of a solution family at simple values, then recognise.
+
+Solutions of the order conditions usually form families (fewer conditions than unknowns). To
+reach a tableau with a closed form, free unknowns are fixed one at a time at simple values (zero
+first, then rationals of small denominator near the current value), the others following by
+Newton's method, until the solution is locally isolated. Each remaining coefficient is then
+passed to sympy's nsimplify (rationals and square roots), and the closed form is kept only if
+every order condition holds exactly (sympy arithmetic on the exact entries).
+"""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import numpy as np
+
+from .polish import Polished, polish
+from .system import ResidualSystem
+
+#: Square roots that nsimplify may use.
+SURDS = (2, 3, 5, 6, 7)
+#: Largest denominator of the simple rationals tried when fixing a free unknown.
+SNAP_DENOMINATOR = 6
+
+
+def _rank(J: np.ndarray) -> int:
+    if J.size == 0:
+        return 0
+    sv = np.linalg.svd(J, compute_uv=False)
+    return int(np.sum(sv > 1e-9 * max(1.0, sv[0])))
+
+
+def _newton_float(system: ResidualSystem, x: np.ndarray, free: np.ndarray, iterations: int = 30):
+    """Minimum-norm Gauss–Newton in float64 on the free unknowns; the point or None."""
+    x = x.copy()
+    for _ in range(iterations):
+        r, J = system.residuals(x)
+        if not np.all(np.isfinite(r)):
+            return None
+        if np.max(np.abs(r), initial=0.0) < 1e-13:
+            return x
+        step, *_ = np.linalg.lstsq(J[:, free], -r, rcond=None)
+        x[free] += step
+        if np.max(np.abs(x)) > 1e3:
+            return None
+    r, _ = system.residuals(x, jacobian=False)
+    return x if np.max(np.abs(r), initial=0.0) < 1e-12 else None
+
+
+def _simple_values(v: float) -> list[Fraction]:
+    """Rationals p/q (q <= SNAP_DENOMINATOR) within 3/4 of v, simplest first (zero first)."""
+    out = {Fraction(p, q) for q in range(1, SNAP_DENOMINATOR + 1)
+           for p in range(int(np.floor((v - 0.75) * q)), int(np.ceil((v + 0.75) * q)) + 1)
+           if abs(p / q - v) <= 0.75}
+    return sorted(out, key=lambda f: (f != 0, f.denominator, abs(f.numerator), abs(float(f) - v)))
+
+
+def fix_free_unknowns(system: ResidualSystem, x: np.ndarray, bound: float = 20.0,
+                      avoid: frozenset = frozenset()):
+    """Fix free unknowns at simple values while a solution remains (greedy, simplest first).
+
+    ``avoid`` lists first choices (index, value) not to take (to try another branch).
+    Returns (x, fixed, first): the float64 solution, a dict index -> Fraction of the fixed
+    unknowns, and the first choice taken (or None).
+    """
+    x = np.asarray(x, dtype=float).copy()
+    n = len(x)
+    fixed: dict[int, Fraction] = {}
+    free = np.ones(n, dtype=bool)
+    first = None
+    while True:
+        _, J = system.residuals(x)
+        freedom = int(free.sum()) - _rank(J[:, free])
+        if freedom <= 0:
+            return x, fixed, first
+        candidates = sorted(((k, v) for k in range(n) if free[k] for v in _simple_values(x[k])),
+                            key=lambda kv: (kv[1] != 0, kv[1].denominator, abs(kv[1].numerator),
+                                            abs(x[kv[0]] - float(kv[1]))))
+        for k, v in candidates:
+            if first is None and (k, v) in avoid:
+                continue
+            trial = x.copy()
+            trial[k] = float(v)
+            mask = free.copy()
+            mask[k] = False
+            moved = _newton_float(system, trial, mask)
+            if moved is not None and np.max(np.abs(moved)) <= bound:
+                _, J2 = system.residuals(moved)
+                if int(mask.sum()) - _rank(J2[:, mask]) < freedom:
+                    x, free, fixed[k] = moved, mask, v
+                    first = first or (k, v)
+                    break
+        else:
+            return x, fixed, first
+
+
+def recognise_number(text: str, digits: int):
+    """A sympy closed form (rational or with square roots) of a decimal, or None."""
+    import sympy
+
+    value = sympy.Float(text, digits)
+    if value == 0:
+        return sympy.Integer(0)
+    tolerance = 10.0 ** (-(digits * 3) // 4)
+    for constants in ((), [sympy.sqrt(k) for k in SURDS]):
+        try:
+            guess = sympy.nsimplify(value, constants, tolerance=tolerance, rational=False)
+        except (ValueError, TypeError, NotImplementedError):
+            continue
+        if guess.has(sympy.Float) or len(sympy.srepr(guess)) > 400:
+            continue
+        if abs(sympy.N(guess - value, digits + 5)) < 10.0 ** (-(digits - 3)):
+            return guess
+    return None
+
+
+def exact_residuals_vanish(system: ResidualSystem, exact: list) -> bool:
+    """Whether every order condition holds exactly at the exact unknowns (sympy arithmetic)."""
+    import sympy
+
+    x = np.array([sympy.nsimplify(v) for v in exact], dtype=object)
+    r, _ = system.residuals(x, jacobian=False)
+    for v in r:
+        v = sympy.radsimp(sympy.expand(v))
+        if v != 0 and not v.equals(0):
+            return False
+    return True
+
+
+def closed_form(system: ResidualSystem, x_float, digits: int = 30, tries: int = 4):
+    """Try to reach an exactly verified closed form near a solution.
+
+    Up to ``tries`` branches of :func:`fix_free_unknowns` (each avoiding the previous first
+    choices). Returns (exact entries as sympy numbers, polished point) for the first branch whose
+    recognised entries verify exactly, else (None, polished point of the first branch or None).
+    """
+    avoid: set = set()
+    fallback = None
+    for _ in range(tries):
+        x, fixed, first = fix_free_unknowns(system, np.asarray(x_float, dtype=float),
+                                            avoid=frozenset(avoid))
+        pol: Polished = polish(system, x, digits, fixed=fixed)
+        if pol.converged:
+            fallback = fallback or pol
+            exact = _recognise_all(system, pol, fixed, digits)
+            if exact is not None:
+                return exact, pol
+        if first is None:
+            break
+        avoid.add(first)
+    return None, fallback
+
+
+def _recognise_all(system: ResidualSystem, pol: Polished, fixed: dict, digits: int):
+    exact = []
+    for k, text in enumerate(pol.x):
+        value = _sympy_fraction(fixed[k]) if k in fixed else recognise_number(text, digits)
+        if value is None:
+            return None
+        exact.append(value)
+    return exact if exact_residuals_vanish(system, exact) else None
+
+
+def _sympy_fraction(v: Fraction):
+    import sympy
+
+    return sympy.Rational(v.numerator, v.denominator)
