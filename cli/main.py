@@ -16,6 +16,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "conditions": ("rkhp_cli.trees_cmd", "conditions", "Print the order conditions (Butcher form, LaTeX)."),
     "verify": ("rkhp_cli.verify_cmd", "verify", "Verify a tableau's orders over T and T_0 (exact or stated tolerance)."),
     "tables": ("rkhp_cli.verify_cmd", "tables", "List the built-in tableaux with their verified orders."),
+    "search": ("rkhp_cli.search_cmd", "search", "Search minimal-stage tableaux; polish, recognise, prove."),
     "systems": ("rkhp_cli.systems_cmd", "systems", "List the built-in Poisson systems."),
     "check": ("rkhp_cli.systems_cmd", "check", "Check a system's birealisation axioms (AD)."),
     "integrate": ("rkhp_cli.systems_cmd", "integrate", "Integrate a Poisson system with an RKHP method."),
