@@ -27,6 +27,18 @@ def _check_antisymmetric(matrix: np.ndarray, what: str) -> None:
         raise InputError(f"{what} is not antisymmetric")
 
 
+def _combination(k: np.ndarray, term: str) -> str:
+    """'k1 TERM1 - k2 TERM2 ...' with the coefficients rounded for display."""
+    text = ""
+    for i, c in enumerate(k):
+        if abs(c) < 1e-12:
+            continue
+        sign = "-" if c < 0 else "+"
+        mag = "" if abs(abs(c) - 1) < 1e-12 else f"{abs(c):.6g} "
+        text += f" {sign} {mag}{term}{i + 1}" if text else f"{'-' if c < 0 else ''}{mag}{term}{i + 1}"
+    return text
+
+
 def _linear_kernel(matrix: np.ndarray) -> list[np.ndarray]:
     from scipy.linalg import null_space
 
@@ -124,8 +136,7 @@ def log_canonical(lam, hamiltonian: Callable, *, name: str, x0, t_final: float,
     if casimirs is None:
         kernel = _linear_kernel(L)
         casimirs = tuple((lambda x, k=k: float(np.dot(k, np.log(x)))) for k in kernel)
-        casimir_names = tuple(" + ".join(f"{c:.6g} log x{i + 1}" for i, c in enumerate(k) if c)
-                              for k in kernel)
+        casimir_names = tuple(_combination(k, "log x") for k in kernel)
     return build_system(name=name, family="log-canonical", dim=n, poisson=poisson,
                         hamiltonian=hamiltonian, base_alpha=make(1.0), base_beta=make(-1.0),
                         x0=x0, t_final=t_final, realisation_name=realisation,
@@ -151,8 +162,7 @@ def constant(pi, hamiltonian: Callable, *, name: str, x0, t_final: float,
     if casimirs is None:
         kernel = _linear_kernel(P)
         casimirs = tuple((lambda x, k=k: float(np.dot(k, x))) for k in kernel)
-        casimir_names = tuple(" + ".join(f"{c:.6g} x{i + 1}" for i, c in enumerate(k) if c)
-                              for k in kernel)
+        casimir_names = tuple(_combination(k, "x") for k in kernel)
     return build_system(name=name, family="constant", dim=n, poisson=lambda x: P.copy(),
                         hamiltonian=hamiltonian, base_alpha=make(1.0), base_beta=make(-1.0),
                         x0=x0, t_final=t_final, realisation_name=realisation, casimirs=casimirs,
