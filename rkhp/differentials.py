@@ -20,12 +20,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from fractions import Fraction
-from functools import lru_cache
+from functools import cache
 from itertools import combinations_with_replacement
 from math import comb, factorial
 
 import numpy as np
 
+from .modular import to_residue
 from .trees import Tree
 
 # ----------------------------------------------------------------------------- monomial bases
@@ -46,7 +47,7 @@ class MonomialBasis:
     index: dict
 
 
-@lru_cache(maxsize=None)
+@cache
 def monomial_basis(nvars: int, degree: int) -> MonomialBasis:
     exps = []
     for d in range(degree + 1):
@@ -61,7 +62,7 @@ def monomial_basis(nvars: int, degree: int) -> MonomialBasis:
     return MonomialBasis(nvars, degree, np.array(exps, dtype=np.int64), sizes, index)
 
 
-@lru_cache(maxsize=None)
+@cache
 def _derivative_table(basis: MonomialBasis, var: int) -> tuple[np.ndarray, np.ndarray]:
     """(source index, factor) for each monomial of degree <= degree - 1: d/dx_var of sum c_e x^e."""
     src, fac = [], []
@@ -73,7 +74,7 @@ def _derivative_table(basis: MonomialBasis, var: int) -> tuple[np.ndarray, np.nd
     return np.array(src, dtype=np.int64), np.array(fac, dtype=np.int64)
 
 
-@lru_cache(maxsize=None)
+@cache
 def _product_table(basis: MonomialBasis, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(ia, ib, starts): the pairs of monomials with degree sum <= m, grouped by their product.
 
@@ -209,13 +210,24 @@ def constant_pi_values(trees, max_order: int, dim: int, batch: int, rng: np.rand
     """F(t)(0) * (-2)^(|t|-1) on ``batch`` random systems with constant pi in dimension ``dim``.
 
     Each instance: a random antisymmetric pi and a random polynomial H of degree max_order - 1
-    (its Taylor jet at 0); residues mod p, or small integers when p is None.
+    (its Taylor jet at 0); residues mod p, or integers in [-bound, bound] when p is None.
     """
     basis = monomial_basis(dim, max(max_order - 1, 0))
-    ring = JetRing(basis, p)
     H = _random_residues(rng, (basis.sizes[-1], batch), p, bound)
     upper = _random_residues(rng, (dim, dim, batch), p, bound)
-    pi = upper - upper.transpose(1, 0, 2)
+    return constant_pi_jets(trees, max_order, H, upper - upper.transpose(1, 0, 2), p)
+
+
+def constant_pi_jets(trees, max_order: int, H: np.ndarray, pi: np.ndarray, p: int | None) -> dict[Tree, np.ndarray]:
+    """F(t)(0) * (-2)^(|t|-1) for given Hamiltonians and constant Poisson matrices.
+
+    ``H``: (M, batch) coefficients of polynomials of degree max_order - 1 over
+    ``monomial_basis(dim, max_order - 1)``; ``pi``: (dim, dim, batch) antisymmetric matrices.
+    """
+    dim = pi.shape[0]
+    basis = monomial_basis(dim, max(max_order - 1, 0))
+    ring = JetRing(basis, p)
+    H = ring.reduce(H)
     pi = ring.reduce(pi)
     cache: dict[tuple[int, ...], np.ndarray] = {(): H}
 
@@ -243,7 +255,7 @@ def _bernoulli_plus(n: int) -> list[Fraction]:
     return B
 
 
-def _composite_partials(alpha_increment, H, dim: int, max_order: int, ring2: JetRing, p: int):
+def _composite_partials(alpha_increment, H, dim: int, ring2: JetRing):
     """partials(J, m) = d_p^J f(x0 + xi, 0) for f = H(x0 + y(xi, p)), y = alpha - x0 as jets in (xi, p)."""
     basis2 = ring2.basis
     D = basis2.degree
@@ -265,7 +277,7 @@ def _composite_partials(alpha_increment, H, dim: int, max_order: int, ring2: Jet
     index2 = basis2.index
     xi_basis = monomial_basis(dim, D)
 
-    @lru_cache(maxsize=None)
+    @cache
     def rows(J, m):
         pexp = [0] * dim
         for j in J:
@@ -308,7 +320,7 @@ def general_values(trees, max_order: int, family: str, batch: int, rng: np.rando
         if dim != 3:
             raise ValueError("the Lie–Poisson family here is so(3)*, dimension 3")
         # K(p) x = p cross x; alpha = sum_k B_k^+/k! K^k x
-        coeffs = [to_mod(b / factorial(k), p) for k, b in enumerate(_bernoulli_plus(D))]
+        coeffs = [to_residue(b / factorial(k), p) for k, b in enumerate(_bernoulli_plus(D))]
         term = x
         y = [xi[i].copy() for i in range(dim)]  # alpha - x0 = xi + sum_k>=1 ...
         for k in range(1, D + 1):
@@ -317,7 +329,7 @@ def general_values(trees, max_order: int, family: str, batch: int, rng: np.rando
     elif family == "log-canonical":
         upper = rng.integers(0, p, size=(dim, dim, batch), dtype=np.int64)
         lam = (upper - upper.transpose(1, 0, 2)) % p
-        half = to_mod(Fraction(-1, 2), p)
+        half = to_residue(Fraction(-1, 2), p)
         y = []
         for i in range(dim):
             w = _sum(ring2, [ring2.reduce(ring2.mul(x[j], pv[j], D) * lam[i, j][None, :]) for j in range(dim)])
@@ -327,13 +339,9 @@ def general_values(trees, max_order: int, family: str, batch: int, rng: np.rando
         raise ValueError(f"unknown family {family!r}")
     hbasis = monomial_basis(dim, D)
     H = rng.integers(0, p, size=(hbasis.sizes[D], batch), dtype=np.int64)
-    partials = _composite_partials(y, H, dim, max_order, ring2, p)
+    partials = _composite_partials(y, H, dim, ring2)
     ring = JetRing(monomial_basis(dim, D), p)
     return elementary_differentials(trees, max_order, ring, partials, lambda grad, m: grad)
-
-
-def to_mod(x: Fraction, p: int) -> int:
-    return x.numerator * pow(x.denominator, -1, p) % p
 
 
 def _constant(values: np.ndarray, size: int) -> np.ndarray:
@@ -356,6 +364,6 @@ def _exp(ring: JetRing, w: np.ndarray, m: int) -> np.ndarray:
     total[0] = 1
     power = total.copy()
     for k in range(1, m + 1):
-        power = ring.reduce(ring.mul(power, w, m) * to_mod(Fraction(1, k), ring.p))
+        power = ring.reduce(ring.mul(power, w, m) * to_residue(Fraction(1, k), ring.p))
         total = ring.reduce(total + power)
     return total

@@ -313,7 +313,6 @@ def _reconstruct(spaces, primes, max_order, crt_pair, rational_reconstruction, t
 
     Returns (relations by order, primes used) or None when reconstruction fails or disagrees.
     """
-    import numpy as np
 
     relations = {}
     for n in range(1, max_order + 1):
