@@ -97,6 +97,7 @@ class Verification:
     c_mismatch: tuple[tuple[int, float], ...] = field(default=())
     class_checked_up_to: dict[str, int] = field(default_factory=dict)
     failing_exact: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    conditions_checked: dict[str, int] = field(default_factory=dict)
 
     @property
     def order(self) -> int:
@@ -146,6 +147,7 @@ class Verification:
             "tolerance_rule": self.tolerance_rule,
             "principal_error_max": dict(self.principal_error_max),
             "class_checked_up_to": dict(self.class_checked_up_to),
+            "conditions_checked": dict(self.conditions_checked),
             "c_mismatch": [{"stage": i + 1, "difference": d} for i, d in self.c_mismatch],
         }
 
@@ -227,6 +229,7 @@ class _ClassState:
     cls: str
     order: int | None = None  # set at the first failing order
     limit: int | None = None  # set when the class has no conditions beyond this order
+    checked: int = 0  # conditions checked
     failing: FailureList = field(default_factory=FailureList)
     failing_exact: tuple = ()
     principal: float | None = None
@@ -262,6 +265,7 @@ def _evaluate_class(state, n, blk, R, plan, arithmetic, tol):
                                            zip(c.weights, c.trees, strict=True)))
                                  for c in conditions])
         sig = np.array([c.trees[0].sigma for c in conditions], dtype=float)
+    state.checked += len(conditions)
     if not conditions:
         return
     residuals = arithmetic.to_floats(R_sel) / denominators
@@ -344,7 +348,8 @@ def verify(tableau, max_order: int | None = None, precision=None, classes=None,
         principal_error_max={cls: s.principal_max for cls, s in states.items()},
         claimed=claimed, claims=claims, c_mismatch=tuple(tableau.c_mismatch()),
         class_checked_up_to=class_checked,
-        failing_exact={cls: s.failing_exact for cls, s in states.items() if s.failing_exact})
+        failing_exact={cls: s.failing_exact for cls, s in states.items() if s.failing_exact},
+        conditions_checked={cls: s.checked for cls, s in states.items()})
 
 
 def _found(state: _ClassState, N: int) -> int:
