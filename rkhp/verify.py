@@ -242,16 +242,13 @@ class _ClassState:
 
 def _evaluate_class(state, n, blk, R, plan, arithmetic, tol):
     """Check the conditions of order n of one class; record the first failing order."""
-    gammas = plan.gamma[blk]
-    sigmas = plan.sigma[blk]
     if _single_tree_class(state.cls):
-        mask = np.ones(len(gammas), dtype=bool) if state.cls == "general" else plan.in_t0[blk]
-        positions = np.nonzero(mask)[0]
-        trees = plan.trees[blk]
-        conditions = [trees[k] for k in positions]
+        positions = np.arange(blk.stop - blk.start) if state.cls == "general" \
+            else np.nonzero(plan.in_t0[blk])[0]
+        conditions = _Indexed(plan.trees, positions + blk.start)
         R_sel = R[positions]
-        denominators = np.array(gammas, dtype=float)[positions]
-        sig = np.array(sigmas, dtype=float)[positions]
+        denominators = plan.gamma_float[blk][positions]
+        sig = plan.sigma_float[blk][positions]
     else:
         try:
             conditions = list(conditions_of_order(n, state.cls))
@@ -266,7 +263,7 @@ def _evaluate_class(state, n, blk, R, plan, arithmetic, tol):
                                  for c in conditions])
         sig = np.array([c.trees[0].sigma for c in conditions], dtype=float)
     state.checked += len(conditions)
-    if not conditions:
+    if not len(conditions):
         return
     residuals = arithmetic.to_floats(R_sel) / denominators
     if arithmetic.exact:
@@ -281,10 +278,24 @@ def _evaluate_class(state, n, blk, R, plan, arithmetic, tol):
     state.principal_max = float(np.abs(weighted).max())
     order = np.argsort(-np.abs(residuals[bad]), kind="stable")
     failing = np.nonzero(bad)[0][order]
-    state.failing = FailureList([conditions[k] for k in failing], residuals[failing])
+    state.failing = FailureList(_Indexed(conditions, failing), residuals[failing])
     if arithmetic.exact:
         state.failing_exact = tuple(str(_exact_residual(arithmetic, R_sel[k], denominators[k]))
                                     for k in failing)
+
+
+class _Indexed:
+    """seq[indices[k]] for k = 0.. (a view that builds nothing)."""
+
+    def __init__(self, seq, indices):
+        self.seq = seq
+        self.indices = indices
+
+    def __len__(self):
+        return len(self.indices)
+
+    def __getitem__(self, k):
+        return self.seq[self.indices[k]]
 
 
 def _combine(arithmetic, values, weights):
@@ -376,7 +387,8 @@ def _run(tableau, N, arithmetic, tolerance, classes, on_order):
     plan = tree_plan(N)
     states = {cls: _ClassState(cls) for cls in classes}
     for n, blk, a in weights_by_order(tableau, N, arithmetic):
-        R = arithmetic.residuals(a, plan.gamma[blk])
+        R = arithmetic.residuals(a, plan.gamma_float[blk] if arithmetic.name == "float"
+                                 else plan.gamma[blk])
         for state in states.values():
             if state.done is False:
                 _evaluate_class(state, n, blk, R, plan, arithmetic, tolerance)

@@ -49,6 +49,8 @@ class TreePlan:
     in_t0: np.ndarray
     gamma: tuple[int, ...]
     sigma: tuple[int, ...]
+    gamma_float: np.ndarray
+    sigma_float: np.ndarray
 
     def block(self, n: int) -> slice:
         """Indices of the trees of order n."""
@@ -97,8 +99,10 @@ def tree_plan(max_order: int) -> TreePlan:
         in_t0[blk] = kids_ok[blk]
         if m == 2:
             in_t0[blk] = False  # b[b]
-    return TreePlan(max_order, trees, tuple(starts), first_, rest_, in_t0,
-                    tuple(t.gamma for t in trees), tuple(t.sigma for t in trees))
+    gamma = tuple(t.gamma for t in trees)
+    sigma = tuple(t.sigma for t in trees)
+    return TreePlan(max_order, trees, tuple(starts), first_, rest_, in_t0, gamma, sigma,
+                    np.array(gamma, dtype=float), np.array(sigma, dtype=float))
 
 
 def _count_of_order(trees, start: int, m: int) -> int:
@@ -137,7 +141,7 @@ class FloatArithmetic:
         return P @ b
 
     def residuals(self, a, gammas):
-        """r(t) = gamma(t) a(t) - 1 for a block."""
+        """r(t) = gamma(t) a(t) - 1 for a block (gammas as floats or ints)."""
         return np.asarray(gammas, dtype=float) * a - 1.0
 
     def to_floats(self, r):
