@@ -4,8 +4,9 @@ Solutions of the order conditions usually form families (fewer conditions than u
 reach a tableau with a closed form, free unknowns are fixed one at a time at simple values (zero
 first, then rationals of small denominator near the current value), the others following by
 Newton's method, until the solution is locally isolated. Each remaining coefficient is then
-passed to sympy's nsimplify (rationals and square roots), and the closed form is kept only if
-every order condition holds exactly (sympy arithmetic on the exact entries).
+recognised as a rational or a quadratic irrational (an integer relation of degree <= 2 found by
+PSLQ; sympy's nsimplify with a list of surds was tried first and spent seconds per failed
+number), and the closed form is kept only if every order condition holds exactly.
 """
 
 from __future__ import annotations
@@ -17,8 +18,8 @@ import numpy as np
 from .polish import Polished, polish
 from .system import ResidualSystem
 
-#: Square roots that nsimplify may use.
-SURDS = (2, 3, 5, 6, 7)
+#: Largest integer coefficient of the relations looked for (rationals and quadratic surds).
+MAX_COEFFICIENT = 10**6
 #: Largest denominator of the simple rationals tried when fixing a free unknown.
 SNAP_DENOMINATOR = 6
 
@@ -95,22 +96,27 @@ def fix_free_unknowns(system: ResidualSystem, x: np.ndarray, bound: float = 20.0
 
 
 def recognise_number(text: str, digits: int):
-    """A sympy closed form (rational or with square roots) of a decimal, or None."""
+    """A sympy closed form of a decimal known to ``digits`` digits: a rational p/q, or a
+    quadratic irrational (u + v sqrt(d)) / w, from an integer relation of degree <= 2 with
+    coefficients up to MAX_COEFFICIENT (mpmath.findpoly, i.e. PSLQ); None when there is none.
+    """
+    import mpmath
     import sympy
 
-    value = sympy.Float(text, digits)
-    if value == 0:
-        return sympy.Integer(0)
-    tolerance = 10.0 ** (-(digits * 3) // 4)
-    for constants in ((), [sympy.sqrt(k) for k in SURDS]):
-        try:
-            guess = sympy.nsimplify(value, constants, tolerance=tolerance, rational=False)
-        except (ValueError, TypeError, NotImplementedError):
-            continue
-        if guess.has(sympy.Float) or len(sympy.srepr(guess)) > 400:
-            continue
-        if abs(sympy.N(guess - value, digits + 5)) < 10.0 ** (-(digits - 3)):
-            return guess
+    with mpmath.workdps(digits):
+        x = mpmath.mpf(text)
+        tolerance = mpmath.mpf(10) ** (5 - digits)
+        q = Fraction(text).limit_denominator(MAX_COEFFICIENT)
+        if abs(x - mpmath.mpf(q.numerator) / q.denominator) < tolerance:
+            return sympy.Rational(q.numerator, q.denominator)
+        poly = mpmath.findpoly(x, 2, maxcoeff=MAX_COEFFICIENT)
+        if poly is None or len(poly) != 3:
+            return None
+        c2, c1, c0 = (int(c) for c in poly)
+        for sign in (1, -1):
+            root = sympy.radsimp((-c1 + sign * sympy.sqrt(c1 * c1 - 4 * c2 * c0)) / (2 * c2))
+            if root.is_real and abs(mpmath.mpf(sympy.N(root, digits + 5)) - x) < tolerance:
+                return root
     return None
 
 

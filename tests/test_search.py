@@ -1,0 +1,238 @@
+"""Tests of `rkhp search` (issue 4): residual system, multistart, polishing, closed forms, proofs.
+
+Expected values come from outside the code: the paper's minimal stage counts (degenerate order 3
+with 2 stages, order 4 with 3 stages), classical Runge–Kutta theory (order 4 needs 4 stages,
+order 3 needs 3; Butcher's barrier: no explicit 5-stage method of order 5, 6 stages suffice),
+and the counting argument that with s explicit stages the tree b[b[...b[b,b]]] of height s has
+a zero elementary weight (so its condition is violated by exactly 1).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from rkhp.search.driver import SearchOptions, search
+from rkhp.search.multistart import Problem, run_restarts
+from rkhp.search.polish import polish
+from rkhp.search.prove import prove_impossible
+from rkhp.search.recognise import recognise_number
+from rkhp.search.system import ResidualSystem
+from rkhp.tablefiles import load_tableau
+from rkhp.verify import verify
+
+ISSUE_KEYS = ["stages", "degenerate", "implicit", "order", "found", "tableau", "residual",
+              "restarts", "successes", "seconds", "principal_error", "proof",
+              "evidence_next_order"]
+
+
+# ----------------------------------------------------------------------------- residual system
+
+
+def test_rk4_satisfies_general_order_4_and_not_5():
+    system = ResidualSystem.build(4, 5, "general")
+    rk4 = load_tableau("rk4")
+    r, _ = system.residuals(system.pack(rk4.A_float, rk4.b_float), jacobian=False)
+    orders = [c.order for c in system.conditions]
+    low = np.array([o <= 4 for o in orders])
+    assert np.max(np.abs(r[low])) < 1e-14
+    assert np.max(np.abs(r[~low])) > 1e-3
+
+
+@pytest.mark.parametrize("stages,order,cls,implicit", [(3, 4, "degenerate", False),
+                                                       (4, 5, "general", False),
+                                                       (2, 4, "symmetric", True)])
+def test_jacobian_matches_finite_differences(stages, order, cls, implicit):
+    system = ResidualSystem.build(stages, order, cls, implicit, with_error=True)
+    x = system.random_start(np.random.default_rng(7))
+    for fun in (system.residuals, system.principal_error):
+        _, J = fun(x)
+        h = 1e-6
+        fd = np.array([(fun(x + h * e, False)[0] - fun(x - h * e, False)[0]) / (2 * h)
+                       for e in np.eye(len(x))]).T
+        assert np.max(np.abs(J - fd)) < 1e-7
+
+
+def test_principal_error_matches_verify():
+    system = ResidualSystem.build(3, 4, "degenerate", with_error=True)
+    paper = load_tableau("paper-three-stage")
+    e, _ = system.principal_error(system.pack(paper.A_float, paper.b_float), jacobian=False)
+    assert np.linalg.norm(e) == pytest.approx(verify(paper).principal_error["degenerate"],
+                                              rel=1e-12)
+
+
+# ----------------------------------------------------------------------------- must reproduce
+
+
+def test_two_stages_degenerate_reach_order_3_only():
+    result = search(2, cls="degenerate", options=SearchOptions(restarts=6, seed=1))
+    assert result.order == 3 and result.found is not None
+    assert result.found.verification.orders["degenerate"] == 3
+    assert result.found.exact  # a closed form, verified exactly
+    ev = result.to_json()["evidence_next_order"]
+    # with 2 explicit stages the weight of b[b[b,b]] vanishes: residual exactly 1
+    assert ev["order"] == 4 and ev["restarts"] == 6 and ev["best_residual"] == pytest.approx(1)
+
+
+def test_three_stages_degenerate_reach_order_4():
+    result = search(3, cls="degenerate", options=SearchOptions(restarts=6, seed=0))
+    assert result.order == 4
+    assert result.found.verification.orders["degenerate"] == 4
+    assert result.to_json()["evidence_next_order"]["order"] == 5
+
+
+def test_four_stages_general_reach_order_4():
+    result = search(4, options=SearchOptions(restarts=4, seed=0))
+    assert result.order == 4
+    assert result.found.verification.orders["general"] == 4
+    assert result.failed_run.problem.order == 5
+
+
+@pytest.mark.parametrize("stages,order,cls", [(2, 3, "general"), (2, 4, "degenerate")])
+def test_groebner_proves_impossibility(stages, order, cls):
+    proof = prove_impossible(ResidualSystem.build(stages, order, cls), time_limit=60)
+    assert proof.proved and proof.basis == ("1",)
+
+
+def test_groebner_does_not_claim_a_possible_case():
+    # the paper's three-stage method exists, so the ideal must be proper
+    proof = prove_impossible(ResidualSystem.build(3, 4, "degenerate"), time_limit=60)
+    assert not proof.proved and proof.status == "solutions-over-C"
+
+
+def test_prove_flag_attaches_the_certificate_to_the_failed_order():
+    result = search(2, 3, "general", options=SearchOptions(restarts=3, prove=True))
+    assert result.found is None and result.proof.proved and result.proof_order == 3
+    assert result.to_json()["proof"]["result"].startswith("proved impossible")
+
+
+# ----------------------------------------------------------------------------- restarts, polish
+
+
+def test_restarts_are_reproducible_and_independent_of_workers():
+    problem = Problem(3, 4, "degenerate")
+    one = run_restarts(problem, 6, seed=3, stop_after=None)
+    again = run_restarts(problem, 6, seed=3, stop_after=None)
+    two = run_restarts(problem, 6, seed=3, workers=2, stop_after=None)
+    assert [a.x for a in one.attempts] == [a.x for a in again.attempts] == [a.x for a in two.attempts]
+    assert [a.success for a in one.attempts] == [a.success for a in two.attempts]
+
+
+def test_polish_reaches_the_digits_asked():
+    import mpmath
+
+    problem = Problem(3, 4, "degenerate")
+    first = run_restarts(problem, 10, seed=0).first
+    pol = polish(problem.system(), first.x, digits=50)
+    assert pol.converged
+    with mpmath.workdps(60):
+        r, _ = problem.system().residuals(pol.mp_values(), jacobian=False)
+        assert max(abs(v) for v in r) < mpmath.mpf(10) ** -48
+
+
+def test_keyboard_interrupt_returns_the_best_so_far():
+    calls = []
+
+    def interrupt(order, done, total):
+        calls.append(order)
+        if order == 3:
+            raise KeyboardInterrupt
+
+    result = search(3, cls="degenerate", options=SearchOptions(restarts=5), on_progress=interrupt)
+    assert result.interrupted and result.found is not None and result.found.order == 2
+
+
+# ----------------------------------------------------------------------------- closed forms
+
+
+def test_recognise_numbers():
+    import sympy
+
+    assert recognise_number("0.433012701892219323381861585376", 30) == sympy.sqrt(3) / 4
+    assert recognise_number("0.407407407407407407407407407407", 30) == sympy.Rational(11, 27)
+    assert recognise_number("3.14159265358979323846264338328", 30) is None
+
+
+# ----------------------------------------------------------------------------- CLI
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "rkhp", *args], capture_output=True, text=True,
+                          timeout=300)
+
+
+@pytest.mark.parametrize("args", [["--stages", "0"], ["--stages", "2", "--order", "0"],
+                                  ["--stages", "2", "--order", "9"],
+                                  ["--stages", "2", "--degenerate", "--symmetric"],
+                                  ["--stages", "2", "--order", "3", "--prove", "--optimize", "error"],
+                                  ["--stages", "2", "--save", "out.txt"],
+                                  ["--stages", "2", "--digits", "5"],
+                                  ["--stages", "2", "--workers", "0"]])
+def test_bad_input_is_one_line_exit_2(args):
+    out = _cli("search", *args)
+    assert out.returncode == 2
+    assert len(out.stderr.strip().splitlines()) == 1 and "Traceback" not in out.stderr
+
+
+def test_cli_json_keys_and_save_round_trip(tmp_path):
+    path = tmp_path / "found.toml"
+    out = _cli("search", "--stages", "3", "--order", "4", "--degenerate", "--restarts", "10",
+               "--save", str(path), "--format", "json")
+    assert out.returncode == 0, out.stderr
+    data = json.loads(out.stdout)
+    assert list(data)[: len(ISSUE_KEYS)] == ISSUE_KEYS
+    assert data["found"] and data["order"] == 4 and data["degenerate"] is True
+    assert set(data["tableau"]) == {"A", "b", "c"}
+    tab = load_tableau(str(path))
+    assert verify(tab).orders["degenerate"] == 4
+    assert tab.claimed_degenerate_order == 4
+
+
+def test_cli_prove_prints_the_certificate():
+    out = _cli("search", "--stages", "2", "--order", "4", "--degenerate", "--restarts", "3",
+               "--prove")
+    assert out.returncode == 0, out.stderr
+    assert "proved impossible" in out.stdout and "Groebner basis [1]" in out.stdout
+
+
+# ----------------------------------------------------------------------------- slow studies
+
+
+@pytest.mark.slow
+def test_general_order_5_needs_6_stages():
+    five = search(5, 5, "general", options=SearchOptions(restarts=30, seed=0, closed_form=False))
+    assert five.found is None and five.failed_run.best_residual > 1e-6
+    six = search(6, 5, "general", options=SearchOptions(restarts=30, seed=0))
+    assert six.found is not None and six.found.verification.orders["general"] >= 5
+
+
+@pytest.mark.slow
+def test_degenerate_order_5_needs_4_stages():
+    three = search(3, 5, "degenerate", options=SearchOptions(restarts=10, prove=True))
+    assert three.found is None and three.proof.proved
+    four = search(4, 5, "degenerate", options=SearchOptions(restarts=30, seed=0))
+    assert four.found is not None and four.found.verification.orders["degenerate"] >= 5
+
+
+@pytest.mark.slow
+def test_saved_tables_verify():
+    for name, cls, order in [("search-degenerate-o5-s4", "degenerate", 5)]:
+        tab = load_tableau(name)
+        assert verify(tab).orders[cls] == order
+
+
+@pytest.mark.slow
+def test_error_optimal_three_stage_degenerate_order_4():
+    result = search(3, 4, "degenerate", options=SearchOptions(restarts=40, seed=0,
+                                                               optimize="error"))
+    opt = result.optimisation
+    paper = verify("paper-three-stage").principal_error["degenerate"]
+    assert result.found.verification.orders["degenerate"] == 4
+    assert opt.error_norm < paper
+    assert all(opt.error_norm <= k.error_norm + 1e-12 for k in opt.known)
+    assert Fraction(result.found.verification.orders["degenerate"]) == 4
