@@ -9,7 +9,8 @@ predicts for the next iterate, is below the tolerance (then psi + Dpsi dx is reu
 NOTES §7); y_next = beta(x, psi(x)). Each stage is computed once: the cost is polynomial in s.
 
 The tableau, h and the states are data: one compilation serves every system and tableau.
-Failure codes: 0 ok, 1 Newton did not converge, 2 non-finite values, 3 left the domain.
+Failure codes: 0 ok, 1 Newton did not converge, 2 non-finite values, 3 left the domain,
+4 Newton reached non-finite values.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 from .cache import numba as nb
 from .jets import NJIT, run_tape
 
-OK, NO_CONVERGENCE, NON_FINITE, LEFT_DOMAIN = 0, 1, 2, 3
+OK, NO_CONVERGENCE, NON_FINITE, LEFT_DOMAIN, NEWTON_NON_FINITE = 0, 1, 2, 3, 4
 
 
 @nb.njit(**NJIT)
@@ -143,7 +144,7 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next):
         solve_small(Jalpha, res, delta)
         size = _max_abs(delta)
         if not np.isfinite(size):
-            return NON_FINITE, it
+            return NEWTON_NON_FINITE, it
         for k in range(n):
             x[k] += delta[k]
         predicted = size * size * size / (previous * previous) if previous < np.inf else np.inf

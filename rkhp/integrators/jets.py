@@ -51,14 +51,14 @@ def _bernoulli_tables():
     phi = [mpmath.bernoulli(k) / mpmath.factorial(k) for k in range(200)]
     phi[1] = -phi[1]  # z / (1 - e^{-z}) has B_1^+ = +1/2
     series = [(-1) ** j * mpmath.bernoulli(2 * j + 2) / mpmath.factorial(2 * j + 2)
-              for j in range(48)]
+              for j in range(200)]
     return np.array([float(v) for v in phi]), np.array([float(v) for v in series])
 
 
 #: PHI_COEF[k]: Taylor coefficients of phi(z) = z / (1 - exp(-z)); radius 2 pi.
 #: CRB_SERIES[j]: c(u) = sum_j CRB_SERIES[j] u^j, c(u) = (1 - (r/2) cot(r/2)) / r^2, u = r^2.
 PHI_COEF, CRB_SERIES = _bernoulli_tables()
-CRB_SERIES_LIMIT = 4.0  # series for |u| < 4 (ratio <= 4 / (4 pi^2) per term), closed form above
+CRB_SERIES_LIMIT = 20.0  # series for |u| < 20 (ratio < 1/2 per term), closed form above
 TWO_PI = 2.0 * math.pi
 
 
@@ -206,17 +206,67 @@ def _uni_compose(coef, a, D):
 
 
 @nb.njit(**NJIT)
-def crb_coef(u0, D, coef):
+def _two_prod(a, b):
+    """a * b = p + e exactly (Dekker)."""
+    p = a * b
+    t = 134217729.0 * a
+    ah = t - (t - a)
+    al = a - ah
+    t = 134217729.0 * b
+    bh = t - (t - b)
+    bl = b - bh
+    return p, ((ah * bh - p) + ah * bl + al * bh) + al * bl
+
+
+@nb.njit(**NJIT)
+def _sum_of_squares(W, args, start, count):
+    """sum_i W[args[start + i], 0]^2 as a double-double (hi, lo)."""
+    hi = 0.0
+    lo = 0.0
+    for i in range(count):
+        v = W[args[start + i], 0]
+        p, e = _two_prod(v, v)
+        s = hi + p
+        bb = s - hi
+        lo += (hi - (s - bb)) + (p - bb) + e
+        hi = s
+    s = hi + lo
+    return s, lo - (s - hi)
+
+
+@nb.njit(**NJIT)
+def _crb_value(u_hi, u_lo):
+    """c(u) for 20 <= u < (2 pi)^2 from u = u_hi + u_lo (double-double): near the pole r = 2 pi
+    cot is ill-conditioned, so r = sqrt(u) is carried to double-double accuracy."""
+    r = math.sqrt(u_hi)
+    p, e = _two_prod(r, r)
+    r_lo = ((u_hi - p) - e + u_lo) / (2.0 * r)
+    w = 0.5 * r
+    w_lo = 0.5 * r_lo
+    sw = math.sin(w)
+    cot = math.cos(w) / sw
+    wcot = w * (cot - w_lo / (sw * sw)) + w_lo * cot
+    return (1.0 - wcot) / u_hi * (1.0 - u_lo / u_hi)
+
+
+@nb.njit(**NJIT)
+def crb_coef(u0, u_lo, D, coef):
     """Taylor coefficients at u0 of c(u) = (1 - (sqrt(u)/2) cot(sqrt(u)/2)) / u (NOTES §4).
 
-    Power series (exact to round-off) for |u0| < 4; closed form in univariate jets for
-    4 <= u0 < (2 pi)^2; NaN beyond the first pole u = (2 pi)^2.
+    Power series (exact to round-off) for |u0| < 20; closed form in univariate jets for
+    20 <= u0 < (2 pi)^2, the value from u0 + u_lo in double-double; NaN beyond the first pole
+    u = (2 pi)^2.
     """
     if abs(u0) < CRB_SERIES_LIMIT:
         for m in range(D + 1):
             s = 0.0
-            for j in range(CRB_SERIES.shape[0] - 1, m - 1, -1):
-                s = s * u0 + CRB_SERIES[j] * _binom(j, m)
+            weight = 1.0  # binom(j, m) u0^(j - m)
+            for j in range(m, CRB_SERIES.shape[0]):
+                term = CRB_SERIES[j] * weight
+                s += term
+                if j > m + 2 and abs(term) <= 1e-18 * abs(s):
+                    break
+                weight *= u0 * (j + 1) / (j + 1 - m)
             coef[m] = s
         return
     if not (u0 < TWO_PI * TWO_PI):
@@ -249,14 +299,7 @@ def crb_coef(u0, D, coef):
     res = _uni_mul(num, _uni_compose(c, u, D), D)
     for m in range(D + 1):
         coef[m] = res[m]
-
-
-@nb.njit(**NJIT)
-def _binom(j, m):
-    r = 1.0
-    for i in range(m):
-        r = r * (j - i) / (i + 1)
-    return r
+    coef[0] = _crb_value(u0, u_lo)
 
 
 @nb.njit(**NJIT)
@@ -391,7 +434,10 @@ def run_tape(tape, W, D, space, scratch):
                 _pow_coef(W[a, 0], float(k), D, coef)
                 jet_compose(coef, W[a], o, D, space, scratch)
         elif code == CRB:
-            crb_coef(W[a, 0], D, coef)
+            u_hi, u_lo = W[a, 0], 0.0
+            if b >= 0:  # u = |p|^2 with p in args[b : b + k]: recompute u0 in double-double
+                u_hi, u_lo = _sum_of_squares(W, args, b, k)
+            crb_coef(u_hi, u_lo, D, coef)
             jet_compose(coef, W[a], o, D, space, scratch)
         elif code == PHIMV:
             _phimv(W, ops[r], args, D, space, scratch, coef)

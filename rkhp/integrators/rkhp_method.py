@@ -24,7 +24,8 @@ MAX_PRODUCT_PAIRS = 2_000_000
 
 CAUSES = {1: "Newton did not converge (the step h may be too large)",
           2: "non-finite values",
-          3: "left the domain"}
+          3: "left the domain",
+          4: "Newton did not converge: non-finite iterate (the step h may be too large)"}
 
 
 def resolve_tableau(tableau):

@@ -88,7 +88,7 @@ def so3_alpha(x, p, sign=1.0):
     """alpha = x + (p x x)/2 + c(|p|^2) p x (p x x) on so(3)* (beta: sign = -1; NOTES §4)."""
     px = _cross(p, x)
     ppx = _cross(p, px)
-    c = tp.crb(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
+    c = tp.crb(p)
     return [x[i] + (0.5 * sign) * px[i] + c * ppx[i] for i in range(3)]
 
 

@@ -8,7 +8,8 @@ interpreter serves every system.
 Operations (opcode, out, a, b, k, f): out receives the result; a, b are operand slots; k an
 integer parameter; f a float parameter. PHIMV is the only operation with several operands and
 results: its operands are `args[a : a + n*n + n]` (K row-major, then x) and it writes
-phi(K) x to the n consecutive slots out..out+n-1.
+phi(K) x to the n consecutive slots out..out+n-1. CRB (c(u), u = |p|^2) lists p in
+`args[b : b + k]`.
 """
 
 from __future__ import annotations
@@ -164,8 +165,21 @@ log = _unary(LOG)
 sin = _unary(SIN)
 cos = _unary(COS)
 sqrt = _unary(SQRT)
-#: c(u) = (1 - (sqrt(u)/2) cot(sqrt(u)/2)) / u, the rigid body's coefficient (NOTES §4)
-crb = _unary(CRB)
+
+
+def crb(p: list[Var]) -> Var:
+    """c(|p|^2), c(u) = (1 - (sqrt(u)/2) cot(sqrt(u)/2)) / u: the so(3)* coefficient (NOTES §4).
+
+    The operation also lists the slots of p, so that the interpreter can form |p|^2 in
+    double-double where c is ill-conditioned (near |p| = 2 pi)."""
+    builder = p[0].builder
+    u = sum(v * v for v in p)
+    start = len(builder.args)
+    builder.args.extend(v.slot for v in p)
+    out = builder._new_slots(1)
+    builder.rows.append((CRB, out, u.slot, start, len(p)))
+    builder.fpar.append(0.0)
+    return Var(builder, out)
 
 
 def record(n: int, program) -> Tape:
