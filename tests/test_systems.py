@@ -9,11 +9,11 @@ import mpmath
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from rkhp_cli.main import rkhp
 
 from rkhp.errors import InputError
 from rkhp.systems import builtin_systems, get_system
 from rkhp.systems.check import check_birealisation
-from rkhp_cli.main import rkhp
 
 BUILTINS = ("rigid-body", "lotka-volterra", "pendulum")
 SPEC_RIGID_BODY = """
