@@ -48,7 +48,8 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
     the first order not reached is impossible.
     """
     from rkhp.errors import InputError
-    from rkhp.search.driver import SearchOptions, search as run_search
+    from rkhp.search.driver import SearchOptions
+    from rkhp.search.driver import search as run_search
     from rkhp.search.system import check_problem
 
     cls = _class_of(degenerate, symmetric)
@@ -78,6 +79,7 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
         _render(result, save)
     if result.interrupted:
         click.echo("rkhp: interrupted: the best found so far is shown", err=True)
+        raise click.exceptions.Exit(130)
     if save and result.found is None:
         raise click.ClickException(f"nothing found, so nothing was saved to {save}")
 
@@ -93,10 +95,19 @@ def _save(result, path) -> None:
     tab = dataclasses.replace(
         found.tableau, claimed_order=ver.orders["general"],
         claimed_degenerate_order=ver.orders["degenerate"],
-        reference=f"rkhp search --stages {result.stages} --order {found.order} "
-                  f"(class {result.cls}, seed {result.options.seed}, restart {found.restart})",
+        reference=_command_line(result, found.order),
         notes=f"verified: {how}")
     save_tableau(tab, path)
+
+
+def _command_line(result, order: int) -> str:
+    """The command that reproduces a saved tableau."""
+    flags = {"general": "", "degenerate": " --degenerate", "symmetric": " --symmetric"}[result.cls]
+    opts = result.options
+    return (f"rkhp search --stages {result.stages} --order {order}{flags}"
+            f"{' --implicit' if result.implicit else ''} --seed {opts.seed} "
+            f"--restarts {opts.restarts} --digits {opts.digits}"
+            f"{' --optimize error' if opts.optimize else ''}")
 
 
 def _render(result, save) -> None:
@@ -114,8 +125,10 @@ def _render(result, save) -> None:
                   f"{data['restarts']} restarts ({data['successes']} successes), "
                   f"{data['seconds']:.2f} s")
         tab = data["tableau"]
-        table = Table(show_header=False, box=None, padding=(0, 1))
         s = result.stages
+        table = Table(show_header=False, box=None, padding=(0, 1))
+        for _ in range(s + 2):
+            table.add_column(overflow="fold")
         for i in range(s):
             table.add_row(tab["c"][i], "│", *tab["A"][i])
         table.add_row("", "│", *(["─" * 4] * s))
@@ -134,7 +147,7 @@ def _render(result, save) -> None:
             rows.add_row(k.name, f"{k.error_norm:.6g}")
         con.print(rows)
     ev = data["evidence_next_order"]
-    if ev is not None:
+    if ev is not None and ev["restarts"]:
         con.print(f"order {ev['order']} not reached: {ev['restarts']} restarts, best max residual "
                   f"{ev['best_residual']:.3g}")
     if result.proof is not None:

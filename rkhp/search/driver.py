@@ -130,18 +130,21 @@ class SearchResult:
 
     def to_json(self) -> dict:
         """The issue's keys, then extras (decided_by, verified orders, optimisation, proof text)."""
+        import mpmath
+
         from ..tableau import entry_text
 
         tab = None
         if self.found is not None:
             t = self.found.tableau
-            tab = {"A": [[entry_text(x) for x in row] for row in t.A],
-                   "b": [entry_text(x) for x in t.b], "c": [entry_text(x) for x in t.c]}
+            with mpmath.workdps(self.options.digits):  # c of a D-digit tableau: D digits
+                tab = {"A": [[entry_text(x) for x in row] for row in t.A],
+                       "b": [entry_text(x) for x in t.b], "c": [entry_text(x) for x in t.c]}
         failed = self.failed_run
         evidence = None
         if failed is not None:
             evidence = {"order": failed.problem.order, "restarts": len(failed.attempts),
-                        "best_residual": failed.best_residual}
+                        "best_residual": failed.best_residual if failed.attempts else None}
         proof = None
         if self.proof is not None:
             proof = {"method": self.proof.method,
@@ -215,8 +218,9 @@ def verified(problem: Problem, x_float, polished, digits: int, closed: bool, nam
 
 
 def method_name(problem: Problem) -> str:
-    kind = "implicit" if problem.implicit else "explicit"
-    return f"search-{problem.cls}-o{problem.order}-s{problem.stages}-{kind}"
+    """``search-<class>-o<order>-s<stages>`` (``-implicit`` added for implicit tableaux)."""
+    kind = "-implicit" if problem.implicit else ""
+    return f"search-{problem.cls}-o{problem.order}-s{problem.stages}{kind}"
 
 
 def search(stages: int, order: int | None = None, cls: str = "general", implicit: bool = False,
