@@ -10,7 +10,7 @@ from .options import console, emit_json, format_option, progress
 
 @click.command()
 @click.option("--order", "-n", "order", type=int, required=True,
-              help="Largest order N (shipped up to 8; up to 10 with --regenerate).")
+              help="Largest order N (shipped up to 8; up to 9 with --regenerate).")
 @click.option("--regenerate", is_flag=True,
               help="Derive the relations from scratch (exact arithmetic modulo primes) instead of reading "
                    "the shipped data.")
@@ -52,7 +52,7 @@ def _render(data, source: str) -> None:
     from rkhp.relations import condition_text, relation_text
 
     out = console()
-    summary = Table(title=f"Symmetric birealisations: relations among F(t), t in T_0 ({source})")
+    summary = Table(title="Symmetric birealisations: relations among F(t)", caption=f"{source} data")
     for col in ("Order", "T_0 trees", "Relations", "Symmetric conditions"):
         summary.add_column(col, justify="right")
     for o in data.orders:
@@ -66,3 +66,4 @@ def _render(data, source: str) -> None:
             out.print(f"  relation   {relation_text(o, k)}", soft_wrap=True, markup=False)
         for trees, weights in o.conditions:
             out.print(f"  condition  {condition_text(trees, weights)}", soft_wrap=True, markup=False)
+    out.print("\nr(t) = gamma(t) a(t) - 1 over T_0; a relation is sum c_t F(t) = 0.", markup=False)
