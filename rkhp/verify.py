@@ -55,6 +55,8 @@ class Failure(NamedTuple):
         """The tree in bracket notation, or the combination ``w1*t1 + w2*t2``."""
         if isinstance(self.item, Tree):
             return str(self.item)
+        if self.item.is_single:
+            return str(self.item.tree)
         return combination_label(self.item)
 
 
@@ -347,7 +349,7 @@ def verify(tableau, max_order: int | None = None, precision=None, classes=None,
                 break
             N = min(N + 2, AUTO_MAX_ORDER)
     orders = {cls: _found(s, N) for cls, s in states.items()}
-    class_checked = {cls: (s.limit if s.limit is not None else N) for cls, s in states.items()}
+    class_checked = {cls: _checked(s, N) for cls, s in states.items()}
     claimed = {"general": tableau.claimed_order, "degenerate": tableau.claimed_degenerate_order}
     claims = {cls: _claim_status(claimed[cls], orders[cls], class_checked[cls])
               for cls in claimed if claimed[cls] is not None}
@@ -361,6 +363,13 @@ def verify(tableau, max_order: int | None = None, precision=None, classes=None,
         class_checked_up_to=class_checked,
         failing_exact={cls: s.failing_exact for cls, s in states.items() if s.failing_exact},
         conditions_checked={cls: s.checked for cls, s in states.items()})
+
+
+def _checked(state: _ClassState, N: int) -> int:
+    """The last order whose conditions were checked in the class."""
+    if state.order is not None:
+        return state.order + 1
+    return state.limit if state.limit is not None else N
 
 
 def _found(state: _ClassState, N: int) -> int:

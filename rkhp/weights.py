@@ -140,6 +140,10 @@ class FloatArithmetic:
     def dot(self, P, b):
         return P @ b
 
+    def left(self, b, A):
+        """b^T A."""
+        return b @ A
+
     def residuals(self, a, gammas):
         """r(t) = gamma(t) a(t) - 1 for a block (gammas as floats or ints)."""
         return np.asarray(gammas, dtype=float) * a - 1.0
@@ -195,8 +199,11 @@ class FixedPointArithmetic:
     def dot(self, P, b):
         return P.dot(b) >> self.bits
 
+    def left(self, b, A):
+        return b.dot(A) >> self.bits
+
     def residuals(self, a, gammas):
-        return np.array(gammas, dtype=object) * a - self.one
+        return np.array(gammas, dtype=object) * a - (1 << self.bits)
 
     def to_floats(self, r):
         """Float values of fixed-point integers (or of Fractions of them)."""
@@ -249,6 +256,9 @@ class ExactArithmetic:
 
     def dot(self, P, b):
         return P.dot(b)
+
+    def left(self, b, A):
+        return b.dot(A)
 
     def residuals(self, a, gammas):
         if self.field is None:
@@ -314,26 +324,40 @@ def weights_by_order(tableau: Tableau, max_order: int, arithmetic=None):
     """Yield (n, block, a) for n = 1..max_order: the weights a(t) of the trees plan.block(n).
 
     One pass (module docstring): each tree's stage vector comes from two stored vectors, and A is
-    applied once per tree of order < max_order. ``arithmetic`` defaults to float64.
+    applied once per tree of order < max_order - 1. The trees b[c1] of the last order need no
+    A Phi(c1): a(b[c1]) = (b^T A) Phi(c1). ``arithmetic`` defaults to float64.
     """
     arithmetic = arithmetic or FloatArithmetic()
     plan = tree_plan(max_order)
     A, b = arithmetic.matrix(tableau)
+    bA = arithmetic.left(b, A)
     s = tableau.stages
-    below = plan.starts[max_order]  # trees of order < max_order
-    Phi = arithmetic.empty(max(below, 1), s)
-    AP = arithmetic.empty(max(below, 1), s)
+    N = max_order
+    Phi = arithmetic.empty(max(plan.starts[N], 1), s)  # orders < N
+    AP = arithmetic.empty(max(plan.starts[N - 1], 1), s)  # orders < N - 1
     Phi[0] = arithmetic.one
-    AP[0:1] = arithmetic.matmul(Phi[0:1], A)
+    if N >= 3:
+        AP[0:1] = arithmetic.matmul(Phi[0:1], A)
     yield 1, plan.block(1), arithmetic.dot(Phi[0:1], b)
     first, rest = plan.first, plan.rest
-    for n in range(2, max_order + 1):
+    for n in range(2, N):
         blk = plan.block(n)
         phi = arithmetic.hadamard(AP[first[blk]], Phi[rest[blk]])
-        if n < max_order:
-            Phi[blk] = phi
+        Phi[blk] = phi
+        if n < N - 1:
             AP[blk] = arithmetic.matmul(phi, A)
         yield n, blk, arithmetic.dot(phi, b)
+    if N >= 2:
+        blk = plan.block(N)
+        f, r = first[blk], rest[blk]
+        single = r == 0  # t = b[c1], |c1| = N - 1
+        a = arithmetic.dot(Phi[f[single]], bA)
+        out = np.empty(len(f), dtype=a.dtype)
+        out[single] = a
+        if not single.all():
+            multi = ~single
+            out[multi] = arithmetic.dot(arithmetic.hadamard(AP[f[multi]], Phi[r[multi]]), b)
+        yield N, blk, out
 
 
 def elementary_weights(tableau: Tableau, max_order: int, precision="float") -> dict[Tree, object]:
