@@ -242,21 +242,3 @@ def rkhp_run(y0, A, b, h, n_steps, tapes, space, n_slots, domain, tol, max_iter,
             y[k] = y_next[k]
         states[step + 1 if keep_all else 0, :] = y
     return n_steps, OK
-
-
-@nb.njit(parallel=True, cache=True)
-def rkhp_ensemble(x0s, A, b, h, n_steps, tapes, space, n_slots, domain, tol, max_iter):
-    """Many initial conditions at once (the "vmap"): final states, completed steps, codes."""
-    m, n = x0s.shape
-    finals = np.empty((m, n))
-    done = np.zeros(m, dtype=np.int64)
-    codes = np.zeros(m, dtype=np.int64)
-    for t in nb.prange(m):
-        last = np.zeros((1, n))
-        iters = np.zeros(max(n_steps, 1), dtype=np.int64)
-        k, c = rkhp_run(x0s[t], A, b, h, n_steps, tapes, space, n_slots, domain, tol, max_iter,
-                        last, iters, False)
-        finals[t, :] = last[0]
-        done[t] = k
-        codes[t] = c
-    return finals, done, codes

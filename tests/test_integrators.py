@@ -1,0 +1,155 @@
+"""The RKHP engine, the Taylor (THP) integrator and `rkhp integrate` (issue 5)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from rkhp_cli.main import rkhp
+
+from rkhp.errors import InputError, NumericalFailure
+from rkhp.integrators import integrate, integrate_ensemble
+from rkhp.systems import get_system
+from rkhp.tableau import Tableau
+
+T_ORDERS = 2.0
+STEPS = (20, 40, 80, 160)
+
+
+def observed_order(system, method, steps=STEPS, t_final=T_ORDERS) -> float:
+    """Least-squares slope of log(error) against log(h) (NOTES §6), error vs the exact solution."""
+    hs, errors = [], []
+    for n in steps:
+        h = t_final / n
+        tr = integrate(system, method, h, n).raise_if_failed()
+        hs.append(h)
+        errors.append(np.abs(tr.final_state - system.exact_solution(t_final)).max())
+    return float(np.polyfit(np.log(hs), np.log(errors), 1)[0])
+
+
+@pytest.mark.parametrize("realisation,method,order", [
+    ("symmetric", "euler", 2), ("symmetric", "paper-two-stage", 3),
+    ("symmetric", "paper-three-stage", 4), ("symmetric", "rk4", 4),
+    ("shifted", "rk4", 4), ("shifted", "euler", 1),
+])
+def test_observed_orders_rigid_body(realisation, method, order):
+    """Paper §5: degenerate orders on the symmetric realisation, classical ones on the shifted."""
+    slope = observed_order(get_system("rigid-body", realisation), method)
+    assert abs(slope - order) <= 0.15, slope
+
+
+def test_tableau_is_data():
+    """A tableau built from arrays gives the same run as the built-in with the same entries."""
+    system = get_system("rigid-body")
+    a = 0.5 * np.sqrt(3.0)
+    own = Tableau.from_arrays([[0, 0, 0], [-a / 2, 0, 0], [0, 0.75, 0]],
+                              [11 / 27, 0, 16 / 27], name="mine")
+    ref = integrate(system, "paper-three-stage", 0.1, 30)
+    mine = integrate(system, own, 0.1, 30)
+    assert np.abs(mine.states - ref.states).max() < 1e-15
+
+
+def _implicit_midpoint(system, h, n):
+    """x1 = x0 + h pi grad H((x0 + x1)/2), solved by fixed point to round-off."""
+    x = system.x0.copy()
+    out = [x]
+    for _ in range(n):
+        y = x.copy()
+        for _ in range(200):
+            y_new = x + h * system.vector_field(0.5 * (x + y))
+            if np.abs(y_new - y).max() <= 1e-17:
+                break
+            y = y_new
+        x = y_new
+        out.append(x)
+    return np.array(out)
+
+
+def test_euler_on_constant_pi_is_implicit_midpoint():
+    """NOTES §5: RKHP Euler on a constant pi is the implicit midpoint rule."""
+    for realisation in ("symmetric",):
+        system = get_system("pendulum", realisation)
+        tr = integrate(system, "euler", 0.1, 50).raise_if_failed()
+        assert np.abs(tr.states - _implicit_midpoint(system, 0.1, 50)).max() < 1e-13
+
+
+@pytest.mark.parametrize("name", ["rigid-body", "lotka-volterra"])
+def test_casimirs_kept_over_10k_steps(name):
+    system = get_system(name)
+    tr = integrate(system, "paper-three-stage", 1e-3, 10_000).raise_if_failed()
+    values = np.array([system.casimir_values(x) for x in tr.states[::50]])
+    assert np.abs(values - values[0]).max() <= 1e-13
+
+
+def test_too_large_h_is_a_newton_failure():
+    system = get_system("lotka-volterra")
+    tr = integrate(system, "rk4", 1.0, 10)
+    assert not tr.ok and "Newton did not converge" in tr.status
+    assert tr.failed_step == 0 and len(tr.states) == 1 and "t = 0" in tr.status
+    with pytest.raises(NumericalFailure):
+        tr.raise_if_failed()
+    # failure after some good steps keeps exactly those
+    tr = integrate(get_system("pendulum"), "rk4", 3.0, 5)
+    assert not tr.ok and "Newton" in tr.status
+    assert len(tr.states) == tr.failed_step + 1 and np.all(np.isfinite(tr.states))
+
+
+def test_bad_input():
+    system = get_system("rigid-body")
+    for h in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(InputError):
+            integrate(system, "euler", h, 10)
+    with pytest.raises(InputError, match="not explicit"):
+        integrate(system, "gauss2", 0.1, 10)
+    with pytest.raises(InputError):
+        integrate(system, "no-such-method", 0.1, 10)
+    with pytest.raises(InputError, match="components"):
+        integrate(system, "euler", 0.1, 10, x0=[1.0, 2.0])
+    with pytest.raises(InputError, match="domain"):
+        integrate(get_system("lotka-volterra"), "euler", 0.1, 10, x0=[1.0, -2.0, 1.0])
+
+
+def test_ensemble_matches_single_runs():
+    system = get_system("lotka-volterra")
+    rng = np.random.default_rng(0)
+    x0s = system.x0 * rng.uniform(0.8, 1.2, size=(16, 3))
+    finals = integrate_ensemble(system, "paper-three-stage", 0.05, 40, x0s)
+    for x0, xf in zip(x0s, finals, strict=True):
+        single = integrate(system, "paper-three-stage", 0.05, 40, x0=x0)
+        assert np.abs(single.final_state - xf).max() < 1e-15
+
+
+def test_spec_file_integrates_like_builtin(tmp_path):
+    from test_systems import SPEC_RIGID_BODY
+
+    path = tmp_path / "rb.toml"
+    path.write_text(SPEC_RIGID_BODY)
+    for realisation in ("symmetric", "shifted"):
+        spec = integrate(get_system(path, realisation), "paper-three-stage", 0.05, 100)
+        ref = integrate(get_system("rigid-body", realisation), "paper-three-stage", 0.05, 100)
+        assert np.abs(spec.states - ref.states).max() < 1e-13
+
+
+def test_cli_integrate_json_and_failures():
+    runner = CliRunner()
+    res = runner.invoke(rkhp, ["integrate", "rigid-body", "--method", "paper-three-stage",
+                               "--steps", "100", "--format", "json"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.output)
+    keys = ["system", "method", "h", "steps", "t_final", "x_final", "casimir_error",
+            "energy_error", "newton", "status", "compile_seconds", "run_seconds"]
+    assert list(doc)[: len(keys)] == keys
+    assert doc["status"] == "ok" and doc["steps"] == 100 and doc["h"] == pytest.approx(0.1)
+    assert doc["casimir_error"] < 1e-14
+    # NOTES §7: the paper's 3-stage method reaches 3e-8 at T = 10 in 100 steps
+    assert 1e-8 < doc["exact_error"] < 5e-8
+    res = runner.invoke(rkhp, ["integrate", "lotka-volterra", "--method", "rk4", "--h", "1"])
+    assert res.exit_code == 1
+    for args in (["--h", "-1"], ["--h", "nan"], ["--steps", "0"], ["--x0", "1,2"],
+                 ["--x0", "a,b,c"], []):
+        res = runner.invoke(rkhp, ["integrate", "rigid-body", "--method", "rk4", *args])
+        assert res.exit_code == 2, args
+    res = runner.invoke(rkhp, ["integrate", "rigid-body", "--method", "nosuch", "--steps", "5"])
+    assert res.exit_code == 2
