@@ -136,12 +136,13 @@ def exact_residuals_vanish(system: ResidualSystem, exact: list) -> bool:
 def closed_form(system: ResidualSystem, x_float, digits: int = 30, tries: int = 4):
     """Try to reach an exactly verified closed form near a solution.
 
-    Up to ``tries`` branches of :func:`fix_free_unknowns` (each avoiding the previous first
-    choices). Returns (exact entries as sympy numbers, polished point) for the first branch whose
-    recognised entries verify exactly, else (None, polished point of the first branch or None).
+    Explores up to ``tries`` branches of :func:`fix_free_unknowns` (each avoiding the previous
+    first choices) and keeps the simplest closed form that verifies exactly (shortest text).
+    Returns (exact entries as sympy numbers, polished point), or (None, polished point of the
+    first branch, or None when even polishing failed).
     """
     avoid: set = set()
-    fallback = None
+    fallback = best = None
     for _ in range(tries):
         x, fixed, first = fix_free_unknowns(system, np.asarray(x_float, dtype=float),
                                             avoid=frozenset(avoid))
@@ -149,12 +150,16 @@ def closed_form(system: ResidualSystem, x_float, digits: int = 30, tries: int = 
         if pol.converged:
             fallback = fallback or pol
             exact = _recognise_all(system, pol, fixed, digits)
-            if exact is not None:
-                return exact, pol
+            if exact is not None and (best is None or _size(exact) < _size(best[0])):
+                best = (exact, pol)
         if first is None:
             break
         avoid.add(first)
-    return None, fallback
+    return best if best is not None else (None, fallback)
+
+
+def _size(exact) -> int:
+    return sum(len(str(v)) for v in exact)
 
 
 def _recognise_all(system: ResidualSystem, pol: Polished, fixed: dict, digits: int):
