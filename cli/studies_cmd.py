@@ -1,0 +1,317 @@
+"""`rkhp converge`, `rkhp bench`, `rkhp stress`: convergence, work-precision and stress studies."""
+
+from __future__ import annotations
+
+import click
+
+from .options import console, emit_json, format_option, progress
+
+METHOD_HELP = ("Method: a tableau name or file used as an RKHP method, classical:NAME for classical "
+               "explicit RK on xdot = pi grad H, or implicit-midpoint. Repeat or separate by commas. "
+               "Default: euler, paper-two-stage, paper-three-stage, rk4.")
+
+
+def _names(values) -> tuple[str, ...]:
+    return tuple(v.strip() for value in values for v in value.split(",") if v.strip())
+
+
+def _ints(text: str | None, what: str) -> tuple[int, ...]:
+    if not text:
+        return ()
+    try:
+        return tuple(int(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise click.BadParameter(f"expected comma-separated integers, got {text!r}", param_hint=what) from None
+
+
+def _floats(text: str | None, what: str) -> tuple[float, ...]:
+    if not text:
+        return ()
+    try:
+        return tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise click.BadParameter(f"expected comma-separated numbers, got {text!r}", param_hint=what) from None
+
+
+def _common(f):
+    f = click.option("--realisation", default="symmetric", show_default=True,
+                     help="Birealisation: symmetric (degenerate) or shifted (general).")(f)
+    f = click.option("--method", "methods", multiple=True, help=METHOD_HELP)(f)
+    f = click.argument("system")(f)
+    return f
+
+
+def _setup(system_name, realisation, methods, t_final, plot):
+    """Validate the cheap inputs first (plot path, T), then load the system and the methods."""
+    from rkhp.studies.converge import check_t_final
+    from rkhp.studies.methods import resolve_methods
+    from rkhp.studies.plots import check_plot_path
+    from rkhp.systems import get_system
+
+    if plot:
+        check_plot_path(plot)
+    if t_final is not None:
+        check_t_final(t_final)
+    system = get_system(system_name, realisation=realisation)
+    return system, resolve_methods(_names(methods))
+
+
+def _table(title, **kw):
+    """A compact rich table (no vertical rules), so that studies fit 80 columns."""
+    from rich import box
+    from rich.table import Table
+
+    return Table(title=title, title_justify="left", box=box.SIMPLE_HEAD, pad_edge=False, **kw)
+
+
+def _e(x) -> str:
+    return "—" if x is None else f"{x:.2e}"
+
+
+def _e1(x) -> str:
+    return "—" if x is None else f"{x:.1e}"
+
+
+def _f(x, digits=2) -> str:
+    return "—" if x is None else f"{x:.{digits}f}"
+
+
+# ----------------------------------------------------------------------------------------------
+# converge
+
+
+@click.command()
+@_common
+@click.option("--t-final", type=float, help="Final time T (default: the system's).")
+@click.option("--steps", help="Numbers of steps N1,N2,... (one value: the coarsest, doubled --refinements times).")
+@click.option("--refinements", type=int, help="Halvings of h after the coarsest step (default 6, from N = 20).")
+@click.option("--plot", type=click.Path(dir_okay=False), help="Log-log plot of error against h (.png, .svg, .pdf).")
+@format_option("table", "json")
+def converge(system, methods, realisation, t_final, steps, refinements, plot, fmt):
+    """Empirical convergence: global error at T against h, observed and expected orders, verdicts."""
+    from rkhp.studies.converge import converge as run
+    from rkhp.studies.converge import step_counts
+
+    counts = step_counts(_ints(steps, "--steps"), refinements)
+    sys_, resolved = _setup(system, realisation, methods, t_final, plot)
+    with progress(fmt != "json") as bar:
+        task = bar.add_task("converge", total=len(resolved) * len(counts))
+        study = run(sys_, resolved, counts, t_final, on_run=lambda *_: bar.advance(task))
+    if plot:
+        from rkhp.studies.plots import plot_convergence
+
+        plot_convergence(study, plot)
+    if fmt == "json":
+        emit_json(study.to_json())
+        return
+    _render_converge(study, plot)
+
+
+def _role(method, i) -> str:
+    """The row's part in the fit: fit, pre-asymptotic, round-off floor, below reference accuracy..."""
+    if i in method.fit.fit_rows:
+        return "fit"
+    return dict(method.fit.excluded).get(i, "")
+
+
+def _render_converge(study, plot) -> None:
+    out = console()
+    ref = study.reference
+    out.print(f"[bold]{study.system}[/] ({study.realisation} realisation, "
+              f"{'degenerate' if study.degenerate else 'not degenerate'}), T = {study.t_final:g}")
+    out.print(f"reference: {ref.kind}, estimated error {ref.error_estimate:.1e} ({ref.detail}); "
+              f"errors <= {ref.floor:.1e} are not reported as measurements")
+    for m in study.methods:
+        table = _table(f"{m.method} ({m.kind})")
+        for col in ("h", "steps", "error", "order", "Casimir", "energy", "Newton", "seconds", "fit"):
+            table.add_column(col, justify="right" if col != "fit" else "left")
+        for i, r in enumerate(m.rows):
+            error = _e(r.error) if r.status == "ok" and r.error is not None else (
+                f"<{study.reference.floor:.0e}" if r.status == "ok" else "failed")
+            table.add_row(f"{r.h:.4g}", str(r.steps), error, _f(r.local_order), _e1(r.casimir_error),
+                          _e1(r.energy_error), f"{r.newton_mean:.1f}/{r.newton_max}", f"{r.seconds:.4f}",
+                          _role(m, i) if r.status == "ok" else "failed")
+        out.print(table)
+        failed = [r.status for r in m.rows if r.status != "ok"]
+        if failed:
+            out.print(f"  failed runs: {'; '.join(failed)}")
+    out.print("columns: global error at T (2-norm), local order, max Casimir and energy errors over the run, "
+              "Newton iterations mean/max, run seconds (compile apart), role in the fit")
+    out.print("[bold]verdicts[/]")
+    for m in study.methods:
+        kind = "degenerate" if study.degenerate and m.kind == "rkhp" else "general"
+        left = ", ".join(f"row {i} {why}" for i, why in m.fit.excluded) or "none"
+        out.print(f"{m.method}: observed order {_f(m.observed_order)} over rows "
+                  f"{','.join(map(str, m.fit.fit_rows)) or '—'} (left out: {left}); expected {m.expected_order} "
+                  f"({kind} order): {m.verdict}")
+    if plot:
+        out.print(f"plot written to {plot}")
+
+
+# ----------------------------------------------------------------------------------------------
+# bench
+
+
+@click.command()
+@_common
+@click.option("--peers", default="dop853,rk45,rk4,midpoint", show_default=True,
+              help="Peers: scipy solve_ivp methods (dop853, rk45, rk23, radau, bdf, lsoda), rk4 (classical), "
+                   "midpoint (implicit midpoint rule), classical:NAME; empty for none.")
+@click.option("--t-final", type=float, help="Final time T (default: the system's).")
+@click.option("--steps", help="Numbers of steps of the integrators (default 10,20,...,2560).")
+@click.option("--tolerances", help="rtol values of the scipy peers (default 1e-3,...,1e-13; atol = 1e-3 rtol).")
+@click.option("--repeats", type=int, default=3, show_default=True, help="Timed repeats per point (median).")
+@click.option("--ensemble", type=int, help="Time K initial conditions near x0 at once (per-trajectory times).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the ensemble's starts.")
+@click.option("--plot", type=click.Path(dir_okay=False), help="Log-log plot of time against error (.png, .svg, .pdf).")
+@format_option("table", "json")
+def bench(system, methods, realisation, peers, t_final, steps, tolerances, repeats, ensemble, seed, plot, fmt):
+    """Work-precision: wall time (median of repeats) against error, methods and peers."""
+    from rkhp.studies import bench as B
+
+    step_list = _ints(steps, "--steps") or B.DEFAULT_STEPS
+    tol_list = _floats(tolerances, "--tolerances") or B.DEFAULT_TOLERANCES
+    peer_list = _names([peers]) if peers else ()
+    for p in peer_list:
+        B.resolve_peer(p)
+    sys_, resolved = _setup(system, realisation, methods, t_final, plot)
+    with progress(fmt != "json") as bar:
+        task = bar.add_task("bench", total=len(resolved) + len(peer_list))
+        study = B.bench(sys_, resolved, peer_list, step_list, tol_list, t_final, repeats, ensemble, seed,
+                        on_curve=lambda *_: bar.advance(task))
+    if plot:
+        from rkhp.studies.plots import plot_work_precision
+
+        plot_work_precision(study, plot)
+    if fmt == "json":
+        emit_json(study.to_json())
+        return
+    _render_bench(study, plot)
+
+
+def _render_bench(study, plot) -> None:
+    out = console()
+    ref = study.reference
+    mode = (f"ensemble of {study.ensemble} starts, seconds per trajectory" if study.ensemble
+            else "one trajectory")
+    out.print(f"[bold]{study.system}[/] ({study.realisation} realisation), T = {study.t_final:g}, {mode}; "
+              f"median of {study.repeats} repeats")
+    out.print(f"reference: {ref.kind}, estimated error {ref.error_estimate:.1e}")
+    for c in study.curves:
+        extra = f", compile {c.compile_seconds:.2f} s apart" if c.kind == "rkhp" else ""
+        timed = f", {c.trajectories} trajectories timed" if study.ensemble else ""
+        table = _table(f"{c.method} ({c.kind}{extra}{timed})")
+        for col in ("steps" if c.kind != "scipy" else "rtol", "error", "seconds", "f evals", "status"):
+            table.add_column(col, justify="right")
+        for p in c.points:
+            setting = str(p.steps) if p.steps is not None else f"{p.tolerance:g}"
+            error = _e(p.error) if p.error is not None else (f"< {ref.floor:.1e}" if p.status == "ok" else "—")
+            table.add_row(setting, error, f"{p.seconds:.2e}", "—" if p.evaluations is None else str(p.evaluations),
+                          p.status)
+        out.print(table)
+    out.print("[bold]cheapest[/]")
+    for c in study.cheapest:
+        if c.method is None:
+            out.print(f"error <= {c.target:.0e}: no method reached it")
+        else:
+            out.print(f"error <= {c.target:.0e}: {c.method} ({c.setting}), {c.seconds:.2e} s")
+    if plot:
+        out.print(f"plot written to {plot}")
+
+
+# ----------------------------------------------------------------------------------------------
+# stress
+
+
+@click.command()
+@_common
+@click.option("--t-final", type=float, help="Horizon T of parts (a) and (c) (default: the system's).")
+@click.option("--long-steps", type=int, default=100_000, show_default=True, help="Steps of the long run (b).")
+@click.option("--long-h", type=float, help="Step size of the long run (default T/100).")
+@click.option("--sweep-coarsest", type=int, default=200, show_default=True,
+              help="Part (a) sweeps h = T/N upward from N = this down to 1.")
+@click.option("--round-off-steps", help="Numbers of steps of part (d) over T (default 32 to 10^5).")
+@click.option("--plot", type=click.Path(dir_okay=False), help="Plot of the long run's drift (.png, .svg, .pdf).")
+@format_option("table", "json")
+def stress(system, methods, realisation, t_final, long_steps, long_h, sweep_coarsest, round_off_steps, plot, fmt):
+    """Stress tests: (a) step sweep to Newton failure, (b) long-run drift, (c) near-singular starts,
+    (d) round-off floor; each part ends with a verdict."""
+    from rkhp.studies import stress as S
+
+    ro = _ints(round_off_steps, "--round-off-steps") or S.ROUND_OFF_STEPS
+    if len(ro) < 3:
+        raise click.BadParameter("a fit needs at least 3 step sizes", param_hint="--round-off-steps")
+    sys_, resolved = _setup(system, realisation, methods, t_final, plot)
+    with progress(fmt != "json") as bar:
+        task = bar.add_task("stress", total=4)
+        study = S.stress(sys_, resolved, t_final, long_steps, long_h, sweep_coarsest, ro,
+                         on_part=lambda *_: bar.advance(task))
+    if plot:
+        from rkhp.studies.plots import plot_stress
+
+        plot_stress(study, plot)
+    if fmt == "json":
+        emit_json(study.to_json())
+        return
+    _render_stress(study, plot)
+
+
+def _render_stress(study, plot) -> None:
+    out = console()
+    verdicts = study.verdicts()
+    out.print(f"[bold]{study.system}[/] ({study.realisation} realisation), T = {study.t_final:g}")
+    out.print("[bold](a) step-size sweep[/]")
+    for s in study.sweep:
+        table = _table(s.method)
+        for col in ("h", "steps", "ok", "Newton max", "rel. error", "rel. energy err", "status"):
+            table.add_column(col, justify="right")
+        for r in s.rows:
+            table.add_row(f"{r.h:.3g}", str(r.steps), "yes" if r.ok else "no", str(r.newton_max),
+                          _e(r.relative_error), _e(r.relative_energy_error), r.status)
+        out.print(table)
+    out.print(f"verdict (a): {verdicts['a']}")
+    lr = study.long_run
+    out.print(f"[bold](b) long run[/]: {lr.steps} steps of h = {lr.h:g}, max error per window ({lr.windows} windows)")
+    table = _table(None)
+    for col in ("method", "status", "Casimir max", "Casimir 1st/last", "energy 1st/last", "growth", "seconds"):
+        table.add_column(col, justify="left" if col in ("method", "status") else "right")
+    for r in (*lr.runs, lr.peer):
+        table.add_row(r.method, r.status, _e(r.casimir_max),
+                      f"{r.casimir_windows[0]:.1e}/{r.casimir_windows[-1]:.1e}",
+                      f"{r.energy_windows[0]:.1e}/{r.energy_windows[-1]:.1e}", f"x{r.energy_growth:.2g}",
+                      f"{r.seconds:.2f}")
+    out.print(table)
+    out.print(f"verdict (b): {verdicts['b']}")
+    out.print("[bold](c) near-singular starts[/]")
+    if study.near_singular.applicable:
+        table = _table(None)
+        for col in ("method", "x1(0)", "status", "min component", "Casimir err", "kept"):
+            table.add_column(col)
+        for r in study.near_singular.runs:
+            table.add_row(r.method, f"{r.first_species:g}", r.status, _e(r.min_component), _e(r.casimir_error),
+                          "yes" if r.kept else "no")
+        out.print(table)
+    out.print(f"verdict (c): {verdicts['c']}")
+    ro = study.round_off
+    out.print(f"[bold](d) tiny steps[/]: T = {ro.t_final:g}, reference {ro.reference_kind} "
+              f"(errors <= {ro.reference_floor:.1e} not measured)")
+    table = _table(None)
+    table.add_column("steps", justify="right")
+    for m in ro.studies:
+        table.add_column(m.method, justify="right")
+    for i, r in enumerate(ro.studies[0].rows):
+        cells = []
+        for m in ro.studies:
+            row = m.rows[i]
+            role = _role(m, i)
+            if row.status != "ok":
+                cells.append("failed")
+            elif row.error is None:
+                cells.append(f"< {ro.reference_floor:.1e}")
+            else:
+                cells.append(_e(row.error) + ("" if role in ("fit", "") else f" ({role})"))
+        table.add_row(str(r.steps), *cells)
+    out.print(table)
+    out.print(f"verdict (d): {verdicts['d']}")
+    if plot:
+        out.print(f"plot written to {plot}")

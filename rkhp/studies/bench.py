@@ -1,0 +1,303 @@
+"""Work-precision: wall time against global error, for the methods and their peers.
+
+Every method runs over numbers of steps; scipy's ``solve_ivp`` peers run over tolerances. A point's
+time is the median wall time of ``repeats`` calls, after one warm-up call whose compile time
+(reported by the engine) is kept apart. The error is the 2-norm at T against the reference
+(:mod:`rkhp.studies.reference`); an error not above the reference's accuracy is not a measurement
+(``error`` None) but still counts as reaching a target error above that accuracy.
+
+Ensemble mode (``ensemble`` = K): every point times K initial conditions near x0 (seeded); RKHP
+methods run all K at once through ``rkhp.integrators.integrate_ensemble``, the peers one after
+another on the first min(K, ENSEMBLE_TIMED) starts; times are per trajectory and the error is the
+largest over the first min(K, ENSEMBLE_CHECKED) starts, each against its own DOP853 reference.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from .methods import Method, resolve_method
+from .reference import Reference, dop853_reference, reference
+
+TARGETS = (1e-4, 1e-6, 1e-8, 1e-10)
+DEFAULT_STEPS = tuple(10 * 2**k for k in range(9))
+DEFAULT_TOLERANCES = tuple(10.0**-k for k in range(3, 14))
+SCIPY_PEERS = {"dop853": "DOP853", "rk45": "RK45", "rk23": "RK23", "radau": "Radau", "bdf": "BDF",
+               "lsoda": "LSODA"}
+PEER_ALIASES = {"rk4": "classical:rk4", "midpoint": "implicit-midpoint"}
+DEFAULT_PEERS = ("dop853", "rk45", "rk4", "midpoint")
+ENSEMBLE_TIMED = 16
+ENSEMBLE_CHECKED = 4
+ENSEMBLE_SPREAD = 0.05
+
+
+@dataclass(frozen=True)
+class BenchPoint:
+    """One setting: ``steps`` (integrators) or ``tolerance`` (scipy, rtol; atol = 1e-3 rtol)."""
+
+    steps: int | None
+    tolerance: float | None
+    error: float | None
+    measured_error: float | None
+    seconds: float
+    evaluations: int | None
+    status: str
+
+    def to_json(self) -> dict:
+        return {"steps": self.steps, "tolerance": self.tolerance, "error": self.error,
+                "seconds": self.seconds, "evaluations": self.evaluations, "status": self.status}
+
+
+@dataclass(frozen=True)
+class BenchCurve:
+    """A method's (or peer's) work-precision points; kind: rkhp, classical, implicit-midpoint, scipy."""
+
+    method: str
+    kind: str
+    compile_seconds: float
+    trajectories: int
+    points: tuple[BenchPoint, ...]
+
+    def to_json(self) -> dict:
+        return {"method": self.method, "kind": self.kind, "compile_seconds": self.compile_seconds,
+                "trajectories": self.trajectories, "points": [p.to_json() for p in self.points]}
+
+
+@dataclass(frozen=True)
+class Cheapest:
+    """The cheapest measured point whose error is at most ``target`` (method None if none)."""
+
+    target: float
+    method: str | None
+    setting: str | None
+    seconds: float | None
+    error: float | None
+
+    def to_json(self) -> dict:
+        return {"target": self.target, "method": self.method, "setting": self.setting,
+                "seconds": self.seconds, "error": self.error}
+
+
+@dataclass(frozen=True)
+class BenchStudy:
+    """``rkhp bench``'s result (JSON keys in the README's studies section)."""
+
+    system: str
+    realisation: str
+    t_final: float
+    reference: Reference
+    repeats: int
+    ensemble: int | None
+    curves: tuple[BenchCurve, ...]
+    cheapest: tuple[Cheapest, ...]
+    targets: tuple[float, ...] = TARGETS
+
+    def to_json(self) -> dict:
+        return {"system": self.system, "realisation": self.realisation, "t_final": self.t_final,
+                "reference": {"kind": self.reference.kind, "error_estimate": self.reference.error_estimate},
+                "repeats": self.repeats, "ensemble": self.ensemble,
+                "curves": [c.to_json() for c in self.curves],
+                "cheapest": [c.to_json() for c in self.cheapest]}
+
+
+def resolve_peer(name: str):
+    """A peer name: a scipy method name (str, its solve_ivp name) or a :class:`Method`."""
+    key = name.strip().lower()
+    if key in SCIPY_PEERS:
+        return key
+    if key in PEER_ALIASES:
+        return resolve_method(PEER_ALIASES[key])
+    if key.startswith("classical:") or key == "implicit-midpoint":
+        return resolve_method(key)
+    known = ", ".join([*SCIPY_PEERS, *PEER_ALIASES, "classical:NAME", "implicit-midpoint"])
+    raise InputError(f"unknown peer {name!r}; known peers: {known}")
+
+
+def _median_seconds(call, repeats: int):
+    times, result = [], None
+    for _ in range(repeats):
+        start = time.perf_counter()
+        result = call()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times), result
+
+
+def _point(measured: float | None, ref_floor: float, **fields) -> BenchPoint:
+    error = measured if measured is not None and measured > ref_floor else None
+    return BenchPoint(error=error, measured_error=measured, **fields)
+
+
+def _method_curve(method: Method, system, ref: Reference, steps, t_final: float, repeats: int) -> BenchCurve:
+    warm = method.integrate(system, t_final / steps[0], steps[0])
+    compile_seconds = float(warm.compile_seconds)
+    points = []
+    for n in steps:
+        seconds, traj = _median_seconds(lambda n=n: method.integrate(system, t_final / n, n), repeats)
+        compile_seconds += float(traj.compile_seconds)
+        measured = float(np.linalg.norm(traj.final_state - ref.state)) if traj.ok else None
+        points.append(_point(measured, ref.floor, steps=n, tolerance=None, seconds=seconds,
+                             evaluations=None, status=traj.status))
+    return BenchCurve(method.name, method.kind, compile_seconds, 1, tuple(points))
+
+
+def _solve_ivp(system, solver: str, x0, t_final: float, rtol: float):
+    from scipy.integrate import solve_ivp
+
+    from ..integrators.classical import vector_field
+
+    f = vector_field(system)
+    return solve_ivp(lambda t, x: f(x), (0.0, t_final), x0, method=SCIPY_PEERS[solver], rtol=rtol,
+                     atol=1e-3 * rtol)
+
+
+def _scipy_curve(solver: str, system, ref: Reference, tolerances, t_final: float, repeats: int) -> BenchCurve:
+    x0 = np.asarray(system.x0, dtype=float)
+    points = []
+    for rtol in tolerances:
+        seconds, sol = _median_seconds(lambda rtol=rtol: _solve_ivp(system, solver, x0, t_final, rtol), repeats)
+        ok = sol.success and np.all(np.isfinite(sol.y[:, -1]))
+        measured = float(np.linalg.norm(sol.y[:, -1] - ref.state)) if ok else None
+        points.append(_point(measured, ref.floor, steps=None, tolerance=rtol, seconds=seconds,
+                             evaluations=int(sol.nfev), status="ok" if ok else f"failed: {sol.message}"))
+    return BenchCurve(solver, "scipy", 0.0, 1, tuple(points))
+
+
+def cheapest(curves, targets=TARGETS) -> tuple[Cheapest, ...]:
+    """For each target error, the cheapest measured point reaching it (over all curves)."""
+    out = []
+    for target in targets:
+        best = None
+        for c in curves:
+            for p in c.points:
+                if p.status == "ok" and p.measured_error is not None and p.measured_error <= target:
+                    if best is None or p.seconds < best[1].seconds:
+                        best = (c, p)
+        if best is None:
+            out.append(Cheapest(target, None, None, None, None))
+        else:
+            c, p = best
+            setting = f"{p.steps} steps" if p.steps is not None else f"rtol {p.tolerance:g}"
+            out.append(Cheapest(target, c.method, setting, p.seconds, p.error))
+    return tuple(out)
+
+
+def ensemble_starts(system, k: int, seed: int = 0) -> np.ndarray:
+    """K starts near ``system.x0``: x0 + 5% of |x0| times standard normals (seeded), multiplicative
+    (x0 * exp(0.05 z)) where the additive start leaves the domain."""
+    if k < 1:
+        raise InputError(f"--ensemble must be >= 1, got {k}")
+    rng = np.random.default_rng(seed)
+    x0 = np.asarray(system.x0, dtype=float)
+    scale = ENSEMBLE_SPREAD * max(float(np.max(np.abs(x0))), 1e-300)
+    starts = np.empty((k, x0.size))
+    for i in range(k):
+        z = rng.standard_normal(x0.size)
+        x = x0 + scale * z
+        if not system.in_domain(x):
+            x = x0 * np.exp(ENSEMBLE_SPREAD * z)
+        starts[i] = x
+    return starts
+
+
+def _ensemble_errors(ensemble_states, refs) -> float | None:
+    errors = [float(np.linalg.norm(ensemble_states[i] - r.state)) for i, r in enumerate(refs)]
+    return max(errors) if all(np.isfinite(errors)) else None
+
+
+def _ensemble_method_curve(method: Method, system, refs, floor, starts, steps, t_final, repeats) -> BenchCurve:
+    if method.kind == "rkhp":
+        from ..integrators import integrate_ensemble
+
+        def run(n):
+            return np.asarray(_final_states(integrate_ensemble(system, method.tableau, t_final / n, n, starts)))
+
+        count = len(starts)
+    else:
+        count = min(len(starts), ENSEMBLE_TIMED)
+
+        def run(n):
+            return np.array([method.integrate(system, t_final / n, n, x0=x).raise_if_failed().final_state
+                             for x in starts[:count]])
+
+    warm_start = time.perf_counter()
+    run(steps[0])
+    warm = time.perf_counter() - warm_start
+    points, fastest_first = [], None
+    for n in steps:
+        seconds, finals = _median_seconds(lambda n=n: run(n), repeats)
+        if n == steps[0]:
+            fastest_first = seconds
+        measured = _ensemble_errors(finals, refs)
+        points.append(_point(measured, floor, steps=n, tolerance=None, seconds=seconds / count,
+                             evaluations=None, status="ok" if measured is not None else "non-finite state"))
+    compile_seconds = max(0.0, warm - fastest_first) if method.kind == "rkhp" else 0.0
+    return BenchCurve(method.name, method.kind, compile_seconds, count, tuple(points))
+
+
+def _final_states(result):
+    """Final states (K, n) from what integrate_ensemble returns (an array, or a value with states)."""
+    states = getattr(result, "final_states", None)
+    if states is None:
+        states = getattr(result, "states", result)
+    states = np.asarray(states)
+    return states[:, -1, :] if states.ndim == 3 else states
+
+
+def _ensemble_scipy_curve(solver, system, refs, floor, starts, tolerances, t_final, repeats) -> BenchCurve:
+    count = min(len(starts), ENSEMBLE_TIMED)
+    points = []
+    for rtol in tolerances:
+        def run(rtol=rtol):
+            sols = [_solve_ivp(system, solver, x, t_final, rtol) for x in starts[:count]]
+            return np.array([s.y[:, -1] for s in sols]), sum(int(s.nfev) for s in sols)
+
+        seconds, (finals, nfev) = _median_seconds(run, repeats)
+        measured = _ensemble_errors(finals, refs)
+        points.append(_point(measured, floor, steps=None, tolerance=rtol, seconds=seconds / count,
+                             evaluations=nfev // count, status="ok" if measured is not None else "failed"))
+    return BenchCurve(solver, "scipy", 0.0, count, tuple(points))
+
+
+def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=DEFAULT_TOLERANCES,
+          t_final=None, repeats: int = 3, ensemble: int | None = None, seed: int = 0,
+          on_curve=None) -> BenchStudy:
+    """Work-precision study of ``methods`` (resolved Methods) and ``peers`` (names) on ``system``."""
+    from .converge import check_t_final
+
+    t_final = check_t_final(system.t_final if t_final is None else t_final)
+    if repeats < 1:
+        raise InputError(f"repeats must be >= 1, got {repeats}")
+    steps = tuple(sorted(set(int(n) for n in steps)))
+    if not steps or steps[0] < 1:
+        raise InputError(f"numbers of steps must be positive, got {list(steps)}")
+    resolved = [resolve_peer(p) for p in peers]
+    curves = []
+    if ensemble is None:
+        ref = reference(system, t_final)
+        for m in [*methods, *(p for p in resolved if isinstance(p, Method))]:
+            curves.append(_method_curve(m, system, ref, steps, t_final, repeats))
+            if on_curve:
+                on_curve(m.name)
+        for p in (p for p in resolved if isinstance(p, str)):
+            curves.append(_scipy_curve(p, system, ref, tolerances, t_final, repeats))
+            if on_curve:
+                on_curve(p)
+    else:
+        starts = ensemble_starts(system, ensemble, seed)
+        refs = [dop853_reference(system, t_final, x) for x in starts[:ENSEMBLE_CHECKED]]
+        ref = max(refs, key=lambda r: r.error_estimate)
+        for m in [*methods, *(p for p in resolved if isinstance(p, Method))]:
+            curves.append(_ensemble_method_curve(m, system, refs, ref.floor, starts, steps, t_final, repeats))
+            if on_curve:
+                on_curve(m.name)
+        for p in (p for p in resolved if isinstance(p, str)):
+            curves.append(_ensemble_scipy_curve(p, system, refs, ref.floor, starts, tolerances, t_final, repeats))
+            if on_curve:
+                on_curve(p)
+    return BenchStudy(system.name, system.realisation, t_final, ref, repeats, ensemble, tuple(curves),
+                      cheapest(curves))

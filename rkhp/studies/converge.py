@@ -1,0 +1,173 @@
+"""Empirical convergence studies: global error at T against h, observed and expected orders.
+
+For each method and step size: the global error at T (2-norm against the reference, NOTES §6),
+the local observed order, Casimir and energy errors (max over the run), Newton iterations and run
+time; per method the fitted slope over the asymptotic range (see :mod:`rkhp.studies.fit`), the
+expected order from the verify engine (degenerate order on a degenerate realisation, else general
+order: paper, Theorem 5.1 and §4) and a verdict.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from .fit import MIN_FIT_POINTS, OrderFit, fit_order, verdict
+from .invariants import max_deviations
+from .reference import Reference, reference
+
+DEFAULT_COARSEST = 20
+DEFAULT_REFINEMENTS = 6
+
+
+@dataclass(frozen=True)
+class ConvergenceRow:
+    """One run: ``steps`` steps of size ``h``; ``error`` is None when it failed or is not above
+    the reference's accuracy (see ``note``)."""
+
+    h: float
+    steps: int
+    error: float | None
+    local_order: float | None
+    casimir_error: float | None
+    energy_error: float | None
+    newton_mean: float
+    newton_max: int
+    seconds: float
+    compile_seconds: float
+    status: str
+    measured_error: float | None
+
+    @property
+    def note(self) -> str:
+        if self.status != "ok":
+            return self.status
+        if self.error is None:
+            return "below reference accuracy"
+        return ""
+
+    def to_json(self) -> dict:
+        return {"h": self.h, "steps": self.steps, "error": self.error, "local_order": self.local_order,
+                "casimir_error": self.casimir_error, "energy_error": self.energy_error,
+                "newton_mean": self.newton_mean, "newton_max": self.newton_max, "seconds": self.seconds}
+
+
+@dataclass(frozen=True)
+class MethodConvergence:
+    """The convergence table of one method, its fit and verdict."""
+
+    method: str
+    kind: str
+    expected_order: int
+    fit: OrderFit
+    verdict: str
+    rows: tuple[ConvergenceRow, ...]
+
+    @property
+    def observed_order(self) -> float | None:
+        return self.fit.slope
+
+    def to_json(self) -> dict:
+        return {"method": self.method, "expected_order": self.expected_order,
+                "observed_order": self.observed_order, "verdict": self.verdict,
+                "fit_rows": list(self.fit.fit_rows), "rows": [r.to_json() for r in self.rows]}
+
+
+@dataclass(frozen=True)
+class ConvergenceStudy:
+    """``rkhp converge``'s result (JSON keys as in the README's studies section)."""
+
+    system: str
+    realisation: str
+    degenerate: bool
+    t_final: float
+    reference: Reference
+    methods: tuple[MethodConvergence, ...]
+
+    def to_json(self) -> dict:
+        return {"system": self.system, "realisation": self.realisation, "degenerate": self.degenerate,
+                "t_final": self.t_final,
+                "reference": {"kind": self.reference.kind, "error_estimate": self.reference.error_estimate},
+                "methods": [m.to_json() for m in self.methods]}
+
+
+def step_counts(steps=None, refinements: int | None = None) -> tuple[int, ...]:
+    """The numbers of steps of a study, coarsest first.
+
+    ``steps`` with several values is used as given; one value N (or none: DEFAULT_COARSEST) is the
+    coarsest and is doubled ``refinements`` times (default DEFAULT_REFINEMENTS).
+    """
+    steps = tuple(int(s) for s in (steps or ()))
+    if any(s < 1 for s in steps):
+        raise InputError(f"numbers of steps must be positive, got {list(steps)}")
+    if len(steps) > 1 and refinements is not None:
+        raise InputError("give either several --steps or --refinements, not both")
+    if len(steps) <= 1:
+        k = DEFAULT_REFINEMENTS if refinements is None else int(refinements)
+        if k < 0:
+            raise InputError(f"refinements must be >= 0, got {k}")
+        first = steps[0] if steps else DEFAULT_COARSEST
+        steps = tuple(first * 2**i for i in range(k + 1))
+    if len(set(steps)) != len(steps):
+        raise InputError(f"numbers of steps repeat: {list(steps)}")
+    steps = tuple(sorted(steps))
+    if len(steps) < MIN_FIT_POINTS:
+        raise InputError(f"a fit needs at least {MIN_FIT_POINTS} step sizes, got {len(steps)}")
+    return steps
+
+
+def check_t_final(t_final) -> float:
+    """A positive, finite final time (InputError otherwise)."""
+    t = float(t_final)
+    if not math.isfinite(t) or t <= 0:
+        raise InputError(f"final time T must be positive and finite, got {t_final}")
+    return t
+
+
+def run_row(method, system, ref: Reference, steps: int, t_final: float) -> ConvergenceRow:
+    """Integrate with ``steps`` steps to ``t_final`` and measure against the reference."""
+    h = t_final / steps
+    traj = method.integrate(system, h, steps)
+    newton = np.asarray(traj.newton_iterations)
+    n_mean = float(newton.mean()) if newton.size else 0.0
+    n_max = int(newton.max()) if newton.size else 0
+    if not traj.ok:
+        return ConvergenceRow(h, steps, None, None, None, None, n_mean, n_max, traj.run_seconds,
+                              traj.compile_seconds, traj.status, None)
+    measured = float(np.linalg.norm(traj.final_state - ref.state))
+    casimir, energy = max_deviations(system, traj.states)
+    error = measured if measured > ref.floor else None
+    return ConvergenceRow(h, steps, error, None, casimir, energy, n_mean, n_max, traj.run_seconds,
+                          traj.compile_seconds, "ok", measured)
+
+
+def study_method(method, system, ref: Reference, steps, t_final: float, on_run=None) -> MethodConvergence:
+    """One method's convergence table, fit and verdict."""
+    rows = []
+    for n in steps:
+        rows.append(run_row(method, system, ref, n, t_final))
+        if on_run:
+            on_run(method.name, n)
+    fit = fit_order([r.h for r in rows], [r.error for r in rows], floor=ref.floor)
+    rows = [_with_local_order(r, p) for r, p in zip(rows, fit.local_orders, strict=True)]
+    expected = method.expected_order(system.degenerate)
+    return MethodConvergence(method.name, method.kind, expected, fit, verdict(fit.slope, expected), tuple(rows))
+
+
+def _with_local_order(row: ConvergenceRow, p) -> ConvergenceRow:
+    from dataclasses import replace
+
+    return replace(row, local_order=p)
+
+
+def converge(system, methods, steps=None, t_final=None, refinements=None, on_run=None) -> ConvergenceStudy:
+    """Run a convergence study of ``methods`` (resolved :class:`~rkhp.studies.methods.Method`
+    values) on ``system`` up to ``t_final`` (default: the system's)."""
+    t_final = check_t_final(system.t_final if t_final is None else t_final)
+    counts = step_counts(steps, refinements)
+    ref = reference(system, t_final)
+    results = tuple(study_method(m, system, ref, counts, t_final, on_run) for m in methods)
+    return ConvergenceStudy(system.name, system.realisation, bool(system.degenerate), t_final, ref, results)

@@ -1,0 +1,139 @@
+"""Observed orders of convergence: local orders, the asymptotic range, the fitted slope, verdicts.
+
+NOTES §6: the observed order is the least-squares slope of log(error) against log(h) over the
+asymptotic range, leaving out the points at the round-off floor. Here the asymptotic range is found
+from the data alone (never from the expected order): it is the longest run of consecutive usable
+rows whose local orders agree to within ``spread`` (the finest such run on ties); usable rows
+coarser than the run are "pre-asymptotic", finer ones the "round-off floor" when their error no
+longer falls (local order below FLOOR_ORDER) and "order drift" otherwise. Rows whose error is not above the reference's
+accuracy are "below reference accuracy" and never enter a fit; failed runs are "failed".
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+
+SPREAD = 0.3
+"""Largest difference between local orders inside the asymptotic range."""
+
+VERDICT_TOLERANCE = 0.2
+"""Largest |observed - expected| order for which the expected order counts as confirmed."""
+
+FLOOR_ORDER = 1.0
+"""A row finer than the asymptotic range whose local order is below this (the error no longer
+falls even linearly) is at the round-off floor; otherwise its order drifts ("order drift")."""
+
+MIN_FIT_POINTS = 3
+"""A fit needs at least this many step sizes (two local orders)."""
+
+
+@dataclass(frozen=True)
+class OrderFit:
+    """The result of :func:`fit_order`.
+
+    Attributes:
+        slope: least-squares slope of log(error) against log(h) over ``fit_rows``; None when no
+            asymptotic range of MIN_FIT_POINTS consistent points exists.
+        fit_rows: indices (into the input) of the rows used by the fit.
+        excluded: (row index, reason) for every row left out.
+        local_orders: per row, log(e_prev/e)/log(h_prev/h) against the previous usable row.
+    """
+
+    slope: float | None
+    fit_rows: tuple[int, ...]
+    excluded: tuple[tuple[int, str], ...]
+    local_orders: tuple[float | None, ...]
+
+
+def local_order(h0: float, e0: float, h1: float, e1: float) -> float:
+    """Observed order between two runs: log(e0/e1) / log(h0/h1)."""
+    return math.log(e0 / e1) / math.log(h0 / h1)
+
+
+def _usable(err: float | None, floor: float) -> str | None:
+    if err is None or not math.isfinite(err):
+        return "failed"
+    if err <= floor:
+        return "below reference accuracy"
+    return None
+
+
+def fit_order(h, errors, floor: float = 0.0, spread: float = SPREAD) -> OrderFit:
+    """Fit the observed order over the asymptotic range of a convergence table.
+
+    Args:
+        h: step sizes, strictly decreasing.
+        errors: global errors (None or nan for a failed run), same length.
+        floor: errors at or below this are not measurements (reference accuracy).
+        spread: largest spread of the local orders inside the asymptotic range.
+
+    Returns:
+        An :class:`OrderFit`.
+    """
+    h = [float(v) for v in h]
+    if len(h) != len(errors):
+        raise InputError(f"{len(h)} step sizes but {len(errors)} errors")
+    if len(h) < MIN_FIT_POINTS:
+        raise InputError(f"a fit needs at least {MIN_FIT_POINTS} step sizes, got {len(h)}")
+    if any(b >= a for a, b in zip(h, h[1:], strict=False)):
+        raise InputError("step sizes must be strictly decreasing")
+    excluded: dict[int, str] = {}
+    usable = []
+    for i, e in enumerate(errors):
+        reason = _usable(None if e is None else float(e), floor)
+        if reason:
+            excluded[i] = reason
+        else:
+            usable.append(i)
+    orders: list[float | None] = [None] * len(h)
+    for a, b in zip(usable, usable[1:], strict=False):
+        orders[b] = local_order(h[a], errors[a], h[b], errors[b])
+    best = _asymptotic_window(usable, orders, spread)
+    if best is None:
+        for i in usable:
+            excluded[i] = "no asymptotic range"
+        return OrderFit(None, (), tuple(sorted(excluded.items())), tuple(orders))
+    lo, hi = best
+    rows = tuple(usable[lo:hi + 1])
+    for i in usable[:lo]:
+        excluded[i] = "pre-asymptotic"
+    floor_reached = False
+    for i in usable[hi + 1:]:
+        floor_reached = floor_reached or orders[i] < FLOOR_ORDER
+        excluded[i] = "round-off floor" if floor_reached else "order drift"
+    x = np.log([h[i] for i in rows])
+    y = np.log([float(errors[i]) for i in rows])
+    slope = float(np.polyfit(x, y, 1)[0])
+    return OrderFit(slope, rows, tuple(sorted(excluded.items())), tuple(orders))
+
+
+def _asymptotic_window(usable: list[int], orders: list, spread: float):
+    """(lo, hi) positions in ``usable`` of the longest consistent run, finest on ties; or None.
+
+    A run is consistent when its local orders (pairs inside it) are positive and differ by at most
+    ``spread``; it needs MIN_FIT_POINTS points.
+    """
+    best = None
+    n = len(usable)
+    for lo in range(n):
+        for hi in range(lo + MIN_FIT_POINTS - 1, n):
+            inner = [orders[usable[k]] for k in range(lo + 1, hi + 1)]
+            if min(inner) <= 0.0 or max(inner) - min(inner) > spread:
+                break
+            if best is None or hi - lo >= best[1] - best[0]:
+                best = (lo, hi)
+    return best
+
+
+def verdict(observed: float | None, expected: int | None, tol: float = VERDICT_TOLERANCE) -> str:
+    """"confirmed", "higher than expected", "lower than expected" or "inconclusive"."""
+    if observed is None or expected is None:
+        return "inconclusive"
+    if abs(observed - expected) <= tol:
+        return "confirmed"
+    return "higher than expected" if observed > expected else "lower than expected"

@@ -1,0 +1,130 @@
+"""Plots of the studies (matplotlib, Agg backend, imported only when a plot is written).
+
+The format follows the file's extension: png, svg or pdf. :func:`check_plot_path` validates a path
+before a study runs, so a bad path costs nothing.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+from ..errors import InputError
+
+FORMATS = ("png", "svg", "pdf")
+
+
+def check_plot_path(path) -> Path:
+    """The plot path, after checking its extension and that its folder is writable."""
+    path = Path(path)
+    ext = path.suffix.lower().lstrip(".")
+    if ext not in FORMATS:
+        raise InputError(f"plot file {path}: unknown extension {path.suffix or '(none)'}; use .png, .svg or .pdf")
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise InputError(f"plot file {path}: folder {folder} does not exist")
+    if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise InputError(f"plot file {path}: not writable")
+    if path.is_dir():
+        raise InputError(f"plot file {path}: is a folder")
+    return path
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, path: Path) -> None:
+    try:
+        fig.savefig(path, format=path.suffix.lower().lstrip("."), bbox_inches="tight")
+    except OSError as exc:
+        raise InputError(f"plot file {path}: {exc.strerror or exc}") from None
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+
+
+def plot_convergence(study, path) -> Path:
+    """Log-log global error against h, one line per method, with dashed reference slopes h^p
+    for each expected order p, and the reference's accuracy floor."""
+    path = check_plot_path(path)
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    for m in study.methods:
+        pts = [(r.h, r.error) for r in m.rows if r.error is not None]
+        if not pts:
+            continue
+        hs, es = zip(*pts, strict=True)
+        obs = "n/a" if m.observed_order is None else f"{m.observed_order:.2f}"
+        line, = ax.loglog(hs, es, "o-", label=f"{m.method} (observed {obs}, expected {m.expected_order})")
+        fit = [(m.rows[i].h, m.rows[i].error) for i in m.fit.fit_rows]
+        if fit:
+            h0, e0 = fit[-1]
+            hmax = max(hs)
+            ax.loglog([h0, hmax], [e0, e0 * (hmax / h0) ** m.expected_order], "--", color=line.get_color(),
+                      alpha=0.5, linewidth=1)
+    floor = study.reference.floor
+    ax.axhline(floor, color="grey", linestyle=":", linewidth=1, label=f"reference accuracy x10 ({floor:.1e})")
+    ax.set_xlabel("step size h")
+    ax.set_ylabel(f"global error at T = {study.t_final:g}")
+    ax.set_title(f"{study.system} ({study.realisation} realisation); dashed: slope = expected order", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    _save(fig, path)
+    return path
+
+
+def plot_work_precision(bench, path) -> Path:
+    """Log-log wall time (median) against error at T, one line per method or peer."""
+    path = check_plot_path(path)
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    for curve in bench.curves:
+        pts = [(p.error, p.seconds) for p in curve.points if p.error is not None and p.seconds > 0]
+        if pts:
+            es, ts = zip(*pts, strict=True)
+            ax.loglog(es, ts, "o-" if curve.kind != "scipy" else "s--", label=f"{curve.method} ({curve.kind})")
+    for target in bench.targets:
+        ax.axvline(target, color="grey", linestyle=":", linewidth=0.8)
+    ax.set_xlabel(f"global error at T = {bench.t_final:g}")
+    ax.set_ylabel("wall time, median of repeats [s]")
+    ax.set_title(f"work-precision, {bench.system} ({bench.realisation} realisation)", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.invert_xaxis()
+    ax.legend(fontsize=7)
+    _save(fig, path)
+    return path
+
+
+def plot_stress(stress, path) -> Path:
+    """Casimir and energy drift per window of the long run (part b), log scale."""
+    path = check_plot_path(path)
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for run in stress.long_run.runs:
+        x = range(1, len(run.casimir_windows) + 1)
+        axes[0].semilogy(x, [max(v, 1e-17) for v in run.casimir_windows], "o-", label=run.method)
+        axes[1].semilogy(x, [max(v, 1e-17) for v in run.energy_windows], "o-", label=run.method)
+    for ax, what in zip(axes, ("Casimir", "energy"), strict=True):
+        ax.set_xlabel(f"window (of {stress.long_run.windows}, {stress.long_run.steps} steps in all)")
+        ax.set_ylabel(f"max {what} error in window")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.suptitle(f"long run, {stress.system}, h = {stress.long_run.h:g}", fontsize=9)
+    _save(fig, path)
+    return path
+
+
+def finite_or_none(value):
+    """A float for JSON: None for None, nan or infinities."""
+    if value is None:
+        return None
+    value = float(value)
+    return value if math.isfinite(value) else None

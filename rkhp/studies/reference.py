@@ -1,0 +1,103 @@
+"""Reference solutions for measured errors, with their own accuracy (NOTES §6).
+
+- ``exact``: the system's closed-form solution (rigid body: Jacobi elliptic functions), when the
+  start is the system's default ``x0``. Its error is the float64 evaluation error of the closed
+  form; it is estimated as ``8 eps (|x(T)| + T |xdot(T)|)`` (a rounding of the time argument
+  moves the point by ``|xdot| T eps``), and the closed form is cross-checked against a tight DOP853
+  solve: a disagreement larger than that solve's estimated error raises NumericalFailure.
+- ``dop853``: scipy's DOP853 at rtol 1e-13, atol 1e-15, with its error estimated by a second,
+  tighter solve (rtol 2.5e-14, atol 1e-16): the estimate is the distance between the two (at least
+  10 eps |x(T)|), and the tighter solve is the reference.
+
+No error at or below ``error_estimate`` (times a safety factor, see :data:`MEASURABLE_FACTOR`) is
+reported as a measurement by the studies.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import NumericalFailure
+
+EPS = float(np.finfo(float).eps)
+MEASURABLE_FACTOR = 10.0
+"""An error counts as a measurement only above MEASURABLE_FACTOR x the reference's error estimate."""
+
+LOOSE = (1e-13, 1e-15)
+TIGHT = (2.5e-14, 1e-16)
+
+
+@dataclass(frozen=True)
+class Reference:
+    """A reference state at ``t_final`` and its estimated error (2-norm).
+
+    Attributes:
+        kind: "exact" or "dop853".
+        state: the reference x(T).
+        error_estimate: estimated 2-norm error of ``state``.
+        detail: one line saying how it was obtained and checked.
+    """
+
+    kind: str
+    t_final: float
+    state: np.ndarray
+    error_estimate: float
+    detail: str
+
+    @property
+    def floor(self) -> float:
+        """Errors at or below this are not reported as measurements."""
+        return MEASURABLE_FACTOR * self.error_estimate
+
+
+def dop853(system, t_final: float, x0, rtol: float, atol: float) -> np.ndarray:
+    """x(t_final) by scipy's DOP853 on ``xdot = pi(x) grad H(x)``; NumericalFailure if it fails."""
+    from scipy.integrate import solve_ivp
+
+    from ..integrators.classical import vector_field
+
+    f = vector_field(system)
+    sol = solve_ivp(lambda t, x: f(x), (0.0, float(t_final)), np.asarray(x0, dtype=float),
+                    method="DOP853", rtol=rtol, atol=atol)
+    if not sol.success or not np.all(np.isfinite(sol.y[:, -1])):
+        raise NumericalFailure(f"reference solve (DOP853, rtol {rtol:g}) failed on {system.name}: {sol.message}")
+    return sol.y[:, -1]
+
+
+def dop853_reference(system, t_final: float, x0=None) -> Reference:
+    """The tighter of two DOP853 solves, its error estimated by their distance."""
+    x0 = np.asarray(system.x0 if x0 is None else x0, dtype=float)
+    loose = dop853(system, t_final, x0, *LOOSE)
+    tight = dop853(system, t_final, x0, *TIGHT)
+    estimate = max(float(np.linalg.norm(loose - tight)), 10 * EPS * float(np.linalg.norm(tight)))
+    detail = (f"scipy DOP853 at rtol {TIGHT[0]:g}, atol {TIGHT[1]:g}; error estimated against a second "
+              f"solve at rtol {LOOSE[0]:g}, atol {LOOSE[1]:g}")
+    return Reference("dop853", float(t_final), tight, estimate, detail)
+
+
+def exact_reference(system, t_final: float) -> Reference:
+    """The closed-form solution at ``t_final``, cross-checked against DOP853."""
+    from ..integrators.classical import vector_field
+
+    state = np.asarray(system.exact_solution(float(t_final)), dtype=float)
+    speed = float(np.linalg.norm(vector_field(system)(state)))
+    estimate = 8 * EPS * (float(np.linalg.norm(state)) + abs(float(t_final)) * speed)
+    check = dop853_reference(system, t_final)
+    gap = float(np.linalg.norm(check.state - state))
+    if gap > 10 * check.error_estimate + estimate:
+        raise NumericalFailure(
+            f"the exact solution of {system.name} at t = {t_final:g} disagrees with DOP853 by {gap:.3g} "
+            f"(DOP853 error estimate {check.error_estimate:.3g})")
+    detail = (f"closed-form solution; round-off estimate 8 eps (|x(T)| + T |xdot(T)|); agrees with DOP853 "
+              f"to {gap:.2g} (DOP853 error estimate {check.error_estimate:.2g})")
+    return Reference("exact", float(t_final), state, estimate, detail)
+
+
+def reference(system, t_final: float, x0=None) -> Reference:
+    """The best available reference for ``system`` from ``x0`` (default start) at ``t_final``."""
+    default_start = x0 is None or np.array_equal(np.asarray(x0, dtype=float), np.asarray(system.x0, dtype=float))
+    if getattr(system, "exact_solution", None) is not None and default_start:
+        return exact_reference(system, t_final)
+    return dop853_reference(system, t_final, x0)

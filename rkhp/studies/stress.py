@@ -1,0 +1,330 @@
+"""Stress tests of numerical stability (paper §5.2: the implicit step may have no solution).
+
+(a) step sizes swept upward to T: the largest h at which every Newton solve converges and the
+    error stays bounded (relative energy error and relative error at T at most 1), and the range
+    where the run fails;
+(b) a long run (>= 10^5 steps by default): Casimir and energy error per window (the maximum in
+    each window), against classical RK4 on the ODE;
+(c) near-singular starts of a log-canonical system (first species at 1e-3 and 1e-6): positivity
+    and Casimir kept;
+(d) tiny steps (h = T/N down to T/10^5): where the round-off floor starts, i.e. the first step
+    size past the asymptotic range of the fit of :mod:`rkhp.studies.fit`.
+Each part ends with a plain verdict line.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from .converge import check_t_final, study_method
+from .invariants import invariant_deviations, max_deviations, window_maxima
+from .methods import resolve_method
+from .reference import reference
+
+SWEEP_COARSEST = 200
+SWEEP_FACTOR = 2 ** 0.25
+LONG_STEPS = 100_000
+LONG_WINDOWS = 10
+SINGULAR_VALUES = (1e-3, 1e-6)
+SINGULAR_STEPS = 200
+ROUND_OFF_STEPS = tuple(int(round(10 ** (1.5 + k / 2))) for k in range(8))
+CASIMIR_KEPT = 1e-10
+"""A Casimir error at most this (over a whole run) counts as kept."""
+
+
+def _fmt(x: float | None) -> str:
+    return "n/a" if x is None else f"{x:.2g}"
+
+
+@dataclass(frozen=True)
+class SweepRow:
+    h: float
+    steps: int
+    status: str
+    newton_max: int
+    relative_error: float | None
+    relative_energy_error: float | None
+
+    @property
+    def ok(self) -> bool:
+        return (self.status == "ok" and self.relative_error is not None and self.relative_error <= 1.0
+                and self.relative_energy_error <= 1.0)
+
+    def to_json(self) -> dict:
+        return {"h": self.h, "steps": self.steps, "ok": self.ok, "status": self.status,
+                "newton_max": self.newton_max, "relative_error": self.relative_error,
+                "relative_energy_error": self.relative_energy_error}
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    method: str
+    rows: tuple[SweepRow, ...]
+
+    @property
+    def largest_ok_h(self) -> float | None:
+        """The largest h below the first failure (every smaller h in the sweep also succeeded)."""
+        best = None
+        for r in self.rows:
+            if not r.ok:
+                break
+            best = r.h
+        return best
+
+    @property
+    def first_failure(self) -> SweepRow | None:
+        return next((r for r in self.rows if not r.ok), None)
+
+    def verdict(self) -> str:
+        bad = self.first_failure
+        if bad is None:
+            return (f"{self.method}: Newton converges and the error stays bounded for every h up to "
+                    f"{self.rows[-1].h:.3g}")
+        failing = [r.h for r in self.rows if not r.ok]
+        cause = bad.status if bad.status != "ok" else "error not bounded"
+        return (f"{self.method}: Newton converges and the error stays bounded up to h = {_fmt(self.largest_ok_h)}; "
+                f"fails from h = {bad.h:.3g} ({len(failing)} of {len(self.rows)} step sizes in "
+                f"[{min(failing):.3g}, {max(failing):.3g}] fail; first: {cause})")
+
+    def to_json(self) -> dict:
+        bad = self.first_failure
+        return {"method": self.method, "largest_ok_h": self.largest_ok_h,
+                "first_failure_h": None if bad is None else bad.h,
+                "first_failure": None if bad is None else bad.status,
+                "rows": [r.to_json() for r in self.rows], "verdict": self.verdict()}
+
+
+def sweep(method, system, t_final: float, coarsest: int = SWEEP_COARSEST, factor: float = SWEEP_FACTOR) -> SweepResult:
+    """Part (a): h = T/n for n = coarsest, coarsest/factor, ... 1 (distinct n), upward in h."""
+    ref = reference(system, t_final)
+    scale = float(np.linalg.norm(ref.state))
+    H0 = abs(float(system.hamiltonian(np.asarray(system.x0, dtype=float)))) or 1.0
+    counts = sorted({max(1, int(round(coarsest / factor**k))) for k in range(int(math.log(coarsest, factor)) + 2)},
+                    reverse=True)
+    rows = []
+    for n in counts:
+        h = t_final / n
+        traj = method.integrate(system, h, n)
+        newton = np.asarray(traj.newton_iterations)
+        n_max = int(newton.max()) if newton.size else 0
+        if traj.ok:
+            err = float(np.linalg.norm(traj.final_state - ref.state)) / scale
+            _, energy = max_deviations(system, traj.states)
+            rows.append(SweepRow(h, n, "ok", n_max, err, energy / H0))
+        else:
+            rows.append(SweepRow(h, n, traj.status, n_max, None, None))
+    return SweepResult(method.name, tuple(rows))
+
+
+@dataclass(frozen=True)
+class LongRun:
+    method: str
+    casimir_windows: tuple[float, ...]
+    energy_windows: tuple[float, ...]
+    status: str
+    seconds: float
+
+    @property
+    def casimir_max(self) -> float:
+        return max(self.casimir_windows)
+
+    @property
+    def energy_growth(self) -> float:
+        """Energy error of the last window over that of the first (about 1: bounded; about the
+        number of windows: linear drift)."""
+        first = self.energy_windows[0]
+        return self.energy_windows[-1] / first if first > 0 else math.inf
+
+    def to_json(self) -> dict:
+        return {"method": self.method, "status": self.status, "casimir_windows": list(self.casimir_windows),
+                "energy_windows": list(self.energy_windows), "casimir_max": self.casimir_max,
+                "energy_growth": self.energy_growth, "seconds": self.seconds}
+
+
+@dataclass(frozen=True)
+class LongRunResult:
+    h: float
+    steps: int
+    windows: int
+    runs: tuple[LongRun, ...]
+    peer: LongRun
+
+    def verdict(self) -> str:
+        kept = [r for r in self.runs if r.status == "ok" and r.casimir_max <= CASIMIR_KEPT]
+        parts = [f"{r.method} Casimir {_fmt(r.casimir_max)}, energy growth x{r.energy_growth:.2g}" for r in self.runs]
+        peer = self.peer
+        head = (f"over {self.steps} steps, {len(kept)} of {len(self.runs)} RKHP methods keep the Casimir "
+                f"(<= {CASIMIR_KEPT:g})")
+        return (f"{head}: {'; '.join(parts)}; {peer.method} drifts to Casimir {_fmt(peer.casimir_max)}, "
+                f"energy growth x{peer.energy_growth:.2g}")
+
+    def to_json(self) -> dict:
+        return {"h": self.h, "steps": self.steps, "windows": self.windows, "runs": [r.to_json() for r in self.runs],
+                "peer": self.peer.to_json(), "verdict": self.verdict()}
+
+
+def _long_run(method, system, h: float, steps: int, windows: int) -> LongRun:
+    traj = method.integrate(system, h, steps)
+    casimir, energy = invariant_deviations(system, traj.states)
+    return LongRun(method.name, tuple(window_maxima(casimir, windows)), tuple(window_maxima(energy, windows)),
+                   traj.status, traj.run_seconds)
+
+
+def long_run(methods, system, h: float, steps: int = LONG_STEPS, windows: int = LONG_WINDOWS) -> LongRunResult:
+    """Part (b): Casimir and energy error per window, the methods against classical RK4."""
+    if steps < windows:
+        raise InputError(f"a long run needs at least {windows} steps, got {steps}")
+    runs = tuple(_long_run(m, system, h, steps, windows) for m in methods)
+    peer = _long_run(resolve_method("classical:rk4"), system, h, steps, windows)
+    return LongRunResult(h, steps, windows, runs, peer)
+
+
+@dataclass(frozen=True)
+class SingularRun:
+    method: str
+    first_species: float
+    status: str
+    min_component: float | None
+    casimir_error: float | None
+
+    @property
+    def kept(self) -> bool:
+        return (self.status == "ok" and self.min_component > 0 and self.casimir_error <= CASIMIR_KEPT)
+
+    def to_json(self) -> dict:
+        return {"method": self.method, "first_species": self.first_species, "status": self.status,
+                "min_component": self.min_component, "casimir_error": self.casimir_error, "kept": self.kept}
+
+
+@dataclass(frozen=True)
+class SingularResult:
+    applicable: bool
+    runs: tuple[SingularRun, ...]
+    reason: str = ""
+
+    def verdict(self) -> str:
+        if not self.applicable:
+            return f"not applicable: {self.reason}"
+        bad = [r for r in self.runs if not r.kept]
+        if not bad:
+            worst = max(r.casimir_error for r in self.runs)
+            return f"positivity and Casimir (to {_fmt(worst)}) kept by every method from every near-singular start"
+        return "; ".join(f"{r.method} from x1 = {r.first_species:g}: "
+                         + (r.status if r.status != "ok" else
+                            f"min component {r.min_component:.3g}, Casimir error {_fmt(r.casimir_error)}")
+                         for r in bad) + " (not kept)"
+
+    def to_json(self) -> dict:
+        return {"applicable": self.applicable, "runs": [r.to_json() for r in self.runs], "verdict": self.verdict()}
+
+
+def near_singular(methods, system, t_final: float, steps: int = SINGULAR_STEPS,
+                  values=SINGULAR_VALUES) -> SingularResult:
+    """Part (c): starts with the first species at 1e-3 and 1e-6 (log-canonical systems only)."""
+    if system.family != "log-canonical":
+        return SingularResult(False, (), f"near-singular starts are defined for log-canonical systems, "
+                                         f"{system.name} is {system.family}")
+    runs = []
+    for value in values:
+        x0 = np.array(system.x0, dtype=float)
+        x0[0] = value
+        for m in methods:
+            traj = m.integrate(system, t_final / steps, steps, x0=x0)
+            if traj.ok:
+                casimir, _ = max_deviations(system, traj.states)
+                runs.append(SingularRun(m.name, value, "ok", float(traj.states.min()), casimir))
+            else:
+                runs.append(SingularRun(m.name, value, traj.status, None, None))
+    return SingularResult(True, tuple(runs))
+
+
+@dataclass(frozen=True)
+class RoundOffResult:
+    t_final: float
+    reference_kind: str
+    reference_floor: float
+    studies: tuple
+
+    @staticmethod
+    def _line(m) -> str:
+        floor_rows = [i for i, why in m.fit.excluded if why == "round-off floor"]
+        below = [i for i, why in m.fit.excluded if why == "below reference accuracy"]
+        if floor_rows:
+            r = m.rows[floor_rows[0]]
+            last = m.rows[m.fit.fit_rows[-1]]
+            return (f"{m.method}: round-off floor from h = {r.h:.3g} (error {_fmt(r.measured_error)}; "
+                    f"last asymptotic point h = {last.h:.3g}, error {_fmt(last.error)})")
+        if below:
+            r = m.rows[below[0]]
+            return (f"{m.method}: no floor above the reference's accuracy; error reaches it at h = {r.h:.3g}")
+        return f"{m.method}: no round-off floor down to h = {m.rows[-1].h:.3g} (error {_fmt(m.rows[-1].error)})"
+
+    def verdict(self) -> str:
+        return "; ".join(self._line(m) for m in self.studies)
+
+    def to_json(self) -> dict:
+        out = []
+        for m in self.studies:
+            data = m.to_json()
+            floor_rows = [i for i, why in m.fit.excluded if why == "round-off floor"]
+            data["floor_h"] = m.rows[floor_rows[0]].h if floor_rows else None
+            out.append(data)
+        return {"t_final": self.t_final, "reference": {"kind": self.reference_kind, "floor": self.reference_floor},
+                "methods": out, "verdict": self.verdict()}
+
+
+def round_off(methods, system, t_final: float, steps=ROUND_OFF_STEPS) -> RoundOffResult:
+    """Part (d): errors at T for h down to T/10^5; the first row past the asymptotic range."""
+    ref = reference(system, t_final)
+    studies = tuple(study_method(m, system, ref, tuple(steps), t_final) for m in methods)
+    return RoundOffResult(t_final, ref.kind, ref.floor, studies)
+
+
+@dataclass(frozen=True)
+class StressStudy:
+    system: str
+    realisation: str
+    t_final: float
+    sweep: tuple[SweepResult, ...]
+    long_run: LongRunResult
+    near_singular: SingularResult
+    round_off: RoundOffResult
+
+    def verdicts(self) -> dict[str, str]:
+        return {"a": " | ".join(s.verdict() for s in self.sweep), "b": self.long_run.verdict(),
+                "c": self.near_singular.verdict(), "d": self.round_off.verdict()}
+
+    def to_json(self) -> dict:
+        return {"system": self.system, "realisation": self.realisation, "t_final": self.t_final,
+                "sweep": {"methods": [s.to_json() for s in self.sweep], "verdict": self.verdicts()["a"]},
+                "long_run": self.long_run.to_json(), "near_singular": self.near_singular.to_json(),
+                "round_off": self.round_off.to_json()}
+
+
+def stress(system, methods, t_final=None, long_steps: int = LONG_STEPS, long_h: float | None = None,
+           sweep_coarsest: int = SWEEP_COARSEST, round_off_steps=ROUND_OFF_STEPS, on_part=None) -> StressStudy:
+    """Run parts (a)-(d) for ``methods`` (resolved Methods) on ``system``."""
+    t_final = check_t_final(system.t_final if t_final is None else t_final)
+    if long_steps < 1 or sweep_coarsest < 1:
+        raise InputError("numbers of steps must be positive")
+    h_long = t_final / 100 if long_h is None else float(long_h)
+    if not math.isfinite(h_long) or h_long <= 0:
+        raise InputError(f"long-run step size must be positive, got {long_h}")
+
+    def tick(part):
+        if on_part:
+            on_part(part)
+
+    a = tuple(sweep(m, system, t_final, sweep_coarsest) for m in methods)
+    tick("a")
+    b = long_run(methods, system, h_long, long_steps)
+    tick("b")
+    c = near_singular(methods, system, t_final)
+    tick("c")
+    d = round_off(methods, system, t_final, round_off_steps)
+    tick("d")
+    return StressStudy(system.name, system.realisation, t_final, a, b, c, d)
