@@ -282,8 +282,8 @@ def _evaluate_class(state, n, blk, R, plan, arithmetic, tol):
     failing = np.nonzero(bad)[0][order]
     state.failing = FailureList(_Indexed(conditions, failing), residuals[failing])
     if arithmetic.exact:
-        state.failing_exact = tuple(str(_exact_residual(arithmetic, R_sel[k], denominators[k]))
-                                    for k in failing)
+        state.failing_exact = tuple(_exact_residual(arithmetic, R_sel[k], _exact_denominator(
+            conditions[k])) for k in failing)
 
 
 class _Indexed:
@@ -309,11 +309,22 @@ def _combine(arithmetic, values, weights):
     return sum((w * x for x, w in zip(values, weights, strict=True)), Fraction(0))
 
 
-def _exact_residual(arithmetic: ExactArithmetic, R, denominator: float):
+def _exact_denominator(item) -> Fraction:
+    """gamma(t) for a tree; sum_k |w_k| gamma(t_k) for a condition (see the module docstring)."""
+    if isinstance(item, Tree):
+        return Fraction(item.gamma)
+    return sum((abs(w) * t.gamma for w, t in zip(item.weights, item.trees, strict=True)),
+               Fraction(0))
+
+
+def _exact_residual(arithmetic: ExactArithmetic, R, denominator: Fraction) -> str:
+    """The exact residual as text: ``-1/80`` or ``-1/20 - sqrt(3)/48``."""
+    if arithmetic.field is None:
+        return str(R / denominator)
     import sympy
 
-    return sympy.nsimplify(arithmetic.to_sympy(R) / int(denominator)) \
-        if arithmetic.field is None else sympy.radsimp(arithmetic.to_sympy(R) / int(denominator))
+    value = arithmetic.to_sympy(R) / sympy.Rational(denominator.numerator, denominator.denominator)
+    return str(sympy.radsimp(sympy.expand(value)))
 
 
 # ----------------------------------------------------------------------------- verify

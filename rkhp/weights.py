@@ -6,8 +6,9 @@ r = b[rest], so that
 
     Phi(t) = (A Phi(c1)) * Phi(r)        (elementwise; Phi(b) = 1)
 
-and every tree costs one elementwise product of two stored vectors, plus one product by A if it
-can still be a child (order < N). A :class:`TreePlan` holds the indices (c1, r) of every tree;
+and every tree costs one elementwise product of two stored vectors, plus one product by A when
+it is the largest child of some tree of order < N (its order is below N - 1); at order N,
+a(b[c1]) = (b^T A) Phi(c1) needs no product by A. A :class:`TreePlan` holds the indices (c1, r) of every tree;
 the arithmetics work on whole blocks of trees of one order at once:
 
 - ``float``: numpy float64;
@@ -27,7 +28,7 @@ from functools import lru_cache
 import numpy as np
 
 from .tableau import Tableau, is_exact, to_fraction
-from .trees import LEAF, Tree, check_order, trees_up_to
+from .trees import LEAF, Tree, check_order, count_trees, trees_up_to
 
 # ----------------------------------------------------------------------------- the plan
 
@@ -86,7 +87,7 @@ def tree_plan(max_order: int) -> TreePlan:
         rest[k] = index[lead + key[1 + len(child_key):]]  # canonical key of b[rest]
     starts = [0, 0]
     for m in range(1, max_order + 1):
-        starts.append(starts[-1] + _count_of_order(trees, starts[-1], m))
+        starts.append(starts[-1] + count_trees(m))
     first_ = np.array(first, dtype=np.intp)
     rest_ = np.array(rest, dtype=np.intp)
     # T_0 (NOTES §1): no vertex has a leaf as its only child. t = b[c1, rest] has all its
@@ -103,13 +104,6 @@ def tree_plan(max_order: int) -> TreePlan:
     sigma = tuple(t.sigma for t in trees)
     return TreePlan(max_order, trees, tuple(starts), first_, rest_, in_t0, gamma, sigma,
                     np.array(gamma, dtype=float), np.array(sigma, dtype=float))
-
-
-def _count_of_order(trees, start: int, m: int) -> int:
-    k = start
-    while k < len(trees) and trees[k].order == m:
-        k += 1
-    return k - start
 
 
 # ----------------------------------------------------------------------------- arithmetics
