@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import click
 
@@ -150,7 +151,8 @@ def integration_report(system, trajectory, method: str, h: float, steps: int) ->
 @click.command("integrate")
 @click.argument("system")
 @click.option("--method", "method", required=True,
-              help="Explicit tableau: built-in name or .toml/.json/.txt file.")
+              help="Explicit tableau (built-in name or .toml/.json/.txt file), or thpN / thpN-t0: "
+                   "the Taylor integrator of order N over T / T_0.")
 @click.option("--steps", type=int, default=None, help="Number of steps over [0, T].")
 @click.option("--h", "h", type=float, default=None, help="Step size (steps = T / h).")
 @click.option("--t-final", type=float, default=None, help="Final time T (default: the system's).")
@@ -165,18 +167,25 @@ def integrate(system, method, steps, h, t_final, x0, realisation, fmt):
     from rkhp.tablefiles import load_tableau
 
     poisson = get_system(system, realisation)
-    tableau = load_tableau(method)
+    taylor = re.fullmatch(r"thp(\d+)(-t0)?", method)
+    tableau = None if taylor else load_tableau(method)
     if x0 is not None:
         poisson = poisson.with_x0(_parse_x0(x0))
     n, step = steps_and_h(poisson.t_final if t_final is None else t_final, steps, h)
-    trajectory = run(poisson, tableau, step, n)
-    report = integration_report(poisson, trajectory, tableau.name, step, n)
+    if taylor:
+        from rkhp.integrators.taylor import integrate_taylor
+
+        trajectory = integrate_taylor(poisson, int(taylor[1]), bool(taylor[2]), step, n)
+    else:
+        trajectory = run(poisson, tableau, step, n)
+    name = method if taylor else tableau.name
+    report = integration_report(poisson, trajectory, name, step, n)
     if fmt == "json":
         emit_json(report)
     else:
         _print_integration(report)
     if not trajectory.ok:
-        raise NumericalFailure(f"{poisson.name}, {tableau.name}, h = {step:g}: "
+        raise NumericalFailure(f"{poisson.name}, {name}, h = {step:g}: "
                                f"{trajectory.status}")
 
 

@@ -153,3 +153,40 @@ def test_cli_integrate_json_and_failures():
         assert res.exit_code == 2, args
     res = runner.invoke(rkhp, ["integrate", "rigid-body", "--method", "nosuch", "--steps", "5"])
     assert res.exit_code == 2
+
+
+def test_thp_two_over_t0_is_rkhp_euler():
+    """Over T_0 the THP of order 2 keeps only the leaf: S = h H, i.e. RKHP Euler."""
+    from rkhp.integrators import integrate_taylor
+
+    system = get_system("rigid-body")
+    thp = integrate_taylor(system, 2, True, 0.1, 20).raise_if_failed()
+    euler = integrate(system, "euler", 0.1, 20)
+    assert np.abs(thp.states - euler.states).max() <= 1e-15
+
+
+def test_thp_degenerate_trees_vanish_on_symmetric_realisation():
+    """On a degenerate realisation F(t) = 0 for t outside T_0: THP over T equals THP over T_0."""
+    from rkhp.integrators import integrate_taylor
+
+    system = get_system("lotka-volterra")
+    over_t = integrate_taylor(system, 4, False, 0.1, 10).raise_if_failed()
+    over_t0 = integrate_taylor(system, 4, True, 0.1, 10).raise_if_failed()
+    assert np.abs(over_t.states - over_t0.states).max() <= 1e-14
+
+
+@pytest.mark.parametrize("order,degenerate,expected", [(2, False, 2), (3, False, 3),
+                                                       (4, False, 4), (3, True, 1)])
+def test_thp_orders_on_shifted_rigid_body(order, degenerate, expected):
+    """Paper Thm 5.1: THP of order N over T has order N on a general birealisation; over T_0
+    it drops to order 1 there (the shifted realisation is not degenerate)."""
+    from rkhp.integrators import integrate_taylor
+
+    system = get_system("rigid-body", "shifted")
+    hs, errors = [], []
+    for n in (20, 40, 80):
+        tr = integrate_taylor(system, order, degenerate, T_ORDERS / n, n).raise_if_failed()
+        hs.append(T_ORDERS / n)
+        errors.append(np.abs(tr.final_state - system.exact_solution(T_ORDERS)).max())
+    slope = np.polyfit(np.log(hs), np.log(errors), 1)[0]
+    assert abs(slope - expected) <= 0.15, slope

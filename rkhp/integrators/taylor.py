@@ -1,0 +1,202 @@
+"""The Taylor Hamiltonian Poisson integrator (THP) of order N (paper Thm 5.1, NOTES §5).
+
+S(x) = sum_{|t| <= N} h^|t| e(t)/sigma(t) F(t)(x) over T (general birealisations) or T_0
+(degenerate ones), F(b) = H, F(b[t1..tm])(x) = d^m_p f(x, 0)[grad F(t1)(x), ..., grad F(tm)(x)],
+f = H o alpha; psi = grad S; solve alpha(x, psi(x)) = y; y_next = beta(x, psi(x)).
+
+Each F(t) is a jet in dx = x - x0 (Newton iterate x0), truncated at degree 2 + N - |t| (enough for
+every use as a subtree, and degree 2 at the root gives psi and its Jacobian). The multilinear
+derivative of a node is read off f(x0 + dx, sum_r eps_r grad F(u_r)) in the variables (dx, eps),
+one eps_r per distinct child u_r: the coefficient of prod eps_r^k_r times prod k_r!. This runs
+the same compiled tape interpreter as the RKHP engine, from Python (a reference method: its cost
+grows with the number of trees).
+"""
+
+from __future__ import annotations
+
+import time
+from functools import lru_cache
+from itertools import groupby
+from math import factorial
+
+import numpy as np
+
+from ..errors import InputError
+from .jets import _monomials, jet_space, run_tape, scratch_rows
+from .rkhp_method import (
+    NEWTON_MAX_ITERATIONS,
+    NEWTON_TOLERANCE,
+    check_step,
+    failure_status,
+    start_state,
+)
+from .trajectory import Trajectory
+
+
+@lru_cache(maxsize=256)
+def _index(n_vars: int, degree: int) -> dict[tuple[int, ...], int]:
+    return {m: i for i, m in enumerate(_monomials(n_vars, degree))}
+
+
+class _Tower:
+    """Per-system buffers and the tree list of a THP of order N."""
+
+    def __init__(self, system, order: int, degenerate: bool):
+        from ..trees import trees_up_to
+
+        self.system = system
+        self.n = system.dim
+        self.order = order
+        self.trees = trees_up_to(order, degenerate)
+        self.n_slots = max(t.n_slots for t in (system.f_tape, system.h_tape, system.alpha_tape,
+                                               system.beta_tape))
+
+    def _run(self, tape, n_vars: int, degree: int, inputs: list[np.ndarray]):
+        space = jet_space(n_vars, degree)
+        W = np.zeros((self.n_slots, space.size))
+        for i, jet in enumerate(inputs):
+            W[i, : len(jet)] = jet[: space.size]
+        scratch = np.zeros((scratch_rows(self.n), space.size))
+        run_tape(tape.packed(), W, degree, space.packed(), scratch)
+        return W[tape.outputs]
+
+    def _x_jet(self, x0, k: int, size: int) -> np.ndarray:
+        jet = np.zeros(size)
+        jet[0] = x0[k]
+        if size > 1:
+            jet[1 + k] = 1.0
+        return jet
+
+    def elementary(self, x0) -> dict:
+        """F(t) as a jet in dx (degree 2 + N - |t|) for every tree t."""
+        n, N = self.n, self.order
+        F: dict = {}
+        for t in self.trees:
+            D = 2 + N - t.order
+            small = jet_space(n, D).size
+            if t.order == 1:
+                inputs = [self._x_jet(x0, k, small) for k in range(n)] + [np.zeros(1)] * n
+                F[t] = self._run(self.system.h_tape, n, D, inputs)[0].copy()
+                continue
+            groups = [(u, len(list(g))) for u, g in groupby(t.children)]
+            q, m = len(groups), len(t.children)
+            nb, Db = n + q, D + m
+            big = _index(nb, Db)
+            size = len(big)
+            inputs = [self._x_jet(x0, k, size) for k in range(n)]
+            for k in range(n):
+                p = np.zeros(size)
+                for r, (u, _) in enumerate(groups):
+                    grad = _gradient(F[u], n, 2 + N - u.order, k)
+                    eps = tuple(1 if j == r else 0 for j in range(q))
+                    for a, i in _index(n, Db - 1).items():
+                        if i < len(grad):
+                            p[big[a + eps]] = grad[i]
+                inputs.append(p)
+            out = self._run(self.system.f_tape, nb, Db, inputs)[0]
+            weight = float(np.prod([factorial(c) for _, c in groups]))
+            ks = tuple(c for _, c in groups)
+            F[t] = np.array([weight * out[big[a + ks]] for a in _monomials(n, D)])
+        return F
+
+    def psi(self, x0, h: float):
+        """psi(x0) and its Jacobian from S = sum h^|t| e(t)/sigma(t) F(t)."""
+        n = self.n
+        F = self.elementary(x0)
+        S = np.zeros(jet_space(n, 2).size)
+        for t in self.trees:
+            S += h ** t.order * float(t.e) / t.sigma * F[t][: S.size]
+        idx = _index(n, 2)
+        psi = S[1: 1 + n].copy()
+        J = np.empty((n, n))
+        for k in range(n):
+            for l in range(n):
+                e = tuple((1 if j == k else 0) + (1 if j == l else 0) for j in range(n))
+                J[k, l] = S[idx[e]] * (2.0 if k == l else 1.0)
+        return psi, J
+
+    def alpha(self, x, p0, Jp):
+        """alpha(x, p0 + Jp dx) and its Jacobian in dx at dx = 0."""
+        n = self.n
+        size = n + 1
+        inputs = [self._x_jet(x, k, size) for k in range(n)]
+        inputs += [np.concatenate([[p0[k]], Jp[k]]) for k in range(n)]
+        out = self._run(self.system.alpha_tape, n, 1, inputs)
+        return out[:, 0].copy(), out[:, 1: 1 + n].copy()
+
+
+def _gradient(jet: np.ndarray, n: int, degree: int, k: int) -> np.ndarray:
+    space = jet_space(n, degree)
+    size = jet_space(n, degree - 1).size
+    return (space.expo[:size, k] + 1) * jet[space.up[:size, k]]
+
+
+def thp_step(tower: _Tower, y, h: float, tol: float, max_iter: int):
+    """One THP step: (y_next or None, Newton iterations, failure code)."""
+    n = tower.n
+    x = y.copy()
+    scale = max(1.0, float(np.abs(y).max()))
+    previous = np.inf
+    for it in range(1, max_iter + 1):
+        psi, Jpsi = tower.psi(x, h)
+        a, J = tower.alpha(x, psi, Jpsi)
+        with np.errstate(all="ignore"):
+            try:
+                delta = np.linalg.solve(J, y - a)
+            except np.linalg.LinAlgError:
+                return None, it, 4
+        size = float(np.abs(delta).max())
+        if not np.isfinite(size):
+            return None, it, 4
+        x = x + delta
+        predicted = size ** 3 / previous ** 2 if np.isfinite(previous) else np.inf
+        if size <= tol * scale or (size < 0.5 * previous and predicted <= tol * scale):
+            p = psi + Jpsi @ delta
+            for _ in range(3):  # with p fixed, alpha(x, p) = y to round-off (as the engine)
+                a, J = tower.alpha(x, p, np.zeros((n, n)))
+                step = np.linalg.solve(J, y - a)
+                x = x + step
+                if not np.abs(step).max() > 4e-16 * scale:
+                    break
+            out = tower._run(tower.system.beta_tape, n, 0, [np.array([v]) for v in x]
+                             + [np.array([v]) for v in p])
+            y_next = out[:, 0].copy()
+            return (y_next, it, 0) if np.all(np.isfinite(y_next)) else (None, it, 2)
+        if size > 1e8 * scale:
+            break
+        previous = size
+    return None, max_iter, 1
+
+
+def integrate_taylor(system, order: int, degenerate: bool, h, n_steps, x0=None, *,
+                     tol: float = NEWTON_TOLERANCE,
+                     max_iter: int = NEWTON_MAX_ITERATIONS) -> Trajectory:
+    """THP of order `order` over T_0 (`degenerate`) or T, as a Trajectory (paper Thm 5.1)."""
+    if not isinstance(order, int) or not 1 <= order <= 8:
+        raise InputError(f"THP order must be an integer from 1 to 8, got {order!r}")
+    h, n_steps = check_step(h, n_steps)
+    y = start_state(system, x0)
+    t0 = time.perf_counter()
+    tower = _Tower(system, order, degenerate)
+    tower.psi(y, h)  # compiles or loads the interpreter
+    compile_seconds = time.perf_counter() - t0
+    states = [y]
+    iterations = []
+    status, failed = "ok", None
+    t0 = time.perf_counter()
+    for step in range(n_steps):
+        y_next, it, code = thp_step(tower, states[-1], h, tol, max_iter)
+        iterations.append(it)
+        if code == 0 and not system.in_domain(y_next):
+            code = 3
+        if code:
+            status, failed = failure_status(code, step, h, system), step
+            break
+        states.append(y_next)
+    run_seconds = time.perf_counter() - t0
+    return Trajectory(times=h * np.arange(len(states)), states=np.array(states),
+                      newton_iterations=np.array(iterations, dtype=np.int64), status=status,
+                      failed_step=failed, compile_seconds=compile_seconds,
+                      run_seconds=run_seconds,
+                      method=f"THP{order}" + (" (T_0)" if degenerate else " (T)"),
+                      system=system.name, extra={"realisation": system.realisation})
