@@ -100,6 +100,20 @@ def _save(result, path) -> None:
     save_tableau(tab, path)
 
 
+SHOWN_DIGITS = 12
+
+
+def _short(text: str) -> str:
+    """A long decimal rounded to SHOWN_DIGITS significant digits (exact forms unchanged)."""
+    import re
+
+    if not re.fullmatch(r"[-+]?[0-9.]+(e[-+]?[0-9]+)?", text) or len(text) <= SHOWN_DIGITS + 4:
+        return text
+    import mpmath
+
+    return mpmath.nstr(mpmath.mpf(text), SHOWN_DIGITS)
+
+
 def _command_line(result, order: int) -> str:
     """The command that reproduces a saved tableau."""
     flags = {"general": "", "degenerate": " --degenerate", "symmetric": " --symmetric"}[result.cls]
@@ -130,10 +144,13 @@ def _render(result, save) -> None:
         for _ in range(s + 2):
             table.add_column(overflow="fold")
         for i in range(s):
-            table.add_row(tab["c"][i], "│", *tab["A"][i])
+            table.add_row(_short(tab["c"][i]), "│", *map(_short, tab["A"][i]))
         table.add_row("", "│", *(["─" * 4] * s))
-        table.add_row("", "│", *tab["b"])
+        table.add_row("", "│", *map(_short, tab["b"]))
         con.print(table)
+        if not result.found.exact:
+            con.print(f"(entries shown to {SHOWN_DIGITS} digits; all {result.options.digits} "
+                      "with --format json or --save)")
         con.print(f"residual {data['residual']:.3g}; principal error (order "
                   f"{result.found.order + 1}) {data['principal_error']:.6g}")
         con.print(f"verified orders {data['verified_orders']}; decided by: {data['decided_by']}")
