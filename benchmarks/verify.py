@@ -56,7 +56,7 @@ def show(label: str, r: dict, target: float | None = None) -> None:
     warm = f", warm {r['warm']:.3f} s" if r.get("warm") is not None else ""
     goal = f"  [target <= {target:g} s]" if target else ""
     print(f"{label:48s} cold {r['cold']:.3f} s{warm}  order {r['order']}/{r['degenerate_order']}"
-          f" ({r['precision']}, {r['checked']} conditions over T){goal}")
+          f" ({r['precision']}, {r['checked']} general conditions checked){goal}")
 
 
 def main() -> None:

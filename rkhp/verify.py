@@ -28,7 +28,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .conditions import CLASSES, OrderCondition, conditions_of_order
+from .conditions import CLASSES, OrderCondition, check_class, conditions_of_order
 from .errors import InputError
 from .tableau import Tableau
 from .trees import MAX_ENUMERATION_ORDER, Tree, check_order
@@ -346,7 +346,7 @@ def verify(tableau, max_order: int | None = None, precision=None, classes=None,
         precision = default_precision(tableau)
     arithmetic = arithmetic_for(tableau, precision)
     tolerance, rule = _tolerance(arithmetic, tableau)
-    classes = tuple(classes) if classes else available_classes()
+    classes = tuple(check_class(c) for c in classes) if classes else available_classes()
     if max_order is not None:
         check_order(max_order, MAX_ENUMERATION_ORDER, "max order")
         states, N = _run(tableau, max_order, arithmetic, tolerance, classes, on_order)
