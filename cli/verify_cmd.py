@@ -45,8 +45,8 @@ def _render(result, tab, show: int) -> None:
               + (f" — {escape(tab.reference)}" if tab.reference else ""))
     out.print(f"precision: {result.precision}; {escape(result.tolerance_rule)}")
     for stage, diff in result.c_mismatch:
-        out.print(f"[yellow]warning:[/yellow] the given c[{stage + 1}] differs from the row sum "
-                  f"of A by {diff:.3g}; the row sums are used")
+        out.print(f"[yellow]warning:[/yellow] the given c of stage {stage + 1} (counting from 1) "
+                  f"differs from the row sum of A by {diff:.3g}; the row sums are used")
     table = Table(title=None)
     for col in ("class", "order", "checked to", "claimed", "principal error", "largest"):
         table.add_column(col, justify="left" if col in ("class", "claimed") else "right")

@@ -102,14 +102,14 @@ class Verification:
     conditions_checked: dict[str, int] = field(default_factory=dict)
 
     @property
-    def order(self) -> int:
-        """General order (over T)."""
-        return self.orders["general"]
+    def order(self) -> int | None:
+        """General order (over T); None when that class was not checked."""
+        return self.orders.get("general")
 
     @property
-    def degenerate_order(self) -> int:
-        """Degenerate order (over T_0)."""
-        return self.orders["degenerate"]
+    def degenerate_order(self) -> int | None:
+        """Degenerate order (over T_0); None when that class was not checked."""
+        return self.orders.get("degenerate")
 
     @property
     def claim_ok(self) -> bool:
