@@ -14,7 +14,7 @@ _CLASS_SETS = {"general": "general (T)", "degenerate": "degenerate (T_0)"}
 @click.command()
 @click.argument("tableau", metavar="NAME|FILE")
 @click.option("--max-order", type=int, default=None,
-              help="Check every condition up to this order (default: the order found plus one).")
+              help="Check at most up to this order (default: the order found plus one, up to 16).")
 @click.option("--precision", default=None, metavar="float|exact|DIGITS", help=_PRECISION_HELP)
 @click.option("--show", type=int, default=10, show_default=True,
               help="Failing conditions listed per class in the table view (JSON lists all).")
