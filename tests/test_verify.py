@@ -132,6 +132,15 @@ def test_a_perturbation_of_1e_8_loses_the_order(name, where, precision):
     assert perturbed.order < original.order
 
 
+def test_sixty_digits_see_what_float64_cannot():
+    # a perturbation of 1e-30 is far below float64 rounding but far above the 60-digit tolerance
+    perturbed = _perturbed("feagin10", ("b", 0), Fraction(1, 10 ** 30))
+    assert verify(perturbed, precision="float").order == 10
+    sixty = verify(perturbed)
+    assert sixty.precision == "60 digits" and sixty.order == 0
+    assert sixty.failing["general"][0].residual == pytest.approx(1e-30)
+
+
 def test_claims_over_and_under_stated():
     t = load_tableau("rk4")
     over = Tableau.from_arrays(t.A, t.b, name="over", claimed_order=5, claimed_degenerate_order=4)
