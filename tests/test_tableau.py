@@ -8,6 +8,8 @@ from pathlib import Path
 
 import pytest
 import sympy
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from rkhp.errors import InputError
 from rkhp.tableau import GivenDecimal, Tableau, parse_entry
@@ -186,3 +188,24 @@ def test_json_schema_matches_toml(tmp_path):
     path = _write(tmp_path, "mine.json", json.dumps(doc))
     t = load_tableau(str(path))
     assert t.name == "mine" and t.claimed_order == 2 and t.b == (Fraction(1, 4), Fraction(3, 4))
+
+
+_entries = st.one_of(
+    st.fractions(max_denominator=10 ** 6).map(str),
+    st.decimals(allow_nan=False, allow_infinity=False, places=40,
+                min_value=-10, max_value=10).map(str),
+    st.tuples(st.integers(-9, 9), st.sampled_from([2, 3, 5, 6, 15]), st.integers(1, 50))
+      .map(lambda t: f"{t[0]}*sqrt({t[1]})/{t[2]}"),
+)
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.integers(1, 3).flatmap(lambda s: st.tuples(
+    st.lists(st.lists(_entries, min_size=s, max_size=s), min_size=s, max_size=s),
+    st.lists(_entries, min_size=s, max_size=s))), st.sampled_from([".toml", ".json"]))
+def test_random_tableaux_round_trip(tmp_path_factory, data, suffix):
+    A, b = data
+    t = Tableau.from_arrays(A, b, name="random")
+    path = tmp_path_factory.mktemp("rt") / f"t{suffix}"
+    save_tableau(t, path)
+    assert load_file(path) == t
