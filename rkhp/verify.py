@@ -3,7 +3,7 @@
 A tableau has order p in a class when every condition of order <= p holds: in the general class
 a(t) = 1/gamma(t) for all t in T, in the degenerate class for t in T_0, in the symmetric class
 the combinations of :func:`rkhp.conditions.conditions_of_order` (NOTES §2, §8). Every condition
-up to the order found plus one is checked (or up to ``max_order``), from the elementary weights of
+up to the order found plus one is checked (at most ``max_order``), from the elementary weights of
 all trees of T computed in one pass (:mod:`rkhp.weights`).
 
 How each residual is decided (``Verification.tolerance_rule``):
@@ -52,7 +52,7 @@ class Failure(NamedTuple):
 
     @property
     def label(self) -> str:
-        """The tree in bracket notation, or the combination ``w1*t1 + w2*t2``."""
+        """The tree in bracket notation, or the combination ``r(t1) - r(t2)``."""
         if isinstance(self.item, Tree):
             return str(self.item)
         if self.item.is_single:
@@ -363,7 +363,7 @@ def verify(tableau, max_order: int | None = None, precision=None, classes=None,
     class_checked = {cls: _checked(s, N) for cls, s in states.items()}
     claimed = {"general": tableau.claimed_order, "degenerate": tableau.claimed_degenerate_order}
     claims = {cls: _claim_status(claimed[cls], orders[cls], class_checked[cls])
-              for cls in claimed if claimed[cls] is not None}
+              for cls in claimed if claimed[cls] is not None and cls in orders}
     return Verification(
         name=tableau.name, stages=tableau.stages, kind=tableau.kind, orders=orders,
         checked_up_to=N, precision=arithmetic.name, tolerance=tolerance, tolerance_rule=rule,
