@@ -151,7 +151,7 @@ def study_method(method, system, ref: Reference, steps, t_final: float, on_run=N
         rows.append(run_row(method, system, ref, n, t_final))
         if on_run:
             on_run(method.name, n)
-    fit = fit_order([r.h for r in rows], [r.error for r in rows], floor=ref.floor)
+    fit = fit_order([r.h for r in rows], [r.measured_error for r in rows], floor=ref.floor)
     rows = [_with_local_order(r, p) for r, p in zip(rows, fit.local_orders, strict=True)]
     expected = method.expected_order(system.degenerate)
     return MethodConvergence(method.name, method.kind, expected, fit, verdict(fit.slope, expected), tuple(rows))

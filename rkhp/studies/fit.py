@@ -2,11 +2,12 @@
 
 NOTES §6: the observed order is the least-squares slope of log(error) against log(h) over the
 asymptotic range, leaving out the points at the round-off floor. Here the asymptotic range is found
-from the data alone (never from the expected order): it is the longest run of consecutive usable
-rows whose local orders agree to within ``spread`` (the finest such run on ties); usable rows
-coarser than the run are "pre-asymptotic", finer ones the "round-off floor" when their error no
-longer falls (local order below FLOOR_ORDER) and "order drift" otherwise. Rows whose error is not above the reference's
-accuracy are "below reference accuracy" and never enter a fit; failed runs are "failed".
+from the data alone (never from the expected order): the finest run of at least three consecutive
+usable rows whose local orders agree to within ``spread``, extended to coarser rows while they
+still agree; usable rows coarser than the run are "pre-asymptotic", finer ones the "round-off
+floor" once their error no longer falls (local order at most MIN_ORDER) and "order drift"
+before that. Rows whose error is not above the reference's accuracy are "below reference
+accuracy" and never enter a fit; failed runs are "failed".
 """
 
 from __future__ import annotations
@@ -18,15 +19,16 @@ import numpy as np
 
 from ..errors import InputError
 
-SPREAD = 0.3
+SPREAD = 0.2
 """Largest difference between local orders inside the asymptotic range."""
 
 VERDICT_TOLERANCE = 0.2
 """Largest |observed - expected| order for which the expected order counts as confirmed."""
 
-FLOOR_ORDER = 1.0
-"""A row finer than the asymptotic range whose local order is below this (the error no longer
-falls even linearly) is at the round-off floor; otherwise its order drifts ("order drift")."""
+MIN_ORDER = 0.5
+"""Local orders inside the asymptotic range exceed this. A row finer than the range whose local
+order is not above it (the error no longer falls) starts the round-off floor; a finer row whose
+error still falls is "order drift"."""
 
 MIN_FIT_POINTS = 3
 """A fit needs at least this many step sizes (two local orders)."""
@@ -104,7 +106,7 @@ def fit_order(h, errors, floor: float = 0.0, spread: float = SPREAD) -> OrderFit
         excluded[i] = "pre-asymptotic"
     floor_reached = False
     for i in usable[hi + 1:]:
-        floor_reached = floor_reached or orders[i] < FLOOR_ORDER
+        floor_reached = floor_reached or orders[i] <= MIN_ORDER
         excluded[i] = "round-off floor" if floor_reached else "order drift"
     x = np.log([h[i] for i in rows])
     y = np.log([float(errors[i]) for i in rows])
@@ -113,21 +115,24 @@ def fit_order(h, errors, floor: float = 0.0, spread: float = SPREAD) -> OrderFit
 
 
 def _asymptotic_window(usable: list[int], orders: list, spread: float):
-    """(lo, hi) positions in ``usable`` of the longest consistent run, finest on ties; or None.
+    """(lo, hi) positions in ``usable`` of the asymptotic range, or None.
 
-    A run is consistent when its local orders (pairs inside it) are positive and differ by at most
-    ``spread``; it needs MIN_FIT_POINTS points.
+    A run of rows is consistent when its local orders (pairs inside it) all exceed MIN_ORDER and
+    differ by at most ``spread``. The range ends at the finest row that ends a consistent run of
+    MIN_FIT_POINTS rows, and extends to coarser rows while the run stays consistent.
     """
-    best = None
-    n = len(usable)
-    for lo in range(n):
-        for hi in range(lo + MIN_FIT_POINTS - 1, n):
-            inner = [orders[usable[k]] for k in range(lo + 1, hi + 1)]
-            if min(inner) <= 0.0 or max(inner) - min(inner) > spread:
-                break
-            if best is None or hi - lo >= best[1] - best[0]:
-                best = (lo, hi)
-    return best
+
+    def consistent(lo: int, hi: int) -> bool:
+        inner = [orders[usable[k]] for k in range(lo + 1, hi + 1)]
+        return min(inner) > MIN_ORDER and max(inner) - min(inner) <= spread
+
+    for hi in range(len(usable) - 1, MIN_FIT_POINTS - 2, -1):
+        lo = hi - MIN_FIT_POINTS + 1
+        if consistent(lo, hi):
+            while lo > 0 and consistent(lo - 1, hi):
+                lo -= 1
+            return lo, hi
+    return None
 
 
 def verdict(observed: float | None, expected: int | None, tol: float = VERDICT_TOLERANCE) -> str:

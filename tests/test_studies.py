@@ -1,0 +1,360 @@
+"""Studies: order fits (synthetic tables), references, converge / bench / stress, plots, CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from rkhp_cli.main import rkhp
+
+from rkhp.errors import InputError
+from rkhp.studies.fit import fit_order, local_order, verdict
+from rkhp.systems import get_system
+
+H = [0.5 / 2**k for k in range(8)]
+
+
+# ----------------------------------------------------------------------------------------------
+# fits on synthetic tables with known slopes, pre-asymptotic points and floors
+
+
+def test_fit_exact_power_law():
+    fit = fit_order(H, [3.0 * h**3 for h in H])
+    assert fit.slope == pytest.approx(3.0, abs=1e-12)
+    assert fit.fit_rows == tuple(range(8)) and fit.excluded == ()
+    assert fit.local_orders[0] is None
+    assert all(p == pytest.approx(3.0) for p in fit.local_orders[1:])
+
+
+def test_fit_leaves_out_pre_asymptotic_rows():
+    # e = h^4 + 40 h^6: the h^6 term dominates the coarse rows
+    errors = [h**4 + 40 * h**6 for h in H]
+    fit = fit_order(H, errors)
+    assert fit.slope == pytest.approx(4.0, abs=0.05)
+    assert dict(fit.excluded).get(0) == "pre-asymptotic"
+    assert all(why == "pre-asymptotic" for _, why in fit.excluded)
+    assert fit.fit_rows[-1] == len(H) - 1
+
+
+def test_fit_leaves_out_round_off_floor():
+    rng = np.random.default_rng(0)
+    errors = [max(1e-3 * h**4, 1e-10 * (1 + rng.random())) for h in H]
+    fit = fit_order(H, errors)
+    assert fit.slope == pytest.approx(4.0, abs=1e-9)
+    floor = [i for i, why in fit.excluded if why == "round-off floor"]
+    assert floor and min(floor) > max(fit.fit_rows)
+    assert floor[-1] == len(H) - 1
+    assert all(1e-3 * H[i] ** 4 < 1e-10 for i in floor)  # only rows where h^4 is below the floor
+
+
+def test_fit_below_reference_accuracy_and_failures():
+    errors = [None, *[h**2 for h in H[1:-2]], 1e-20, 1e-21]
+    fit = fit_order(H, errors, floor=1e-15)
+    reasons = dict(fit.excluded)
+    assert reasons[0] == "failed"
+    assert reasons[6] == reasons[7] == "below reference accuracy"
+    assert fit.slope == pytest.approx(2.0, abs=1e-12)
+    assert fit.fit_rows == (1, 2, 3, 4, 5)
+
+
+def test_fit_without_asymptotic_range_is_inconclusive():
+    errors = [1e-3, 2e-3, 5e-4, 3e-3, 1e-4]
+    fit = fit_order(H[:5], errors)
+    assert fit.slope is None and fit.fit_rows == ()
+    assert verdict(fit.slope, 2) == "inconclusive"
+
+
+def test_fit_needs_three_decreasing_step_sizes():
+    with pytest.raises(InputError, match="at least 3"):
+        fit_order([0.1, 0.05], [1e-2, 1e-3])
+    with pytest.raises(InputError, match="decreasing"):
+        fit_order([0.1, 0.2, 0.05], [1e-2, 1e-3, 1e-4])
+
+
+def test_local_order_and_verdicts():
+    assert local_order(0.2, 16e-4, 0.1, 1e-4) == pytest.approx(4.0)
+    assert verdict(3.9, 4) == "confirmed"
+    assert verdict(4.6, 4) == "higher than expected"
+    assert verdict(1.1, 2) == "lower than expected"
+
+
+# ----------------------------------------------------------------------------------------------
+# references
+
+
+def test_exact_reference_agrees_with_dop853():
+    from rkhp.studies.reference import dop853_reference, reference
+
+    rigid = get_system("rigid-body")
+    exact = reference(rigid, 10.0)
+    assert exact.kind == "exact" and exact.error_estimate < 1e-13
+    numeric = dop853_reference(rigid, 10.0)
+    assert numeric.error_estimate < 1e-12
+    assert np.linalg.norm(exact.state - numeric.state) <= numeric.error_estimate + exact.error_estimate
+
+
+def test_dop853_reference_of_lotka_volterra_keeps_its_casimir():
+    from rkhp.studies.reference import reference
+
+    lv = get_system("lotka-volterra")
+    ref = reference(lv, 3.0)
+    assert ref.kind == "dop853" and 0 < ref.error_estimate < 1e-12
+    (casimir,) = lv.casimirs
+    assert abs(casimir(ref.state) - casimir(lv.x0)) < 1e-12
+    assert ref.floor == pytest.approx(10 * ref.error_estimate)
+
+
+# ----------------------------------------------------------------------------------------------
+# convergence studies with the RKHP integrators (orders: paper Table 1 / Theorem 5.1, NOTES §6)
+
+
+def _study(system, realisation, methods, steps, t_final=None):
+    from rkhp.studies.converge import converge
+    from rkhp.studies.methods import resolve_methods
+
+    return converge(get_system(system, realisation=realisation), resolve_methods(methods), steps, t_final)
+
+
+SYMMETRIC = {"euler": 2, "paper-two-stage": 3, "paper-three-stage": 4, "rk4": 4}
+
+
+@pytest.mark.parametrize(("system", "t_final"), [("rigid-body", None), ("lotka-volterra", 3.0)])
+def test_symmetric_orders(system, t_final):
+    study = _study(system, "symmetric", list(SYMMETRIC), [40, 80, 160, 320, 640, 1280, 2560], t_final)
+    assert study.degenerate
+    for m in study.methods:
+        assert m.expected_order == SYMMETRIC[m.method]
+        assert m.observed_order == pytest.approx(SYMMETRIC[m.method], abs=0.15), m.method
+        assert m.verdict == "confirmed"
+        assert len(m.fit.fit_rows) >= 3
+        assert max(r.casimir_error for r in m.rows) < 1e-12  # RKHP keeps the Casimir
+
+
+@pytest.mark.parametrize(("system", "t_final"), [("rigid-body", None), ("lotka-volterra", 3.0)])
+def test_shifted_realisation_drops_euler_not_rk4(system, t_final):
+    study = _study(system, "shifted", ["euler", "rk4"], [80, 160, 320, 640, 1280, 2560], t_final)
+    assert not study.degenerate
+    euler, rk4 = study.methods
+    assert (euler.expected_order, rk4.expected_order) == (1, 4)
+    assert euler.observed_order == pytest.approx(1, abs=0.15)
+    assert rk4.observed_order == pytest.approx(4, abs=0.15)
+    assert euler.verdict == rk4.verdict == "confirmed"
+
+
+def test_errors_below_reference_accuracy_are_not_measurements():
+    study = _study("rigid-body", "symmetric", ["rk4"], [100, 1000, 10000, 20000])
+    (m,) = study.methods
+    floor = study.reference.floor
+    for i, r in enumerate(m.rows):
+        assert r.error is None or r.error > floor
+        if r.error is None:
+            assert dict(m.fit.excluded)[i] == "below reference accuracy"
+            assert r.measured_error <= floor
+    assert m.rows[-1].error is None
+
+
+def test_classical_peers_as_methods():
+    study = _study("rigid-body", "symmetric", ["classical:rk4", "implicit-midpoint"], [40, 80, 160, 320])
+    rk4, midpoint = study.methods
+    assert (rk4.kind, midpoint.kind) == ("classical", "implicit-midpoint")
+    assert (rk4.expected_order, midpoint.expected_order) == (4, 2)
+    assert rk4.verdict == midpoint.verdict == "confirmed"
+    assert rk4.rows[-1].casimir_error > 1e-12  # classical RK drifts off the Casimir
+
+
+# ----------------------------------------------------------------------------------------------
+# CLI: converge JSON, plots, bad input
+
+
+def _run(args):
+    result = CliRunner().invoke(rkhp, args)
+    return result
+
+
+CONVERGE_KEYS = {"system", "realisation", "degenerate", "t_final", "reference", "methods"}
+METHOD_KEYS = {"method", "expected_order", "observed_order", "verdict", "fit_rows", "rows"}
+ROW_KEYS = {"h", "steps", "error", "local_order", "casimir_error", "energy_error", "newton_mean", "newton_max",
+            "seconds"}
+
+
+def test_converge_json_keys_and_plots(tmp_path):
+    magic = {"png": b"\x89PNG\r\n\x1a\n", "pdf": b"%PDF-", "svg": b"<?xml"}
+    for ext, head in magic.items():
+        path = tmp_path / f"conv.{ext}"
+        result = _run(["converge", "rigid-body", "--method", "euler,rk4", "--steps", "20,40,80",
+                       "--plot", str(path), "--format", "json"])
+        assert result.exit_code == 0, result.output
+        assert path.read_bytes().startswith(head)
+        if ext == "svg":
+            assert b"<svg" in path.read_bytes()[:2000]
+    data = json.loads(result.output)
+    assert set(data) == CONVERGE_KEYS
+    assert set(data["reference"]) == {"kind", "error_estimate"}
+    assert [m["method"] for m in data["methods"]] == ["euler", "rk4"]
+    for m in data["methods"]:
+        assert set(m) == METHOD_KEYS
+        assert all(set(r) == ROW_KEYS for r in m["rows"])
+
+
+def test_converge_table_ends_with_verdicts():
+    result = _run(["converge", "rigid-body", "--method", "paper-three-stage", "--steps", "20", "--refinements", "3"])
+    assert result.exit_code == 0, result.output
+    tail = result.output.strip().splitlines()[-3:]
+    assert any("paper-three-stage: observed order" in line for line in tail)
+    assert "confirmed" in result.output.split("verdicts")[-1]
+
+
+@pytest.mark.parametrize(
+    ("args", "fragment"),
+    [
+        (["converge", "no-such-system"], "no-such-system"),
+        (["converge", "rigid-body", "--method", "no-such-method"], "no-such-method"),
+        (["converge", "rigid-body", "--steps", "10,20"], "at least 3"),
+        (["converge", "rigid-body", "--steps", "10", "--refinements", "1"], "at least 3"),
+        (["converge", "rigid-body", "--t-final", "0"], "final time"),
+        (["converge", "rigid-body", "--t-final", "-2"], "final time"),
+        (["converge", "rigid-body", "--plot", "/no/such/folder/x.png"], "does not exist"),
+        (["converge", "rigid-body", "--plot", "x.gif"], "extension"),
+        (["converge", "rigid-body", "--steps", "a,b"], "integers"),
+        (["bench", "rigid-body", "--peers", "nope"], "nope"),
+        (["bench", "rigid-body", "--plot", "x.jpg"], "extension"),
+        (["stress", "no-such-system"], "no-such-system"),
+        (["stress", "rigid-body", "--t-final", "nan"], "final time"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2(args, fragment):
+    result = _run(args)
+    assert result.exit_code == 2, result.output
+    err = result.stderr if hasattr(result, "stderr") else result.output
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and fragment in lines[0], err
+    assert "Traceback" not in result.output
+
+
+def test_unwritable_plot_path(tmp_path):
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    folder.chmod(0o500)
+    try:
+        import os
+
+        if os.access(folder, os.W_OK):  # running as root: permissions are not enforced
+            pytest.skip("permissions are not enforced for this user")
+        result = _run(["converge", "rigid-body", "--plot", str(folder / "x.png")])
+        assert result.exit_code == 2 and "not writable" in result.stderr
+    finally:
+        folder.chmod(0o700)
+
+
+# ----------------------------------------------------------------------------------------------
+# bench
+
+
+def _bench_json(args):
+    result = _run(["bench", "rigid-body", *args, "--format", "json"])
+    assert result.exit_code == 0, result.output
+    return json.loads(result.output)
+
+
+def test_bench_error_falls_as_cost_rises(tmp_path):
+    plot = tmp_path / "wp.png"
+    data = _bench_json(["--method", "paper-three-stage", "--peers", "dop853,rk4", "--steps", "10,20,40,80,160",
+                        "--tolerances", "1e-4,1e-6,1e-8", "--repeats", "1", "--plot", str(plot)])
+    assert plot.read_bytes().startswith(b"\x89PNG")
+    assert set(data) == {"system", "realisation", "t_final", "reference", "repeats", "ensemble", "curves",
+                         "cheapest"}
+    kinds = {c["method"]: c["kind"] for c in data["curves"]}
+    assert kinds == {"paper-three-stage": "rkhp", "classical:rk4": "classical", "dop853": "scipy"}
+    for c in data["curves"]:
+        points = c["points"]
+        cost = [p["steps"] if p["steps"] is not None else p["evaluations"] for p in points]
+        errors = [p["error"] for p in points]
+        assert cost == sorted(cost) and len(set(cost)) == len(cost)
+        assert all(e is not None for e in errors)
+        assert all(b < a for a, b in zip(errors, errors[1:], strict=False)), c["method"]
+        slow = max(points, key=lambda p: p["seconds"])
+        fast = min(points, key=lambda p: p["seconds"])
+        assert slow["error"] < fast["error"]
+    targets = [c["target"] for c in data["cheapest"]]
+    assert targets == [1e-4, 1e-6, 1e-8, 1e-10]
+    for c in data["cheapest"]:
+        if c["method"] is not None:
+            assert c["error"] is None or c["error"] <= c["target"]
+
+
+def test_bench_ensemble_mode():
+    data = _bench_json(["--method", "paper-three-stage", "--peers", "dop853", "--steps", "20,40,80",
+                        "--tolerances", "1e-6,1e-9", "--repeats", "1", "--ensemble", "6"])
+    assert data["ensemble"] == 6
+    rkhp_curve, scipy_curve = data["curves"]
+    assert rkhp_curve["trajectories"] == 6 and scipy_curve["trajectories"] == 6
+    errors = [p["error"] for p in rkhp_curve["points"]]
+    assert errors[0] > errors[1] > errors[2]
+
+
+# ----------------------------------------------------------------------------------------------
+# stress
+
+
+def test_stress_finds_the_newton_failure_range_of_the_rigid_body():
+    from rkhp.studies.methods import resolve_method
+    from rkhp.studies.stress import sweep
+
+    rigid = get_system("rigid-body")
+    result = sweep(resolve_method("paper-three-stage"), rigid, 10.0, coarsest=20)
+    bad = result.first_failure
+    assert bad is not None and "Newton" in bad.status
+    assert result.largest_ok_h is not None and result.largest_ok_h < bad.h
+    assert all(r.ok for r in result.rows if r.h <= result.largest_ok_h)
+    assert "fails from h" in result.verdict()
+
+
+def test_stress_cli_parts_end_with_verdicts(tmp_path):
+    plot = tmp_path / "drift.pdf"
+    result = _run(["stress", "lotka-volterra", "--method", "paper-three-stage", "--long-steps", "3000",
+                   "--sweep-coarsest", "10", "--round-off-steps", "30,100,300,1000", "--plot", str(plot),
+                   "--format", "json"])
+    assert result.exit_code == 0, result.output
+    assert plot.read_bytes().startswith(b"%PDF-")
+    data = json.loads(result.output)
+    assert set(data) == {"system", "realisation", "t_final", "sweep", "long_run", "near_singular", "round_off"}
+    for part in ("sweep", "long_run", "near_singular", "round_off"):
+        assert data[part]["verdict"]
+    runs = data["long_run"]["runs"]
+    assert runs[0]["casimir_max"] < 1e-12  # RKHP keeps the Casimir
+    assert data["long_run"]["peer"]["casimir_max"] > 100 * runs[0]["casimir_max"]  # classical RK4 does not
+    singular = data["near_singular"]
+    assert singular["applicable"]
+    assert {r["first_species"] for r in singular["runs"]} == {1e-3, 1e-6}
+    assert all(r["kept"] and r["min_component"] > 0 for r in singular["runs"])
+
+
+def test_stress_table_has_four_verdict_lines():
+    result = _run(["stress", "rigid-body", "--method", "euler", "--long-steps", "1000", "--sweep-coarsest", "10",
+                   "--round-off-steps", "30,100,300"])
+    assert result.exit_code == 0, result.output
+    for part in "abcd":
+        assert f"verdict ({part}):" in result.output
+    assert "not applicable" in result.output  # (c) is for log-canonical systems
+
+
+@pytest.mark.slow
+def test_full_stress_rigid_body():
+    """The full study: 10^5-step long run, sweep from T/200, round-off down to T/10^5."""
+    result = _run(["stress", "rigid-body", "--format", "json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert all(r["casimir_max"] < 1e-12 for r in data["long_run"]["runs"])
+    assert data["long_run"]["steps"] == 100_000
+    assert all(m["first_failure_h"] is not None for m in data["sweep"]["methods"])
+
+
+@pytest.mark.slow
+def test_full_default_converge_and_bench():
+    result = _run(["converge", "rigid-body", "--format", "json"])
+    assert result.exit_code == 0
+    assert all(m["verdict"] == "confirmed" for m in json.loads(result.output)["methods"])
+    data = _bench_json([])
+    assert any(c["method"] is not None for c in data["cheapest"])
