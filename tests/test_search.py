@@ -218,14 +218,16 @@ def test_degenerate_order_5_needs_4_stages():
     assert four.found is not None and four.found.verification.orders["degenerate"] >= 5
 
 
-@pytest.mark.parametrize("name,order", [("search-degenerate-o3-s2", 3), ("search-degenerate-o4-s3", 4),
-                                        ("search-degenerate-o5-s4", 5),
-                                        ("search-degenerate-o4-s3-min-error", 4),
-                                        ("search-degenerate-o6-s6", 6)])
-def test_saved_tables_verify(name, order):
+@pytest.mark.parametrize("name,cls,order", [("search-degenerate-o3-s2", "degenerate", 3),
+                                            ("search-degenerate-o4-s3", "degenerate", 4),
+                                            ("search-degenerate-o5-s4", "degenerate", 5),
+                                            ("search-degenerate-o4-s3-min-error", "degenerate", 4),
+                                            ("search-degenerate-o6-s6", "degenerate", 6),
+                                            ("search-symmetric-o6-s5", "symmetric", 6)])
+def test_saved_tables_verify(name, cls, order):
     tab = load_tableau(name)
     ver = verify(tab)
-    assert ver.orders["degenerate"] == order and ver.claim_ok
+    assert ver.orders[cls] == order and ver.claim_ok
     assert tab.is_explicit and tab.stages == int(name.split("-s")[1].split("-")[0])
     assert ver.precision == "exact" or tab.digits >= 60
 
