@@ -42,8 +42,8 @@ class Polished:
         return np.array([mpmath.mpf(v) for v in self.x], dtype=object)
 
 
-def to_mp(x, digits: int) -> np.ndarray:
-    """An object array of mpmath numbers from floats or strings (precision must be set by caller)."""
+def to_mp(x) -> np.ndarray:
+    """An object array of mpmath numbers from floats or strings, at the current precision."""
     import mpmath
 
     return np.array([mpmath.mpf(v) for v in x], dtype=object)
@@ -76,7 +76,7 @@ def polish(system: ResidualSystem, x0, digits: int = 30, max_iterations: int = 4
     import mpmath
 
     with mpmath.workdps(digits + 10):
-        x = to_mp(x0, digits)
+        x = to_mp(x0)
         free = np.ones(len(x), dtype=bool)
         for k, v in (fixed or {}).items():
             x[k] = mpmath.mpf(v.numerator) / v.denominator
@@ -97,9 +97,3 @@ def polish(system: ResidualSystem, x0, digits: int = 30, max_iterations: int = 4
         converged = bool(size < tol)
         text = tuple(mpmath.nstr(v, digits, strip_zeros=False) for v in x)
         return Polished(text, digits, float(size), converged, iterations)
-
-
-def max_residual(system: ResidualSystem, x_mp) -> float:
-    """max |residual| of the system at mpmath unknowns."""
-    r, _ = system.residuals(x_mp, jacobian=False)
-    return float(max(abs(v) for v in r)) if len(r) else 0.0

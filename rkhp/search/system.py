@@ -27,18 +27,6 @@ MAX_SEARCH_ORDER = 8
 MAX_SEARCH_STAGES = 16
 
 
-def condition_class(degenerate: bool, cls: str | None = None) -> str:
-    """The condition class: ``cls`` when given (checked against --degenerate), else from the flag."""
-    from ..conditions import check_class
-
-    if cls is None:
-        return "degenerate" if degenerate else "general"
-    check_class(cls)
-    if degenerate and cls == "general":
-        raise InputError("--degenerate conflicts with --class general")
-    return cls
-
-
 def check_problem(stages, order=None) -> None:
     """Validate the numbers of stages and the order (InputError naming the value)."""
     if isinstance(stages, bool) or not isinstance(stages, int) or stages < 1:
