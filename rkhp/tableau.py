@@ -182,10 +182,10 @@ def to_fraction(x, bits: int) -> Fraction:
     if isinstance(x, mpmath.mpf):
         man, exp = x.man_exp
         return Fraction(man) * Fraction(2) ** exp
-    digits = int(bits * 0.30103) + 10
-    value = x.evalf(digits)
-    man, exp = mpmath.mpf(value._mpf_).man_exp
-    return Fraction(man) * Fraction(2) ** exp
+    import sympy
+
+    value = sympy.Rational(x.evalf(int(bits * 0.30103) + 10))  # the binary value, exactly
+    return Fraction(int(value.p), int(value.q))
 
 
 def _sum(values):

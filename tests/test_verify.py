@@ -152,6 +152,15 @@ def test_claims_over_and_under_stated():
     assert short.order == 3 and short.is_lower_bound("general") and not short.claim_ok
 
 
+@pytest.mark.parametrize("name", ["gauss3", "radau-iia3", "paper-three-stage"])
+def test_radicals_agree_in_every_precision(name):
+    exact = verify(name)
+    for precision in ("float", 30):
+        other = verify(name, precision=precision)
+        assert other.orders == exact.orders
+        assert other.principal_error["general"] == pytest.approx(exact.principal_error["general"])
+
+
 def test_precision_modes_and_tolerances():
     assert verify("rk4").precision == "exact"
     floats = Tableau.from_arrays([[0, 0], [2 / 3, 0]], [0.25, 0.75])  # 2/3 as a float
