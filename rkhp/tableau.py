@@ -180,8 +180,9 @@ def to_fraction(x, bits: int) -> Fraction:
     if isinstance(x, GivenDecimal):
         return x.as_fraction()
     if isinstance(x, mpmath.mpf):
-        man, exp = x.man_exp
-        return Fraction(man) * Fraction(2) ** exp
+        sign, man, exp, _ = x._mpf_  # x = (-1)^sign man 2^exp
+        value = Fraction(int(man)) * Fraction(2) ** exp
+        return -value if sign else value
     import sympy
 
     value = sympy.Rational(x.evalf(int(bits * 0.30103) + 10))  # the binary value, exactly

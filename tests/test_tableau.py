@@ -82,6 +82,9 @@ def test_given_c_differing_from_row_sums_is_reported():
     assert t.c == (Fraction(0), Fraction(1, 2))
     assert t.c_mismatch() == [(1, pytest.approx(0.1))]
     assert load_tableau("gauss3").c_mismatch() == []
+    long = "-0.11111111111111111111111111111111111"  # inexact, negative row sum
+    t = Tableau.from_arrays([[0, 0], [long, "1/2"]], [0, 1], c=[0, "0.38888888888888888888888888888888889"])
+    assert t.c_mismatch() == []
 
 
 def test_every_listed_builtin_exists_with_a_reference():
