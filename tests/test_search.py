@@ -122,6 +122,11 @@ def test_restarts_are_reproducible_and_independent_of_workers():
     assert [a.success for a in one.attempts] == [a.success for a in two.attempts]
 
 
+def test_time_limit_stops_the_restarts():
+    run = run_restarts(Problem(3, 5, "degenerate"), 1000, seed=0, time_limit=0.5)
+    assert run.timed_out and 0 < len(run.attempts) < 1000 and run.first is None
+
+
 def test_polish_reaches_the_digits_asked():
     import mpmath
 
