@@ -107,6 +107,10 @@ def converge(system, methods, realisation, t_final, steps, refinements, plot, fm
     _render_converge(study, plot)
 
 
+SHORT_ROLES = {"pre-asymptotic": "pre", "round-off floor": "floor", "order drift": "drift",
+               "no asymptotic range": "no fit"}
+
+
 def _role(method, i) -> str:
     """The row's part in the fit: fit, pre-asymptotic, round-off floor, below reference accuracy..."""
     if i in method.fit.fit_rows:
@@ -263,24 +267,27 @@ def _render_stress(study, plot) -> None:
     out.print("[bold](a) step-size sweep[/]")
     for s in study.sweep:
         table = _table(s.method)
-        for col in ("h", "steps", "ok", "Newton max", "rel. error", "rel. energy err", "status"):
+        for col in ("h", "steps", "ok", "Newton max", "rel. error", "rel. energy err"):
             table.add_column(col, justify="right")
         for r in s.rows:
             table.add_row(f"{r.h:.3g}", str(r.steps), "yes" if r.ok else "no", str(r.newton_max),
-                          _e(r.relative_error), _e(r.relative_energy_error), r.status)
+                          _e(r.relative_error), _e(r.relative_energy_error))
         out.print(table)
-    out.print(f"verdict (a): {verdicts['a']}")
+    for s in study.sweep:
+        out.print(f"verdict (a): {s.verdict()}")
     lr = study.long_run
     out.print(f"[bold](b) long run[/]: {lr.steps} steps of h = {lr.h:g}, max error per window ({lr.windows} windows)")
     table = _table(None)
-    for col in ("method", "status", "Casimir max", "Casimir 1st/last", "energy 1st/last", "growth", "seconds"):
-        table.add_column(col, justify="left" if col in ("method", "status") else "right")
+    table.add_column("method", no_wrap=True)
+    for col in ("Casimir max", "energy, 1st window", "last window", "growth", "seconds"):
+        table.add_column(col, justify="right")
     for r in (*lr.runs, lr.peer):
-        table.add_row(r.method, r.status, _e(r.casimir_max),
-                      f"{r.casimir_windows[0]:.1e}/{r.casimir_windows[-1]:.1e}",
-                      f"{r.energy_windows[0]:.1e}/{r.energy_windows[-1]:.1e}", f"x{r.energy_growth:.2g}",
-                      f"{r.seconds:.2f}")
+        table.add_row(r.method, _e(r.casimir_max), _e(r.energy_windows[0]), _e(r.energy_windows[-1]),
+                      f"x{r.energy_growth:.2g}", f"{r.seconds:.2f}")
     out.print(table)
+    for r in (*lr.runs, lr.peer):
+        if r.status != "ok":
+            out.print(f"  {r.method}: {r.status}")
     out.print(f"verdict (b): {verdicts['b']}")
     out.print("[bold](c) near-singular starts[/]")
     if study.near_singular.applicable:
@@ -309,9 +316,10 @@ def _render_stress(study, plot) -> None:
             elif row.error is None:
                 cells.append(f"< {ro.reference_floor:.1e}")
             else:
-                cells.append(_e(row.error) + ("" if role in ("fit", "") else f" ({role})"))
+                cells.append(_e(row.error) + ("" if role in ("fit", "") else f" {SHORT_ROLES.get(role, role)}"))
         table.add_row(str(r.steps), *cells)
     out.print(table)
+    out.print("marks: pre = pre-asymptotic, floor = round-off floor, drift = order drift (left out of the fit)")
     out.print(f"verdict (d): {verdicts['d']}")
     if plot:
         out.print(f"plot written to {plot}")

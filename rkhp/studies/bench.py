@@ -138,7 +138,7 @@ def _method_curve(method: Method, system, ref: Reference, steps, t_final: float,
     points = []
     for n in steps:
         seconds, traj = _median_seconds(lambda n=n: method.integrate(system, t_final / n, n), repeats)
-        compile_seconds += float(traj.compile_seconds)
+        compile_seconds = max(compile_seconds, float(traj.compile_seconds))
         measured = float(np.linalg.norm(traj.final_state - ref.state)) if traj.ok else None
         points.append(_point(measured, ref.floor, steps=n, tolerance=None, seconds=seconds,
                              evaluations=None, status=traj.status))

@@ -54,8 +54,16 @@ class SweepRow:
         return (self.status == "ok" and self.relative_error is not None and self.relative_error <= 1.0
                 and self.relative_energy_error <= 1.0)
 
+    @property
+    def cause(self) -> str:
+        """Why the run does not count: the failure's cause, or an unbounded error."""
+        if self.status != "ok":
+            return self.status.split("): ", 1)[-1]
+        return "" if self.ok else "error not bounded (relative error or energy error above 1)"
+
     def to_json(self) -> dict:
         return {"h": self.h, "steps": self.steps, "ok": self.ok, "status": self.status,
+                "cause": self.cause,
                 "newton_max": self.newton_max, "relative_error": self.relative_error,
                 "relative_energy_error": self.relative_energy_error}
 
@@ -85,10 +93,13 @@ class SweepResult:
             return (f"{self.method}: Newton converges and the error stays bounded for every h up to "
                     f"{self.rows[-1].h:.3g}")
         failing = [r.h for r in self.rows if not r.ok]
-        cause = bad.status if bad.status != "ok" else "error not bounded"
+        if self.largest_ok_h is None:
+            return (f"{self.method}: fails at the smallest step size tried, h = {bad.h:.3g} ({len(failing)} of "
+                    f"{len(self.rows)} step sizes fail, in [{min(failing):.3g}, {max(failing):.3g}]; first cause: "
+                    f"{bad.cause}); sweep from a smaller h (--sweep-coarsest)")
         return (f"{self.method}: Newton converges and the error stays bounded up to h = {_fmt(self.largest_ok_h)}; "
-                f"fails from h = {bad.h:.3g} ({len(failing)} of {len(self.rows)} step sizes in "
-                f"[{min(failing):.3g}, {max(failing):.3g}] fail; first: {cause})")
+                f"fails from h = {bad.h:.3g} ({len(failing)} of {len(self.rows)} step sizes, in "
+                f"[{min(failing):.3g}, {max(failing):.3g}]; first cause: {bad.cause})")
 
     def to_json(self) -> dict:
         bad = self.first_failure
