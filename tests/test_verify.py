@@ -152,10 +152,11 @@ def test_claims_over_and_under_stated():
     assert short.order == 3 and short.is_lower_bound("general") and not short.claim_ok
 
 
-@pytest.mark.parametrize("name", ["gauss3", "radau-iia3", "paper-three-stage"])
-def test_radicals_agree_in_every_precision(name):
+@pytest.mark.parametrize("name", ["gauss3", "radau-iia3", "paper-three-stage", "rk4", "dopri5",
+                                  "kutta3", "lobatto-iiic3", "dop853", "feagin10"])
+def test_every_precision_agrees(name):
     exact = verify(name)
-    for precision in ("float", 30):
+    for precision in ("float", 30, 80):
         other = verify(name, precision=precision)
         assert other.orders == exact.orders
         assert other.principal_error["general"] == pytest.approx(exact.principal_error["general"])
