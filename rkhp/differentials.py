@@ -298,8 +298,13 @@ def _composite_partials(alpha_increment, H, dim: int, ring2: JetRing):
 
 def general_values(trees, max_order: int, family: str, batch: int, rng: np.random.Generator,
                    p: int, dim: int = 3) -> dict[Tree, np.ndarray]:
-    """F(t) at a random base point x0 for random Hamiltonian jets, modulo p, on a symmetric
-    Lie–Poisson (so(3)*, ``family="lie-poisson"``) or log-canonical (dimension ``dim``) system."""
+    """F(t) at a random base point x0 for random Hamiltonian jets, modulo p.
+
+    Families: ``"lie-poisson"`` (so(3)*, symmetric realisation), ``"log-canonical"`` (dimension
+    ``dim``, symmetric), and ``"quartic"``: constant pi composed with the time-1 flow of
+    K(p) = sum_k (u_k . p)^4 / 24, alpha = x + grad K(p) - pi p / 2 (NOTES §8), degenerate but not
+    symmetric — the control on which the symmetric relations must fail.
+    """
     D = max(max_order - 1, 1)
     basis2 = monomial_basis(2 * dim, D)
     ring2 = JetRing(basis2, p)
@@ -335,6 +340,18 @@ def general_values(trees, max_order: int, family: str, batch: int, rng: np.rando
             w = _sum(ring2, [ring2.reduce(ring2.mul(x[j], pv[j], D) * lam[i, j][None, :]) for j in range(dim)])
             w = ring2.reduce(w * half)
             y.append(ring2.reduce(ring2.mul(x[i], _exp(ring2, w, D), D) - _constant(x0[i], size2)))
+    elif family == "quartic":
+        upper = rng.integers(0, p, size=(dim, dim, batch), dtype=np.int64)
+        pi = (upper - upper.transpose(1, 0, 2)) % p
+        half = to_residue(Fraction(-1, 2), p)
+        sixth = to_residue(Fraction(1, 6), p)
+        y = [ring2.reduce(xi[i] + _sum(ring2, [ring2.reduce(pv[j] * pi[i, j][None, :]) for j in range(dim)]) * half)
+             for i in range(dim)]
+        for _ in range(2):  # grad K = sum_k u_k (u_k . p)^3 / 6, two random directions u_k
+            u = rng.integers(0, p, size=(dim, batch), dtype=np.int64)
+            up = _sum(ring2, [ring2.reduce(pv[j] * u[j][None, :]) for j in range(dim)])
+            cube = ring2.reduce(ring2.mul(ring2.mul(up, up, D), up, D) * sixth)
+            y = [ring2.reduce(y[i] + ring2.reduce(cube * u[i][None, :])) for i in range(dim)]
     else:
         raise ValueError(f"unknown family {family!r}")
     hbasis = monomial_basis(dim, D)

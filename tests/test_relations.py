@@ -142,6 +142,31 @@ def test_order_four_oddness_on_every_family():
         assert np.all(a % p != 0)
 
 
+def test_quartic_realisation_breaks_the_symmetric_relations():
+    """Degenerate but not symmetric (NOTES §8): trees outside T_0 still vanish, the relations fail."""
+    from rkhp.differentials import general_values
+
+    p = PRIMES[1]
+    trees = [t for n in range(1, 6) for t in trees_of_order(n)]
+    values = general_values(trees, 5, "quartic", 12, np.random.default_rng(4), p, dim=3)
+    assert all(np.all(values[t] % p == 0) for t in trees if not t.in_t0)  # paper, Thm superconvergence
+    a, b = (values[t] for t in trees_of_order(4, True))
+    assert np.all((a + b) % p != 0)
+    for n in (4, 5):
+        tn = trees_of_order(n, True)
+        assert nullspace_mod(np.array([values[t] for t in tn]).T, p).shape[0] == 0
+
+
+@pytest.mark.parametrize("family", ["lie-poisson", "log-canonical"])
+def test_trees_outside_t0_vanish_on_symmetric_families(family):
+    from rkhp.differentials import general_values
+
+    p = PRIMES[1]
+    trees = [t for n in range(1, 6) for t in trees_of_order(n)]
+    values = general_values(trees, 5, family, 3, np.random.default_rng(5), p)
+    assert all(np.all(values[t] % p == 0) == (not t.in_t0) for t in trees)
+
+
 # ----------------------------------------------------------------------------- shipped relations
 
 
