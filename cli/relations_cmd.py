@@ -37,8 +37,10 @@ def relations(order, regenerate, seed, output, fmt):
     if output:
         import json
 
+        document = data.to_json()
+        document["method"]["regenerate"] += f" --output {output}"
         with open(output, "w", encoding="utf-8") as fh:
-            json.dump(data.to_json(), fh, indent=1, ensure_ascii=False)
+            json.dump(document, fh, indent=1, ensure_ascii=False)
             fh.write("\n")
     if fmt == "json":
         emit_json(doc)

@@ -35,9 +35,6 @@ from .trees import Tree, check_order, format_tree, parse_tree, trees_of_order
 MAX_SHIPPED_ORDER = 8
 #: Largest order :func:`derive_relations` accepts (order 9, 79 trees: about 4 minutes, 0.7 GB).
 MAX_REGENERATE_ORDER = 9
-#: The command that regenerates the shipped file.
-REGENERATE_COMMAND = ("rkhp relations --order 8 --regenerate --seed 0 "
-                      "--output rkhp/data/symmetric_relations.json")
 DATA_FILE = "symmetric_relations.json"
 
 
@@ -216,18 +213,18 @@ def derive_relations(max_order: int, seed: int = 0, dim: int = 6, extra: int = 1
     Args:
         max_order: largest order (<= MAX_REGENERATE_ORDER).
         seed: seed of every random instance (reproducible).
-        dim: dimension of the constant-pi systems (>= 6 by default; relations found here agree
-            for dimensions 4..8 up to order 8).
+        dim: dimension of the constant-pi systems (6 by default; the relations found agree for
+            dimensions 4..8 up to order 8).
         extra: instances beyond the number of trees of the largest order.
         cross_check: check the relation space on Lie–Poisson so(3)* (symmetric realisation).
         exact_instances: instances on which each relation is checked in exact integers.
         progress: optional callable(step: str) told about each stage.
-    Raises NumericalFailure when the primes disagree or reconstruction fails (never silently).
+    Raises NumericalFailure when the primes disagree, reconstruction fails or a check fails.
     """
     import numpy as np
 
-    from .differentials import constant_pi_values, general_values
-    from .modular import PRIMES, crt_pair, nullspace_mod, rational_reconstruction, to_residue
+    from .differentials import constant_pi_values
+    from .modular import PRIMES
 
     check_order(max_order, MAX_REGENERATE_ORDER, what="relation order")
     if dim < 2:
@@ -235,84 +232,68 @@ def derive_relations(max_order: int, seed: int = 0, dim: int = 6, extra: int = 1
     tell = progress or (lambda step: None)
     all_trees = [t for n in range(1, max_order + 1) for t in trees_of_order(n, True)]
     batch = len(trees_of_order(max_order, True)) + extra
-    rng_root = np.random.SeedSequence(seed)
-    streams = rng_root.spawn(len(PRIMES) + 2)
+    streams = np.random.SeedSequence(seed).spawn(len(PRIMES) + 2)
 
-    def null_spaces(values, p):
-        out = {}
-        for n in range(1, max_order + 1):
-            trees = trees_of_order(n, True)
-            if not trees:
-                out[n] = np.zeros((0, 0), dtype=np.int64)
-                continue
-            matrix = np.array([values[t] for t in trees], dtype=np.int64).T
-            out[n] = nullspace_mod(matrix, p)
-        return out
-
-    # 1-2. null spaces modulo primes, CRT and rational reconstruction until a further prime confirms
+    # 1-2. null spaces modulo primes; CRT and rational reconstruction until a further prime confirms
     spaces = []
     for k, p in enumerate(PRIMES):
         tell(f"constant pi, dimension {dim}, {batch} instances modulo {p}")
         values = constant_pi_values(all_trees, max_order, dim, batch, np.random.default_rng(streams[k]), p)
-        spaces.append(null_spaces(values, p))
-        if k < 2:
-            continue
-        result = _reconstruct(spaces, PRIMES[: k + 1], max_order, crt_pair, rational_reconstruction,
-                              to_residue)
+        spaces.append(_null_spaces(values, max_order, p))
+        result = _reconstruct(spaces, PRIMES[: k + 1], max_order) if k >= 2 else None
         if result is not None:
-            relations, used = result
             break
     else:
         raise NumericalFailure(f"rational reconstruction of the relations did not stabilise with {len(PRIMES)} primes")
-
-    # 3a. exact integer check on fresh instances
+    relations, used = result
     checks = {n: {"primes": list(used[:-1]), "confirmed_modulo": used[-1], "instances": batch,
                   "dimension": dim} for n in range(1, max_order + 1)}
+    # 3. exact integers on fresh instances; another family of symmetric birealisations
     if exact_instances:
         tell(f"exact integer check on {exact_instances} instances")
-        exact = constant_pi_values(all_trees, max_order, dim, exact_instances,
-                                   np.random.default_rng(streams[-2]), None)
-        for n in range(1, max_order + 1):
-            trees = trees_of_order(n, True)
-            for row in relations[n]:
-                for i in range(exact_instances):
-                    total = sum(c * exact[t][i] for c, t in zip(row, trees))
-                    if total != 0:
-                        raise NumericalFailure(f"order {n}: relation {_relation_text(trees, row)} fails in exact "
-                                               f"arithmetic (value {total})")
+        _exact_check(relations, all_trees, max_order, dim, exact_instances, np.random.default_rng(streams[-2]))
+        for n in checks:
             checks[n]["exact_instances"] = exact_instances
-    # 3b. another family of symmetric birealisations
     if cross_check:
-        p = PRIMES[0]
-        tell(f"Lie–Poisson so(3)*, {batch} instances modulo {p}")
-        other = null_spaces(general_values(all_trees, max_order, "lie-poisson", batch,
-                                           np.random.default_rng(streams[-1]), p), p)
-        for n in range(1, max_order + 1):
-            mine = _residue_rows(relations[n], p, to_residue)
-            theirs = other[n]
-            contained = bool(np.all(_in_row_space(mine, theirs, p))) if len(mine) else True
-            checks[n]["lie_poisson_so3"] = {"relations": int(theirs.shape[0]), "contains_all": contained,
-                                             "equal": contained and int(theirs.shape[0]) == len(mine)}
-            if not contained:
-                raise NumericalFailure(f"order {n}: a relation derived on constant pi fails on Lie–Poisson so(3)*")
-
+        tell(f"Lie–Poisson so(3)*, {batch} instances modulo {PRIMES[0]}")
+        for n, found in _lie_poisson_check(relations, all_trees, max_order, batch,
+                                           np.random.default_rng(streams[-1])).items():
+            checks[n]["lie_poisson_so3"] = found
     orders = []
     for n in range(1, max_order + 1):
         trees = trees_of_order(n, True)
         rels = tuple(_primitive(r) for r in relations[n])
         orders.append(OrderRelations(n, trees, rels, conditions_from_relations(trees, rels), checks[n]))
     method = {"family": "constant pi (alpha = x - pi p / 2), random antisymmetric pi, random polynomial H",
-              "dimension": dim, "seed": seed, "arithmetic": "integers modulo primes below 2^31, CRT, "
-              "rational reconstruction, exact integer check", "cross_check": "Lie–Poisson so(3)*" if cross_check
-              else None, "regenerate": REGENERATE_COMMAND}
+              "dimension": dim, "seed": seed,
+              "arithmetic": "integers modulo primes below 2^31, CRT, rational reconstruction, exact integer check",
+              "cross_check": "Lie–Poisson so(3)*" if cross_check else None,
+              "regenerate": f"rkhp relations --order {max_order} --regenerate --seed {seed}"}
     return RelationData(max_order, tuple(orders), method)
 
 
-def _reconstruct(spaces, primes, max_order, crt_pair, rational_reconstruction, to_residue):
+def _null_spaces(values, max_order: int, p: int) -> dict:
+    """Per order, the RREF basis modulo p of the relations among the evaluated F(t)."""
+    import numpy as np
+
+    from .modular import nullspace_mod
+
+    out = {}
+    for n in range(1, max_order + 1):
+        trees = trees_of_order(n, True)
+        if not trees:
+            out[n] = np.zeros((0, 0), dtype=np.int64)
+            continue
+        out[n] = nullspace_mod(np.array([values[t] for t in trees], dtype=np.int64).T, p)
+    return out
+
+
+def _reconstruct(spaces, primes, max_order):
     """Rational RREF bases per order from the RREFs modulo ``primes[:-1]``, confirmed by the last.
 
     Returns (relations by order, primes used) or None when reconstruction fails or disagrees.
     """
+    from .modular import crt_pair, rational_reconstruction, to_residue
 
     relations = {}
     for n in range(1, max_order + 1):
@@ -340,10 +321,40 @@ def _reconstruct(spaces, primes, max_order, crt_pair, rational_reconstruction, t
     return relations, tuple(primes)
 
 
-def _residue_rows(rows, p, to_residue):
+def _exact_check(relations, all_trees, max_order, dim, count, rng) -> None:
+    """Every relation, evaluated in exact integers on ``count`` fresh constant-pi instances, is 0."""
+    from .differentials import constant_pi_values
+
+    exact = constant_pi_values(all_trees, max_order, dim, count, rng, None)
+    for n in range(1, max_order + 1):
+        trees = trees_of_order(n, True)
+        for row in relations[n]:
+            for i in range(count):
+                total = sum(c * exact[t][i] for c, t in zip(row, trees))
+                if total != 0:
+                    raise NumericalFailure(f"order {n}: relation {_relation_text(trees, row)} fails in exact "
+                                           f"arithmetic (value {total})")
+
+
+def _lie_poisson_check(relations, all_trees, max_order, batch, rng) -> dict:
+    """Per order: the relation space of so(3)* (symmetric realisation) must contain the relations."""
     import numpy as np
 
-    return np.array([[to_residue(c, p) for c in row] for row in rows], dtype=np.int64)
+    from .differentials import general_values
+    from .modular import PRIMES, to_residue
+
+    p = PRIMES[0]
+    other = _null_spaces(general_values(all_trees, max_order, "lie-poisson", batch, rng, p), max_order, p)
+    out = {}
+    for n in range(1, max_order + 1):
+        mine = np.array([[to_residue(c, p) for c in row] for row in relations[n]], dtype=np.int64)
+        theirs = other[n]
+        contained = bool(np.all(_in_row_space(mine, theirs, p))) if len(mine) else True
+        if not contained:
+            raise NumericalFailure(f"order {n}: a relation derived on constant pi fails on Lie–Poisson so(3)*")
+        out[n] = {"relations": int(theirs.shape[0]), "contains_all": contained,
+                  "equal": int(theirs.shape[0]) == len(mine)}
+    return out
 
 
 def _in_row_space(rows, basis, p):
