@@ -18,7 +18,7 @@ from rkhp import conditions, trees
 def best_of(fn, repeats=3):
     times = []
     for _ in range(repeats):
-        trees._table.cache_clear()
+        trees._reset_tables()
         trees._counts.cache_clear()
         t0 = time.perf_counter()
         result = fn()

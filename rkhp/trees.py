@@ -45,6 +45,8 @@ class Tree(tuple):
         sigma: the number of automorphisms, sigma(b[t1^m1..tk^mk]) = prod mi! sigma(ti)^mi.
         gamma: the density, gamma(t) = |t| prod gamma(ti); the order condition is a(t) = 1/gamma.
         key: the canonical level sequence as bytes (equality and ordering).
+        rest: the tree b[children[1:]] (None for the leaf), so that t = b[children[0]] merged
+            with rest: elementary weights need one product per tree (NOTES §2).
     """
 
     __slots__ = ()
@@ -55,6 +57,7 @@ class Tree(tuple):
     gamma = property(itemgetter(3))
     key = property(itemgetter(4))
     _lead = property(itemgetter(5))  # how many children equal the first one
+    rest = property(itemgetter(6))
 
     def __new__(cls, children=()):
         return from_children(children)
@@ -117,12 +120,13 @@ class Tree(tuple):
 _new_tuple = tuple.__new__
 
 
-def _make(children: tuple[Tree, ...], order: int, sigma: int, gamma: int, key: bytes, lead: int) -> Tree:
-    return _new_tuple(Tree, (children, order, sigma, gamma, key, lead))
+def _make(children: tuple[Tree, ...], order: int, sigma: int, gamma: int, key: bytes, lead: int,
+          rest: Tree | None) -> Tree:
+    return _new_tuple(Tree, (children, order, sigma, gamma, key, lead, rest))
 
 
 #: The single vertex b.
-LEAF = _make((), 1, 1, 1, b"\x01", 0)
+LEAF = _make((), 1, 1, 1, b"\x01", 0, None)
 
 
 def from_children(children) -> Tree:
@@ -143,7 +147,9 @@ def from_children(children) -> Tree:
     while lead < len(kids) and kids[lead].key == kids[0].key:
         lead += 1
     key = b"\x01" + b"".join(c.key.translate(_SHIFT) for c in kids)
-    return _make(kids, order, sigma, gamma, key, lead)
+    if len(key) != order or max(key) >= 255:
+        raise InputError(f"tree too deep: depth {max(key)} (at most 254 levels)")
+    return _make(kids, order, sigma, gamma, key, lead, from_children(kids[1:]))
 
 
 def _key_of(t: Tree) -> bytes:
@@ -160,7 +166,7 @@ def graft_child(c1: Tree, r: Tree) -> Tree:
     sigma = r.sigma * c1.sigma * lead
     gamma = r.gamma // r.order * order * c1.gamma
     key = b"\x01" + c1.key.translate(_SHIFT) + r.key[1:]
-    return _make((c1,) + r.children, order, sigma, gamma, key, lead)
+    return _make((c1,) + r.children, order, sigma, gamma, key, lead, r)
 
 
 # ----------------------------------------------------------------------------- notation
@@ -234,73 +240,97 @@ def check_order(n, maximum: int = MAX_ENUMERATION_ORDER, what: str = "order") ->
     return n
 
 
-@lru_cache(maxsize=4)
-def _table(max_order: int, degenerate: bool) -> tuple[tuple[Tree, ...], ...]:
-    """Trees of orders 0..max_order (index 0 empty), each order in canonical decreasing order.
+class _TreeTable:
+    """Trees of orders 1..size of T or T_0, grown in place when a larger order is asked for.
 
-    The cyclic garbage collector is paused meanwhile: trees hold no cycles, and its repeated
-    scans of the growing heap would otherwise take most of the time.
+    by_order[n]: the trees of order n in canonical (decreasing key) order. rests[m]: the trees
+    b[M] of order m (M a multiset of admissible children) in increasing key order, first_keys[m]
+    the keys of their largest children (increasing too). For T_0 the rests are the T_0 trees plus
+    b[b], since b[c1, b] is in T_0 whenever c1 is.
     """
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
-        return _build_table(max_order, degenerate)
-    finally:
-        if enabled:
-            gc.enable()
 
+    def __init__(self, degenerate: bool):
+        self.degenerate = degenerate
+        self.by_order: list[tuple[Tree, ...]] = [(), (LEAF,)]
+        self.rests: list[list[Tree]] = [[], [LEAF]]
+        self.first_keys: list[list[bytes]] = [[], [b""]]
 
-def _build_table(max_order: int, degenerate: bool) -> tuple[tuple[Tree, ...], ...]:
-    by_order: list[list[Tree]] = [[], [LEAF]]
-    # rests[m]: trees b[M] (M a multiset of admissible children) of order m, in increasing key
-    # order, with first_keys[m] the keys of their largest children (increasing too); for T_0 these
-    # are the T_0 trees plus b[b], since b[c1, b] is in T_0 whenever c1 is.
-    rests: list[list[Tree]] = [[], [LEAF]]
-    first_keys: list[list[bytes]] = [[], [b""]]
-    shift = _SHIFT
-    make = _new_tuple
-    for n in range(2, max_order + 1):
+    @property
+    def size(self) -> int:
+        return len(self.by_order) - 1
+
+    def grow(self, max_order: int) -> None:
+        """Extend to max_order. The cyclic garbage collector is paused meanwhile: trees hold no
+        cycles, and its repeated scans of the growing heap would otherwise take most of the time."""
+        enabled = gc.isenabled()
+        gc.disable()
+        try:
+            for n in range(self.size + 1, max_order + 1):
+                self._add_order(n)
+        finally:
+            if enabled:
+                gc.enable()
+
+    def _add_order(self, n: int) -> None:
+        """Every tree of order n as b[c1, *r.children], c1 its largest child (graft_child, inlined)."""
+        by_order, rests, first_keys = self.by_order, self.rests, self.first_keys
+        shift = _SHIFT
+        make = _new_tuple
         smaller = sorted((t for m in range(1, n) for t in by_order[m]), key=_key_of, reverse=True)
         out: list[Tree] = []
         append = out.append
         for c1 in smaller:
-            # graft_child(c1, r), inlined on the tuple fields for speed
-            c1_kids, c1_order, c1_sigma, c1_gamma, c1_key, _ = c1
+            c1_order, c1_sigma, c1_gamma, c1_key = c1[1], c1[2], c1[3], c1[4]
             m = n - c1_order
             shifted = b"\x01" + c1_key.translate(shift)
             # rests whose children are all <= c1 form a prefix of the increasing list
             stop = bisect_right(first_keys[m], c1_key)
             rest_m = rests[m]
             for i in range(stop - 1, -1, -1):
-                r_kids, r_order, r_sigma, r_gamma, r_key, r_lead = rest_m[i]
+                r = rest_m[i]
+                r_kids, r_order, r_sigma, r_gamma, r_key, r_lead, _ = r
                 lead = r_lead + 1 if r_kids and r_kids[0][4] == c1_key else 1
                 append(make(Tree, ((c1,) + r_kids, n, r_sigma * c1_sigma * lead,
-                                   r_gamma // r_order * n * c1_gamma, shifted + r_key[1:], lead)))
-        if degenerate and n == 2:
-            out = []  # b[b] is not in T_0
-        by_order.append(out)
-        rest = out[::-1] if not (degenerate and n == 2) else [graft_child(LEAF, LEAF)]
+                                   r_gamma // r_order * n * c1_gamma, shifted + r_key[1:], lead, r)))
+        if self.degenerate and n == 2:
+            out = []  # b[b] is not in T_0, but it is a rest: b[c1, b] is
+            rest = [graft_child(LEAF, LEAF)]
+        else:
+            rest = out[::-1]
+        by_order.append(tuple(out))
         rests.append(rest)
-        first_keys.append([r.children[0].key for r in rest])
-    return tuple(tuple(x) for x in by_order)
+        first_keys.append([r[0][0][4] for r in rest])
+
+
+_TABLES: dict[bool, _TreeTable] = {}
+
+
+def _table(max_order: int, degenerate: bool) -> list[tuple[Tree, ...]]:
+    """The trees of orders 0..(at least) max_order by order (index 0 empty), grown on demand."""
+    table = _TABLES.get(degenerate)
+    if table is None:
+        table = _TABLES[degenerate] = _TreeTable(degenerate)
+    if table.size < max_order:
+        table.grow(max_order)
+    return table.by_order
+
+
+def _reset_tables() -> None:
+    """Forget the enumerated trees (benchmarks measure enumeration from scratch)."""
+    _TABLES.clear()
 
 
 def trees_of_order(n: int, degenerate: bool = False) -> tuple[Tree, ...]:
     """All trees of order exactly n in T (or T_0 when degenerate), in canonical order."""
     check_order(n)
-    return _table(_cache_size(n), degenerate)[n]
+    return _table(n, degenerate)[n]
 
 
 def trees_up_to(n: int, degenerate: bool = False) -> list[Tree]:
     """All trees of order 1..n in T (or T_0), grouped by increasing order, canonical within."""
     check_order(n)
-    table = _table(_cache_size(n), degenerate)
+    table = _table(n, degenerate)
     return [t for m in range(1, n + 1) for t in table[m]]
-
-
-def _cache_size(n: int) -> int:
-    """Round the table size up so that repeated calls with nearby orders share one table."""
-    return max(n, 8)
 
 
 # ----------------------------------------------------------------------------- counting
