@@ -20,6 +20,10 @@ _LAZY = {
     "InputError": "rkhp.errors",
     "NumericalFailure": "rkhp.errors",
     "integrate": "rkhp.integrators.rkhp_method",
+    "Tableau": "rkhp.tableau",
+    "load_tableau": "rkhp.tablefiles",
+    "verify": "rkhp.verify",
+    "get_system": "rkhp.systems",
 }
 
 __all__ = sorted(_LAZY)
