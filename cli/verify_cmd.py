@@ -110,7 +110,7 @@ def tables(precision, fmt):
     if fmt == "json":
         emit_json([{"name": tab.name, "aliases": list(tab.aliases), "stages": tab.stages,
                     "kind": tab.kind, "order": r.order, "degenerate_order": r.degenerate_order,
-                    "orders": dict(r.orders), "precision": r.precision,
+                    "symmetric_order": r.orders.get("symmetric"), "orders": dict(r.orders), "precision": r.precision,
                     "claimed": {"order": tab.claimed_order,
                                 "degenerate_order": tab.claimed_degenerate_order},
                     "claim_ok": r.claim_ok, "reference": tab.reference} for tab, r in rows])

@@ -136,6 +136,7 @@ class Verification:
             "kind": self.kind,
             "order": self.order,
             "degenerate_order": self.degenerate_order,
+            "symmetric_order": self.orders.get("symmetric"),
             "checked_up_to": self.checked_up_to,
             "precision": self.precision,
             "tolerance": self.tolerance,
