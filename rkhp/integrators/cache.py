@@ -1,29 +1,33 @@
-"""Where numba keeps compiled code (`cache=True`): next to the modules when that folder is
-writable, else in a user cache folder ($XDG_CACHE_HOME/rkhp/numba or ~/.cache/rkhp/numba).
+"""Where numba keeps compiled code (`cache=True`).
 
-Imported before numba by every compiled module, so the setting is in place when numba reads it.
+numba checks only the time stamp of the file that defines a cached function, not of the files
+whose functions it calls: after an edit of `jets.py`, the cached engine would still run the old
+interpreter. So the cache lives in a user folder named by a hash of the compiled sources
+(`rkhp/integrators/*.py` and `rkhp/systems/tape.py`):
+$XDG_CACHE_HOME/rkhp/numba/<hash> (default ~/.cache/rkhp/numba/<hash>). A NUMBA_CACHE_DIR set by
+the user is respected. Every compiled module imports numba from here.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 from pathlib import Path
 
 
-def _configure() -> None:
-    if "NUMBA_CACHE_DIR" in os.environ:
-        return
+def cache_dir() -> Path:
     here = Path(__file__).resolve().parent
-    pycache = here / "__pycache__"
-    target = pycache if pycache.exists() else here
-    if os.access(target, os.W_OK):
-        return
-    base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
-    os.environ["NUMBA_CACHE_DIR"] = str(base / "rkhp" / "numba")
+    digest = hashlib.sha256()
+    for path in sorted(here.glob("*.py")) + [here.parent / "systems" / "tape.py"]:
+        digest.update(path.name.encode())
+        digest.update(path.read_bytes())
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "rkhp" / "numba" / digest.hexdigest()[:16]
 
 
-_configure()
+import numba  # noqa: E402
 
-import numba  # noqa: E402  (after the cache folder is set)
+if not os.environ.get("NUMBA_CACHE_DIR"):
+    numba.config.CACHE_DIR = str(cache_dir())
 
-__all__ = ["numba"]
+__all__ = ["numba", "cache_dir"]

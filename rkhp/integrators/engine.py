@@ -126,13 +126,27 @@ def _max_abs(v):
 
 
 @nb.njit(**NJIT)
-def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next):
-    """One RKHP step from y into y_next; returns (failure code, Newton iterations)."""
+def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
+    """One RKHP step from y into y_next; returns (failure code, Newton iterations).
+
+    hist[0], hist[1]: psi of the two previous steps, memo[0]: how many of them there are,
+    memo[1]: Newton's quadratic constant L (|dx_{k+1}| ~ L |dx_k|^2) measured on an earlier step
+    (0 when unknown). The start is predicted: psi extrapolated linearly from the previous steps,
+    x from alpha(x, psi_predicted) = y by cheap Newton steps (no tower); then a tower step whose
+    next correction L |dx|^2 is predicted below the tolerance is the last one.
+    """
     W, G, scratch, psi, Jpsi, alpha, Jalpha, x, delta, res = buf
     n = y.shape[0]
     scale = max(1.0, _max_abs(y))
     for k in range(n):
         x[k] = y[k]
+    if memo[0] >= 1.0:
+        for k in range(n):
+            res[k] = 2.0 * hist[0, k] - hist[1, k] if memo[0] >= 2.0 else hist[0, k]
+        _polish(y, x, res, tapes[2], space, W, scratch, Jalpha, alpha, delta, scale, 1)
+        if not np.isfinite(_max_abs(x)):
+            for k in range(n):
+                x[k] = y[k]
     previous = np.inf
     converged = False
     it = 0
@@ -147,7 +161,14 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next):
             return NEWTON_NON_FINITE, it
         for k in range(n):
             x[k] += delta[k]
-        predicted = size * size * size / (previous * previous) if previous < np.inf else np.inf
+        if previous < np.inf and previous > 1e3 * tol * scale and size < 0.5 * previous:
+            memo[1] = size / (previous * previous)
+        if previous < np.inf:
+            predicted = size * size * size / (previous * previous)
+        elif memo[1] > 0.0:
+            predicted = 2.0 * memo[1] * size * size
+        else:
+            predicted = np.inf
         if size <= tol * scale or (size < 0.5 * previous and predicted <= tol * scale):
             converged = True
             for k in range(n):
@@ -161,7 +182,11 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next):
         previous = size
     if not converged:
         return NO_CONVERGENCE, it
-    _polish(y, x, res, tapes[2], space, W, scratch, Jalpha, alpha, delta, scale)
+    _polish(y, x, res, tapes[2], space, W, scratch, Jalpha, alpha, delta, scale, 1)
+    for k in range(n):
+        hist[1, k] = hist[0, k]
+        hist[0, k] = res[k]
+    memo[0] = min(memo[0] + 1.0, 2.0)
     btape = tapes[3]
     for k in range(n):
         W[k, 0] = x[k]
@@ -175,14 +200,15 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next):
 
 
 @nb.njit(**NJIT)
-def _polish(y, x, p, atape, space, W, scratch, J, alpha, delta, scale):
-    """Solve alpha(x, p) = y for x with p fixed, to round-off (at most 3 cheap Newton steps).
+def _polish(y, x, p, atape, space, W, scratch, J, alpha, delta, scale, iterations):
+    """Solve alpha(x, p) = y for x with p fixed, to round-off (at most `iterations` cheap
+    Newton steps, no tower).
 
     With p fixed, C(beta(x, p)) = C(alpha(x, p)) for every Casimir C, so this keeps the Casimirs
     to round-off whatever the accuracy of psi (NOTES §4): only alpha's residual matters.
     """
     n = y.shape[0]
-    for _ in range(3):
+    for _ in range(iterations):
         _set_x(W, x, n, 1)
         for k in range(n):
             row = W[n + k]
@@ -228,11 +254,13 @@ def rkhp_run(y0, A, b, h, n_steps, tapes, space, n_slots, domain, tol, max_iter,
     """
     n = y0.shape[0]
     buf = make_buffers(n, b.shape[0], n_slots, space)
+    hist = np.zeros((2, n))
+    memo = np.zeros(2)
     y = y0.copy()
     y_next = np.zeros(n)
     states[0, :] = y
     for step in range(n_steps):
-        code, it = rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next)
+        code, it = rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo)
         iterations[step] = it
         if code == OK and not in_domain(y_next, domain):
             code = LEFT_DOMAIN

@@ -351,7 +351,7 @@ def run_tape(tape, W, D, space, scratch):
     """Evaluate a tape at truncation degree D; inputs are W[0:n_inputs] (already set)."""
     ops, fpar, args = tape[0], tape[1], tape[2]
     M = space[0][D]
-    coef = np.empty(D + 1)
+    coef = scratch[scratch.shape[0] - 1]
     for r in range(ops.shape[0]):
         code, out, a, b, k = ops[r, 0], ops[r, 1], ops[r, 2], ops[r, 3], ops[r, 4]
         o = W[out]
