@@ -19,7 +19,7 @@ from fractions import Fraction
 import numpy as np
 
 from ..errors import InputError
-from ..trees import LEAF, Tree
+from ..trees import Tree
 
 #: Largest order a search accepts: the conditions over T number 200 up to order 8, 719 more at 9.
 MAX_SEARCH_ORDER = 8
@@ -65,6 +65,9 @@ class ResidualSystem:
     conditions: tuple
     trees: tuple[Tree, ...]
     error_trees: tuple[Tree, ...]
+    children: tuple[tuple[int, ...], ...]
+    condition_terms: tuple[tuple[tuple[int, Fraction], ...], ...]
+    error_index: tuple[int, ...]
 
     @classmethod
     def build(cls_, stages: int, order: int, cls: str = "general", implicit: bool = False,
@@ -89,8 +92,12 @@ class ResidualSystem:
         for t in error_trees:
             add(t)
         trees = tuple(sorted(needed, key=lambda t: (t.order, t.key)))
+        index = {t: k for k, t in enumerate(trees)}
+        children = tuple(tuple(index[c] for c in t.children) for t in trees)
+        terms = tuple(tuple((index[t], w) for t, w in zip(c.trees, c.weights, strict=True))
+                      for c in conds)
         return cls_(stages, order, cls, implicit, unknown_pattern(stages, implicit), conds, trees,
-                    error_trees)
+                    error_trees, children, terms, tuple(index[t] for t in error_trees))
 
     # ------------------------------------------------------------------ layout
 
@@ -125,10 +132,12 @@ class ResidualSystem:
 
     # ------------------------------------------------------------------ evaluation
 
-    def weights(self, x, jacobian: bool = True, trees=None):
-        """a(t) (and da(t)/dx when ``jacobian``) for ``trees`` (default: all needed trees).
+    def weights(self, x, jacobian: bool = True):
+        """a(t) for every needed tree (list, in ``trees`` order) and, with ``jacobian``, the rows
+        da(t)/dx (list of arrays of length n_unknowns; None without).
 
-        Returns dicts tree -> value and tree -> row of length n_unknowns (None without jacobian).
+        Stage vectors by increasing order, each from its children's: u = A Phi(c),
+        du = A dPhi(c) + (dA) Phi(c), Phi = prod u, dPhi = sum_k (prod_{l != k} u_l) du_k.
         """
         s, n = self.stages, self.n_unknowns
         na = len(self.pattern)
@@ -137,46 +146,48 @@ class ResidualSystem:
         cols = np.array([j for _, j in self.pattern], dtype=int)
         ar = np.arange(na)
         one = np.ones(s, dtype=x.dtype)
-        phi = {LEAF: one}
-        dphi = {LEAF: np.zeros((s, n), dtype=x.dtype)} if jacobian else None
-        u_cache: dict[Tree, tuple] = {}
-
-        def u_of(t: Tree):
-            if t not in u_cache:
-                u = A @ phi[t]
-                du = None
-                if jacobian:
-                    du = A @ dphi[t]
-                    du[rows, ar] += phi[t][cols]
-                u_cache[t] = (u, du)
-            return u_cache[t]
-
-        for t in self.trees:
-            if t.order == 1:
+        count = len(self.trees)
+        phi: list = [None] * count
+        dphi: list = [None] * count
+        u_cache: list = [None] * count
+        for k, kids in enumerate(self.children):
+            if not kids:
+                phi[k] = one
+                dphi[k] = np.zeros((s, n), dtype=x.dtype) if jacobian else None
                 continue
-            us = [u_of(c) for c in t.children]
+            us = []
+            for c in kids:
+                if u_cache[c] is None:
+                    du = None
+                    if jacobian:
+                        du = A @ dphi[c]
+                        du[rows, ar] += phi[c][cols]
+                    u_cache[c] = (A @ phi[c], du)
+                us.append(u_cache[c])
             value = us[0][0]
             for u, _ in us[1:]:
                 value = value * u
-            phi[t] = value
+            phi[k] = value
             if jacobian:
-                d = np.zeros((s, n), dtype=x.dtype)
-                for k, (_, du) in enumerate(us):
-                    others = one
-                    for m, (u, _) in enumerate(us):
-                        if m != k:
-                            others = others * u
-                    d += others[:, None] * du
-                dphi[t] = d
-        wanted = self.trees if trees is None else trees
-        values = {t: b @ phi[t] for t in wanted}
+                if len(us) == 1:
+                    dphi[k] = us[0][1]
+                else:
+                    d = np.zeros((s, n), dtype=x.dtype)
+                    for m, (_, du) in enumerate(us):
+                        others = one
+                        for l, (u, _) in enumerate(us):
+                            if l != m:
+                                others = others * u
+                        d += others[:, None] * du
+                    dphi[k] = d
+        values = [b @ v for v in phi]
         if not jacobian:
             return values, None
-        grads = {}
-        for t in wanted:
-            g = b @ dphi[t]
-            g[na:] += phi[t]
-            grads[t] = g
+        grads = []
+        for k in range(count):
+            g = b @ dphi[k]
+            g[na:] += phi[k]
+            grads.append(g)
         return values, grads
 
     def residuals(self, x, jacobian: bool = True):
@@ -186,25 +197,30 @@ class ResidualSystem:
         m, n = self.n_conditions, self.n_unknowns
         r = np.zeros(m, dtype=x.dtype)
         J = np.zeros((m, n), dtype=x.dtype) if jacobian else None
-        for k, cond in enumerate(self.conditions):
-            for t, w in zip(cond.trees, cond.weights, strict=True):
-                wk = conv(w)
-                r[k] += wk * (t.gamma * values[t] - 1)
+        trees = self.trees
+        for k, terms in enumerate(self.condition_terms):
+            for i, w in terms:
+                wk = 1 if w == 1 else conv(w)
+                gamma = trees[i].gamma
+                r[k] += wk * (gamma * values[i] - 1)
                 if jacobian:
-                    J[k] += (wk * t.gamma) * grads[t]
+                    J[k] += (wk * gamma) * grads[i]
         return r, J
 
     def principal_error(self, x, jacobian: bool = True):
         """Entries (a(t) - 1/gamma(t)) / sigma(t) over the trees of order N+1 (NOTES §2)."""
         if not self.error_trees:
             raise ValueError("ResidualSystem built without with_error=True")
-        values, grads = self.weights(x, jacobian, self.error_trees)
+        values, grads = self.weights(x, jacobian)
         conv = _converter(x)
-        e = np.array([(values[t] - conv(Fraction(1, t.gamma))) / t.sigma for t in self.error_trees],
+        e = np.array([(values[i] - conv(Fraction(1, t.gamma))) / t.sigma
+                      for i, t in zip(self.error_index, self.error_trees, strict=True)],
                      dtype=x.dtype)
         if not jacobian:
             return e, None
-        return e, np.array([grads[t] / t.sigma for t in self.error_trees], dtype=x.dtype)
+        return e, np.array([grads[i] / t.sigma
+                            for i, t in zip(self.error_index, self.error_trees, strict=True)],
+                           dtype=x.dtype)
 
 
 def _converter(x):
