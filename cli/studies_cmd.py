@@ -61,7 +61,8 @@ def _table(title, **kw):
     from rich import box
     from rich.table import Table
 
-    return Table(title=title, title_justify="left", box=box.SIMPLE_HEAD, pad_edge=False, **kw)
+    return Table(title=title, title_justify="left", box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True,
+                 **kw)
 
 
 def _e(x) -> str:
@@ -108,7 +109,7 @@ def converge(system, methods, realisation, t_final, steps, refinements, plot, fm
 
 
 SHORT_ROLES = {"pre-asymptotic": "pre", "round-off floor": "floor", "order drift": "drift",
-               "no asymptotic range": "no fit"}
+               "no asymptotic range": "no fit", "below reference accuracy": "<ref"}
 
 
 def _role(method, i) -> str:
@@ -127,20 +128,22 @@ def _render_converge(study, plot) -> None:
               f"errors <= {ref.floor:.1e} are not reported as measurements")
     for m in study.methods:
         table = _table(f"{m.method} ({m.kind})")
-        for col in ("h", "steps", "error", "order", "Casimir", "energy", "Newton", "seconds", "fit"):
-            table.add_column(col, justify="right" if col != "fit" else "left")
+        for col in ("h", "steps", "error", "order", "Casimir", "energy", "Newton", "s", "fit"):
+            table.add_column(col, justify="right" if col != "fit" else "left", no_wrap=True)
         for i, r in enumerate(m.rows):
             error = _e(r.error) if r.status == "ok" and r.error is not None else (
                 f"<{study.reference.floor:.0e}" if r.status == "ok" else "failed")
-            table.add_row(f"{r.h:.4g}", str(r.steps), error, _f(r.local_order), _e1(r.casimir_error),
+            role = SHORT_ROLES.get(_role(m, i), _role(m, i))
+            table.add_row(f"{r.h:.3g}", str(r.steps), error, _f(r.local_order), _e1(r.casimir_error),
                           _e1(r.energy_error), f"{r.newton_mean:.1f}/{r.newton_max}", f"{r.seconds:.4f}",
-                          _role(m, i) if r.status == "ok" else "failed")
+                          role if r.status == "ok" else "failed")
         out.print(table)
         failed = [r.status for r in m.rows if r.status != "ok"]
         if failed:
             out.print(f"  failed runs: {'; '.join(failed)}")
     out.print("columns: global error at T (2-norm), local order, max Casimir and energy errors over the run, "
-              "Newton iterations mean/max, run seconds (compile apart), role in the fit")
+              "Newton iterations mean/max, run seconds (compile apart), role in the fit (pre = pre-asymptotic, "
+              "floor = round-off floor, drift = order drift, <ref = below the reference's accuracy)")
     out.print("[bold]verdicts[/]")
     for m in study.methods:
         kind = "degenerate" if study.degenerate and m.kind == "rkhp" else "general"
