@@ -132,8 +132,9 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
     hist[0], hist[1]: psi of the two previous steps, memo[0]: how many of them there are,
     memo[1]: Newton's quadratic constant L (|dx_{k+1}| ~ L |dx_k|^2) measured on an earlier step
     (0 when unknown). The start is predicted: psi extrapolated linearly from the previous steps,
-    x from alpha(x, psi_predicted) = y by cheap Newton steps (no tower); then a tower step whose
-    next correction L |dx|^2 is predicted below the tolerance is the last one.
+    x from alpha(x, psi_predicted) = y by a cheap Newton step (no tower). A first tower step
+    stops when 2 max(L, 1/max(1, |y|)) |dx|^2 is below the tolerance; later ones likewise with
+    L = |dx_k| / |dx_{k-1}|^2 measured on this step (NOTES §7).
     """
     W, G, scratch, psi, Jpsi, alpha, Jalpha, x, delta, res = buf
     n = y.shape[0]
@@ -163,12 +164,10 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
             x[k] += delta[k]
         if previous < np.inf and previous > 1e3 * tol * scale and size < 0.5 * previous:
             memo[1] = size / (previous * previous)
-        if previous < np.inf:
-            predicted = size * size * size / (previous * previous)
-        elif memo[1] > 0.0:
-            predicted = 2.0 * memo[1] * size * size
-        else:
-            predicted = np.inf
+        # next correction ~ L |dx|^2; one measured L can be far too small (a correction along a
+        # flat direction), hence the floor 1 / scale
+        L = size / (previous * previous) if previous < np.inf else 2.0 * memo[1]
+        predicted = max(L, 1.0 / scale) * size * size
         if size <= tol * scale or (size < 0.5 * previous and predicted <= tol * scale):
             converged = True
             for k in range(n):
