@@ -304,22 +304,23 @@ def _render_stress(study, plot) -> None:
     out.print(f"verdict (c): {verdicts['c']}")
     ro = study.round_off
     out.print(f"[bold](d) tiny steps[/]: T = {ro.t_final:g}, reference {ro.reference_kind} "
-              f"(errors <= {ro.reference_floor:.1e} not measured)")
+              f"(errors <= {ro.reference_floor:.1e} not measured); error at T and max energy error")
     table = _table(None)
     table.add_column("steps", justify="right")
     for m in ro.studies:
         table.add_column(m.method, justify="right")
     for i, r in enumerate(ro.studies[0].rows):
         cells = []
-        for m in ro.studies:
+        for m, energy in zip(ro.studies, ro.energy_fits, strict=True):
             row = m.rows[i]
-            role = _role(m, i)
             if row.status != "ok":
                 cells.append("failed")
-            elif row.error is None:
-                cells.append(f"< {ro.reference_floor:.1e}")
-            else:
-                cells.append(_e(row.error) + ("" if role in ("fit", "") else f" {SHORT_ROLES.get(role, role)}"))
+                continue
+            role = SHORT_ROLES.get(_role(m, i), _role(m, i))
+            error = f"<{ro.reference_floor:.0e}" if row.error is None else _e1(row.error)
+            e_role = "" if i in energy.fit_rows else SHORT_ROLES.get(dict(energy.excluded).get(i, ""), "")
+            cells.append(f"{error}{'' if role == 'fit' else ' ' + role} | {_e1(row.energy_error)}"
+                         f"{'' if not e_role else ' ' + e_role}")
         table.add_row(str(r.steps), *cells)
     out.print(table)
     out.print("marks: pre = pre-asymptotic, floor = round-off floor, drift = order drift (left out of the fit)")

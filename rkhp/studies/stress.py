@@ -21,6 +21,7 @@ import numpy as np
 
 from ..errors import InputError
 from .converge import check_t_final, study_method
+from .fit import fit_order
 from .invariants import invariant_deviations, max_deviations, window_maxima
 from .methods import resolve_method
 from .reference import reference
@@ -253,46 +254,68 @@ def near_singular(methods, system, t_final: float, steps: int = SINGULAR_STEPS,
     return SingularResult(True, tuple(runs))
 
 
+def _floor_row(fit) -> int | None:
+    rows = [i for i, why in fit.excluded if why == "round-off floor"]
+    return rows[0] if rows else None
+
+
 @dataclass(frozen=True)
 class RoundOffResult:
+    """Part (d). ``studies``: the convergence tables (error at T against the reference);
+    ``energy_fits``: fits of the energy error (max over the run), which needs no reference, so its
+    round-off floor shows even where the error at T is below the reference's accuracy."""
+
     t_final: float
     reference_kind: str
     reference_floor: float
     studies: tuple
+    energy_fits: tuple
 
     @staticmethod
-    def _line(m) -> str:
-        floor_rows = [i for i, why in m.fit.excluded if why == "round-off floor"]
+    def _line(m, energy) -> str:
+        floor = _floor_row(m.fit)
         below = [i for i, why in m.fit.excluded if why == "below reference accuracy"]
-        if floor_rows:
-            r = m.rows[floor_rows[0]]
-            last = m.rows[m.fit.fit_rows[-1]]
-            return (f"{m.method}: round-off floor from h = {r.h:.3g} (error {_fmt(r.measured_error)}; "
-                    f"last asymptotic point h = {last.h:.3g}, error {_fmt(last.error)})")
-        if below:
-            r = m.rows[below[0]]
-            return (f"{m.method}: no floor above the reference's accuracy; error reaches it at h = {r.h:.3g}")
-        return f"{m.method}: no round-off floor down to h = {m.rows[-1].h:.3g} (error {_fmt(m.rows[-1].error)})"
+        if floor is not None:
+            r = m.rows[floor]
+            head = (f"{m.method}: error at T reaches a round-off floor from h = {r.h:.3g} "
+                    f"(error {_fmt(r.measured_error)})")
+        elif below:
+            head = (f"{m.method}: error at T reaches the reference's accuracy at h = {m.rows[below[0]].h:.3g} "
+                    f"before any round-off floor")
+        else:
+            head = f"{m.method}: no round-off floor in the error at T down to h = {m.rows[-1].h:.3g}"
+        e_floor = _floor_row(energy)
+        if e_floor is not None:
+            r = m.rows[e_floor]
+            return f"{head}; energy error at its round-off floor from h = {r.h:.3g} ({_fmt(r.energy_error)})"
+        return f"{head}; no round-off floor in the energy error down to h = {m.rows[-1].h:.3g}"
 
     def verdict(self) -> str:
-        return "; ".join(self._line(m) for m in self.studies)
+        return "; ".join(self._line(m, e) for m, e in zip(self.studies, self.energy_fits, strict=True))
 
     def to_json(self) -> dict:
         out = []
-        for m in self.studies:
+        for m, energy in zip(self.studies, self.energy_fits, strict=True):
             data = m.to_json()
-            floor_rows = [i for i, why in m.fit.excluded if why == "round-off floor"]
-            data["floor_h"] = m.rows[floor_rows[0]].h if floor_rows else None
+            floor, e_floor = _floor_row(m.fit), _floor_row(energy)
+            data["floor_h"] = None if floor is None else m.rows[floor].h
+            data["energy_observed_order"] = energy.slope
+            data["energy_floor_h"] = None if e_floor is None else m.rows[e_floor].h
             out.append(data)
         return {"t_final": self.t_final, "reference": {"kind": self.reference_kind, "floor": self.reference_floor},
                 "methods": out, "verdict": self.verdict()}
 
 
 def round_off(methods, system, t_final: float, steps=ROUND_OFF_STEPS) -> RoundOffResult:
-    """Part (d): errors at T for h down to T/10^5; the first row past the asymptotic range."""
+    """Part (d): errors at T and energy errors for h down to T/10^5; the first row past the
+    asymptotic range of each fit (energy errors at or below 2 eps |H(x0)| are not measurements)."""
     ref = reference(system, t_final)
     studies = tuple(study_method(m, system, ref, tuple(steps), t_final) for m in methods)
-    return RoundOffResult(t_final, ref.kind, ref.floor, studies)
+    h0 = abs(float(system.hamiltonian(np.asarray(system.x0, dtype=float))))
+    energy_floor = 2 * np.finfo(float).eps * max(h0, 1e-300)
+    energy = tuple(fit_order([r.h for r in m.rows], [r.energy_error for r in m.rows], floor=energy_floor)
+                   for m in studies)
+    return RoundOffResult(t_final, ref.kind, ref.floor, studies, energy)
 
 
 @dataclass(frozen=True)
