@@ -358,3 +358,19 @@ def test_full_default_converge_and_bench():
     assert all(m["verdict"] == "confirmed" for m in json.loads(result.output)["methods"])
     data = _bench_json([])
     assert any(c["method"] is not None for c in data["cheapest"])
+
+
+def test_round_off_floor_of_the_energy_error():
+    """Part (d): the energy error of the 3-stage method stops falling at round-off level."""
+    from rkhp.studies.methods import resolve_method
+    from rkhp.studies.stress import round_off
+
+    rigid = get_system("rigid-body")
+    result = round_off([resolve_method("paper-three-stage")], rigid, 10.0, steps=(100, 316, 1000, 3162, 10000, 31623))
+    (study,), (energy,) = result.studies, result.energy_fits
+    assert energy.slope == pytest.approx(4, abs=0.15)
+    data = result.to_json()["methods"][0]
+    assert data["energy_floor_h"] is not None
+    floor_row = next(r for r in study.rows if r.h == data["energy_floor_h"])
+    assert floor_row.energy_error < 1e-13  # round-off level for |H| ~ 0.65 after ~10^4 steps
+    assert "round-off floor" in result.verdict()
