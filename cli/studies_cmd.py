@@ -207,7 +207,8 @@ def _render_bench(study, plot) -> None:
     for c in study.curves:
         extra = f", compile {c.compile_seconds:.2f} s apart" if c.kind == "rkhp" else ""
         timed = f", {c.trajectories} trajectories timed" if study.ensemble else ""
-        table = _table(f"{c.method} ({c.kind}{extra}{timed})")
+        out.print(f"[bold]{c.method}[/] ({c.kind}{extra}{timed})")
+        table = _table(None)
         for col in ("steps" if c.kind != "scipy" else "rtol", "error", "seconds", "f evals", "status"):
             table.add_column(col, justify="right")
         for p in c.points:
