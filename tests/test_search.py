@@ -227,6 +227,7 @@ def test_degenerate_order_5_needs_4_stages():
                                             ("search-degenerate-o4-s3", "degenerate", 4),
                                             ("search-degenerate-o5-s4", "degenerate", 5),
                                             ("search-degenerate-o4-s3-min-error", "degenerate", 4),
+                                            ("search-degenerate-o5-s4-min-error", "degenerate", 5),
                                             ("search-degenerate-o6-s6", "degenerate", 6),
                                             ("search-symmetric-o6-s5", "symmetric", 6)])
 def test_saved_tables_verify(name, cls, order):
@@ -241,6 +242,8 @@ def test_saved_error_optimum_beats_the_known_three_stage_methods():
     best = verify("search-degenerate-o4-s3-min-error").principal_error["degenerate"]
     for name in ("paper-three-stage", "kutta3", "search-degenerate-o4-s3"):
         assert best < verify(name).principal_error["degenerate"]
+    best5 = verify("search-degenerate-o5-s4-min-error").principal_error["degenerate"]
+    assert best5 < verify("search-degenerate-o5-s4").principal_error["degenerate"]
 
 
 @pytest.mark.slow
