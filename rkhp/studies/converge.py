@@ -10,7 +10,7 @@ order: paper, Theorem 5.1 and §4) and a verdict.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -158,8 +158,6 @@ def study_method(method, system, ref: Reference, steps, t_final: float, on_run=N
 
 
 def _with_local_order(row: ConvergenceRow, p) -> ConvergenceRow:
-    from dataclasses import replace
-
     return replace(row, local_order=p)
 
 

@@ -6,7 +6,6 @@ before a study runs, so a bad path costs nothing.
 
 from __future__ import annotations
 
-import math
 import os
 from pathlib import Path
 
@@ -120,11 +119,3 @@ def plot_stress(stress, path) -> Path:
     fig.suptitle(f"long run, {stress.system}, h = {stress.long_run.h:g}", fontsize=9)
     _save(fig, path)
     return path
-
-
-def finite_or_none(value):
-    """A float for JSON: None for None, nan or infinities."""
-    if value is None:
-        return None
-    value = float(value)
-    return value if math.isfinite(value) else None
