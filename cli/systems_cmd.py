@@ -9,15 +9,11 @@ import click
 
 from .options import console, emit_json, format_option
 
-REALISATION_CHOICES = ("symmetric", "shifted")
-
 
 def realisation_option():
-    from rkhp.systems.core import REALISATIONS
-
-    return click.option("--realisation", type=click.Choice(sorted(REALISATIONS)),
-                        default="symmetric", show_default=True,
-                        help="Birealisation: symmetric (degenerate) or shifted (x + Q p; general).")
+    return click.option("--realisation", default="symmetric", show_default=True,
+                        help="Birealisation: symmetric (degenerate), shifted (x + Q p; general), "
+                             "or another registered kind.")
 
 
 def _fmt(v, digits=6) -> str:

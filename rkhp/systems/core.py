@@ -66,7 +66,21 @@ register_realisation("shifted", _q_shift, False,
                      "alpha(x + Q p, p), Q = 1/2 on the diagonal and 1/4 off it (NOTES §4)")
 
 
+#: modules that register further realisations when imported (e.g. issue 7's quartic kind)
+REALISATION_MODULES = ("rkhp.systems.quartic",)
+
+
 def realisation(name: str) -> Realisation:
+    """The realisation kind called `name` (InputError listing the known kinds otherwise)."""
+    if name not in REALISATIONS:
+        import importlib
+
+        for module in REALISATION_MODULES:
+            try:
+                importlib.import_module(module)
+            except ModuleNotFoundError as exc:
+                if exc.name != module:
+                    raise
     if name not in REALISATIONS:
         raise InputError(f"unknown realisation {name!r}; choose one of {', '.join(REALISATIONS)}")
     return REALISATIONS[name]
