@@ -51,9 +51,10 @@ def solve_small(J, r, out):
 
 
 @nb.njit(**NJIT)
-def _set_x(W, x0, n, D):
+def _set_x(W, x0, n, D, M):
+    """Input rows 0..n-1: the jets x0_k + dx_k (degree <= D, M coefficients)."""
     for k in range(n):
-        for m in range(W.shape[1]):
+        for m in range(M):
             W[k, m] = 0.0
         W[k, 0] = x0[k]
         if D >= 1:
@@ -61,58 +62,58 @@ def _set_x(W, x0, n, D):
 
 
 @nb.njit(**NJIT)
-def tower(x0, A, b, h, tapes, space, W, G, scratch, psi, Jpsi, alpha, Jalpha):
-    """psi, its Jacobian, alpha(x0, psi(x0)) and d/dx of alpha(x, psi(x)) at x0 (see module)."""
+def tower(x0, A, b, h, tapes, space, W, G, scratch, psi, Jpsi, alpha, Jalpha, jacobian):
+    """psi and alpha(x0, psi(x0)) at x0 (see module); with `jacobian`, also Dpsi and the
+    Jacobian of x -> alpha(x, psi(x)) (stage degrees s + 2 - i; without, s + 1 - i)."""
     ftape, htape, atape = tapes[0], tapes[1], tapes[2]
     counts, up, expo = space[0], space[5], space[6]
     s = b.shape[0]
     n = x0.shape[0]
+    extra = 1 if jacobian else 0
     for i in range(s):
-        D = s + 1 - i
+        D = s + extra - i
         M = counts[D]
-        _set_x(W, x0, n, D)
+        _set_x(W, x0, n, D, M)
         zero_row = True
         for j in range(i):
             if A[i, j] != 0.0:
                 zero_row = False
         for k in range(n):
-            row = W[n + k]
             for m in range(M):
-                row[m] = 0.0
+                W[n + k, m] = 0.0
             for j in range(i):
                 c = h * A[i, j]
                 if c != 0.0:
                     for m in range(M):
-                        row[m] += c * G[j, k, m]
+                        W[n + k, m] += c * G[j, k, m]
         tape = htape if zero_row else ftape
         run_tape(tape, W, D, space, scratch)
-        g = W[tape[3][0]]
+        g = tape[3][0]
         for k in range(n):
             for m in range(counts[D - 1]):
-                G[i, k, m] = (expo[m, k] + 1) * g[up[m, k]]
+                G[i, k, m] = (expo[m, k] + 1) * W[g, up[m, k]]
     for k in range(n):
         psi[k] = 0.0
-        for l in range(n):
-            Jpsi[k, l] = 0.0
         for i in range(s):
-            c = h * b[i]
-            psi[k] += c * G[i, k, 0]
+            psi[k] += h * b[i] * G[i, k, 0]
+        if jacobian:
             for l in range(n):
-                Jpsi[k, l] += c * G[i, k, 1 + l]
-    _set_x(W, x0, n, 1)
+                acc = 0.0
+                for i in range(s):
+                    acc += h * b[i] * G[i, k, 1 + l]
+                Jpsi[k, l] = acc
+    _set_x(W, x0, n, extra, n + 1)
     for k in range(n):
-        row = W[n + k]
-        for m in range(W.shape[1]):
-            row[m] = 0.0
-        row[0] = psi[k]
+        W[n + k, 0] = psi[k]
         for l in range(n):
-            row[1 + l] = Jpsi[k, l]
-    run_tape(atape, W, 1, space, scratch)
+            W[n + k, 1 + l] = Jpsi[k, l] if jacobian else 0.0
+    run_tape(atape, W, extra, space, scratch)
     for k in range(n):
-        a = W[atape[3][k]]
-        alpha[k] = a[0]
-        for l in range(n):
-            Jalpha[k, l] = a[1 + l]
+        a = atape[3][k]
+        alpha[k] = W[a, 0]
+        if jacobian:
+            for l in range(n):
+                Jalpha[k, l] = W[a, 1 + l]
 
 
 @nb.njit(**NJIT)
@@ -132,9 +133,11 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
     hist[0], hist[1]: psi of the two previous steps, memo[0]: how many of them there are,
     memo[1]: Newton's quadratic constant L (|dx_{k+1}| ~ L |dx_k|^2) measured on an earlier step
     (0 when unknown). The start is predicted: psi extrapolated linearly from the previous steps,
-    x from alpha(x, psi_predicted) = y by a cheap Newton step (no tower). A first tower step
-    stops when 2 max(L, 1/max(1, |y|)) |dx|^2 is below the tolerance; later ones likewise with
-    L = |dx_k| / |dx_{k-1}|^2 measured on this step (NOTES §7).
+    x from alpha(x, psi_predicted) = y by a cheap Newton step (no tower). The first tower has the
+    Jacobian; it is the last when max(2 L, 1/max(1, |y|)) |dx|^2 is below the tolerance. Later
+    iterations are chord steps with value-only towers (one degree less, about a third of the
+    cost), stopped when theta/(1 - theta) |dx_k| is (theta = |dx_k|/|dx_{k-1}|); the Jacobian is
+    refreshed when theta > 1/4 (NOTES §7 measured 2 full towers per step instead of 3).
     """
     W, G, scratch, psi, Jpsi, alpha, Jalpha, x, delta, res = buf
     n = y.shape[0]
@@ -150,10 +153,12 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
                 x[k] = y[k]
     previous = np.inf
     converged = False
+    full = True
     it = 0
     while it < max_iter:
         it += 1
-        tower(x, A, b, h, tapes, space, W, G, scratch, psi, Jpsi, alpha, Jalpha)
+        # a full tower (Jacobian) first; then value-only towers with that Jacobian (chord)
+        tower(x, A, b, h, tapes, space, W, G, scratch, psi, Jpsi, alpha, Jalpha, full)
         for k in range(n):
             res[k] = y[k] - alpha[k]
         solve_small(Jalpha, res, delta)
@@ -164,11 +169,15 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
             x[k] += delta[k]
         if previous < np.inf and previous > 1e3 * tol * scale and size < 0.5 * previous:
             memo[1] = size / (previous * previous)
-        # next correction ~ L |dx|^2; one measured L can be far too small (a correction along a
-        # flat direction), hence the floor 1 / scale
-        L = size / (previous * previous) if previous < np.inf else 2.0 * memo[1]
-        predicted = max(L, 1.0 / scale) * size * size
-        if size <= tol * scale or (size < 0.5 * previous and predicted <= tol * scale):
+        if previous < np.inf:
+            # chord step: |dx_{k+1}| <~ theta |dx_k| with theta = |dx_k| / |dx_{k-1}|
+            theta = size / previous
+            predicted = theta / (1.0 - theta) * size if theta < 0.5 else np.inf
+        else:
+            # next correction ~ L |dx|^2; one measured L can be far too small (a correction
+            # along a flat direction), hence the floor 1 / scale
+            predicted = max(2.0 * memo[1], 1.0 / scale) * size * size
+        if size <= tol * scale or predicted <= tol * scale:
             converged = True
             for k in range(n):
                 acc = psi[k]
@@ -178,6 +187,8 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
             break
         if size > 1e8 * scale:
             break
+        # refresh the Jacobian when the chord iteration converges slowly
+        full = previous < np.inf and size > 0.25 * previous
         previous = size
     if not converged:
         return NO_CONVERGENCE, it
@@ -208,18 +219,17 @@ def _polish(y, x, p, atape, space, W, scratch, J, alpha, delta, scale, iteration
     """
     n = y.shape[0]
     for _ in range(iterations):
-        _set_x(W, x, n, 1)
+        _set_x(W, x, n, 1, n + 1)
         for k in range(n):
-            row = W[n + k]
-            for m in range(W.shape[1]):
-                row[m] = 0.0
-            row[0] = p[k]
+            W[n + k, 0] = p[k]
+            for l in range(n):
+                W[n + k, 1 + l] = 0.0
         run_tape(atape, W, 1, space, scratch)
         for k in range(n):
-            a = W[atape[3][k]]
-            alpha[k] = y[k] - a[0]
+            a = atape[3][k]
+            alpha[k] = y[k] - W[a, 0]
             for l in range(n):
-                J[k, l] = a[1 + l]
+                J[k, l] = W[a, 1 + l]
         solve_small(J, alpha, delta)
         for k in range(n):
             x[k] += delta[k]
