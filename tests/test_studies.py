@@ -374,3 +374,22 @@ def test_round_off_floor_of_the_energy_error():
     floor_row = next(r for r in study.rows if r.h == data["energy_floor_h"])
     assert floor_row.energy_error < 1e-13  # round-off level for |H| ~ 0.65 after ~10^4 steps
     assert "round-off floor" in result.verdict()
+
+
+def test_converge_on_spec_file_system_with_tableau_file(tmp_path):
+    """A system from a spec file (no exact solution: DOP853 reference) and a method from a file."""
+    from rkhp.tablefiles import load_tableau, save_tableau
+
+    spec = tmp_path / "lv.json"
+    spec.write_text('{"family": "log-canonical", "lambda": [[0,1,2],[-1,0,1],[-2,-1,0]], '
+                    '"hamiltonian": "x1 + x2 + x3 - log(x1) - log(x2) - log(x3)", "x0": [0.5, 1, 2]}')
+    method = tmp_path / "three.toml"
+    save_tableau(load_tableau("paper-three-stage"), method)
+    result = _run(["converge", str(spec), "--method", f"{method},classical:{method}", "--t-final", "3",
+                   "--steps", "40", "--refinements", "4", "--format", "json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert data["reference"]["kind"] == "dop853" and data["t_final"] == 3.0
+    rkhp_m, classical_m = data["methods"]
+    assert (rkhp_m["expected_order"], classical_m["expected_order"]) == (4, 1)  # degenerate vs general order
+    assert rkhp_m["verdict"] == classical_m["verdict"] == "confirmed"
