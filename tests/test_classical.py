@@ -135,3 +135,18 @@ def test_bad_start_and_tableau(rigid):
         integrate_midpoint(get_system("lotka-volterra"), 0.1, 10, x0=[-1.0, 1.0, 1.0])
     with pytest.raises(InputError, match="explicit"):
         integrate_classical(rigid, load_tableau("gauss2"), 0.1, 10)
+
+
+def test_kernel_self_check_turns_a_mismatch_into_an_error(rigid, monkeypatch):
+    """A compiled kernel that disagrees with the system's own evaluation (as a stale numba cache
+    would) raises instead of returning numbers."""
+    from dataclasses import replace
+
+    from rkhp.errors import NumericalFailure
+    from rkhp.integrators import classical
+
+    monkeypatch.setattr(classical, "_VERIFIED", set())
+    wrong = replace(rigid, poisson=lambda x: 2 * rigid.poisson(x))  # pi differs from the alpha tape's
+    with pytest.raises(NumericalFailure, match="stale numba cache"):
+        integrate_classical(wrong, load_tableau("rk4"), 0.1, 10)
+    assert integrate_classical(rigid, load_tableau("rk4"), 0.1, 10).ok

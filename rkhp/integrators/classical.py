@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, NumericalFailure
 from .jets import NJIT, jet_space, nb, run_tape, scratch_rows
 from .trajectory import Trajectory
 
@@ -239,6 +239,42 @@ def _workspace(system):
             np.zeros((scratch_rows(at.n_inputs) + at.n_inputs, M)))
 
 
+_VERIFIED: set[str] = set()
+
+
+def _verify(name: str, system, ws) -> None:
+    """Once per process and kernel, compare a compiled kernel with the system's own evaluation
+    (``system.vector_field``, ``system.hamiltonian``, through ``jets.evaluate``).
+
+    numba's on-disk cache of this module is keyed by this file only, so a change of ``jets.py``
+    can leave stale compiled code behind; this turns that into an error, never into wrong numbers.
+    """
+    if name in _VERIFIED:
+        return
+    ht, at, space, Wh, Wa, sh, sa = ws
+    x = np.array(system.x0, dtype=np.float64)
+    f = np.asarray(system.vector_field(x), dtype=np.float64)
+    h = 1e-3
+    states = np.empty((2, x.size))
+    if name == "field":
+        got, want = np.empty(x.size), f
+        _field(x, ht, at, space, Wh, Wa, sh, sa, got)
+    elif name == "rk":
+        _rk_loop(ht, at, space, np.zeros((1, 1)), np.ones(1), h, 1, x, False, states, Wh, Wa, sh, sa)
+        got, want = states[1], x + h * f
+    else:
+        _midpoint_loop(ht, at, space, h, 1, x, False, NEWTON_TOLERANCE, NEWTON_MAX_ITERATIONS, states,
+                       np.zeros(1, dtype=np.int64), Wh, Wa, sh, sa)
+        got = states[1]
+        want = x + h * np.asarray(system.vector_field((x + got) / 2), dtype=np.float64)
+    scale = max(1.0, float(np.max(np.abs(want))))
+    if not np.all(np.abs(got - want) <= 1e-12 * scale):
+        raise NumericalFailure(f"compiled {name} kernel of rkhp.integrators.classical disagrees with {system.name}'s "
+                               "own evaluation (stale numba cache after a source change?): delete the *.nbi/*.nbc "
+                               "files of classical in the numba cache folder and run again")
+    _VERIFIED.add(name)
+
+
 def _compiled(kernel) -> bool:
     return bool(kernel.signatures)
 
@@ -287,6 +323,7 @@ def integrate_classical(system, tableau, h, n_steps, x0=None) -> Trajectory:
     states = np.empty((n_steps + 1, x.size))
     started = time.perf_counter()
     compile_s = _warm_up(_rk_loop, (ht, at, space, A, b, h, 1, x, positive, np.empty((2, x.size)), Wh, Wa, sh, sa))
+    _verify("rk", system, (ht, at, space, Wh, Wa, sh, sa))
     k_done, code = _rk_loop(ht, at, space, A, b, h, n_steps, x, positive, states, Wh, Wa, sh, sa)
     newton = np.zeros(n_steps, dtype=np.int64)
     return _trajectory(system, f"classical {tableau.name}", h, k_done, code, states, newton, started, compile_s)
@@ -318,6 +355,7 @@ def integrate_midpoint(system, h, n_steps, x0=None) -> Trajectory:
     started = time.perf_counter()
     compile_s = _warm_up(_midpoint_loop, (ht, at, space, h, 1, x, positive, tol, max_it, np.empty((2, x.size)),
                                           np.zeros(1, dtype=np.int64), Wh, Wa, sh, sa))
+    _verify("midpoint", system, (ht, at, space, Wh, Wa, sh, sa))
     k_done, code = _midpoint_loop(ht, at, space, h, n_steps, x, positive, tol, max_it, states, newton,
                                   Wh, Wa, sh, sa)
     extra = {"newton_tolerance": tol, "newton_max_iterations": max_it}
@@ -326,7 +364,9 @@ def integrate_midpoint(system, h, n_steps, x0=None) -> Trajectory:
 
 def vector_field(system):
     """The compiled Poisson vector field ``x -> pi(x) grad H(x)`` of a system (NOTES §4)."""
-    ht, at, space, Wh, Wa, sh, sa = _workspace(system)
+    ws = _workspace(system)
+    ht, at, space, Wh, Wa, sh, sa = ws
+    _verify("field", system, ws)
 
     def f(x):
         out = np.empty(system.dim)
@@ -345,4 +385,10 @@ def hamiltonian_values(system, states) -> np.ndarray:
     scratch = np.zeros((scratch_rows(ht.n_inputs) + ht.n_inputs, space.size))
     out = np.empty(len(states))
     _hamiltonian_loop(ht.packed(), space.packed(), states, W, scratch, out)
+    if "hamiltonian" not in _VERIFIED and len(out):
+        want = system.hamiltonian(states[0])
+        if not abs(out[0] - want) <= 1e-12 * max(1.0, abs(want)):
+            raise NumericalFailure("compiled Hamiltonian kernel of rkhp.integrators.classical disagrees with "
+                                   f"{system.name}'s own evaluation (stale numba cache after a source change?)")
+        _VERIFIED.add("hamiltonian")
     return out
