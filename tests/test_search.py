@@ -92,6 +92,18 @@ def test_four_stages_general_reach_order_4():
     assert result.failed_run.problem.order == 5
 
 
+def test_implicit_searches_find_the_paper_one_stage_method_and_gauss():
+    one = search(1, 3, "degenerate", implicit=True, options=SearchOptions(restarts=20, seed=0))
+    assert one.found.exact and abs(abs(one.found.tableau.A_float[0, 0]) - 3 ** -0.5) < 1e-15
+    gauss = search(2, 4, "general", implicit=True, options=SearchOptions(restarts=20, seed=0))
+    ref = load_tableau("gauss2")
+    assert gauss.found.exact and gauss.found.verification.orders["general"] == 4
+    # the two-stage order-4 method is unique up to the order of the stages
+    A = gauss.found.tableau.A_float
+    assert np.allclose(A, ref.A_float, atol=1e-15) or np.allclose(A[::-1, ::-1], ref.A_float,
+                                                                  atol=1e-15)
+
+
 @pytest.mark.parametrize("stages,order,cls", [(2, 3, "general"), (2, 4, "degenerate")])
 def test_groebner_proves_impossibility(stages, order, cls):
     proof = prove_impossible(ResidualSystem.build(stages, order, cls), time_limit=60)
@@ -276,3 +288,18 @@ def test_symmetric_class_needs_fewer_stages():
     five = search(5, 6, "symmetric", options=SearchOptions(restarts=30, seed=0))
     assert five.found is not None and five.found.verification.orders["symmetric"] >= 6
     assert five.found.verification.orders["degenerate"] < 6
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["search-degenerate-o3-s2", "search-degenerate-o4-s3",
+                                  "search-degenerate-o5-s4", "search-degenerate-o4-s3-min-error",
+                                  "search-degenerate-o5-s4-min-error", "search-degenerate-o6-s6",
+                                  "search-symmetric-o6-s5"])
+def test_saved_tables_are_reproduced_by_their_reference_command(name, tmp_path):
+    tab = load_tableau(name)
+    words = tab.reference.split()
+    assert words[:2] == ["rkhp", "search"]
+    out = _cli(*words[2:], "--save", str(tmp_path / "again.toml"))
+    assert out.returncode == 0, out.stderr
+    again = load_tableau(str(tmp_path / "again.toml"))
+    assert again.A == tab.A and again.b == tab.b

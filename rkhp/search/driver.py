@@ -198,18 +198,20 @@ def make_tableau(problem: Problem, entries, name: str):
 
 def verified(problem: Problem, x_float, polished, digits: int, closed: bool, name: str,
              restart: int | None) -> Found | None:
-    """Verify a polished solution (after trying a closed form); None if verification disagrees."""
+    """Verify a polished solution: exactly when its entries (or, with ``closed``, those of a
+    nearby member of its family, see :func:`closed_form`) have closed forms that satisfy the
+    conditions, else at D digits. None if the verification disagrees with the search."""
     from ..verify import verify
+    from .recognise import closed_form, recognise_point
 
-    if closed:
-        from .recognise import closed_form
-
-        exact, pol = closed_form(problem.system(), x_float, digits)
-        if exact is not None:
-            tab = make_tableau(problem, exact, name)
-            ver = verify(tab, max_order=problem.order + 1, precision="exact")
-            if ver.orders[problem.cls] >= problem.order:
-                return Found(problem.order, tab, ver, 0.0, restart)
+    exact = recognise_point(problem.system(), polished)
+    if exact is None and closed:
+        exact, _ = closed_form(problem.system(), x_float, digits)
+    if exact is not None:
+        tab = make_tableau(problem, exact, name)
+        ver = verify(tab, max_order=problem.order + 1, precision="exact")
+        if ver.orders[problem.cls] >= problem.order:
+            return Found(problem.order, tab, ver, 0.0, restart)
     tab = make_tableau(problem, list(polished.x), name)
     ver = verify(tab, max_order=problem.order + 1, precision=digits)
     if ver.orders[problem.cls] >= problem.order:

@@ -162,6 +162,12 @@ def _size(exact) -> int:
     return sum(len(str(v)) for v in exact)
 
 
+def recognise_point(system: ResidualSystem, pol: Polished):
+    """Closed forms of every entry of a polished point as it is (no parameter fixed), kept only
+    if the order conditions then hold exactly; else None."""
+    return _recognise_all(system, pol, {}, pol.digits)
+
+
 def _recognise_all(system: ResidualSystem, pol: Polished, fixed: dict, digits: int):
     exact = []
     for k, text in enumerate(pol.x):
