@@ -130,9 +130,9 @@ def _max_abs(v):
 def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
     """One RKHP step from y into y_next; returns (failure code, Newton iterations).
 
-    hist[0], hist[1]: psi of the two previous steps, memo[0]: how many of them there are,
+    hist[0..2]: psi of the three previous steps, memo[0]: how many of them there are,
     memo[1]: Newton's quadratic constant L (|dx_{k+1}| ~ L |dx_k|^2) measured on an earlier step
-    (0 when unknown). The start is predicted: psi extrapolated linearly from the previous steps,
+    (0 when unknown). The start is predicted: psi extrapolated (quadratically) from the previous steps,
     x from alpha(x, psi_predicted) = y by a cheap Newton step (no tower). The first tower has the
     Jacobian; it is the last when max(2 L, 1/max(1, |y|)) |dx|^2 is below the tolerance. Later
     iterations are chord steps with value-only towers (one degree less, about a third of the
@@ -146,7 +146,12 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
         x[k] = y[k]
     if memo[0] >= 1.0:
         for k in range(n):
-            res[k] = 2.0 * hist[0, k] - hist[1, k] if memo[0] >= 2.0 else hist[0, k]
+            if memo[0] >= 3.0:
+                res[k] = 3.0 * (hist[0, k] - hist[1, k]) + hist[2, k]
+            elif memo[0] >= 2.0:
+                res[k] = 2.0 * hist[0, k] - hist[1, k]
+            else:
+                res[k] = hist[0, k]
         _polish(y, x, res, tapes[2], space, W, scratch, Jalpha, alpha, delta, scale, 1)
         if not np.isfinite(_max_abs(x)):
             for k in range(n):
@@ -194,9 +199,10 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
         return NO_CONVERGENCE, it
     _polish(y, x, res, tapes[2], space, W, scratch, Jalpha, alpha, delta, scale, 1)
     for k in range(n):
+        hist[2, k] = hist[1, k]
         hist[1, k] = hist[0, k]
         hist[0, k] = res[k]
-    memo[0] = min(memo[0] + 1.0, 2.0)
+    memo[0] = min(memo[0] + 1.0, 3.0)
     btape = tapes[3]
     for k in range(n):
         W[k, 0] = x[k]
@@ -263,7 +269,7 @@ def rkhp_run(y0, A, b, h, n_steps, tapes, space, n_slots, domain, tol, max_iter,
     """
     n = y0.shape[0]
     buf = make_buffers(n, b.shape[0], n_slots, space)
-    hist = np.zeros((2, n))
+    hist = np.zeros((3, n))
     memo = np.zeros(2)
     y = y0.copy()
     y_next = np.zeros(n)
