@@ -246,8 +246,10 @@ def _verify(name: str, system, ws) -> None:
     """Once per process and kernel, compare a compiled kernel with the system's own evaluation
     (``system.vector_field``, ``system.hamiltonian``, through ``jets.evaluate``).
 
-    numba's on-disk cache of this module is keyed by this file only, so a change of ``jets.py``
-    can leave stale compiled code behind; this turns that into an error, never into wrong numbers.
+    numba checks only the time stamp of the file defining a cached function, not of ``jets.py``
+    whose interpreter it inlines; :mod:`rkhp.integrators.cache` names the cache folder by a hash
+    of the sources, but a user's own NUMBA_CACHE_DIR kept across a source change would still
+    serve stale code. This check turns that into an error, never into wrong numbers.
     """
     if name in _VERIFIED:
         return
