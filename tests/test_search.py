@@ -299,7 +299,7 @@ def test_saved_tables_are_reproduced_by_their_reference_command(name, tmp_path):
     tab = load_tableau(name)
     words = tab.reference.split()
     assert words[:2] == ["rkhp", "search"]
-    out = _cli(*words[2:], "--save", str(tmp_path / "again.toml"))
+    out = _cli(*words[1:], "--save", str(tmp_path / "again.toml"))
     assert out.returncode == 0, out.stderr
     again = load_tableau(str(tmp_path / "again.toml"))
     assert again.A == tab.A and again.b == tab.b
