@@ -163,6 +163,8 @@ def _render(result, save) -> None:
         for k in opt.known:
             rows.add_row(k.name, f"{k.error_norm:.6g}")
         con.print(rows)
+        if opt.kkt_residual is not None:
+            con.print(f"optimum stationary to D digits: max |KKT residual| {opt.kkt_residual:.2g}")
     ev = data["evidence_next_order"]
     if ev is not None and ev["restarts"]:
         con.print(f"order {ev['order']} not reached: {ev['restarts']} restarts, best max residual "

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import InputError
 from .multistart import Problem, Restarts, run_restarts
-from .optimise import KnownMethod, known_methods, minimise_error
+from .optimise import KnownMethod, known_methods, minimise_error, refine_optimum
 from .polish import polish
 from .prove import Proof, prove_impossible
 from .system import MAX_SEARCH_ORDER, check_problem
@@ -82,11 +82,13 @@ class Found:
 
 @dataclass(frozen=True)
 class Optimisation:
-    """--optimize error: the optimum's principal error norm beside known methods' norms."""
+    """--optimize error: the optimum's principal error norm beside known methods' norms, and the
+    KKT residual of the D-digit refinement (None when the refinement did not converge)."""
 
     error_norm: float
     starts: int
     known: tuple[KnownMethod, ...]
+    kkt_residual: float | None
 
 
 @dataclass(frozen=True)
@@ -173,6 +175,7 @@ class SearchResult:
             "interrupted": self.interrupted,
             "optimization": None if self.optimisation is None else {
                 "error_norm": self.optimisation.error_norm, "starts": self.optimisation.starts,
+                "kkt_residual": self.optimisation.kkt_residual,
                 "known": [{"name": k.name, "principal_error": k.error_norm}
                           for k in self.optimisation.known]},
             "proof_detail": None if self.proof is None else {
@@ -294,12 +297,14 @@ def _optimise(problem: Problem, run: Restarts, options: SearchOptions, found: Fo
     opt = minimise_error(system, starts)
     known = tuple(known_methods(system))
     if opt is None:
-        return found, Optimisation(float("nan"), len(starts), known)
-    pol = polish(system, np.array(opt.x), options.digits)
+        return found, Optimisation(float("nan"), len(starts), known, None)
+    refined = refine_optimum(system, opt.x, options.digits)
+    pol = polish(system, refined.x if refined.converged else np.array(opt.x), options.digits)
     candidate = None
     if pol.converged:
         name = method_name(problem) + "-min-error"
         candidate = verified(problem, opt.x, pol, options.digits, False, name, None)
     best = candidate or found
     norm = best.verification.principal_error.get(problem.cls)
-    return best, Optimisation(norm, len(starts), known)
+    kkt = refined.kkt_residual if candidate is not None and refined.converged else None
+    return best, Optimisation(norm, len(starts), known, kkt)
