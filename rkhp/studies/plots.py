@@ -103,14 +103,16 @@ def plot_work_precision(bench, path) -> Path:
 
 
 def plot_stress(stress, path) -> Path:
-    """Casimir and energy drift per window of the long run (part b), log scale."""
+    """Casimir and energy drift per window of the long run (part b), log scale; the classical
+    RK4 peer dashed."""
     path = check_plot_path(path)
     plt = _pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
-    for run in stress.long_run.runs:
+    for run in (*stress.long_run.runs, stress.long_run.peer):
         x = range(1, len(run.casimir_windows) + 1)
-        axes[0].semilogy(x, [max(v, 1e-17) for v in run.casimir_windows], "o-", label=run.method)
-        axes[1].semilogy(x, [max(v, 1e-17) for v in run.energy_windows], "o-", label=run.method)
+        style = "s--" if run is stress.long_run.peer else "o-"
+        axes[0].semilogy(x, [max(v, 1e-17) for v in run.casimir_windows], style, label=run.method)
+        axes[1].semilogy(x, [max(v, 1e-17) for v in run.energy_windows], style, label=run.method)
     for ax, what in zip(axes, ("Casimir", "energy"), strict=True):
         ax.set_xlabel(f"window (of {stress.long_run.windows}, {stress.long_run.steps} steps in all)")
         ax.set_ylabel(f"max {what} error in window")
