@@ -69,7 +69,7 @@ def tower(x0, A, b, h, tapes, space, W, G, scratch, psi, Jpsi, alpha, Jalpha, ja
     counts, up, expo = space[0], space[5], space[6]
     s = b.shape[0]
     n = x0.shape[0]
-    extra = 1 if jacobian else 0
+    extra = np.int64(1) if jacobian else np.int64(0)
     for i in range(s):
         D = s + extra - i
         M = counts[D]
@@ -152,13 +152,13 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
                 res[k] = 2.0 * hist[0, k] - hist[1, k]
             else:
                 res[k] = hist[0, k]
-        _polish(y, x, res, tapes[2], space, W, scratch, Jalpha, alpha, delta, scale, 1)
+        _polish(y, x, res, tapes[2], space, W, scratch, Jalpha, alpha, delta, scale, np.int64(1))
         if not np.isfinite(_max_abs(x)):
             for k in range(n):
                 x[k] = y[k]
     previous = np.inf
     converged = False
-    full = True
+    full = np.bool_(True)
     it = 0
     while it < max_iter:
         it += 1
@@ -193,11 +193,11 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
         if size > 1e8 * scale:
             break
         # refresh the Jacobian when the chord iteration converges slowly
-        full = previous < np.inf and size > 0.25 * previous
+        full = np.bool_(previous < np.inf and size > 0.25 * previous)
         previous = size
     if not converged:
         return NO_CONVERGENCE, it
-    _polish(y, x, res, tapes[2], space, W, scratch, Jalpha, alpha, delta, scale, 1)
+    _polish(y, x, res, tapes[2], space, W, scratch, Jalpha, alpha, delta, scale, np.int64(1))
     for k in range(n):
         hist[2, k] = hist[1, k]
         hist[1, k] = hist[0, k]
@@ -207,7 +207,7 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
     for k in range(n):
         W[k, 0] = x[k]
         W[n + k, 0] = res[k]
-    run_tape(btape, W, 0, space, scratch)
+    run_tape(btape, W, np.int64(0), space, scratch)
     for k in range(n):
         y_next[k] = W[btape[3][k], 0]
     if not np.isfinite(_max_abs(y_next)):
@@ -225,12 +225,12 @@ def _polish(y, x, p, atape, space, W, scratch, J, alpha, delta, scale, iteration
     """
     n = y.shape[0]
     for _ in range(iterations):
-        _set_x(W, x, n, 1, n + 1)
+        _set_x(W, x, n, np.int64(1), n + 1)
         for k in range(n):
             W[n + k, 0] = p[k]
             for l in range(n):
                 W[n + k, 1 + l] = 0.0
-        run_tape(atape, W, 1, space, scratch)
+        run_tape(atape, W, np.int64(1), space, scratch)
         for k in range(n):
             a = atape[3][k]
             alpha[k] = y[k] - W[a, 0]
