@@ -287,7 +287,7 @@ def _render_stress(study, plot) -> None:
         table.add_column(col, justify="right")
     for r in (*lr.runs, lr.peer):
         table.add_row(r.method, _e(r.casimir_max), _e(r.energy_windows[0]), _e(r.energy_windows[-1]),
-                      f"x{r.energy_growth:.2g}", f"{r.seconds:.2f}")
+                      "—" if r.energy_growth is None else f"x{r.energy_growth:.2g}", f"{r.seconds:.2f}")
     out.print(table)
     for r in (*lr.runs, lr.peer):
         if r.status != "ok":

@@ -145,11 +145,11 @@ class LongRun:
         return max(self.casimir_windows)
 
     @property
-    def energy_growth(self) -> float:
+    def energy_growth(self) -> float | None:
         """Energy error of the last window over that of the first (about 1: bounded; about the
-        number of windows: linear drift)."""
+        number of windows: linear drift); None when the first window's error is 0."""
         first = self.energy_windows[0]
-        return self.energy_windows[-1] / first if first > 0 else math.inf
+        return self.energy_windows[-1] / first if first > 0 else None
 
     def to_json(self) -> dict:
         return {"method": self.method, "status": self.status, "casimir_windows": list(self.casimir_windows),
@@ -167,12 +167,12 @@ class LongRunResult:
 
     def verdict(self) -> str:
         kept = [r for r in self.runs if r.status == "ok" and r.casimir_max <= CASIMIR_KEPT]
-        parts = [f"{r.method} Casimir {_fmt(r.casimir_max)}, energy growth x{r.energy_growth:.2g}" for r in self.runs]
+        parts = [f"{r.method} Casimir {_fmt(r.casimir_max)}, energy growth x{_fmt(r.energy_growth)}" for r in self.runs]
         peer = self.peer
         head = (f"over {self.steps} steps, {len(kept)} of {len(self.runs)} RKHP methods keep the Casimir "
                 f"(<= {CASIMIR_KEPT:g})")
         return (f"{head}: {'; '.join(parts)}; {peer.method} drifts to Casimir {_fmt(peer.casimir_max)}, "
-                f"energy growth x{peer.energy_growth:.2g}")
+                f"energy growth x{_fmt(peer.energy_growth)}")
 
     def to_json(self) -> dict:
         return {"h": self.h, "steps": self.steps, "windows": self.windows, "runs": [r.to_json() for r in self.runs],
