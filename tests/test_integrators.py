@@ -190,3 +190,33 @@ def test_thp_orders_on_shifted_rigid_body(order, degenerate, expected):
         errors.append(np.abs(tr.final_state - system.exact_solution(T_ORDERS)).max())
     slope = np.polyfit(np.log(hs), np.log(errors), 1)[0]
     assert abs(slope - expected) <= 0.15, slope
+
+
+def test_taylor_arithmetic_against_sympy():
+    """Degree-4 jets of a Hamiltonian using every primitive, against sympy's derivatives."""
+    import math
+
+    import sympy
+
+    from rkhp.integrators.jets import _monomials, jet_space, run_tape, scratch_rows
+    from rkhp.systems.spec import parse_expression, to_program
+    from rkhp.systems.tape import record
+
+    text = ("exp(x1) * sin(x2) / (1 + x1^2) + sqrt(x2 + 2) * cos(x1 * x2) + log(x1 + 3) "
+            "- x2^(-3) + (x1 + 2)^1.5 + tan(x1 / 3) + cosh(x2) * tanh(x1)")
+    expr, symbols = parse_expression(text, 2, "test")
+    tape = record(2, lambda x, p: [to_program(expr, symbols)(x)])
+    x0 = (0.3, 0.7)
+    D = 4
+    space = jet_space(2, D)
+    W = np.zeros((tape.n_slots, space.size))
+    for k in range(2):
+        W[k, 0] = x0[k]
+        W[k, 1 + k] = 1.0
+    run_tape(tape.packed(), W, D, space.packed(), np.zeros((scratch_rows(2), space.size)))
+    jet = W[tape.outputs[0]]
+    at = dict(zip(symbols, x0, strict=True))
+    for index, (e1, e2) in enumerate(_monomials(2, D)):
+        exact = float(sympy.diff(expr, symbols[0], e1, symbols[1], e2).evalf(30, subs=at))
+        exact /= math.factorial(e1) * math.factorial(e2)
+        assert jet[index] == pytest.approx(exact, rel=1e-12, abs=1e-12), (e1, e2)
