@@ -8,7 +8,8 @@
 (c) near-singular starts of a log-canonical system (first species at 1e-3 and 1e-6): positivity
     and Casimir kept;
 (d) tiny steps (h = T/N down to T/10^5): where the round-off floor starts, i.e. the first step
-    size past the asymptotic range of the fit of :mod:`rkhp.studies.fit`.
+    size past the asymptotic range of the fit of :mod:`rkhp.studies.fit`, for the error at T
+    (limited by the reference's accuracy) and for the energy error (which needs no reference).
 Each part ends with a plain verdict line.
 """
 
@@ -43,6 +44,8 @@ def _fmt(x: float | None) -> str:
 
 @dataclass(frozen=True)
 class SweepRow:
+    """One run of part (a): ``steps`` steps of size ``h`` to T; errors relative to |x(T)|, |H(x0)|."""
+
     h: float
     steps: int
     status: str
@@ -71,6 +74,8 @@ class SweepRow:
 
 @dataclass(frozen=True)
 class SweepResult:
+    """Part (a) for one method, rows in increasing h."""
+
     method: str
     rows: tuple[SweepRow, ...]
 
@@ -134,6 +139,8 @@ def sweep(method, system, t_final: float, coarsest: int = SWEEP_COARSEST, factor
 
 @dataclass(frozen=True)
 class LongRun:
+    """Part (b) for one method: the maximum Casimir and energy error in each window."""
+
     method: str
     casimir_windows: tuple[float, ...]
     energy_windows: tuple[float, ...]
@@ -159,6 +166,8 @@ class LongRun:
 
 @dataclass(frozen=True)
 class LongRunResult:
+    """Part (b): the methods' long runs and the classical RK4 peer's."""
+
     h: float
     steps: int
     windows: int
@@ -197,6 +206,8 @@ def long_run(methods, system, h: float, steps: int = LONG_STEPS, windows: int = 
 
 @dataclass(frozen=True)
 class SingularRun:
+    """Part (c): one method from a start with the first species at ``first_species``."""
+
     method: str
     first_species: float
     status: str
@@ -214,6 +225,8 @@ class SingularRun:
 
 @dataclass(frozen=True)
 class SingularResult:
+    """Part (c): every run, or why the part does not apply."""
+
     applicable: bool
     runs: tuple[SingularRun, ...]
     reason: str = ""
@@ -320,6 +333,8 @@ def round_off(methods, system, t_final: float, steps=ROUND_OFF_STEPS) -> RoundOf
 
 @dataclass(frozen=True)
 class StressStudy:
+    """``rkhp stress``'s result (JSON keys in the README's studies section)."""
+
     system: str
     realisation: str
     t_final: float
