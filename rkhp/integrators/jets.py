@@ -69,8 +69,8 @@ class JetSpace:
     """Tables for jets in `n_vars` variables truncated at degree <= `degree`.
 
     counts[d]: number of monomials of degree <= d; the product pairs (pa[t], pb[t]) of monomial c
-    are t in start[c]:start[c + 1]; up[m, k]: index of m + e_k (or -1); expo[m, k]: exponent of
-    variable k in monomial m.
+    are t in start[c]:start[c + 1]; up[m, k]: index of m + e_k (0 where deg m = degree);
+    expo[m, k]: exponent of variable k in monomial m. Index tables are unsigned (see jet_mul).
     """
 
     n_vars: int
@@ -126,7 +126,7 @@ def jet_space(n_vars: int, degree: int) -> JetSpace:
     pairs.sort()
     arr = np.array(pairs, dtype=np.int64).reshape(-1, 3)
     start = np.searchsorted(arr[:, 0], np.arange(len(monos) + 1)).astype(np.uint64)
-    up = -np.ones((len(monos), max(n_vars, 1)), dtype=np.int64)
+    up = np.zeros((len(monos), max(n_vars, 1)), dtype=np.uint64)
     expo = np.zeros((len(monos), max(n_vars, 1)), dtype=np.int64)
     for i, m in enumerate(monos):
         for k in range(n_vars):
