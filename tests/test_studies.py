@@ -106,6 +106,22 @@ def test_dop853_reference_of_lotka_volterra_keeps_its_casimir():
     assert ref.floor == pytest.approx(10 * ref.error_estimate)
 
 
+def test_dop853_error_estimate_is_honest_against_mpmath():
+    """Lotka–Volterra (NOTES §6) solved independently by mpmath's Taylor integrator at 25 digits:
+    the DOP853 reference is within its own error estimate."""
+    import mpmath
+
+    from rkhp.studies.reference import reference
+
+    lam = [[0, 1, 2], [-1, 0, 1], [-2, -1, 0]]
+    with mpmath.workdps(25):
+        solution = mpmath.odefun(lambda t, x: [x[i] * sum(lam[i][j] * (x[j] - 1) for j in range(3))
+                                               for i in range(3)], 0, [mpmath.mpf("0.5"), 1, 2])
+        exact = np.array([float(v) for v in solution(3)])
+    ref = reference(get_system("lotka-volterra"), 3.0)
+    assert np.linalg.norm(ref.state - exact) <= ref.error_estimate
+
+
 # ----------------------------------------------------------------------------------------------
 # convergence studies with the RKHP integrators (orders: paper Table 1 / Theorem 5.1, NOTES §6)
 
