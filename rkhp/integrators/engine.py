@@ -4,9 +4,11 @@ At the Newton iterate x0, each stage function g_i(x) = f(x, Z_i(x)), f = H o alp
 Taylor polynomial in dx = x - x0, truncated at degree s + 2 - i (1-based i); g_1 = H;
 Z_i = h sum_{j<i} a_ij grad g_j is read off the coefficients. psi = h sum_i b_i grad g_i and its
 Jacobian are the degree-0 and degree-1 coefficients. Newton solves alpha(x, psi(x)) = y (Jacobian
-by the same jets), stopping when the correction, or the correction Newton's quadratic rate
-predicts for the next iterate, is below the tolerance (then psi + Dpsi dx is reused at the new x,
-NOTES §7); y_next = beta(x, psi(x)). Each stage is computed once: the cost is polynomial in s.
+by the same jets) from a predicted start, then chord steps with value-only towers, stopping when
+the predicted next correction is below the tolerance (then psi + Dpsi dx is reused at the new x,
+NOTES §7); a last cheap correction of x at fixed p makes alpha(x, p) = y hold to round-off (so
+the Casimirs are kept); y_next = beta(x, p). Each stage is computed once: the cost is
+polynomial in s (see `rkhp_step`).
 
 The tableau, h and the states are data: one compilation serves every system and tableau.
 Failure codes: 0 ok, 1 Newton did not converge, 2 non-finite values, 3 left the domain,
@@ -132,11 +134,11 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
 
     hist[0..2]: psi of the three previous steps, memo[0]: how many of them there are,
     memo[1]: Newton's quadratic constant L (|dx_{k+1}| ~ L |dx_k|^2) measured on an earlier step
-    (0 when unknown). The start is predicted: psi extrapolated (quadratically) from the previous steps,
-    x from alpha(x, psi_predicted) = y by a cheap Newton step (no tower). The first tower has the
+    (0 when unknown). The start is predicted: psi extrapolated (quadratically) from the previous
+    steps, x from alpha(x, psi_predicted) = y by a cheap Newton step (no tower). The first tower has the
     Jacobian; it is the last when max(2 L, 1/max(1, |y|)) |dx|^2 is below the tolerance. Later
-    iterations are chord steps with value-only towers (one degree less, about a third of the
-    cost), stopped when theta/(1 - theta) |dx_k| is (theta = |dx_k|/|dx_{k-1}|); the Jacobian is
+    iterations are chord steps with value-only towers (one degree less, about half the cost),
+    stopped when theta/(1 - theta) |dx_k| is (theta = |dx_k|/|dx_{k-1}|); the Jacobian is
     refreshed when theta > 1/4 (NOTES §7 measured 2 full towers per step instead of 3).
     """
     W, G, scratch, psi, Jpsi, alpha, Jalpha, x, delta, res = buf
