@@ -154,7 +154,8 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
                 res[k] = 2.0 * hist[0, k] - hist[1, k]
             else:
                 res[k] = hist[0, k]
-        _polish(y, x, res, tapes[2], space, W, scratch, Jalpha, alpha, delta, scale, np.int64(1))
+        _polish(y, x, res, tapes[2], space, W, scratch, Jalpha, alpha, delta, scale, np.int64(1),
+                np.bool_(True))
         if not np.isfinite(_max_abs(x)):
             for k in range(n):
                 x[k] = y[k]
@@ -199,7 +200,8 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
         previous = size
     if not converged:
         return NO_CONVERGENCE, it
-    _polish(y, x, res, tapes[2], space, W, scratch, Jalpha, alpha, delta, scale, np.int64(1))
+    _polish(y, x, res, tapes[2], space, W, scratch, Jalpha, alpha, delta, scale, np.int64(1),
+            np.bool_(False))
     for k in range(n):
         hist[2, k] = hist[1, k]
         hist[1, k] = hist[0, k]
@@ -218,26 +220,32 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
 
 
 @nb.njit(**NJIT)
-def _polish(y, x, p, atape, space, W, scratch, J, alpha, delta, scale, iterations):
-    """Solve alpha(x, p) = y for x with p fixed, to round-off (at most `iterations` cheap
-    Newton steps, no tower).
+def _polish(y, x, p, atape, space, W, scratch, J, alpha, delta, scale, iterations, exact):
+    """Solve alpha(x, p) = y for x with p fixed by at most `iterations` cheap steps (no tower):
+    with `exact`, Newton steps (J := d_x alpha(x, p) by degree-1 jets); otherwise steps with the
+    given approximate J (the last tower's), from values of alpha only.
 
-    With p fixed, C(beta(x, p)) = C(alpha(x, p)) for every Casimir C, so this keeps the Casimirs
-    to round-off whatever the accuracy of psi (NOTES §4): only alpha's residual matters.
+    With p fixed, C(beta(x, p)) = C(alpha(x, p)) for every Casimir C, so the final such step keeps
+    the Casimirs to round-off whatever the accuracy of psi (NOTES §4): only alpha's residual
+    matters. Its correction is below the Newton tolerance, so J's O(h) inexactness is harmless.
     """
     n = y.shape[0]
     for _ in range(iterations):
-        _set_x(W, x, n, np.int64(1), n + 1)
+        degree = np.int64(1) if exact else np.int64(0)
         for k in range(n):
+            W[k, 0] = x[k]
             W[n + k, 0] = p[k]
-            for l in range(n):
-                W[n + k, 1 + l] = 0.0
-        run_tape(atape, W, np.int64(1), space, scratch)
+            if exact:
+                for l in range(n):
+                    W[k, 1 + l] = 1.0 if k == l else 0.0
+                    W[n + k, 1 + l] = 0.0
+        run_tape(atape, W, degree, space, scratch)
         for k in range(n):
             a = atape[3][k]
             alpha[k] = y[k] - W[a, 0]
-            for l in range(n):
-                J[k, l] = W[a, 1 + l]
+            if exact:
+                for l in range(n):
+                    J[k, l] = W[a, 1 + l]
         solve_small(J, alpha, delta)
         for k in range(n):
             x[k] += delta[k]

@@ -352,31 +352,60 @@ def run_tape(tape, W, D, space, S):
     the Taylor coefficients of the univariate functions.
     """
     ops, fpar, args = tape[0], tape[1], tape[2]
-    M = space[0][D]
+    counts = space[0]
+    M = counts[D]
     coef = S[S.shape[0] - 1]
+    if ops.shape[0] == 0:
+        return
+    # deg[slot]: a bound on the degree of the slot's polynomial (inputs: read off their
+    # coefficients), so that products of low-degree values (e.g. H of x0 + dx) stop early
+    deg = np.empty(W.shape[0], dtype=np.int64)
+    for row in range(ops[0, 1]):
+        d = D
+        while d > 0:
+            nonzero = False
+            for m in range(counts[d - 1], counts[d]):
+                if W[row, m] != 0.0:
+                    nonzero = True
+                    break
+            if nonzero:
+                break
+            d -= 1
+        deg[row] = d
     for r in range(ops.shape[0]):
         code, out, a, b, k = ops[r, 0], ops[r, 1], ops[r, 2], ops[r, 3], ops[r, 4]
+        deg[out] = D
         if code == MUL:
-            jet_mul(W, a, W, b, W, out, D, space)
-        elif code == ADD:
-            for m in range(M):
-                W[out, m] = W[a, m] + W[b, m]
-        elif code == SUB:
-            for m in range(M):
-                W[out, m] = W[a, m] - W[b, m]
+            dd = min(D, deg[a] + deg[b])
+            jet_mul(W, a, W, b, W, out, dd, space)
+            for m in range(counts[dd], M):
+                W[out, m] = 0.0
+            deg[out] = dd
+        elif code == ADD or code == SUB:
+            deg[out] = max(deg[a], deg[b])
+            if code == ADD:
+                for m in range(M):
+                    W[out, m] = W[a, m] + W[b, m]
+            else:
+                for m in range(M):
+                    W[out, m] = W[a, m] - W[b, m]
         elif code == MULC:
+            deg[out] = deg[a]
             f = fpar[r]
             for m in range(M):
                 W[out, m] = f * W[a, m]
         elif code == ADDC:
+            deg[out] = deg[a]
             for m in range(M):
                 W[out, m] = W[a, m]
             W[out, 0] += fpar[r]
         elif code == CONST:
+            deg[out] = 0
             for m in range(M):
                 W[out, m] = 0.0
             W[out, 0] = fpar[r]
         elif code == NEG:
+            deg[out] = deg[a]
             for m in range(M):
                 W[out, m] = -W[a, m]
         elif code == DIV:
@@ -421,6 +450,7 @@ def run_tape(tape, W, D, space, S):
                 for m in range(M):
                     W[out, m] = 0.0
                 W[out, 0] = 1.0
+                deg[out] = 0
             elif k > 0:
                 for m in range(M):
                     S[3, m] = W[a, m]
@@ -430,6 +460,7 @@ def run_tape(tape, W, D, space, S):
                         S[3, m] = W[out, m]
                 for m in range(M):
                     W[out, m] = S[3, m]
+                deg[out] = min(D, k * deg[a])
             else:
                 _pow_coef(W[a, 0], float(k), D, coef)
                 jet_compose(coef, W, a, W, out, D, space, S)
@@ -441,6 +472,8 @@ def run_tape(tape, W, D, space, S):
             jet_compose(coef, W, a, W, out, D, space, S)
         elif code == PHIMV:
             _phimv(W, out, a, k, args, D, space, S)
+            for i in range(k):
+                deg[out + i] = D
 
 
 def scratch_rows(n: int) -> int:
