@@ -35,7 +35,10 @@ lint: install
 check-install:
 	rm -rf /tmp/rkhp-check-install && $(PYTHON) -m venv /tmp/rkhp-check-install
 	/tmp/rkhp-check-install/bin/pip install --quiet .
-	cd /tmp && /tmp/rkhp-check-install/bin/rkhp conditions --order 3 && /tmp/rkhp-check-install/bin/python -c "import rkhp, rkhp_cli, importlib.util as u; assert u.find_spec('cli') is None"
+	cd /tmp && /tmp/rkhp-check-install/bin/rkhp conditions --order 5 --symmetric --format json > /dev/null
+	cd /tmp && /tmp/rkhp-check-install/bin/rkhp verify paper-three-stage
+	cd /tmp && /tmp/rkhp-check-install/bin/rkhp tables --format json > /dev/null
+	cd /tmp && /tmp/rkhp-check-install/bin/python -c "import rkhp, rkhp_cli, importlib.util as u; assert u.find_spec('cli') is None; print('no top-level cli module: ok')"
 
 clean:
 	rm -rf $(VENV) build *.egg-info
