@@ -82,9 +82,11 @@ def check(system, realisation, samples, seed, fmt):
         for key, value in result.deviations.items():
             table.add_row(labels[key], f"{value:.2e}")
         table.add_row("d_p alpha(x,0) antisymmetric", f"{result.degeneracy:.2e}")
+        table.add_row("beta(x,p) = alpha(x,-p)", f"{result.symmetry:.2e}")
         out = console()
         out.print(table)
         out.print(f"degenerate: {'yes' if result.degenerate else 'no'}    "
+                  f"symmetric: {'yes' if result.symmetric else 'no'}    "
                   f"axioms: {'ok' if result.ok else 'FAILED'} (tolerance {result.tolerance:g})")
     if not result.ok:
         raise click.exceptions.Exit(1)

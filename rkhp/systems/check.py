@@ -5,6 +5,7 @@ exactly by forward-mode automatic differentiation (degree-1 jets in the 2n varia
 compiled interpreter as the integrators), the axioms read
 alpha(x, 0) = beta(x, 0) = x, {alpha_i, alpha_j} = pi_ij(alpha), {beta_i, beta_j} = -pi_ij(beta),
 {alpha_i, beta_j} = 0. Degeneracy (paper, eq. (degen)): d_p alpha(x, 0) is antisymmetric.
+Symmetry (NOTES §8): beta(x, p) = alpha(x, -p) to round-off at the samples.
 """
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ class BirealisationCheck:
     commute: float
     degeneracy: float
     tolerance: float
+    symmetric: bool = False
+    symmetry: float = 0.0
 
     @property
     def deviations(self) -> dict[str, float]:
@@ -43,7 +46,8 @@ class BirealisationCheck:
 
     def to_json(self) -> dict:
         return {"system": self.system, "realisation": self.realisation,
-                "degenerate": self.degenerate, "samples": self.samples,
+                "degenerate": self.degenerate, "symmetric": self.symmetric,
+                "samples": self.samples,
                 "deviations": self.deviations, "ok": self.ok}
 
 
@@ -75,12 +79,14 @@ def check_birealisation(system, samples: int = 100, seed: int = 0,
     if samples < 1:
         raise InputError(f"--samples must be at least 1, got {samples}")
     n = system.dim
-    dev = dict(identity=0.0, poisson=0.0, anti_poisson=0.0, commute=0.0, degeneracy=0.0)
+    dev = dict(identity=0.0, poisson=0.0, anti_poisson=0.0, commute=0.0, degeneracy=0.0,
+               symmetry=0.0)
     for x, p in zip(*sample_points(system, samples, seed), strict=True):
         a, Ja = evaluate(system.alpha_tape, np.concatenate([x, p]), 1, 2 * n)
         b, Jb = evaluate(system.beta_tape, np.concatenate([x, p]), 1, 2 * n)
         a0, J0 = evaluate(system.alpha_tape, np.concatenate([x, 0 * p]), 1, 2 * n)
         b0 = evaluate(system.beta_tape, np.concatenate([x, 0 * p]))
+        a_minus = evaluate(system.alpha_tape, np.concatenate([x, -p]))
         pa, pb = system.poisson(a), system.poisson(b)
         scale = max(1.0, np.abs(pa).max(), np.abs(pb).max())
         dev["identity"] = max(dev["identity"], np.abs(a0 - x).max(), np.abs(b0 - x).max())
@@ -91,7 +97,10 @@ def check_birealisation(system, samples: int = 100, seed: int = 0,
         D = J0[:, n:]
         dev["degeneracy"] = max(dev["degeneracy"],
                                 np.abs(D + D.T).max() / max(1.0, np.abs(D).max()))
+        dev["symmetry"] = max(dev["symmetry"],
+                              np.abs(b - a_minus).max() / max(1.0, np.abs(b).max()))
     dev = {k: float(v) for k, v in dev.items()}
     return BirealisationCheck(system=system.name, realisation=system.realisation,
-                              degenerate=dev["degeneracy"] <= tolerance, samples=samples,
+                              degenerate=dev["degeneracy"] <= tolerance,
+                              symmetric=dev["symmetry"] <= tolerance, samples=samples,
                               seed=seed, tolerance=tolerance, **dev)

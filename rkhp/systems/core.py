@@ -51,17 +51,21 @@ class Realisation:
     shift: Callable
     degenerate: bool
     description: str
+    symmetric: bool = False
 
 
 REALISATIONS: dict[str, Realisation] = {}
 
 
-def register_realisation(name: str, shift: Callable, degenerate: bool, description: str) -> None:
-    """Add a realisation kind (shift: list of n tape Vars p -> list of n shifts, or None)."""
-    REALISATIONS[name] = Realisation(name, shift, degenerate, description)
+def register_realisation(name: str, shift: Callable, degenerate: bool, description: str,
+                         symmetric: bool = False) -> None:
+    """Add a realisation kind (shift: list of n tape Vars p -> list of n shifts, or None;
+    symmetric: beta(x, p) = alpha(x, -p), i.e. the shift is even in p)."""
+    REALISATIONS[name] = Realisation(name, shift, degenerate, description, symmetric)
 
 
-register_realisation("symmetric", _no_shift, True, "beta(x, p) = alpha(x, -p) (NOTES §4)")
+register_realisation("symmetric", _no_shift, True, "beta(x, p) = alpha(x, -p) (NOTES §4)",
+                     symmetric=True)
 register_realisation("shifted", _q_shift, False,
                      "alpha(x + Q p, p), Q = 1/2 on the diagonal and 1/4 off it (NOTES §4)")
 
@@ -116,6 +120,11 @@ class PoissonSystem:
     exact_solution: Callable | None = None
     description: str = ""
     extra: dict = field(default_factory=dict)
+
+    @property
+    def symmetric(self) -> bool:
+        """beta(x, p) = alpha(x, -p) (NOTES §8): the symmetric order conditions apply."""
+        return realisation(self.realisation).symmetric
 
     @property
     def domain_code(self) -> int:
