@@ -14,7 +14,7 @@ import click
 COMMANDS: dict[str, tuple[str, str, str]] = {
     "trees": ("rkhp_cli.trees_cmd", "trees", "Enumerate Butcher trees of T or T_0."),
     "conditions": ("rkhp_cli.trees_cmd", "conditions", "Print the order conditions (Butcher form, LaTeX)."),
-    "verify": ("rkhp_cli.verify_cmd", "verify", "Verify a tableau's orders over T and T_0 (exact or stated tolerance)."),
+    "verify": ("rkhp_cli.verify_cmd", "verify", "Verify a tableau's orders (exact, or a stated tolerance)."),
     "tables": ("rkhp_cli.verify_cmd", "tables", "List the built-in tableaux with their verified orders."),
     "search": ("rkhp_cli.search_cmd", "search", "Search minimal-stage tableaux; polish, recognise, prove."),
     "systems": ("rkhp_cli.systems_cmd", "systems", "List the built-in Poisson systems."),

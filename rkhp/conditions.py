@@ -140,8 +140,8 @@ def _factors(t: Tree):
     return factors, counter[0] + 1
 
 
-def butcher_form(t: Tree) -> str:
-    """Left-hand side in plain text: ``sum_{i,j} b_i c_i a_ij c_j^2`` (NOTES §2)."""
+def _folded_product(t: Tree, a_factor) -> tuple[list[str], list[str]]:
+    """Index names and the factors b_i, c_x^m, a_xy of the folded elementary weight of t."""
     factors, n_idx = _factors(t)
     names = [_index_name(k) for k in range(n_idx)]
     parts = [f"b_{names[0]}"]
@@ -149,22 +149,20 @@ def butcher_form(t: Tree) -> str:
         if kind == "c":
             parts.append(f"c_{names[idx[0]]}" + (f"^{power}" if power > 1 else ""))
         else:
-            x, y = names[idx[0]], names[idx[1]]
-            parts.append(f"a_{x}{y}" if len(x) == len(y) == 1 else f"a_{{{x},{y}}}")
-    head = f"sum_{names[0]}" if n_idx == 1 else "sum_{" + ",".join(names) + "}"
+            parts.append(a_factor(names[idx[0]], names[idx[1]]))
+    return names, parts
+
+
+def butcher_form(t: Tree) -> str:
+    """Left-hand side in plain text: ``sum_{i,j} b_i c_i a_ij c_j^2`` (NOTES §2)."""
+    names, parts = _folded_product(t, lambda x, y: f"a_{x}{y}" if len(x) == len(y) == 1 else f"a_{{{x},{y}}}")
+    head = f"sum_{names[0]}" if len(names) == 1 else "sum_{" + ",".join(names) + "}"
     return head + " " + " ".join(parts)
 
 
 def latex_form(t: Tree) -> str:
     """Left-hand side in LaTeX: ``\\sum_{i,j=1}^s b_i a_{ij} c_j^2`` (paper, Table 1)."""
-    factors, n_idx = _factors(t)
-    names = [_index_name(k) for k in range(n_idx)]
-    parts = [f"b_{names[0]}"]
-    for kind, idx, power in factors:
-        if kind == "c":
-            parts.append(f"c_{names[idx[0]]}" + (f"^{power}" if power > 1 else ""))
-        else:
-            parts.append(f"a_{{{names[idx[0]]}{names[idx[1]]}}}")
+    names, parts = _folded_product(t, lambda x, y: f"a_{{{x}{y}}}")
     return "\\sum_{" + ",".join(names) + "=1}^s " + " ".join(parts)
 
 
