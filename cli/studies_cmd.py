@@ -146,7 +146,7 @@ def _render_converge(study, plot) -> None:
               "floor = round-off floor, drift = order drift, <ref = below the reference's accuracy)")
     out.print("[bold]verdicts[/]")
     for m in study.methods:
-        kind = "degenerate" if study.degenerate and m.kind == "rkhp" else "general"
+        kind = study.condition_class if m.kind == "rkhp" else "general"
         left = ", ".join(f"row {i} {why}" for i, why in m.fit.excluded) or "none"
         out.print(f"{m.method}: observed order {_f(m.observed_order)} over rows "
                   f"{','.join(map(str, m.fit.fit_rows)) or '—'} (left out: {left}); expected {m.expected_order} "

@@ -189,7 +189,7 @@ def _run(args):
     return result
 
 
-CONVERGE_KEYS = {"system", "realisation", "degenerate", "t_final", "reference", "methods"}
+CONVERGE_KEYS = {"system", "realisation", "degenerate", "symmetric", "t_final", "reference", "methods"}
 METHOD_KEYS = {"method", "expected_order", "observed_order", "verdict", "fit_rows", "rows"}
 ROW_KEYS = {"h", "steps", "error", "local_order", "casimir_error", "energy_error", "newton_mean", "newton_max",
             "seconds"}

@@ -3,8 +3,8 @@
 For each method and step size: the global error at T (2-norm against the reference, NOTES §6),
 the local observed order, Casimir and energy errors (max over the run), Newton iterations and run
 time; per method the fitted slope over the asymptotic range (see :mod:`rkhp.studies.fit`), the
-expected order from the verify engine (degenerate order on a degenerate realisation, else general
-order: paper, Theorem 5.1 and §4) and a verdict.
+expected order from the verify engine (symmetric order on a symmetric realisation, NOTES §8;
+degenerate order on a degenerate one, else general order: paper, Theorem 5.1 and §4) and a verdict.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ import numpy as np
 from ..errors import InputError
 from .fit import MIN_FIT_POINTS, OrderFit, fit_order, verdict
 from .invariants import max_deviations
+from .methods import condition_class
 from .reference import Reference, reference
 
 DEFAULT_COARSEST = 20
@@ -86,9 +87,15 @@ class ConvergenceStudy:
     t_final: float
     reference: Reference
     methods: tuple[MethodConvergence, ...]
+    condition_class: str = "general"
+
+    @property
+    def symmetric(self) -> bool:
+        return self.condition_class == "symmetric"
 
     def to_json(self) -> dict:
         return {"system": self.system, "realisation": self.realisation, "degenerate": self.degenerate,
+                "symmetric": self.symmetric,
                 "t_final": self.t_final,
                 "reference": {"kind": self.reference.kind, "error_estimate": self.reference.error_estimate},
                 "methods": [m.to_json() for m in self.methods]}
@@ -153,7 +160,7 @@ def study_method(method, system, ref: Reference, steps, t_final: float, on_run=N
             on_run(method.name, n)
     fit = fit_order([r.h for r in rows], [r.measured_error for r in rows], floor=ref.floor)
     rows = [_with_local_order(r, p) for r, p in zip(rows, fit.local_orders, strict=True)]
-    expected = method.expected_order(system.degenerate)
+    expected = method.expected_order(condition_class(system))
     return MethodConvergence(method.name, method.kind, expected, fit, verdict(fit.slope, expected), tuple(rows))
 
 
@@ -168,4 +175,5 @@ def converge(system, methods, steps=None, t_final=None, refinements=None, on_run
     counts = step_counts(steps, refinements)
     ref = reference(system, t_final)
     results = tuple(study_method(m, system, ref, counts, t_final, on_run) for m in methods)
-    return ConvergenceStudy(system.name, system.realisation, bool(system.degenerate), t_final, ref, results)
+    return ConvergenceStudy(system.name, system.realisation, bool(system.degenerate), t_final, ref, results,
+                            condition_class(system))

@@ -8,9 +8,10 @@ A method is named by a string:
   method on ``xdot = pi(x) grad H(x)``;
 - ``implicit-midpoint``: the implicit midpoint rule (Newton per step).
 
-The expected order comes from the verify engine: for RKHP, the degenerate order (over T_0) on a
-degenerate realisation and the general order (over T) otherwise (paper, Theorems 4.4 and 5.1);
-for a classical method, its order over T (the classical order conditions); 2 for the midpoint rule.
+The expected order comes from the verify engine: for RKHP, the symmetric order (the reduced
+conditions of NOTES §8) on a symmetric realisation, the degenerate order (over T_0) on a degenerate
+one and the general order (over T) otherwise (paper, Theorems 4.4 and 5.1); for a classical method,
+its order over T (the classical order conditions); 2 for the midpoint rule.
 """
 
 from __future__ import annotations
@@ -52,27 +53,32 @@ class Method:
 
         return integrate_midpoint(system, h, n_steps, x0)
 
-    def expected_order(self, degenerate: bool) -> int:
-        """Order expected on a realisation that is (or is not) degenerate."""
+    def expected_order(self, condition_class: str) -> int:
+        """Order expected on a realisation of `condition_class` (see :func:`condition_class`)."""
         if self.kind == "implicit-midpoint":
             return 2
-        orders = _orders(self.tableau)
-        if self.kind == "rkhp" and degenerate:
-            return orders[1]
-        return orders[0]
+        return _orders(self.tableau)[condition_class if self.kind == "rkhp" else "general"]
 
 
-_ORDERS: dict[tuple, tuple[int, int]] = {}
+def condition_class(system) -> str:
+    """The class of order conditions an RKHP method meets on `system`'s realisation: "symmetric"
+    (beta(x, p) = alpha(x, -p), NOTES §8), "degenerate" (paper, eq. (degen)) or "general"."""
+    if system.symmetric:
+        return "symmetric"
+    return "degenerate" if system.degenerate else "general"
 
 
-def _orders(tableau) -> tuple[int, int]:
-    """(general order, degenerate order) of a tableau by the verify engine (cached by entries)."""
+_ORDERS: dict[tuple, dict[str, int]] = {}
+
+
+def _orders(tableau) -> dict[str, int]:
+    """Order per condition class of a tableau by the verify engine (cached by entries)."""
     key = (tableau.name, str(tableau.A), str(tableau.b))
     if key not in _ORDERS:
         from ..verify import verify
 
-        result = verify(tableau, classes=("general", "degenerate"))
-        _ORDERS[key] = (int(result.order), int(result.degenerate_order))
+        result = verify(tableau, classes=("general", "degenerate", "symmetric"))
+        _ORDERS[key] = {cls: int(order) for cls, order in result.orders.items()}
     return _ORDERS[key]
 
 
