@@ -77,8 +77,14 @@ def _orders(tableau) -> dict[str, int]:
     if key not in _ORDERS:
         from ..verify import verify
 
-        result = verify(tableau, classes=("general", "degenerate", "symmetric"))
-        _ORDERS[key] = {cls: int(order) for cls, order in result.orders.items()}
+        orders = verify(tableau, classes=("general", "degenerate", "symmetric")).orders
+        # each class's conditions follow from the previous class's (T_0 is part of T; the symmetric
+        # conditions combine T_0 residuals), so its order is at least theirs: this matters where a
+        # class is checked to a lower order (the symmetric relations ship up to order 8)
+        general = int(orders["general"])
+        degenerate = max(general, int(orders["degenerate"]))
+        _ORDERS[key] = {"general": general, "degenerate": degenerate,
+                        "symmetric": max(degenerate, int(orders["symmetric"]))}
     return _ORDERS[key]
 
 
