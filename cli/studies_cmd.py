@@ -35,7 +35,8 @@ def _floats(text: str | None, what: str) -> tuple[float, ...]:
 
 def _common(f):
     f = click.option("--realisation", default="symmetric", show_default=True,
-                     help="Birealisation: symmetric (degenerate), shifted (general) or another registered kind.")(f)
+                     help="Birealisation: symmetric (degenerate), shifted (general) or quartic "
+                          "(degenerate, not symmetric).")(f)
     f = click.option("--method", "methods", multiple=True, help=METHOD_HELP)(f)
     f = click.argument("system")(f)
     return f

@@ -13,7 +13,7 @@ from .options import console, emit_json, format_option
 def realisation_option():
     return click.option("--realisation", default="symmetric", show_default=True,
                         help="Birealisation: symmetric (degenerate), shifted (x + Q p; general), "
-                             "or another registered kind.")
+                             "quartic (x + grad K(p); degenerate, not symmetric).")
 
 
 def _fmt(v, digits=6) -> str:
@@ -42,7 +42,7 @@ def systems(fmt):
         return
     from rich.table import Table
 
-    table = Table(title="Built-in Poisson systems (realisations: symmetric, shifted)")
+    table = Table(title="Built-in Poisson systems (realisations: symmetric, shifted, quartic)")
     for col in ("name", "family", "n", "domain", "x0", "t_final", "Casimirs", "exact"):
         table.add_column(col)
     for r in rows:
