@@ -294,7 +294,8 @@ def test_symmetric_class_needs_fewer_stages():
 @pytest.mark.parametrize("name", ["search-degenerate-o3-s2", "search-degenerate-o4-s3",
                                   "search-degenerate-o5-s4", "search-degenerate-o4-s3-min-error",
                                   "search-degenerate-o5-s4-min-error", "search-degenerate-o6-s6",
-                                  "search-symmetric-o6-s5"])
+                                  "search-symmetric-o4-s3", "search-symmetric-o5-s4",
+                                  "search-symmetric-o6-s5", "search-symmetric-o7-s6"])
 def test_saved_tables_are_reproduced_by_their_reference_command(name, tmp_path):
     tab = load_tableau(name)
     words = tab.reference.split()
