@@ -53,12 +53,13 @@ class Reference:
 
 
 def dop853(system, t_final: float, x0, rtol: float, atol: float) -> np.ndarray:
-    """x(t_final) by scipy's DOP853 on ``xdot = pi(x) grad H(x)``; NumericalFailure if it fails."""
+    """x(t_final) by scipy's DOP853 on ``xdot = pi(x) grad H(x)``; NumericalFailure if it fails.
+
+    The vector field is the system's own evaluation (a few thousand calls at most, no compilation:
+    the compiled one of :mod:`rkhp.integrators.classical` serves the timed peers of ``bench``)."""
     from scipy.integrate import solve_ivp
 
-    from ..integrators.classical import vector_field
-
-    f = vector_field(system)
+    f = system.vector_field
     sol = solve_ivp(lambda t, x: f(x), (0.0, float(t_final)), np.asarray(x0, dtype=float),
                     method="DOP853", rtol=rtol, atol=atol)
     if not sol.success or not np.all(np.isfinite(sol.y[:, -1])):
@@ -79,10 +80,8 @@ def dop853_reference(system, t_final: float, x0=None) -> Reference:
 
 def exact_reference(system, t_final: float) -> Reference:
     """The closed-form solution at ``t_final``, cross-checked against DOP853."""
-    from ..integrators.classical import vector_field
-
     state = np.asarray(system.exact_solution(float(t_final)), dtype=float)
-    speed = float(np.linalg.norm(vector_field(system)(state)))
+    speed = float(np.linalg.norm(system.vector_field(state)))
     estimate = 8 * EPS * (float(np.linalg.norm(state)) + abs(float(t_final)) * speed)
     check = dop853_reference(system, t_final)
     gap = float(np.linalg.norm(check.state - state))
