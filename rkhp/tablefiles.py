@@ -50,7 +50,14 @@ def _registry() -> dict[str, tuple[str, tuple[str, ...]]]:
     for entry in sorted(_tables_dir().iterdir(), key=lambda p: p.name):
         if not entry.name.endswith(".toml"):
             continue
-        data = tomllib.loads(entry.read_text(encoding="utf-8"))
+        text = entry.read_text(encoding="utf-8")
+        # only the one-line `name` and `aliases` keys are needed here: parsing them alone spares
+        # reading every coefficient of every table (60-digit files) on each start-up
+        head = "\n".join(line for line in text.splitlines() if line.startswith(("name ", "name=", "aliases")))
+        try:
+            data = tomllib.loads(head)
+        except tomllib.TOMLDecodeError:
+            data = tomllib.loads(text)
         name = data.get("name", entry.name[:-5])
         out[name] = (entry.name, tuple(data.get("aliases", ())))
     return out

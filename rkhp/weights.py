@@ -75,16 +75,11 @@ def tree_plan(max_order: int) -> TreePlan:
     """The plan of all trees up to ``max_order`` (cached: the two most recent)."""
     check_order(max_order)
     trees = tuple(trees_up_to(max_order))
+    # t = b[c1, *rest]: c1 = t.children[0] and t.rest are trees of this same enumeration
     index = {t.key: k for k, t in enumerate(trees)}
+    first = [0] + [index[t.children[0].key] for t in trees[1:]]
+    rest = [0] + [index[t.rest.key] for t in trees[1:]]
     n = len(trees)
-    first = [0] * n
-    rest = [0] * n
-    lead = b"\x01"
-    for k in range(1, n):
-        key = trees[k].key
-        child_key = trees[k].children[0].key
-        first[k] = index[child_key]
-        rest[k] = index[lead + key[1 + len(child_key):]]  # canonical key of b[rest]
     starts = [0, 0]
     for m in range(1, max_order + 1):
         starts.append(starts[-1] + count_trees(m))
