@@ -44,7 +44,7 @@ def systems(fmt):
 
     table = Table(title="Built-in Poisson systems (realisations: symmetric, shifted, quartic)")
     for col in ("name", "family", "n", "domain", "x0", "t_final", "Casimirs", "exact"):
-        table.add_column(col, no_wrap=col in ("name", "family"))  # names are typed back: never cut
+        table.add_column(col, no_wrap=col in ("name", "family"), overflow="fold")  # never cut with an ellipsis
     for r in rows:
         table.add_row(r["name"], r["family"], str(r["dim"]), r["domain"],
                       ", ".join(f"{v:.4g}" for v in r["x0"]), _fmt(r["t_final"]),
