@@ -20,17 +20,20 @@ from __future__ import annotations
 import numpy as np
 
 from .cache import numba as nb
-from .jets import NJIT, run_tape
+from .jets import NJIT, run_tape_into
 
 OK, NO_CONVERGENCE, NON_FINITE, LEFT_DOMAIN, NEWTON_NON_FINITE = 0, 1, 2, 3, 4
 
 
 @nb.njit(**NJIT)
-def solve_small(J, r, out):
-    """out = J^{-1} r by Gaussian elimination with partial pivoting (J, r copied)."""
+def solve_small(J, r, out, M, v):
+    """out = J^{-1} r by Gaussian elimination with partial pivoting (J, r copied into the work
+    arrays M (n x n) and v (n): no allocation in the step loop)."""
     n = r.shape[0]
-    M = J.copy()
-    v = r.copy()
+    for i in range(n):
+        v[i] = r[i]
+        for j in range(n):
+            M[i, j] = J[i, j]
     for c in range(n):
         piv = c
         for i in range(c + 1, n):
@@ -64,7 +67,7 @@ def _set_x(W, x0, n, D, M):
 
 
 @nb.njit(**NJIT)
-def tower(x0, A, b, h, tapes, space, W, G, scratch, psi, Jpsi, alpha, Jalpha, jacobian):
+def tower(x0, A, b, h, tapes, space, W, G, scratch, deg, psi, Jpsi, alpha, Jalpha, jacobian):
     """psi and alpha(x0, psi(x0)) at x0 (see module); with `jacobian`, also Dpsi and the
     Jacobian of x -> alpha(x, psi(x)) (stage degrees s + 2 - i; without, s + 1 - i)."""
     ftape, htape, atape = tapes[0], tapes[1], tapes[2]
@@ -89,7 +92,7 @@ def tower(x0, A, b, h, tapes, space, W, G, scratch, psi, Jpsi, alpha, Jalpha, ja
                     for m in range(M):
                         W[n + k, m] += c * G[j, k, m]
         tape = htape if zero_row else ftape
-        run_tape(tape, W, D, space, scratch)
+        run_tape_into(tape, W, D, space, scratch, deg)
         g = tape[3][0]
         for k in range(n):
             for m in range(counts[D - 1]):
@@ -109,7 +112,7 @@ def tower(x0, A, b, h, tapes, space, W, G, scratch, psi, Jpsi, alpha, Jalpha, ja
         W[n + k, 0] = psi[k]
         for l in range(n):
             W[n + k, 1 + l] = Jpsi[k, l] if jacobian else 0.0
-    run_tape(atape, W, extra, space, scratch)
+    run_tape_into(atape, W, extra, space, scratch, deg)
     for k in range(n):
         a = atape[3][k]
         alpha[k] = W[a, 0]
@@ -141,7 +144,7 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
     stopped when theta/(1 - theta) |dx_k| is (theta = |dx_k|/|dx_{k-1}|); the Jacobian is
     refreshed when theta > 1/4 (NOTES §7 measured 2 full towers per step instead of 3).
     """
-    W, G, scratch, psi, Jpsi, alpha, Jalpha, x, delta, res = buf
+    W, G, scratch, deg, psi, Jpsi, alpha, Jalpha, x, delta, res, LU, v = buf
     n = y.shape[0]
     scale = max(1.0, _max_abs(y))
     for k in range(n):
@@ -154,8 +157,8 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
                 res[k] = 2.0 * hist[0, k] - hist[1, k]
             else:
                 res[k] = hist[0, k]
-        _polish(y, x, res, tapes[2], space, W, scratch, Jalpha, alpha, delta, scale, np.int64(1),
-                np.bool_(True))
+        _polish(y, x, res, tapes[2], space, W, scratch, deg, Jalpha, alpha, delta, LU, v, scale,
+                np.int64(1), np.bool_(True))
         if not np.isfinite(_max_abs(x)):
             for k in range(n):
                 x[k] = y[k]
@@ -166,10 +169,10 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
     while it < max_iter:
         it += 1
         # a full tower (Jacobian) first; then value-only towers with that Jacobian (chord)
-        tower(x, A, b, h, tapes, space, W, G, scratch, psi, Jpsi, alpha, Jalpha, full)
+        tower(x, A, b, h, tapes, space, W, G, scratch, deg, psi, Jpsi, alpha, Jalpha, full)
         for k in range(n):
             res[k] = y[k] - alpha[k]
-        solve_small(Jalpha, res, delta)
+        solve_small(Jalpha, res, delta, LU, v)
         size = _max_abs(delta)
         if not np.isfinite(size):
             return NEWTON_NON_FINITE, it
@@ -200,8 +203,8 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
         previous = size
     if not converged:
         return NO_CONVERGENCE, it
-    _polish(y, x, res, tapes[2], space, W, scratch, Jalpha, alpha, delta, scale, np.int64(1),
-            np.bool_(False))
+    _polish(y, x, res, tapes[2], space, W, scratch, deg, Jalpha, alpha, delta, LU, v, scale,
+            np.int64(1), np.bool_(False))
     for k in range(n):
         hist[2, k] = hist[1, k]
         hist[1, k] = hist[0, k]
@@ -211,7 +214,7 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
     for k in range(n):
         W[k, 0] = x[k]
         W[n + k, 0] = res[k]
-    run_tape(btape, W, np.int64(0), space, scratch)
+    run_tape_into(btape, W, np.int64(0), space, scratch, deg)
     for k in range(n):
         y_next[k] = W[btape[3][k], 0]
     if not np.isfinite(_max_abs(y_next)):
@@ -220,7 +223,8 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
 
 
 @nb.njit(**NJIT)
-def _polish(y, x, p, atape, space, W, scratch, J, alpha, delta, scale, iterations, exact):
+def _polish(y, x, p, atape, space, W, scratch, deg, J, alpha, delta, LU, v, scale, iterations,
+            exact):
     """Solve alpha(x, p) = y for x with p fixed by at most `iterations` cheap steps (no tower):
     with `exact`, Newton steps (J := d_x alpha(x, p) by degree-1 jets); otherwise steps with the
     given approximate J (the last tower's), from values of alpha only.
@@ -239,14 +243,14 @@ def _polish(y, x, p, atape, space, W, scratch, J, alpha, delta, scale, iteration
                 for l in range(n):
                     W[k, 1 + l] = 1.0 if k == l else 0.0
                     W[n + k, 1 + l] = 0.0
-        run_tape(atape, W, degree, space, scratch)
+        run_tape_into(atape, W, degree, space, scratch, deg)
         for k in range(n):
             a = atape[3][k]
             alpha[k] = y[k] - W[a, 0]
             if exact:
                 for l in range(n):
                     J[k, l] = W[a, 1 + l]
-        solve_small(J, alpha, delta)
+        solve_small(J, alpha, delta, LU, v)
         for k in range(n):
             x[k] += delta[k]
         if not _max_abs(delta) > 4e-16 * scale:
@@ -257,8 +261,9 @@ def _polish(y, x, p, atape, space, W, scratch, J, alpha, delta, scale, iteration
 def make_buffers(n, s, n_slots, space):
     size = space[0][space[0].shape[0] - 1]
     return (np.zeros((n_slots, size)), np.zeros((s, n, size)),
-            np.zeros((5 + 2 * n, size)), np.zeros(n), np.zeros((n, n)), np.zeros(n),
-            np.zeros((n, n)), np.zeros(n), np.zeros(n), np.zeros(n))
+            np.zeros((5 + 2 * n, size)), np.zeros(n_slots, dtype=np.int64), np.zeros(n),
+            np.zeros((n, n)), np.zeros(n), np.zeros((n, n)), np.zeros(n), np.zeros(n),
+            np.zeros(n), np.zeros((n, n)), np.zeros(n))
 
 
 @nb.njit(**NJIT)

@@ -147,17 +147,26 @@ def jet_mul(X, i, Y, j, Z, k, D, space):
 
     Rows are passed as (array, index), not as views: a view costs reference counting. The pair
     tables are unsigned, so that indexing skips the negative-index wrap-around (both measured:
-    together about 1.7x on the tower).
+    together about 1.7x on the tower). Two partial sums (even and odd pairs) halve the chain of
+    dependent additions (the sum's rounding differs from the sequential one at round-off level).
     """
     counts, start, pa, pb = space[0], space[1], space[2], space[3]
+    one = np.uint64(1)
     for c in range(counts[D]):
-        acc = 0.0
-        for t in range(start[c], start[c + 1]):
-            acc += X[i, pa[t]] * Y[j, pb[t]]
-        Z[k, c] = acc
+        hi = start[c + 1]
+        acc0 = 0.0
+        acc1 = 0.0
+        t = start[c]
+        while t + one < hi:
+            acc0 += X[i, pa[t]] * Y[j, pb[t]]
+            acc1 += X[i, pa[t + one]] * Y[j, pb[t + one]]
+            t += np.uint64(2)
+        if t < hi:
+            acc0 += X[i, pa[t]] * Y[j, pb[t]]
+        Z[k, c] = acc0 + acc1
 
 
-@nb.njit(**NJIT)
+@nb.njit(inline="always", **NJIT)
 def jet_compose(coef, X, i, Z, k, D, space, S):
     """Z[k] = sum_q coef[q] (X[i] - X[i, 0])^q truncated at degree D (Horner; scratch rows
     S[0:3]; Z[k] may be X[i])."""
@@ -217,7 +226,7 @@ def _two_prod(a, b):
     return p, ((ah * bh - p) + ah * bl + al * bh) + al * bl
 
 
-@nb.njit(**NJIT)
+@nb.njit(inline="always", **NJIT)
 def _sum_of_squares(W, args, start, count):
     """sum_i W[args[start + i], 0]^2 as a double-double (hi, lo)."""
     hi = 0.0
@@ -351,6 +360,16 @@ def run_tape(tape, W, D, space, S):
     S: scratch rows (`scratch_rows(n)` of them, n the system's dimension); its last row holds
     the Taylor coefficients of the univariate functions.
     """
+    run_tape_into(tape, W, D, space, S, np.empty(W.shape[0], dtype=np.int64))
+
+
+@nb.njit(**NJIT)
+def run_tape_into(tape, W, D, space, S, deg):
+    """`run_tape` with the caller's work array deg (>= W.shape[0] int64): no allocation in the
+    engine's step loop."""
+    if D == 0:
+        _run_values(tape, W, space, S)
+        return
     ops, fpar, args = tape[0], tape[1], tape[2]
     counts = space[0]
     M = counts[D]
@@ -359,7 +378,6 @@ def run_tape(tape, W, D, space, S):
         return
     # deg[slot]: a bound on the degree of the slot's polynomial (inputs: read off their
     # coefficients), so that products of low-degree values (e.g. H of x0 + dx) stop early
-    deg = np.empty(W.shape[0], dtype=np.int64)
     for row in range(ops[0, 1]):
         d = D
         while d > 0:
@@ -474,6 +492,68 @@ def run_tape(tape, W, D, space, S):
             _phimv(W, out, a, k, args, D, space, S)
             for i in range(k):
                 deg[out + i] = D
+
+
+@nb.njit(**NJIT)
+def _run_values(tape, W, space, S):
+    """`run_tape` at degree 0 (values only, W[:, 0]): the same floating-point operations as the
+    jet kernels at D = 0, without their loops, degree bounds and scratch rows (the engine's
+    value-only evaluations of alpha and beta)."""
+    ops, fpar, args = tape[0], tape[1], tape[2]
+    coef = S[S.shape[0] - 1]
+    for r in range(ops.shape[0]):
+        code, out, a, b, k = ops[r, 0], ops[r, 1], ops[r, 2], ops[r, 3], ops[r, 4]
+        if code == MUL:
+            W[out, 0] = 0.0 + W[a, 0] * W[b, 0]
+        elif code == ADD:
+            W[out, 0] = W[a, 0] + W[b, 0]
+        elif code == SUB:
+            W[out, 0] = W[a, 0] - W[b, 0]
+        elif code == MULC:
+            W[out, 0] = fpar[r] * W[a, 0]
+        elif code == ADDC:
+            W[out, 0] = W[a, 0] + fpar[r]
+        elif code == CONST:
+            W[out, 0] = fpar[r]
+        elif code == NEG:
+            W[out, 0] = -W[a, 0]
+        elif code == DIV:
+            W[out, 0] = 0.0 + W[a, 0] * W[b, 0] ** -1.0
+        elif code == EXP:
+            W[out, 0] = math.exp(W[a, 0]) * 1.0
+        elif code == LOG:
+            u0 = W[a, 0]
+            W[out, 0] = math.log(u0) if u0 > 0.0 else np.nan
+        elif code == SIN or code == COS:
+            u0 = W[a, 0] + (0.5 * math.pi if code == COS else 0.0)
+            W[out, 0] = math.sin(u0 + 0.0) * 1.0
+        elif code == SQRT or code == POWR:
+            u0 = W[a, 0]
+            power = 0.5 if code == SQRT else fpar[r]
+            if u0 > 0.0:
+                W[out, 0] = u0 ** power
+            elif u0 == 0.0 and power > 0.0:
+                W[out, 0] = 0.0
+            else:
+                W[out, 0] = np.nan
+        elif code == POWI:
+            if k == 0:
+                W[out, 0] = 1.0
+            elif k > 0:
+                v = W[a, 0]
+                for _ in range(k - 1):
+                    v = 0.0 + v * W[a, 0]
+                W[out, 0] = v
+            else:
+                W[out, 0] = W[a, 0] ** float(k)
+        elif code == CRB:
+            u_hi, u_lo = W[a, 0], 0.0
+            if b >= 0:
+                u_hi, u_lo = _sum_of_squares(W, args, b, k)
+            crb_coef(u_hi, u_lo, np.int64(0), coef)
+            W[out, 0] = coef[0]
+        elif code == PHIMV:
+            _phimv(W, out, a, k, args, np.int64(0), space, S)
 
 
 def scratch_rows(n: int) -> int:
