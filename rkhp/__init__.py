@@ -5,7 +5,7 @@ The package imports nothing heavy on start-up: the names below are loaded on fir
 
 from __future__ import annotations
 
-import importlib
+from ._lazy import lazy_getattr
 
 __version__ = "0.1.0"
 
@@ -29,10 +29,7 @@ _LAZY = {
 __all__ = sorted(_LAZY)
 
 
-def __getattr__(name: str):
-    if name in _LAZY:
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(f"module 'rkhp' has no attribute {name!r}")
+__getattr__ = lazy_getattr("rkhp", _LAZY)
 
 
 def __dir__():

@@ -7,7 +7,7 @@ Thm 5.1), `integrate_classical`, `integrate_midpoint` (peers), `Trajectory`.
 
 from __future__ import annotations
 
-import importlib
+from .._lazy import lazy_getattr
 
 _LAZY = {
     "integrate": "rkhp.integrators.rkhp_method",
@@ -21,7 +21,4 @@ _LAZY = {
 __all__ = sorted(_LAZY)
 
 
-def __getattr__(name: str):
-    if name in _LAZY:
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(f"module 'rkhp.integrators' has no attribute {name!r}")
+__getattr__ = lazy_getattr("rkhp.integrators", _LAZY)
