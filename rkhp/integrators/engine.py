@@ -20,12 +20,12 @@ from __future__ import annotations
 import numpy as np
 
 from .cache import numba as nb
-from .jets import NJIT, run_tape_into
+from .jets import NJIT, NJIT_NORC, run_tape_into
 
 OK, NO_CONVERGENCE, NON_FINITE, LEFT_DOMAIN, NEWTON_NON_FINITE = 0, 1, 2, 3, 4
 
 
-@nb.njit(**NJIT)
+@nb.njit(**NJIT_NORC)
 def solve_small(J, r, out, M, v):
     """out = J^{-1} r by Gaussian elimination with partial pivoting (J, r copied into the work
     arrays M (n x n) and v (n): no allocation in the step loop)."""
@@ -55,7 +55,7 @@ def solve_small(J, r, out, M, v):
         out[i] = acc / M[i, i]
 
 
-@nb.njit(**NJIT)
+@nb.njit(**NJIT_NORC)
 def _set_x(W, x0, n, D, M):
     """Input rows 0..n-1: the jets x0_k + dx_k (degree <= D, M coefficients)."""
     for k in range(n):
@@ -66,7 +66,7 @@ def _set_x(W, x0, n, D, M):
             W[k, 1 + k] = 1.0
 
 
-@nb.njit(**NJIT)
+@nb.njit(**NJIT_NORC)
 def tower(x0, A, b, h, tapes, space, W, G, scratch, deg, psi, Jpsi, alpha, Jalpha, jacobian):
     """psi and alpha(x0, psi(x0)) at x0 (see module); with `jacobian`, also Dpsi and the
     Jacobian of x -> alpha(x, psi(x)) (stage degrees s + 2 - i; without, s + 1 - i)."""
@@ -121,7 +121,7 @@ def tower(x0, A, b, h, tapes, space, W, G, scratch, deg, psi, Jpsi, alpha, Jalph
                 Jalpha[k, l] = W[a, 1 + l]
 
 
-@nb.njit(**NJIT)
+@nb.njit(**NJIT_NORC)
 def _max_abs(v):
     r = 0.0
     for q in range(v.shape[0]):
@@ -131,7 +131,7 @@ def _max_abs(v):
     return r
 
 
-@nb.njit(**NJIT)
+@nb.njit(**NJIT_NORC)
 def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
     """One RKHP step from y into y_next; returns (failure code, Newton iterations).
 
@@ -222,7 +222,7 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
     return OK, it
 
 
-@nb.njit(**NJIT)
+@nb.njit(**NJIT_NORC)
 def _polish(y, x, p, atape, space, W, scratch, deg, J, alpha, delta, LU, v, scale, iterations,
             exact):
     """Solve alpha(x, p) = y for x with p fixed by at most `iterations` cheap steps (no tower):

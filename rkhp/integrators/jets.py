@@ -8,7 +8,9 @@ jet u = u0 + v are evaluated by Horner's rule on their Taylor coefficients at u0
 f(u) = sum_k f^(k)(u0)/k! v^k (v has no constant term, so the sum stops at k = D).
 
 Everything here is compiled with numba (`cache=True`; compiled code persists in numba's cache,
-see `rkhp.integrators.cache`). The interpreter takes tapes as data (`rkhp.systems.tape`).
+see `rkhp.integrators.cache`). The interpreter takes tapes as data (`rkhp.systems.tape`). The
+kernels of the engine's step loop allocate nothing and are compiled without reference counting
+(NJIT_NORC); crb_coef, whose closed form allocates, keeps it (NJIT_NRT).
 """
 
 from __future__ import annotations
@@ -44,6 +46,13 @@ from .cache import numba as nb
 NJIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 # Calls between compiled functions pass integers as np.int64(...), never as bare literals: numba
 # compiles a separate specialisation for every literal value (measured: 10 of jet_mul).
+#: Kernels of the step loop that allocate nothing: compiled without numba's reference counting
+#: (its incref/decref of every array argument was about a fifth of a step). A function compiled
+#: so may only call functions that allocate nothing, or ones that set NJIT_NRT (below): callees
+#: without an explicit setting inherit the caller's.
+NJIT_NORC = dict(NJIT, _nrt=False)
+#: Functions that allocate and are called from NJIT_NORC kernels (e.g. crb_coef's closed form).
+NJIT_NRT = dict(NJIT, _nrt=True)
 
 
 def _bernoulli_tables():
@@ -141,7 +150,7 @@ def jet_space(n_vars: int, degree: int) -> JetSpace:
 # jet kernels
 
 
-@nb.njit(**NJIT)
+@nb.njit(**NJIT_NORC)
 def jet_mul(X, i, Y, j, Z, k, D, space):
     """Z[k] = X[i] * Y[j] truncated at degree D (rows of 2-d arrays; Z[k] not X[i] or Y[j]).
 
@@ -166,7 +175,7 @@ def jet_mul(X, i, Y, j, Z, k, D, space):
         Z[k, c] = acc0 + acc1
 
 
-@nb.njit(inline="always", **NJIT)
+@nb.njit(inline="always", **NJIT_NORC)
 def jet_compose(coef, X, i, Z, k, D, space, S):
     """Z[k] = sum_q coef[q] (X[i] - X[i, 0])^q truncated at degree D (Horner; scratch rows
     S[0:3]; Z[k] may be X[i])."""
@@ -185,7 +194,7 @@ def jet_compose(coef, X, i, Z, k, D, space, S):
         Z[k, m] = S[1, m]
 
 
-@nb.njit(**NJIT)
+@nb.njit(**NJIT_NORC)
 def _pow_coef(u0, power, D, coef):
     coef[0] = u0 ** power
     for k in range(1, D + 1):
@@ -213,7 +222,7 @@ def _uni_compose(coef, a, D):
     return r
 
 
-@nb.njit(**NJIT)
+@nb.njit(**NJIT_NORC)
 def _two_prod(a, b):
     """a * b = p + e exactly (Dekker)."""
     p = a * b
@@ -226,7 +235,7 @@ def _two_prod(a, b):
     return p, ((ah * bh - p) + ah * bl + al * bh) + al * bl
 
 
-@nb.njit(inline="always", **NJIT)
+@nb.njit(inline="always", **NJIT_NORC)
 def _sum_of_squares(W, args, start, count):
     """sum_i W[args[start + i], 0]^2 as a double-double (hi, lo)."""
     hi = 0.0
@@ -242,7 +251,7 @@ def _sum_of_squares(W, args, start, count):
     return s, lo - (s - hi)
 
 
-@nb.njit(**NJIT)
+@nb.njit(**NJIT_NORC)
 def _crb_value(u_hi, u_lo):
     """c(u) for 20 <= u < (2 pi)^2 from u = u_hi + u_lo (double-double): near the pole r = 2 pi
     cot is ill-conditioned, so r = sqrt(u) is carried to double-double accuracy."""
@@ -257,7 +266,7 @@ def _crb_value(u_hi, u_lo):
     return (1.0 - wcot) / u_hi * (1.0 - u_lo / u_hi)
 
 
-@nb.njit(**NJIT)
+@nb.njit(**NJIT_NRT)
 def crb_coef(u0, u_lo, D, coef):
     """Taylor coefficients at u0 of c(u) = (1 - (sqrt(u)/2) cot(sqrt(u)/2)) / u (NOTES §4).
 
@@ -310,7 +319,7 @@ def crb_coef(u0, u_lo, D, coef):
     coef[0] = _crb_value(u0, u_lo)
 
 
-@nb.njit(**NJIT)
+@nb.njit(**NJIT_NORC)
 def _phimv(W, out, start, n, args, D, space, S):
     """phi(K) x by its power series sum_k PHI_COEF[k] K^k x, for ||K0||_F < 0.9 * 2 pi."""
     M = space[0][D]
@@ -363,7 +372,7 @@ def run_tape(tape, W, D, space, S):
     run_tape_into(tape, W, D, space, S, np.empty(W.shape[0], dtype=np.int64))
 
 
-@nb.njit(**NJIT)
+@nb.njit(**NJIT_NORC)
 def run_tape_into(tape, W, D, space, S, deg):
     """`run_tape` with the caller's work array deg (>= W.shape[0] int64): no allocation in the
     engine's step loop."""
@@ -494,7 +503,7 @@ def run_tape_into(tape, W, D, space, S, deg):
                 deg[out + i] = D
 
 
-@nb.njit(**NJIT)
+@nb.njit(**NJIT_NORC)
 def _run_values(tape, W, space, S):
     """`run_tape` at degree 0 (values only, W[:, 0]): the same floating-point operations as the
     jet kernels at D = 0, without their loops, degree bounds and scratch rows (the engine's
