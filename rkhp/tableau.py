@@ -30,8 +30,6 @@ EXACT_DECIMAL_DIGITS = 15
 
 _DECIMAL = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
 _RATIONAL = re.compile(r"^[+-]?\d+\s*/\s*[+-]?\d+$")
-# what an exact radical expression may contain: numbers, sqrt, + - * / ^ ( ) and spaces
-_EXPRESSION = re.compile(r"^(\s|\d|\.|[eE](?=[+-]?\d)|sqrt|[-+*/^()])+$")
 
 
 class GivenDecimal(mpmath.mpf):
@@ -107,25 +105,9 @@ def _parse_text(text: str, where: str):
         return Fraction(num, den)
     if s.lower().lstrip("+-") in ("nan", "inf", "infinity"):
         raise InputError(f"{where}: non-finite value {text!r}")
-    if not s or not _EXPRESSION.match(s):
-        raise InputError(f"{where}: not a number or an exact expression: {text!r} "
-                         "(use decimals, p/q, or radicals such as sqrt(3)/4)")
-    import sympy
-    from sympy.parsing.sympy_parser import (
-        TokenError,
-        convert_xor,
-        parse_expr,
-        rationalize,
-        standard_transformations,
-    )
+    from .expressions import parse_expression
 
-    try:
-        expr = parse_expr(s.replace("sqrt", "S_q_r_t"), local_dict={"S_q_r_t": sympy.sqrt},
-                          global_dict={"Integer": sympy.Integer, "Rational": sympy.Rational,
-                                       "Float": sympy.Float},
-                          transformations=standard_transformations + (convert_xor, rationalize))
-    except (SyntaxError, TypeError, ValueError, ZeroDivisionError, TokenError) as exc:
-        raise InputError(f"{where}: cannot read {text!r} as a number ({exc})") from None
+    expr = parse_expression(s, (), where=where)
     return _exact_expression(expr, where, text)
 
 
@@ -141,6 +123,13 @@ def _exact_expression(expr, where: str, text: str):
     if expr.is_Rational:
         return Fraction(int(expr.p), int(expr.q))
     return expr
+
+
+def as_sympy(x):
+    """An exact entry (Fraction or sympy number) as a sympy number."""
+    import sympy
+
+    return sympy.Rational(x.numerator, x.denominator) if isinstance(x, Fraction) else x
 
 
 def is_exact(x) -> bool:
@@ -196,7 +185,7 @@ def _sum(values):
     if all(is_exact(v) for v in values):
         import sympy
 
-        total = sympy.radsimp(sympy.nsimplify(sum(sympy.sympify(v) for v in values)))
+        total = sympy.radsimp(sympy.nsimplify(sum(as_sympy(v) for v in values)))
         return Fraction(int(total.p), int(total.q)) if total.is_Rational else total
     digits = max(getattr(v, "digits", 17) for v in values) + 10
     total = sum((to_fraction(v, 4 * digits) for v in values), Fraction(0))

@@ -27,7 +27,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .tableau import Tableau, is_exact, to_fraction
+from .tableau import Tableau, as_sympy, is_exact, to_fraction
 from .trees import LEAF, Tree, check_order, count_trees, trees_up_to
 
 # ----------------------------------------------------------------------------- the plan
@@ -218,16 +218,14 @@ class ExactArithmetic:
             from sympy import QQ
 
             generators = sorted({g for x in entries if not isinstance(x, Fraction)
-                                 for g in _radicals(sympy.sympify(x))}, key=sympy.default_sort_key)
+                                 for g in _radicals(x)}, key=sympy.default_sort_key)
             self.field = QQ.algebraic_field(*generators)
             self.one = self.field.one
 
     def _value(self, x):
         if self.field is None:
             return x
-        import sympy
-
-        return self.field.from_sympy(sympy.sympify(x))
+        return self.field.from_sympy(as_sympy(x))
 
     def matrix(self, tableau: Tableau):
         A = np.array([[self._value(x) for x in row] for row in tableau.A], dtype=object)
