@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml
 demo: install
 	$(VENV)/bin/rkhp conditions --order 5 --degenerate
 	$(VENV)/bin/rkhp verify paper-three-stage
-	$(VENV)/bin/rkhp search --stages 3 --degenerate --seed 0
+	$(VENV)/bin/rkhp search --stages 3 --degenerate --seed 0 --optimize error
 	$(VENV)/bin/rkhp converge rigid-body
 
 test: install

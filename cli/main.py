@@ -16,6 +16,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "conditions": ("rkhp_cli.trees_cmd", "conditions", "Print the order conditions (Butcher form, LaTeX)."),
     "verify": ("rkhp_cli.verify_cmd", "verify", "Verify a tableau's orders (exact, or a stated tolerance)."),
     "tables": ("rkhp_cli.verify_cmd", "tables", "List the built-in tableaux with their verified orders."),
+    "show": ("rkhp_cli.show_cmd", "show", "Show a tableau's Butcher array, source and claims."),
     "search": ("rkhp_cli.search_cmd", "search", "Search minimal-stage tableaux; polish, recognise, prove."),
     "systems": ("rkhp_cli.systems_cmd", "systems", "List the built-in Poisson systems."),
     "check": ("rkhp_cli.systems_cmd", "check", "Check a system's birealisation axioms (AD)."),
@@ -45,13 +46,16 @@ class LazyGroup(click.Group):
             formatter.write_dl(rows)
 
     def main(self, *args, **kwargs):
-        from rkhp.errors import InputError, NumericalFailure
+        from rkhp.errors import CheckFailed, InputError, NumericalFailure
 
         kwargs["standalone_mode"] = False
         try:
             rv = super().main(*args, **kwargs)
         except click.exceptions.Exit as exc:
             sys.exit(exc.exit_code)
+        except click.exceptions.NoArgsIsHelpError as exc:  # bare `rkhp`: the help, on stdout
+            click.echo(exc.ctx.get_help())
+            sys.exit(0)
         except click.exceptions.Abort:
             sys.stderr.write("rkhp: aborted\n")
             sys.exit(130)
@@ -66,6 +70,9 @@ class LazyGroup(click.Group):
             sys.exit(2)
         except NumericalFailure as exc:
             sys.stderr.write(f"rkhp: numerical failure: {one_line(str(exc))}\n")
+            sys.exit(1)
+        except CheckFailed as exc:
+            sys.stderr.write(f"rkhp: check failed: {one_line(str(exc))}\n")
             sys.exit(1)
         except BrokenPipeError:
             sys.exit(0)

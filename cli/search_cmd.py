@@ -5,6 +5,8 @@ from __future__ import annotations
 import click
 
 from .options import console, emit_json, format_option, progress
+from .render import print_table
+from .show_cmd import print_array
 
 
 def _class_of(degenerate: bool, symmetric: bool) -> str:
@@ -80,48 +82,33 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
     if result.interrupted:
         click.echo("rkhp: interrupted: the best found so far is shown", err=True)
         raise click.exceptions.Exit(130)
-    if save and result.found is None:
-        raise click.ClickException(f"nothing found, so nothing was saved to {save}")
+    if result.found is None:  # a failed check: exit status 1 (docs/exit-status.md)
+        from rkhp.errors import CheckFailed
+
+        proved = result.proof is not None and result.proof.proved
+        raise CheckFailed(f"no tableau found of order {result.order} with {stages} stages"
+                          + (" (proved impossible)" if proved else "")
+                          + (f"; nothing was saved to {save}" if save else ""))
 
 
 def _save(result, path) -> None:
-    import dataclasses
-
     from rkhp.tablefiles import save_tableau
 
-    found = result.found
-    ver = found.verification
-    how = ver.tolerance_rule
-    tab = dataclasses.replace(
-        found.tableau, claimed_order=ver.orders["general"],
-        claimed_degenerate_order=ver.orders["degenerate"],
-        reference=_command_line(result, found.order),
-        notes=f"verified: {how}")
-    save_tableau(tab, path)
+    save_tableau(result.tableau_to_save(), path)
 
 
 SHOWN_DIGITS = 12
 
 
-def _short(text: str) -> str:
-    """A long decimal rounded to SHOWN_DIGITS significant digits (exact forms unchanged)."""
-    import re
+def _shown(x) -> str:
+    """An entry as shown: exact forms whole, decimals of D digits rounded to SHOWN_DIGITS."""
+    from rkhp.tableau import entry_decimal, entry_text, is_exact
 
-    if not re.fullmatch(r"[-+]?[0-9.]+(e[-+]?[0-9]+)?", text) or len(text) <= SHOWN_DIGITS + 4:
-        return text
-    import mpmath
-
-    return mpmath.nstr(mpmath.mpf(text), SHOWN_DIGITS)
+    return entry_text(x) if is_exact(x) else entry_decimal(x, SHOWN_DIGITS)
 
 
-def _command_line(result, order: int) -> str:
-    """The command that reproduces a saved tableau."""
-    flags = {"general": "", "degenerate": " --degenerate", "symmetric": " --symmetric"}[result.cls]
-    opts = result.options
-    return (f"rkhp search --stages {result.stages} --order {order}{flags}"
-            f"{' --implicit' if result.implicit else ''} --seed {opts.seed} "
-            f"--restarts {opts.restarts} --digits {opts.digits}"
-            f"{' --optimize error' if opts.optimize else ''}")
+def _count(n: int, one: str, many: str | None = None) -> str:
+    return f"{n} {one if n == 1 else many or one + 's'}"
 
 
 def _render(result, save) -> None:
@@ -136,33 +123,32 @@ def _render(result, save) -> None:
                   f"{data['restarts']} restarts, {data['seconds']:.2f} s")
     else:
         con.print(f"[bold]Order {result.found.order}[/bold] ({head}): found in "
-                  f"{data['restarts']} restarts ({data['successes']} successes), "
-                  f"{data['seconds']:.2f} s")
-        tab = data["tableau"]
-        s = result.stages
-        table = Table(show_header=False, box=None, padding=(0, 1))
-        for _ in range(s + 2):
-            table.add_column(overflow="fold")
-        for i in range(s):
-            table.add_row(_short(tab["c"][i]), "│", *map(_short, tab["A"][i]))
-        table.add_row("", "│", *(["─" * 4] * s))
-        table.add_row("", "│", *map(_short, tab["b"]))
-        con.print(table)
+                  f"{_count(data['order_restarts'], 'restart')} of order {result.found.order} "
+                  f"({_count(data['order_successes'], 'success', 'successes')}; "
+                  f"{_count(data['restarts'], 'restart')} over all orders), {data['seconds']:.2f} s")
+        import mpmath
+
+        with mpmath.workdps(result.options.digits):
+            print_array(con, result.found.tableau, _shown, "c | A / b")
         if not result.found.exact:
             con.print(f"(entries shown to {SHOWN_DIGITS} digits; all {result.options.digits} "
                       "with --format json or --save)")
         con.print(f"residual {data['residual']:.3g}; principal error (order "
                   f"{result.found.order + 1}) {data['principal_error']:.6g}")
-        con.print(f"verified orders {data['verified_orders']}; decided by: {data['decided_by']}")
+        ver = result.found.verification
+        orders = ", ".join(f"{cls} {'>= ' if ver.is_lower_bound(cls) else ''}{n}"
+                           for cls, n in ver.orders.items())
+        con.print(f"verified orders: {orders}; decided by: {data['decided_by']}")
         if save:
             con.print(f"saved to {save}")
     if result.optimisation is not None:
         opt = result.optimisation
         rows = Table("method", "principal error norm", title="Error norms at order N+1")
+        rows.columns[0].no_wrap = True
         rows.add_row("optimum found", f"{opt.error_norm:.6g}")
         for k in opt.known:
             rows.add_row(k.name, f"{k.error_norm:.6g}")
-        con.print(rows)
+        print_table(con, rows)
         if opt.kkt_residual is not None:
             con.print(f"optimum stationary to D digits: max |KKT residual| {opt.kkt_residual:.2g}")
     ev = data["evidence_next_order"]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from .options import console, emit_json, format_option, progress
+from .render import compact_table
 
 METHOD_HELP = ("Method: a tableau name or file used as an RKHP method, classical:NAME for classical "
                "explicit RK on xdot = pi grad H, or implicit-midpoint. Repeat or separate by commas. "
@@ -55,15 +56,6 @@ def _setup(system_name, realisation, methods, t_final, plot):
         check_t_final(t_final)
     system = get_system(system_name, realisation=realisation)
     return system, resolve_methods(_names(methods))
-
-
-def _table(title, **kw):
-    """A compact rich table (no vertical rules), so that studies fit 80 columns."""
-    from rich import box
-    from rich.table import Table
-
-    return Table(title=title, title_justify="left", box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True,
-                 **kw)
 
 
 def _e(x) -> str:
@@ -128,7 +120,7 @@ def _render_converge(study, plot) -> None:
     out.print(f"reference: {ref.kind}, estimated error {ref.error_estimate:.1e} ({ref.detail}); "
               f"errors <= {ref.floor:.1e} are not reported as measurements")
     for m in study.methods:
-        table = _table(f"{m.method} ({m.kind})")
+        table = compact_table(f"{m.method} ({m.kind})")
         for col in ("h", "steps", "error", "order", "Casimir", "energy", "Newton", "s", "fit"):
             table.add_column(col, justify="right" if col != "fit" else "left", no_wrap=True)
         for i, r in enumerate(m.rows):
@@ -209,7 +201,7 @@ def _render_bench(study, plot) -> None:
         extra = f", compile {c.compile_seconds:.2f} s apart" if c.kind == "rkhp" else ""
         timed = f", {c.trajectories} trajectories timed" if study.ensemble else ""
         out.print(f"[bold]{c.method}[/] ({c.kind}{extra}{timed})")
-        table = _table(None)
+        table = compact_table(None)
         for col in ("steps" if c.kind != "scipy" else "rtol", "error", "seconds", "f evals", "status"):
             table.add_column(col, justify="right")
         for p in c.points:
@@ -271,7 +263,7 @@ def _render_stress(study, plot) -> None:
     out.print(f"[bold]{study.system}[/] ({study.realisation} realisation), T = {study.t_final:g}")
     out.print("[bold](a) step-size sweep[/]")
     for s in study.sweep:
-        table = _table(s.method)
+        table = compact_table(s.method)
         for col in ("h", "steps", "ok", "Newton max", "rel. error", "rel. energy err"):
             table.add_column(col, justify="right")
         for r in s.rows:
@@ -282,7 +274,7 @@ def _render_stress(study, plot) -> None:
         out.print(f"verdict (a): {s.verdict()}")
     lr = study.long_run
     out.print(f"[bold](b) long run[/]: {lr.steps} steps of h = {lr.h:g}, max error per window ({lr.windows} windows)")
-    table = _table(None)
+    table = compact_table(None)
     table.add_column("method", no_wrap=True)
     for col in ("Casimir max", "energy, 1st window", "last window", "growth", "seconds"):
         table.add_column(col, justify="right")
@@ -296,7 +288,7 @@ def _render_stress(study, plot) -> None:
     out.print(f"verdict (b): {verdicts['b']}")
     out.print("[bold](c) near-singular starts[/]")
     if study.near_singular.applicable:
-        table = _table(None)
+        table = compact_table(None)
         for col in ("method", "x1(0)", "status", "min component", "Casimir err", "kept"):
             table.add_column(col)
         for r in study.near_singular.runs:
@@ -307,7 +299,7 @@ def _render_stress(study, plot) -> None:
     ro = study.round_off
     out.print(f"[bold](d) tiny steps[/]: T = {ro.t_final:g}, reference {ro.reference_kind} "
               f"(errors <= {ro.reference_floor:.1e} not measured); error at T and max energy error")
-    table = _table(None)
+    table = compact_table(None)
     table.add_column("steps", justify="right")
     for m in ro.studies:
         table.add_column(m.method, justify="right")

@@ -8,6 +8,7 @@ import re
 import click
 
 from .options import console, emit_json, format_option
+from .render import compact_table, print_table
 
 
 def realisation_option():
@@ -40,16 +41,14 @@ def systems(fmt):
     if fmt == "json":
         emit_json(rows)
         return
-    from rich.table import Table
-
-    table = Table(title="Built-in Poisson systems (realisations: symmetric, shifted, quartic)")
+    table = compact_table("Built-in Poisson systems (realisations: symmetric, shifted, quartic)")
     for col in ("name", "family", "n", "domain", "x0", "t_final", "Casimirs", "exact"):
-        table.add_column(col, no_wrap=col in ("name", "family"), overflow="fold")  # never cut with an ellipsis
+        table.add_column(col, no_wrap=col in ("name", "family"))
     for r in rows:
         table.add_row(r["name"], r["family"], str(r["dim"]), r["domain"],
                       ", ".join(f"{v:.4g}" for v in r["x0"]), _fmt(r["t_final"]),
                       "; ".join(r["casimirs"]) or "-", "yes" if r["exact_solution"] else "no")
-    console().print(table)
+    print_table(console(), table)
 
 
 @click.command("check")
@@ -84,7 +83,7 @@ def check(system, realisation, samples, seed, fmt):
         table.add_row("d_p alpha(x,0) antisymmetric", f"{result.degeneracy:.2e}")
         table.add_row("beta(x,p) = alpha(x,-p)", f"{result.symmetry:.2e}")
         out = console()
-        out.print(table)
+        print_table(out, table)
         out.print(f"degenerate: {'yes' if result.degenerate else 'no'}    "
                   f"symmetric: {'yes' if result.symmetric else 'no'}    "
                   f"axioms: {'ok' if result.ok else 'FAILED'} (tolerance {result.tolerance:g})")
@@ -138,8 +137,8 @@ def integration_report(system, trajectory, method: str, h: float, steps: int) ->
         "t_final": float(trajectory.times[-1]), "x_final": [float(v) for v in xf],
         "casimir_error": casimir,
         "energy_error": abs(system.hamiltonian(xf) - system.hamiltonian(x0)),
-        "newton": {"mean": float(iters.mean()) if iters.size else 0.0,
-                   "max": int(iters.max()) if iters.size else 0},
+        "newton_mean": float(iters.mean()) if iters.size else 0.0,
+        "newton_max": int(iters.max()) if iters.size else 0,
         "status": trajectory.status, "compile_seconds": trajectory.compile_seconds,
         "run_seconds": trajectory.run_seconds, "realisation": system.realisation,
         "exact_error": exact,
@@ -199,10 +198,10 @@ def _print_integration(r: dict) -> None:
             ("error vs exact solution", _fmt(r["exact_error"], 3)),
             ("Casimir error", _fmt(r["casimir_error"], 3)),
             ("energy error", _fmt(r["energy_error"], 3)),
-            ("Newton iterations (mean, max)", f"{r['newton']['mean']:.2f}, {r['newton']['max']}"),
+            ("Newton iterations (mean, max)", f"{r['newton_mean']:.2f}, {r['newton_max']}"),
             ("status", r["status"]),
             ("compile seconds", f"{r['compile_seconds']:.3f}"),
             ("run seconds", f"{r['run_seconds']:.4f}")]
     for key, value in rows:
         table.add_row(key, value)
-    console().print(table)
+    print_table(console(), table)

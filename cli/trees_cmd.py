@@ -55,8 +55,10 @@ def trees(order, degenerate, exact_order, count, fmt):
     rows = [(str(t.order), str(t), str(t.sigma), str(t.gamma)) for t in found]
     header = ("Order", "Tree", "sigma", "gamma")
     if fmt == "latex":
-        body = [(o, f"\\forest{{{t}}}", s, g) for o, t, s, g in rows]
-        click.echo(_latex_longtable(("\\text{Order}", "\\text{Tree}", "\\sigma", "\\gamma"), body))
+        from rkhp.latex import tree_latex
+
+        body = [(str(t.order), tree_latex(t), str(t.sigma), str(t.gamma)) for t in found]
+        _echo_latex(("\\text{Order}", "\\text{Tree}", "\\sigma", "\\gamma"), body, trees=True)
     elif fmt == "markdown":
         click.echo(_markdown(header, rows))
     else:
@@ -87,9 +89,11 @@ def conditions(order, degenerate, symmetric, exact_order, fmt):
                    "conditions": [_condition_json(c) for c in conds]})
         return
     if fmt == "latex":
-        click.echo(_latex_longtable(
-            ("\\text{Order}", "\\text{Butcher tree } \\tau", "\\text{Order condition}"),
-            [(str(c.order), " ".join(t.latex() for t in c.trees), c.latex()) for c in conds]))
+        from rkhp.latex import tree_latex
+
+        _echo_latex(("\\text{Order}", "\\text{Butcher tree } \\tau", "\\text{Order condition}"),
+                    [(str(c.order), " ".join(tree_latex(t) for t in c.trees), c.latex()) for c in conds],
+                    trees=True)
         return
     rows = [(str(c.order), " ".join(str(t) for t in c.trees), c.text()) for c in conds]
     header = ("Order", "Tree", "Order condition")
@@ -140,7 +144,7 @@ def _render_counts(counts, degenerate, fmt) -> None:
     header = ("Order", f"trees in {'T_0' if degenerate else 'T'}")
     rows = list(counts.items())
     if fmt == "latex":
-        click.echo(_latex_longtable(("\\text{Order}", "\\#" + ("T_0" if degenerate else "T")), rows))
+        _echo_latex(("\\text{Order}", "\\#" + ("T_0" if degenerate else "T")), rows)
     elif fmt == "markdown":
         click.echo(_markdown(header, rows))
     else:
@@ -152,19 +156,11 @@ def _render_counts(counts, degenerate, fmt) -> None:
         console().print(table)
 
 
-def _latex_longtable(header, rows) -> str:
-    """A longtable in the layout of the paper's Table 1 (a rule between orders)."""
-    cols = "|".join("C" for _ in header)
-    lines = [f"\\begin{{longtable}}{{{cols}}}", " & ".join(header) + "\\\\\\hline"]
-    previous = None
-    for row in rows:
-        if previous is not None and row[0] != previous:
-            lines.append("\\hline")
-        cells = row if row[0] != previous else ("",) + tuple(row[1:])
-        lines.append(" & ".join(cells) + "\\\\")
-        previous = row[0]
-    lines.append("\\end{longtable}")
-    return "\n".join(lines)
+def _echo_latex(header, rows, trees: bool = False) -> None:
+    """A standalone LaTeX document holding the longtable (compiles with pdflatex as it is)."""
+    from rkhp.latex import longtable, standalone
+
+    click.echo(standalone(longtable(header, rows), tables=True, trees=trees))
 
 
 def _markdown(header, rows) -> str:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from .options import console, emit_json, format_option, progress
+from .render import compact_table, print_table
 
 _PRECISION_HELP = ("float, exact, or a number of decimal digits (fixed point). Default: exact when "
                    "every entry is exact, else the digits given when above 17, else float.")
@@ -32,8 +33,18 @@ def verify(tableau, max_order, precision, show, fmt):
                             on_order=lambda n, N: bar.update(task, completed=n, total=N))
     if fmt == "json":
         emit_json(result.to_json())
-        return
-    _render(result, tab, show)
+    else:
+        _render(result, tab, show)
+    fail_on_overstated([result])
+
+
+def fail_on_overstated(results) -> None:
+    """Exit status 1 when a claimed order is overstated (docs/exit-status.md)."""
+    bad = [f"{r.name} ({', '.join(r.overstated)})" for r in results if r.overstated]
+    if bad:
+        from rkhp.errors import CheckFailed
+
+        raise CheckFailed(f"claimed order overstated: {'; '.join(bad)}")
 
 
 def _render(result, tab, show: int) -> None:
@@ -56,10 +67,10 @@ def _render(result, tab, show: int) -> None:
         pe = result.principal_error.get(cls)
         pm = result.principal_error_max.get(cls)
         claimed = result.claimed.get(cls)
-        claim = "" if claimed is None else f"{claimed} ({result.claims[cls]})"
+        claim = "" if claimed is None else f"{claimed} ({result.claims.get(cls, 'not checked')})"
         table.add_row(_CLASS_SETS.get(cls, cls), f"{lower}{order}", str(checked), escape(claim),
                       "" if pe is None else f"{pe:.3e}", "" if pm is None else f"{pm:.3e}")
-    out.print(table)
+    print_table(out, table)
     for cls, failures in result.failing.items():
         if not len(failures):
             continue
@@ -77,7 +88,7 @@ def _render(result, tab, show: int) -> None:
             t.add_row(*row)
         if len(failures) > show:
             t.caption = f"... and {len(failures) - show} more (--show N, or --format json)"
-        out.print(t)
+        print_table(out, t)
     if not result.claim_ok:
         out.print("[red]claimed orders do not match:[/red] "
                   + ", ".join(f"{cls}: {status}" for cls, status in result.claims.items()
@@ -108,25 +119,40 @@ def tables(precision, fmt):
             rows.append((tab, result))
             bar.advance(task)
     if fmt == "json":
-        emit_json([{"name": tab.name, "aliases": list(tab.aliases), "stages": tab.stages,
-                    "kind": tab.kind, "order": r.order, "degenerate_order": r.degenerate_order,
-                    "symmetric_order": r.orders.get("symmetric"), "orders": dict(r.orders), "precision": r.precision,
-                    "claimed": {"order": tab.claimed_order,
-                                "degenerate_order": tab.claimed_degenerate_order},
-                    "claim_ok": r.claim_ok, "reference": tab.reference} for tab, r in rows])
-        return
-    from rich.table import Table
+        emit_json([tables_row(tab, r) for tab, r in rows])
+    else:
+        _render_tables(rows, precision)
+    fail_on_overstated([r for _, r in rows])
 
-    table = Table(title=f"Built-in tableaux (verified orders; precision: {precision})")
-    for col in ("name", "stages", "kind", "order", "degenerate", "symmetric", "claimed"):
-        table.add_column(col, justify="right" if col in ("stages", "order", "degenerate",
-                                                         "symmetric") else "left")
+
+_CLASSES = ("general", "degenerate", "symmetric")
+
+
+def tables_row(tab, r) -> dict:
+    """One element of `rkhp tables --format json` (docs/json.md)."""
+    return {"name": tab.name, "aliases": list(tab.aliases), "stages": tab.stages, "kind": tab.kind,
+            "order": r.order_json("general"), "degenerate_order": r.order_json("degenerate"),
+            "symmetric_order": r.order_json("symmetric"),
+            "orders": {cls: r.order_json(cls) for cls in r.orders}, "precision": r.precision,
+            "claimed": {"order": tab.claimed_order, "degenerate_order": tab.claimed_degenerate_order,
+                        "symmetric_order": tab.claimed_symmetric_order},
+            "claim_ok": r.claim_ok, "claims": dict(r.claims), "reference": tab.reference}
+
+
+def _render_tables(rows, precision) -> None:
+    table = compact_table(f"Built-in tableaux (verified orders; precision: {precision})")
+    for col in ("name", "s", "kind", "T", "T_0", "sym", "claimed"):
+        table.add_column(col, justify="left" if col in ("name", "kind", "claimed") else "right",
+                         no_wrap=col == "name")
     for tab, r in rows:
-        claimed = "/".join("-" if x is None else str(x)
-                           for x in (tab.claimed_order, tab.claimed_degenerate_order))
+        claimed = "/".join("-" if x is None else str(x) for x in tab.claims.values())
         if not r.claim_ok:
-            claimed += " (mismatch)"
+            claimed += " (" + ", ".join(f"{c}: {st}" for c, st in r.claims.items() if st != "ok") + ")"
         orders = [(">=" if r.is_lower_bound(c) else "") + str(r.orders[c]) if c in r.orders else ""
-                  for c in ("general", "degenerate", "symmetric")]
+                  for c in _CLASSES]
         table.add_row(tab.name, str(tab.stages), tab.kind, *orders, claimed)
-    console().print(table)
+    table.caption = ("s: stages; T, T_0, sym: verified orders over T (general), T_0 (degenerate) and "
+                     "in the symmetric class (>= n: checked up to n); claimed: the file's orders "
+                     "T/T_0/sym")
+    table.caption_justify = "left"
+    print_table(console(), table)

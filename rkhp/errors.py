@@ -1,7 +1,8 @@
 """Errors raised by the library.
 
 The command line turns an :class:`InputError` into one line on stderr and exit status 2, and a
-:class:`NumericalFailure` into one line and exit status 1. Nothing in ``rkhp`` prints.
+:class:`NumericalFailure` or a :class:`CheckFailed` into one line and exit status 1
+(docs/exit-status.md). Nothing in ``rkhp`` prints.
 """
 
 
@@ -15,3 +16,7 @@ class InputError(RkhpError, ValueError):
 
 class NumericalFailure(RkhpError, ArithmeticError):
     """A computation that could not be carried out reliably (Newton diverged, step too large)."""
+
+
+class CheckFailed(RkhpError):
+    """A check whose answer is no: a claimed order overstated, no tableau found, axioms violated."""

@@ -150,8 +150,8 @@ def entry_text(x) -> str:
         return str(x)
     if isinstance(x, GivenDecimal):
         return x.text
-    if isinstance(x, mpmath.mpf):
-        return mpmath.nstr(x, mpmath.mp.dps, min_fixed=-1, max_fixed=-1)
+    if isinstance(x, mpmath.mpf):  # a computed value (a row sum): mpmath's current digits
+        return mpmath.nstr(x, mpmath.mp.dps, min_fixed=-5, max_fixed=mpmath.mp.dps)
     return str(x)
 
 
@@ -207,8 +207,9 @@ class Tableau:
         A: s rows of s entries; b: s entries (see :func:`parse_entry` for the entry types).
         c: the row sums of A, which the RKHP conditions use.
         c_given: the abscissae given in the file, or None; :meth:`c_mismatch` compares them.
-        aliases, reference, notes: metadata; claimed_order, claimed_degenerate_order: the orders
-        the source claims (None when it claims none).
+        aliases, reference, notes: metadata; claimed_order, claimed_degenerate_order,
+        claimed_symmetric_order: the orders the source claims in each class (None when it claims
+        none).
     """
 
     name: str
@@ -220,6 +221,7 @@ class Tableau:
     notes: str = ""
     claimed_order: int | None = None
     claimed_degenerate_order: int | None = None
+    claimed_symmetric_order: int | None = None
     source: str = field(default="", compare=False)
 
     def __post_init__(self):
@@ -236,7 +238,8 @@ class Tableau:
         if self.c_given is not None and len(self.c_given) != s:
             raise InputError(f"{where}: c has {len(self.c_given)} entries, A has {s} rows")
         for what, value in (("order", self.claimed_order),
-                            ("degenerate_order", self.claimed_degenerate_order)):
+                            ("degenerate_order", self.claimed_degenerate_order),
+                            ("symmetric_order", self.claimed_symmetric_order)):
             if value is not None and (isinstance(value, bool) or not isinstance(value, int)
                                       or value < 1):
                 raise InputError(f"{where}: claimed {what} must be a positive integer, "
@@ -254,6 +257,12 @@ class Tableau:
         return cls(name=name, A=A_, b=b_, c_given=c_, **metadata)
 
     # ------------------------------------------------------------------ structure
+
+    @property
+    def claims(self) -> dict[str, int | None]:
+        """The claimed order per class of conditions (general, degenerate, symmetric)."""
+        return {"general": self.claimed_order, "degenerate": self.claimed_degenerate_order,
+                "symmetric": self.claimed_symmetric_order}
 
     @property
     def stages(self) -> int:
@@ -342,4 +351,82 @@ class Tableau:
         return _readonly(np.array([to_float(x) for x in self.c], dtype=float))
 
     def describe(self) -> str:
+        """``rk4 (4 stages, explicit)``."""
         return f"{self.name} ({self.stages} stages, {self.kind})"
+
+    # ------------------------------------------------------------------ display
+
+    def blank_above_diagonal(self) -> bool:
+        """Whether the Butcher array leaves the (zero) entries on and above the diagonal blank."""
+        return self.is_explicit
+
+    def __str__(self) -> str:
+        """The Butcher array c | A / b with the entries as given (exact, or their digits)."""
+        return self.describe() + "\n" + butcher_text(self, entry_text)
+
+    def to_latex(self) -> str:
+        """The Butcher array as a LaTeX ``array`` (math mode; needs no package)."""
+        return butcher_latex(self)
+
+    def _repr_latex_(self) -> str:
+        return "$$" + self.to_latex() + "$$"
+
+
+# ----------------------------------------------------------------------------- display
+
+
+def entry_decimal(x, digits: int = 12) -> str:
+    """An entry rounded to ``digits`` significant digits (``0.333333333333``; ``0`` for zero)."""
+    if is_zero(x):
+        return "0"
+    value = to_fraction(x, int(digits * 3.33) + 64)
+    with mpmath.workdps(digits + 10):
+        text = mpmath.nstr(mpmath.mpf(value.numerator) / value.denominator, digits,
+                           min_fixed=-5, max_fixed=digits + 1)
+    return text[:-2] if text.endswith(".0") else text
+
+
+def entry_latex(x) -> str:
+    """LaTeX of an entry: ``\\frac{1}{2}``, ``-\\frac{\\sqrt{3}}{6}``, or the given digits."""
+    if isinstance(x, Fraction):
+        if x.denominator == 1:
+            return str(x.numerator)
+        sign = "-" if x < 0 else ""
+        return f"{sign}\\frac{{{abs(x.numerator)}}}{{{x.denominator}}}"
+    if isinstance(x, mpmath.mpf):
+        return entry_text(x)
+    import sympy
+
+    return sympy.latex(x)
+
+
+def butcher_cells(tableau: Tableau, fmt) -> list[list[str]]:
+    """Rows [c_i, a_i1, ..., a_is] then ["", b_1, ..., b_s], entries as ``fmt(x)``; entries on
+    and above the diagonal of an explicit tableau are "" (the usual blank)."""
+    blank = tableau.blank_above_diagonal()
+    rows = [[fmt(tableau.c[i])] + ["" if blank and j >= i else fmt(x) for j, x in enumerate(row)]
+            for i, row in enumerate(tableau.A)]
+    return rows + [[""] + [fmt(x) for x in tableau.b]]
+
+
+def butcher_text(tableau: Tableau, fmt, gap: int = 2) -> str:
+    """The Butcher array as aligned text lines (c | A, a rule, then | b)."""
+    rows = butcher_cells(tableau, fmt)
+    widths = [max(len(r[k]) for r in rows) for k in range(len(rows[0]))]
+    sep = " " * gap
+
+    def line(cells):
+        left = cells[0].ljust(widths[0])
+        right = sep.join(c.ljust(w) for c, w in zip(cells[1:], widths[1:], strict=True))
+        return f"{left} │ {right}".rstrip()
+
+    rule = "─" * (widths[0] + 1) + "┼" + "─" * (sum(widths[1:]) + gap * (len(widths) - 2) + 1)
+    return "\n".join([line(r) for r in rows[:-1]] + [rule, line(rows[-1])])
+
+
+def butcher_latex(tableau: Tableau) -> str:
+    """``\\begin{array}{c|ccc} ... \\end{array}``: c | A, a rule, then b (paper §5.2)."""
+    rows = butcher_cells(tableau, entry_latex)
+    spec = "c|" + "c" * tableau.stages
+    body = [" & ".join(r) + " \\\\" for r in rows[:-1]] + ["\\hline", " & ".join(rows[-1])]
+    return "\\begin{array}{" + spec + "}\n" + "\n".join(body) + "\n\\end{array}"

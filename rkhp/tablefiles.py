@@ -7,6 +7,7 @@ Schema (TOML, or the same keys in JSON; README "Tableau files"):
     reference = "Kutta (1901) ..."    # optional
     order = 4                         # optional: the claimed (general) order
     degenerate_order = 4              # optional: the claimed order over T_0
+    symmetric_order = 4               # optional: the claimed order in the symmetric class
     notes = "..."                     # optional
     A = [["0", "0"], ["1/2", "0"]]    # s rows of s entries
     b = ["0", "1"]
@@ -28,7 +29,8 @@ from pathlib import Path
 from .errors import InputError
 from .tableau import Tableau, entry_text, parse_entry
 
-_KEYS = ("name", "aliases", "reference", "order", "degenerate_order", "notes", "A", "b", "c")
+_KEYS = ("name", "aliases", "reference", "order", "degenerate_order", "symmetric_order", "notes", "A",
+         "b", "c")
 _FILE_SUFFIXES = (".toml", ".json", ".txt")
 
 
@@ -163,7 +165,8 @@ def tableau_from_mapping(data, where: str, default_name: str) -> Tableau:
     return Tableau(name=name, A=A_, b=b_, c_given=c_, aliases=tuple(data.get("aliases", ())),
                    reference=data.get("reference", ""), notes=data.get("notes", ""),
                    claimed_order=data.get("order"),
-                   claimed_degenerate_order=data.get("degenerate_order"), source=where)
+                   claimed_degenerate_order=data.get("degenerate_order"),
+                   claimed_symmetric_order=data.get("symmetric_order"), source=where)
 
 
 # ----------------------------------------------------------------------------- 60-digit files
@@ -226,6 +229,8 @@ def tableau_mapping(tableau: Tableau) -> dict:
         data["order"] = tableau.claimed_order
     if tableau.claimed_degenerate_order is not None:
         data["degenerate_order"] = tableau.claimed_degenerate_order
+    if tableau.claimed_symmetric_order is not None:
+        data["symmetric_order"] = tableau.claimed_symmetric_order
     if tableau.notes:
         data["notes"] = tableau.notes
     data["A"] = [[entry_text(x) for x in row] for row in tableau.A]

@@ -116,9 +116,21 @@ class Verification:
         """Whether every claimed order equals the verified one."""
         return all(v == "ok" for v in self.claims.values())
 
+    @property
+    def overstated(self) -> tuple[str, ...]:
+        """The classes whose claimed order is above the verified one (a failed check)."""
+        return tuple(cls for cls, status in self.claims.items() if status == "overstated")
+
     def is_lower_bound(self, cls: str) -> bool:
         """Whether the order in ``cls`` reached the end of the check (so is only a lower bound)."""
         return self.orders[cls] >= self.class_checked_up_to.get(cls, self.checked_up_to)
+
+    def order_json(self, cls: str) -> dict | None:
+        """``{"order": n, "lower_bound": b}``: b is true when the check ended at order n, so that
+        the order is only known to be at least n (the table's ``>= n``); None if not checked."""
+        if cls not in self.orders:
+            return None
+        return {"order": self.orders[cls], "lower_bound": self.is_lower_bound(cls)}
 
     def _failing_json(self, cls: str) -> list[dict]:
         exact = self.failing_exact.get(cls)
@@ -134,18 +146,19 @@ class Verification:
             "name": self.name,
             "stages": self.stages,
             "kind": self.kind,
-            "order": self.order,
-            "degenerate_order": self.degenerate_order,
-            "symmetric_order": self.orders.get("symmetric"),
+            "order": self.order_json("general"),
+            "degenerate_order": self.order_json("degenerate"),
+            "symmetric_order": self.order_json("symmetric"),
             "checked_up_to": self.checked_up_to,
             "precision": self.precision,
             "tolerance": self.tolerance,
             "principal_error": dict(self.principal_error),
             "failing": {cls: self._failing_json(cls) for cls in self.failing},
             "claimed": {"order": self.claimed.get("general"),
-                        "degenerate_order": self.claimed.get("degenerate")},
+                        "degenerate_order": self.claimed.get("degenerate"),
+                        "symmetric_order": self.claimed.get("symmetric")},
             "claim_ok": self.claim_ok,
-            "orders": dict(self.orders),
+            "orders": {cls: self.order_json(cls) for cls in self.orders},
             "claims": dict(self.claims),
             "tolerance_rule": self.tolerance_rule,
             "principal_error_max": dict(self.principal_error_max),
@@ -352,7 +365,7 @@ def verify(tableau, max_order: int | None = None, precision=None, classes=None,
         check_order(max_order, MAX_ENUMERATION_ORDER, "max order")
         states, N = _run(tableau, max_order, arithmetic, tolerance, classes, on_order)
     else:
-        claimed = [x for x in (tableau.claimed_order, tableau.claimed_degenerate_order) if x]
+        claimed = [x for x in tableau.claims.values() if x]
         N = min(max(claimed, default=5) + 1, AUTO_MAX_ORDER)
         while True:
             states, checked = _run(tableau, N, arithmetic, tolerance, classes, on_order)
@@ -362,7 +375,7 @@ def verify(tableau, max_order: int | None = None, precision=None, classes=None,
             N = min(N + 2, AUTO_MAX_ORDER)
     orders = {cls: _found(s, N) for cls, s in states.items()}
     class_checked = {cls: _checked(s, N) for cls, s in states.items()}
-    claimed = {"general": tableau.claimed_order, "degenerate": tableau.claimed_degenerate_order}
+    claimed = tableau.claims
     claims = {cls: _claim_status(claimed[cls], orders[cls], class_checked[cls])
               for cls in claimed if claimed[cls] is not None and cls in orders}
     return Verification(

@@ -182,7 +182,7 @@ def test_json_keys():
     assert set(doc["principal_error"]) >= {"general", "degenerate"}
     assert doc["failing"]["general"] == [{"tree": "b[b]", "residual": pytest.approx(0.0773502691896),
                                           "exact": "-1/2 + sqrt(3)/3"}]
-    assert doc["claimed"] == {"order": None, "degenerate_order": 3}
+    assert doc["claimed"] == {"order": None, "degenerate_order": 3, "symmetric_order": None}
 
 
 def test_principal_error_is_the_weighted_norm():
@@ -197,7 +197,7 @@ def test_cli_verify_json_and_table(run_cli):
     rc, out, err = run_cli("verify", "paper-three-stage", "--format", "json")
     assert rc == 0, err
     doc = json.loads(out)
-    assert (doc["order"], doc["degenerate_order"], doc["precision"]) == (1, 4, "exact")
+    assert (doc["order"]["order"], doc["degenerate_order"]["order"], doc["precision"]) == (1, 4, "exact")
     rc, out, err = run_cli("verify", "rk4", "--precision", "float")
     assert rc == 0 and "general (T)" in out and "b[b[b[b[b]]]]" in out
 
@@ -206,7 +206,7 @@ def test_cli_tables(run_cli):
     rc, out, err = run_cli("tables", "--format", "json")
     assert rc == 0, err
     rows = {r["name"]: r for r in json.loads(out)}
-    assert rows["feagin14"]["order"] == 14 and rows["paper-implicit"]["degenerate_order"] == 3
+    assert rows["feagin14"]["order"]["order"] == 14 and rows["paper-implicit"]["degenerate_order"]["order"] == 3
     assert all(r["claim_ok"] for r in rows.values())
 
 

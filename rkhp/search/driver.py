@@ -130,6 +130,40 @@ class SearchResult:
             return None
         return self.found.verification.principal_error.get(self.cls)
 
+    @property
+    def found_run(self) -> Restarts | None:
+        """The restarts of the order reported (those that found it), if any."""
+        if self.found is None:
+            return None
+        return next(r for r in self.runs if r.problem.order == self.found.order)
+
+    def command_line(self) -> str:
+        """The command that reproduces the reported tableau."""
+        flags = {"general": "", "degenerate": " --degenerate", "symmetric": " --symmetric"}[self.cls]
+        opts = self.options
+        return (f"rkhp search --stages {self.stages} --order {self.found.order}{flags}"
+                f"{' --implicit' if self.implicit else ''} --seed {opts.seed} "
+                f"--restarts {opts.restarts} --digits {opts.digits}"
+                f"{' --optimize error' if opts.optimize else ''}")
+
+    def tableau_to_save(self):
+        """The reported tableau as a file would hold it: named by its content (its class, order,
+        stages and a hash of its entries), claiming its verified order in every class (verified
+        again without an order limit), with the command line that reproduces it."""
+        import dataclasses
+
+        from ..verify import verify
+
+        found = self.found
+        orders = verify(found.tableau, precision=found.verification.precision
+                        if found.exact else self.options.digits).orders
+        return dataclasses.replace(
+            found.tableau, name=content_name(found.tableau, method_name(
+                Problem(self.stages, found.order, self.cls, self.implicit))),
+            claimed_order=orders.get("general"), claimed_degenerate_order=orders.get("degenerate"),
+            claimed_symmetric_order=orders.get("symmetric"), reference=self.command_line(),
+            notes=f"verified: {found.verification.tolerance_rule}")
+
     def to_json(self) -> dict:
         """The issue's keys, then extras (decided_by, verified orders, optimisation, proof text)."""
         import mpmath
@@ -153,6 +187,7 @@ class SearchResult:
                      "result": self.proof.result_text(self.stages, self.proof_order, self.cls)}
         restarts = sum(len(r.attempts) for r in self.runs)
         successes = sum(len(r.successes) for r in self.runs)
+        run = self.found_run
         out = {
             "stages": self.stages,
             "degenerate": self.cls != "general",
@@ -169,8 +204,11 @@ class SearchResult:
             "evidence_next_order": evidence,
             # extras
             "class": self.cls,
+            "order_restarts": None if run is None else len(run.attempts),
+            "order_successes": None if run is None else len(run.successes),
             "decided_by": None if self.found is None else self.found.verification.tolerance_rule,
-            "verified_orders": None if self.found is None else dict(self.found.verification.orders),
+            "verified_orders": None if self.found is None else {
+                cls: self.found.verification.order_json(cls) for cls in self.found.verification.orders},
             "seed": self.options.seed,
             "interrupted": self.interrupted,
             "optimization": None if self.optimisation is None else {
@@ -226,6 +264,18 @@ def method_name(problem: Problem) -> str:
     """``search-<class>-o<order>-s<stages>`` (``-implicit`` added for implicit tableaux)."""
     kind = "-implicit" if problem.implicit else ""
     return f"search-{problem.cls}-o{problem.order}-s{problem.stages}{kind}"
+
+
+def content_name(tableau, base: str) -> str:
+    """``base-<8 hex digits>``: the digits hash the entries of A and b, so that two files hold the
+    same name only when they hold the same tableau."""
+    import hashlib
+
+    from ..tableau import entry_text
+
+    text = ";".join(",".join(entry_text(x) for x in row) for row in tableau.A)
+    text += "|" + ",".join(entry_text(x) for x in tableau.b)
+    return f"{base}-{hashlib.sha256(text.encode()).hexdigest()[:8]}"
 
 
 def search(stages: int, order: int | None = None, cls: str = "general", implicit: bool = False,

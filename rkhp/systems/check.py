@@ -45,10 +45,12 @@ class BirealisationCheck:
         return all(v <= self.tolerance for v in self.deviations.values())
 
     def to_json(self) -> dict:
+        """docs/json.md: the axioms' deviations, then those of degeneracy and symmetry."""
         return {"system": self.system, "realisation": self.realisation,
                 "degenerate": self.degenerate, "symmetric": self.symmetric,
-                "samples": self.samples,
-                "deviations": self.deviations, "ok": self.ok}
+                "samples": self.samples, "seed": self.seed, "tolerance": self.tolerance,
+                "deviations": self.deviations, "degeneracy": self.degeneracy,
+                "symmetry": self.symmetry, "ok": self.ok}
 
 
 def sample_points(system, samples: int, seed: int) -> tuple[np.ndarray, np.ndarray]:

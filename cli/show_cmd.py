@@ -1,0 +1,127 @@
+"""`rkhp show`: a tableau's Butcher array (exact entries and decimals), its source and claims."""
+
+from __future__ import annotations
+
+import click
+
+from .options import console, emit_json, format_option
+
+DECIMAL_DIGITS = 12
+_CLASS_NAMES = {"general": "general", "degenerate": "degenerate", "symmetric": "symmetric"}
+
+
+@click.command()
+@click.argument("tableau", metavar="NAME|FILE")
+@format_option("table", "json", "latex")
+def show(tableau, fmt):
+    """Show a tableau: the Butcher array c | A / b (exact entries and decimals), its source and
+    the orders it claims (check them with `rkhp verify`)."""
+    from rkhp.tablefiles import load_tableau
+
+    tab = load_tableau(tableau)
+    if fmt == "json":
+        emit_json(tableau_json(tab))
+    elif fmt == "latex":
+        from rkhp.latex import standalone
+
+        click.echo(standalone("\\[\n" + tab.to_latex() + "\n\\]", title=_latex_title(tab)))
+    else:
+        _render(tab)
+
+
+def tableau_json(tab) -> dict:
+    """The JSON document of `rkhp show` (docs/json.md)."""
+    import mpmath
+
+    from rkhp.tableau import entry_text, to_float
+
+    claims = tab.claims
+    with mpmath.workdps(tab.digits or mpmath.mp.dps):  # row sums of given digits: those digits
+        c = [entry_text(x) for x in tab.c]
+    return {
+        "name": tab.name, "aliases": list(tab.aliases), "stages": tab.stages, "kind": tab.kind,
+        "source": tab.source, "reference": tab.reference, "notes": tab.notes,
+        "claimed": {"order": claims["general"], "degenerate_order": claims["degenerate"],
+                    "symmetric_order": claims["symmetric"]},
+        "A": [[entry_text(x) for x in row] for row in tab.A], "b": [entry_text(x) for x in tab.b],
+        "c": c, "c_given": None if tab.c_given is None else [entry_text(x) for x in tab.c_given],
+        "decimals": {"A": [[to_float(x) for x in row] for row in tab.A],
+                     "b": [to_float(x) for x in tab.b], "c": [to_float(x) for x in tab.c]},
+    }
+
+
+def _latex_title(tab) -> str:
+    from rkhp.latex import escape_text
+
+    return escape_text(tab.describe())
+
+
+def claims_text(tab) -> str:
+    """``general 4, degenerate -, symmetric -``."""
+    return ", ".join(f"{_CLASS_NAMES[cls]} {'-' if n is None else n}" for cls, n in tab.claims.items())
+
+
+def _render(tab) -> None:
+    from rich.markup import escape
+
+    from rkhp.tableau import entry_decimal, entry_text
+
+    out = console()
+    out.print(f"[bold]{escape(tab.name)}[/bold]: {tab.stages} stages, {tab.kind}")
+    for label, value in (("aliases", ", ".join(tab.aliases)), ("source", tab.source),
+                         ("reference", tab.reference), ("notes", tab.notes)):
+        if value:
+            out.print(f"{label}: {escape(value)}")
+    out.print(f"claimed orders: {claims_text(tab)} (check them with `rkhp verify`)")
+    import mpmath
+
+    given = "exact entries" if tab.is_exact else f"entries as given ({tab.digits}+ digits)"
+    with mpmath.workdps(tab.digits or mpmath.mp.dps):  # row sums of given digits: those digits
+        print_array(out, tab, entry_text, f"{given}; c = row sums of A")
+    if tab.c_mismatch():
+        out.print("[yellow]note:[/yellow] the file's c differs from the row sums of A "
+                  "(`rkhp verify` lists the stages)")
+    print_array(out, tab, lambda x: entry_decimal(x, DECIMAL_DIGITS),
+                f"decimals ({DECIMAL_DIGITS} significant digits)")
+
+
+def print_array(out, tab, fmt, heading: str) -> None:
+    """The Butcher array as a block when it fits the console, else its non-zero entries row by
+    row, packed into lines (a number is never split across lines)."""
+    from rich.text import Text
+
+    from rkhp.tableau import butcher_text, is_zero
+
+    block = butcher_text(tab, fmt)
+    out.print()
+    if max(len(line) for line in block.splitlines()) <= out.width:
+        out.print(heading)
+        out.print(Text(block))
+        return
+    out.print(f"{heading}; non-zero entries row by row (the array is wider than the output)")
+    s = tab.stages
+    for i in range(s):
+        items = [f"c[{i + 1}] = {fmt(tab.c[i])}"] + [
+            f"a[{i + 1},{j + 1}] = {fmt(x)}" for j, x in enumerate(tab.A[i]) if not is_zero(x)]
+        for line in pack(items, out.width):
+            out.print(Text(line))
+    for line in pack([f"b[{j + 1}] = {fmt(x)}" for j, x in enumerate(tab.b) if not is_zero(x)],
+                     out.width):
+        out.print(Text(line))
+
+
+def pack(items: list[str], width: int, gap: str = "   ", indent: str = "  ") -> list[str]:
+    """Items joined by ``gap`` into lines of at most ``width`` (an item longer than a line stands
+    alone); lines after the first are indented."""
+    lines: list[str] = []
+    current = ""
+    for item in items:
+        candidate = item if not current else current + gap + item
+        if current and len(candidate) > width:
+            lines.append(current)
+            current = indent + item
+        else:
+            current = candidate
+    if current:
+        lines.append(current)
+    return lines
