@@ -139,7 +139,7 @@ def test_cli_integrate_json_and_failures():
     assert res.exit_code == 0, res.output
     doc = json.loads(res.output)
     keys = ["system", "method", "h", "steps", "t_final", "x_final", "casimir_error",
-            "energy_error", "newton", "status", "compile_seconds", "run_seconds"]
+            "energy_error", "newton_mean", "newton_max", "status", "compile_seconds", "run_seconds"]
     assert list(doc)[: len(keys)] == keys
     assert doc["status"] == "ok" and doc["steps"] == 100 and doc["h"] == pytest.approx(0.1)
     assert doc["casimir_error"] < 1e-14

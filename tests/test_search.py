@@ -22,7 +22,7 @@ from rkhp.search.polish import polish
 from rkhp.search.prove import prove_impossible
 from rkhp.search.recognise import recognise_number
 from rkhp.search.system import ResidualSystem
-from rkhp.tablefiles import load_tableau
+from rkhp.tablefiles import builtin_names, load_tableau
 from rkhp.verify import verify
 
 ISSUE_KEYS = ["stages", "degenerate", "implicit", "order", "found", "tableau", "residual",
@@ -207,6 +207,30 @@ def test_cli_json_keys_and_save_round_trip(tmp_path):
     tab = load_tableau(str(path))
     assert verify(tab).orders["degenerate"] == 4
     assert tab.claimed_degenerate_order == 4
+    # every class claimed, and named by content, never after another built-in table
+    assert (tab.claimed_order, tab.claimed_symmetric_order) == (1, 4) and verify(tab).claim_ok
+    assert tab.name.startswith("search-degenerate-o4-s3-") and tab.name not in builtin_names()
+
+
+def test_cli_symmetric_save_claims_the_symmetric_order(tmp_path):
+    # NOTES §8: symmetric order 4 with 3 stages (degenerate order 3 only)
+    path = tmp_path / "sym.toml"
+    out = _cli("search", "--stages", "3", "--order", "4", "--symmetric", "--restarts", "10",
+               "--save", str(path))
+    assert out.returncode == 0, out.stderr
+    tab = load_tableau(str(path))
+    assert (tab.claimed_degenerate_order, tab.claimed_symmetric_order) == (3, 4)
+    assert verify(tab).claim_ok
+
+
+def test_cli_counts_the_restarts_of_the_order_found():
+    # 2 stages reach degenerate order 3 at most (the paper): orders 1..3 found, 4 fails
+    out = _cli("search", "--stages", "2", "--degenerate", "--restarts", "5", "--format", "json")
+    data = json.loads(out.stdout)
+    assert data["order"] == 3 and data["evidence_next_order"]["restarts"] == 5
+    assert data["order_restarts"] <= data["restarts"] - 5 - 2  # not the failed ones of order 4
+    out = _cli("search", "--stages", "2", "--degenerate", "--restarts", "5")
+    assert f"found in {data['order_restarts']} restart" in out.stdout
 
 
 def test_cli_prove_prints_the_certificate():

@@ -203,3 +203,14 @@ def test_cli_check_bad_input(tmp_path):
     assert res.exit_code == 2
     res = runner.invoke(rkhp, ["check", "pendulum", "--samples", "0"])
     assert res.exit_code == 2
+
+
+def test_check_json_holds_every_deviation_of_its_table(run_cli):
+    rc, out, err = run_cli("check", "rigid-body", "--samples", "5", "--format", "json")
+    doc = json.loads(out)
+    assert rc == 0 and doc["seed"] == 0 and doc["tolerance"] == 1e-12
+    # the symmetric realisation (docs/theory.md §4): d_p alpha(x, 0) = -pi(x) / 2 is
+    # antisymmetric and beta(x, p) = alpha(x, -p), both to round-off
+    assert doc["degeneracy"] < 1e-14 and doc["symmetry"] < 1e-14
+    rc, table, err = run_cli("check", "rigid-body", "--samples", "5")
+    assert f"{doc['degeneracy']:.2e}" in table and f"{doc['symmetry']:.2e}" in table

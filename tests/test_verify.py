@@ -225,3 +225,15 @@ def test_cli_bad_file_names_the_file(run_cli, tmp_path):
     path.write_text('A = [["0", "0"], ["1"]]\nb = ["1", "0"]\n')
     rc, out, err = run_cli("verify", str(path))
     assert rc == 2 and err.count("\n") == 1 and str(path) in err and "not square" in err
+
+
+def test_json_says_which_orders_are_lower_bounds(run_cli):
+    # dop853 has order 8 (Hairer, Norsett & Wanner I, II.10); the symmetric relations ship up to
+    # order 8, so its symmetric order is only known to be at least 8: the table says ">= 8"
+    rc, out, err = run_cli("verify", "dop853", "--format", "json")
+    doc = json.loads(out)
+    assert doc["order"] == {"order": 8, "lower_bound": False}
+    assert doc["symmetric_order"] == {"order": 8, "lower_bound": True}
+    assert doc["orders"]["symmetric"] == doc["symmetric_order"]
+    rc, out, err = run_cli("verify", "dop853")
+    assert ">= 8" in out
