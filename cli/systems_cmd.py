@@ -88,7 +88,11 @@ def check(system, realisation, samples, seed, fmt):
                   f"symmetric: {'yes' if result.symmetric else 'no'}    "
                   f"axioms: {'ok' if result.ok else 'FAILED'} (tolerance {result.tolerance:g})")
     if not result.ok:
-        raise click.exceptions.Exit(1)
+        from rkhp.errors import CheckFailed
+
+        bad = ", ".join(f"{k} {v:.2e}" for k, v in result.deviations.items() if v > result.tolerance)
+        raise CheckFailed(f"{result.system} ({result.realisation}): birealisation axioms violated "
+                          f"({bad} > {result.tolerance:g})")
 
 
 def _parse_x0(text: str | None):
