@@ -36,8 +36,9 @@ def _floats(text: str | None, what: str) -> tuple[float, ...]:
 
 def _common(f):
     f = click.option("--realisation", default="symmetric", show_default=True,
-                     help="Birealisation: symmetric (degenerate), shifted (general) or quartic "
-                          "(degenerate, not symmetric).")(f)
+                     help="Birealisation: symmetric (degenerate), shifted (general), quartic "
+                          "(degenerate, not symmetric) or truncated:K (the spray series to degree "
+                          "K in p, K = 1..12; the expected order is bounded accordingly).")(f)
     f = click.option("--method", "methods", multiple=True, help=METHOD_HELP)(f)
     f = click.argument("system")(f)
     return f
@@ -141,9 +142,12 @@ def _render_converge(study, plot) -> None:
     for m in study.methods:
         kind = study.condition_class if m.kind == "rkhp" else "general"
         left = ", ".join(f"row {i} {why}" for i, why in m.fit.excluded) or "none"
+        basis = f"{kind} order"
+        if m.realisation_bound is not None:
+            basis += f", at most {m.realisation_bound} with {study.realisation}"
         out.print(f"{m.method}: observed order {_f(m.observed_order)} over rows "
                   f"{','.join(map(str, m.fit.fit_rows)) or '—'} (left out: {left}); expected {m.expected_order} "
-                  f"({kind} order): {m.verdict}")
+                  f"({basis}): {m.verdict}")
     if plot:
         out.print(f"plot written to {plot}")
 

@@ -14,7 +14,8 @@ from .render import compact_table, print_table
 def realisation_option():
     return click.option("--realisation", default="symmetric", show_default=True,
                         help="Birealisation: symmetric (degenerate), shifted (x + Q p; general), "
-                             "quartic (x + grad K(p); degenerate, not symmetric).")
+                             "quartic (x + grad K(p); degenerate, not symmetric), truncated:K (the "
+                             "spray series to degree K in p, K = 1..12; symmetric).")
 
 
 def _fmt(v, digits=6) -> str:

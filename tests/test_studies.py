@@ -190,7 +190,8 @@ def _run(args):
 
 
 CONVERGE_KEYS = {"system", "realisation", "degenerate", "symmetric", "t_final", "reference", "methods"}
-METHOD_KEYS = {"method", "expected_order", "observed_order", "verdict", "fit_rows", "rows"}
+METHOD_KEYS = {"method", "expected_order", "observed_order", "verdict", "fit_rows", "rows",
+               "realisation_bound"}
 ROW_KEYS = {"h", "steps", "error", "local_order", "casimir_error", "energy_error", "newton_mean", "newton_max",
             "seconds"}
 

@@ -4,7 +4,8 @@ For each method and step size: the global error at T (2-norm against the referen
 the local observed order, Casimir and energy errors (max over the run), Newton iterations and run
 time; per method the fitted slope over the asymptotic range (see :mod:`rkhp.studies.fit`), the
 expected order from the verify engine (symmetric order on a symmetric realisation, NOTES §8;
-degenerate order on a degenerate one, else general order: paper, Theorem 5.1 and §4) and a verdict.
+degenerate order on a degenerate one, else general order: paper, Theorem 5.1 and §4), bounded by
+what a ``truncated:K`` realisation allows (docs/theory.md §9), and a verdict.
 """
 
 from __future__ import annotations
@@ -66,6 +67,7 @@ class MethodConvergence:
     fit: OrderFit
     verdict: str
     rows: tuple[ConvergenceRow, ...]
+    realisation_bound: int | None = None
 
     @property
     def observed_order(self) -> float | None:
@@ -73,6 +75,7 @@ class MethodConvergence:
 
     def to_json(self) -> dict:
         return {"method": self.method, "expected_order": self.expected_order,
+                "realisation_bound": self.realisation_bound,
                 "observed_order": self.observed_order, "verdict": self.verdict,
                 "fit_rows": list(self.fit.fit_rows), "rows": [r.to_json() for r in self.rows]}
 
@@ -160,8 +163,10 @@ def study_method(method, system, ref: Reference, steps, t_final: float, on_run=N
             on_run(method.name, n)
     fit = fit_order([r.h for r in rows], [r.measured_error for r in rows], floor=ref.floor)
     rows = [_with_local_order(r, p) for r, p in zip(rows, fit.local_orders, strict=True)]
-    expected = method.expected_order(condition_class(system))
-    return MethodConvergence(method.name, method.kind, expected, fit, verdict(fit.slope, expected), tuple(rows))
+    expected = method.expected_order_on(system)
+    bound = system.realisation_order if method.kind == "rkhp" else None
+    return MethodConvergence(method.name, method.kind, expected, fit, verdict(fit.slope, expected), tuple(rows),
+                             bound)
 
 
 def _with_local_order(row: ConvergenceRow, p) -> ConvergenceRow:

@@ -59,6 +59,13 @@ class Method:
             return 2
         return _orders(self.tableau)[condition_class if self.kind == "rkhp" else "general"]
 
+    def expected_order_on(self, system) -> int:
+        """Order expected on `system`: the class's order, bounded for an RKHP method by what
+        the system's realisation allows (``truncated:K``: docs/theory.md §9)."""
+        order = self.expected_order(condition_class(system))
+        bound = system.realisation_order if self.kind == "rkhp" else None
+        return order if bound is None else min(order, bound)
+
 
 def condition_class(system) -> str:
     """The class of order conditions an RKHP method meets on `system`'s realisation: "symmetric"

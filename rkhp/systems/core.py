@@ -24,7 +24,7 @@ import numpy as np
 from ..errors import InputError
 from . import tape as tp
 
-FAMILIES = ("lie-poisson", "log-canonical", "constant")
+FAMILIES = ("lie-poisson", "log-canonical", "constant", "general")
 DOMAINS = {"R^n": 0, "positive orthant": 1}
 
 
@@ -45,13 +45,16 @@ def _q_shift(p):
 @dataclass(frozen=True)
 class Realisation:
     """How the base (symmetric) birealisation is composed: x -> x + shift(p) (shift of tape Vars,
-    None for no shift), and whether the result is degenerate (d_p alpha(x,0) antisymmetric)."""
+    None for no shift), and whether the result is degenerate (d_p alpha(x,0) antisymmetric).
+    With `truncation` K, the base itself is replaced by the spray realisation of pi truncated at
+    degree K in p (`rkhp.systems.spray`, docs/theory.md §9)."""
 
     name: str
     shift: Callable
     degenerate: bool
     description: str
     symmetric: bool = False
+    truncation: int | None = None
 
 
 REALISATIONS: dict[str, Realisation] = {}
@@ -74,8 +77,28 @@ register_realisation("shifted", _q_shift, False,
 REALISATION_MODULES = ("rkhp.systems.quartic",)
 
 
+TRUNCATED = "truncated:"
+
+
+def truncated(name: str) -> Realisation:
+    """The kind ``truncated:K``: the spray realisation's series to degree K in p (symmetric,
+    degenerate; docs/theory.md §9); InputError unless 1 <= K <= MAX_TRUNCATION."""
+    from .spray import MAX_TRUNCATION
+
+    text = name[len(TRUNCATED):]
+    if not (text.isdigit() and 1 <= int(text) <= MAX_TRUNCATION):
+        raise InputError(f"realisation {name!r}: K in truncated:K must be an integer from 1 to "
+                         f"{MAX_TRUNCATION}")
+    K = int(text)
+    return Realisation(f"{TRUNCATED}{K}", _no_shift, True,
+                       f"the spray realisation truncated at degree {K} in p (docs/theory.md §9)",
+                       symmetric=True, truncation=K)
+
+
 def realisation(name: str) -> Realisation:
     """The realisation kind called `name` (InputError listing the known kinds otherwise)."""
+    if isinstance(name, str) and name.startswith(TRUNCATED):
+        return truncated(name)
     if name not in REALISATIONS:
         import importlib
 
@@ -86,7 +109,8 @@ def realisation(name: str) -> Realisation:
                 if exc.name != module:
                     raise
     if name not in REALISATIONS:
-        raise InputError(f"unknown realisation {name!r}; choose one of {', '.join(REALISATIONS)}")
+        raise InputError(f"unknown realisation {name!r}; choose one of {', '.join(REALISATIONS)}, "
+                         f"{TRUNCATED}K")
     return REALISATIONS[name]
 
 
@@ -100,6 +124,9 @@ class PoissonSystem:
     `exact_solution(t)` (or None) is the exact solution from the system's own `x0`.
     The engine uses the tapes: `h_tape` (H), `f_tape` (H o alpha), `alpha_tape`, `beta_tape`,
     all over the 2n inputs (x, p), and `domain_code` (0: R^n, 1: positive orthant).
+    `poisson_degree`: the degree of pi as a polynomial in x (0 constant, 1 linear, ...; None when
+    pi is not a polynomial): it decides which terms of the spray series vanish, hence the order
+    a ``truncated:K`` realisation allows (`realisation_order`).
     """
 
     name: str
@@ -120,6 +147,18 @@ class PoissonSystem:
     exact_solution: Callable | None = None
     description: str = ""
     extra: dict = field(default_factory=dict)
+    poisson_degree: int | None = None
+
+    @property
+    def realisation_order(self) -> int | None:
+        """The largest order an RKHP method can reach with this realisation (None: no bound;
+        ``truncated:K``: docs/theory.md §9)."""
+        K = realisation(self.realisation).truncation
+        if K is None:
+            return None
+        from .spray import truncated_order
+
+        return truncated_order(K, self.poisson_degree)
 
     @property
     def symmetric(self) -> bool:
@@ -187,6 +226,7 @@ class PoissonSystem:
 
 def build_system(*, name: str, family: str, dim: int, poisson: Callable, hamiltonian: Callable,
                  base_alpha: Callable, base_beta: Callable, x0, t_final: float,
+                 poisson_program: Callable, poisson_degree: int | None,
                  realisation_name: str = "symmetric", domain: str = "R^n",
                  casimirs: tuple = (), casimir_names: tuple = (),
                  exact_solution: Callable | None = None, description: str = "") -> PoissonSystem:
@@ -194,8 +234,15 @@ def build_system(*, name: str, family: str, dim: int, poisson: Callable, hamilto
 
     hamiltonian(x) -> Var; base_alpha(x, p), base_beta(x, p) -> lists of n Vars: the symmetric
     base birealisation; the realisation named `realisation_name` is composed on top.
+    poisson_program(y) -> n x n entries (numbers or functions of y with + - * / ** and the tape
+    functions): pi at the tape level, for the ``truncated:K`` realisations; poisson_degree: its
+    degree as a polynomial (None if it is not one).
     """
     kind = realisation(realisation_name)
+    if kind.truncation is not None:
+        from .spray import truncated_realisation
+
+        base_alpha, base_beta = truncated_realisation(poisson_program, kind.truncation)
 
     def shifted(x, p):
         s = kind.shift(p)
@@ -215,5 +262,5 @@ def build_system(*, name: str, family: str, dim: int, poisson: Callable, hamilto
         f_tape=tp.record(dim, lambda x, p: [hamiltonian(alpha(x, p))]),
         alpha_tape=tp.record(dim, alpha), beta_tape=tp.record(dim, beta),
         domain=domain, casimirs=tuple(casimirs), casimir_names=tuple(casimir_names),
-        exact_solution=exact_solution, description=description,
+        exact_solution=exact_solution, description=description, poisson_degree=poisson_degree,
     )

@@ -67,6 +67,9 @@ def lie_poisson(structure: np.ndarray, hamiltonian: Callable, *, name: str, x0, 
         return [[sum(-sign * C[i, j, k] * p[j] for j in range(n) if C[i, j, k] != 0.0)
                  for k in range(n)] for i in range(n)]
 
+    def poisson_program(y):
+        return [[_linear(C[i, j], y) for j in range(n)] for i in range(n)]
+
     def base_alpha(x, p):
         return x[0].builder.phimv(K_of(p, 1.0), x)
 
@@ -75,9 +78,21 @@ def lie_poisson(structure: np.ndarray, hamiltonian: Callable, *, name: str, x0, 
 
     return build_system(name=name, family="lie-poisson", dim=n, poisson=poisson,
                         hamiltonian=hamiltonian, base_alpha=base_alpha, base_beta=base_beta,
-                        x0=x0, t_final=t_final, realisation_name=realisation, casimirs=casimirs,
+                        x0=x0, t_final=t_final, poisson_program=poisson_program, poisson_degree=1,
+                        realisation_name=realisation, casimirs=casimirs,
                         casimir_names=casimir_names, exact_solution=exact_solution,
                         description=description)
+
+
+def _linear(coefficients, y):
+    """sum_k c_k y_k over the non-zero c_k (0.0 when all vanish)."""
+    terms = [y[k] * float(c) for k, c in enumerate(coefficients) if c != 0.0]
+    return sum(terms[1:], terms[0]) if terms else 0.0
+
+
+def so3_matrix(y):
+    """pi(y) on so(3)*: pi(y) v = y cross v."""
+    return [[0.0, -y[2], y[1]], [y[2], 0.0, -y[0]], [-y[1], y[0], 0.0]]
 
 
 def _cross(a, b):
@@ -103,7 +118,8 @@ def so3(hamiltonian: Callable, *, name: str, x0, t_final: float, realisation: st
     return build_system(
         name=name, family="lie-poisson", dim=3, poisson=poisson, hamiltonian=hamiltonian,
         base_alpha=lambda x, p: so3_alpha(x, p, 1.0), base_beta=lambda x, p: so3_alpha(x, p, -1.0),
-        x0=x0, t_final=t_final, realisation_name=realisation,
+        x0=x0, t_final=t_final, poisson_program=so3_matrix, poisson_degree=1,
+        realisation_name=realisation,
         casimirs=(lambda x: 0.5 * float(np.dot(x, x)),), casimir_names=("|x|^2/2",),
         exact_solution=exact_solution, description=description)
 
@@ -133,14 +149,19 @@ def log_canonical(lam, hamiltonian: Callable, *, name: str, x0, t_final: float,
 
         return base
 
+    def poisson_program(y):
+        return [[y[i] * y[j] * float(L[i, j]) if L[i, j] else 0.0 for j in range(n)]
+                for i in range(n)]
+
     if casimirs is None:
         kernel = _linear_kernel(L)
         casimirs = tuple((lambda x, k=k: float(np.dot(k, np.log(x)))) for k in kernel)
         casimir_names = tuple(_combination(k, "log x") for k in kernel)
     return build_system(name=name, family="log-canonical", dim=n, poisson=poisson,
                         hamiltonian=hamiltonian, base_alpha=make(1.0), base_beta=make(-1.0),
-                        x0=x0, t_final=t_final, realisation_name=realisation,
-                        domain="positive orthant", casimirs=casimirs, casimir_names=casimir_names,
+                        x0=x0, t_final=t_final, poisson_program=poisson_program,
+                        poisson_degree=2, realisation_name=realisation, domain="positive orthant",
+                        casimirs=casimirs, casimir_names=casimir_names,
                         exact_solution=exact_solution, description=description)
 
 
@@ -165,6 +186,8 @@ def constant(pi, hamiltonian: Callable, *, name: str, x0, t_final: float,
         casimir_names = tuple(_combination(k, "x") for k in kernel)
     return build_system(name=name, family="constant", dim=n, poisson=lambda x: P.copy(),
                         hamiltonian=hamiltonian, base_alpha=make(1.0), base_beta=make(-1.0),
-                        x0=x0, t_final=t_final, realisation_name=realisation, casimirs=casimirs,
+                        x0=x0, t_final=t_final,
+                        poisson_program=lambda y: [[float(v) for v in row] for row in P],
+                        poisson_degree=0, realisation_name=realisation, casimirs=casimirs,
                         casimir_names=casimir_names, exact_solution=exact_solution,
                         description=description)

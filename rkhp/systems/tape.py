@@ -151,20 +151,26 @@ class TapeBuilder:
                     self.n_inputs, self.n_slots)
 
 
-def _unary(code: int):
+def _unary(code: int, name: str):
+    """The tape function `name`; on a value of another arithmetic (e.g. the series of
+    `rkhp.systems.spray`) it calls that value's method of the same name."""
+
     def op(v):
-        if not isinstance(v, Var):
+        if isinstance(v, Var):
+            return v.builder.emit(code, v)
+        method = getattr(v, name, None)
+        if method is None:
             raise TypeError("tape functions take tape values")
-        return v.builder.emit(code, v)
+        return method()
 
     return op
 
 
-exp = _unary(EXP)
-log = _unary(LOG)
-sin = _unary(SIN)
-cos = _unary(COS)
-sqrt = _unary(SQRT)
+exp = _unary(EXP, "exp")
+log = _unary(LOG, "log")
+sin = _unary(SIN, "sin")
+cos = _unary(COS, "cos")
+sqrt = _unary(SQRT, "sqrt")
 
 
 def crb(p: list[Var]) -> Var:

@@ -1,0 +1,87 @@
+"""Sympy expressions as programs over tape values (`rkhp.systems.tape`).
+
+The expressions come from the safe reader (`rkhp.expressions`), so they hold only numbers, the
+variables x1..xn, + - * / and powers, and the functions exp, log, sqrt, sin, cos, tan, sinh, cosh
+and tanh. A program takes a list x of n values of any arithmetic with + - * / ** (tape Vars, or the
+series of `rkhp.systems.spray`) and calls the tape functions `tp.exp` etc., which dispatch to that
+arithmetic.
+"""
+
+from __future__ import annotations
+
+from functools import reduce
+
+import numpy as np
+
+from . import tape as tp
+
+
+def expression_program(expr, symbols):
+    """A program x -> value of the sympy expression in `symbols`; a constant expression gives a
+    float (so that constant entries of a matrix cost nothing)."""
+    index = {s: i for i, s in enumerate(symbols)}
+
+    def conv(e, x):
+        if not e.free_symbols:
+            return float(e.evalf(20))
+        if e.is_Symbol:
+            return x[index[e]]
+        args = [conv(a, x) for a in e.args]
+        if e.is_Add:
+            return reduce(lambda a, b: a + b, args)
+        if e.is_Mul:
+            return reduce(lambda a, b: a * b, args)
+        if e.is_Pow:
+            base, power = args
+            if isinstance(base, float):
+                return tp.exp(power * float(np.log(base)))
+            return base ** power
+        f = type(e).__name__
+        (a,) = args
+        if f in ("exp", "log", "sin", "cos"):
+            return getattr(tp, f)(a)
+        if f == "tan":
+            return tp.sin(a) / tp.cos(a)
+        ep, em = tp.exp(a), tp.exp(-a)
+        return {"sinh": 0.5 * (ep - em), "cosh": 0.5 * (ep + em),
+                "tanh": (ep - em) / (ep + em)}[f]
+
+    def program(x):
+        return conv(expr, x)
+
+    return program
+
+
+def to_program(expr, symbols):
+    """A program x -> tape Var computing the sympy expression (for `build_system`: a constant
+    is recorded as x1 * 0 + c so that the result is always a Var)."""
+    value = expression_program(expr, symbols)
+
+    def program(x):
+        v = value(x)
+        return v if isinstance(v, tp.Var) else x[0] * 0.0 + v
+
+    program.expression = str(expr)
+    return program
+
+
+def matrix_program(entries, symbols):
+    """A program y -> n x n entries (floats where constant) of a matrix of sympy expressions."""
+    programs = [[expression_program(e, symbols) for e in row] for row in entries]
+
+    def program(y):
+        return [[f(y) for f in row] for row in programs]
+
+    return program
+
+
+def numeric_function(expr, symbols):
+    """A float64 function x -> float of a sympy expression (numpy), e.g. a Casimir."""
+    import sympy
+
+    f = sympy.lambdify(symbols, expr, "numpy")
+
+    def value(x):
+        return float(f(*np.asarray(x, dtype=np.float64)))
+
+    return value
