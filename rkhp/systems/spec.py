@@ -9,6 +9,9 @@ Keys (README "Spec files"):
                                            # {x_j, x_i} = -{x_i, x_j} is implied)
     # lambda = [[0, 1, 2], [-1, 0, 1], [-2, -1, 0]]   # log-canonical: pi_ij = lambda_ij x_i x_j
     # poisson = [[0, 1], [-1, 0]]                      # constant pi
+    # family = "general": poisson = [["0", "x3", "-x2"], ["-x3", "0", "x1"], ["x2", "-x1", "0"]]
+    #                                   # any pi(x): a matrix of expressions in x1..xn, checked
+    #                                   # (antisymmetry, Jacobi, Casimirs, finite at x0)
     hamiltonian = "x1^2/4 + x2^2/2 + 3*x3^2/4"        # an expression in x1..xn (sympy syntax)
     x0 = [0.4536, 0.0, 0.8912]
     t_final = 10.0                         # optional (default 10)
@@ -21,16 +24,15 @@ on a tape (`rkhp.systems.tape`) that the compiled engine differentiates.
 from __future__ import annotations
 
 import json
-from functools import reduce
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
 from ..expressions import variable_names
-from . import tape as tp
 from .core import FAMILIES, PoissonSystem
 from .families import constant, lie_poisson, log_canonical
+from .program import numeric_function, to_program
 
 KEYS = ("name", "family", "structure_constants", "lambda", "poisson", "hamiltonian", "x0",
         "t_final", "casimirs")
@@ -66,6 +68,25 @@ def _matrix(value, n: int, where: str) -> np.ndarray:
     return m
 
 
+def _expression_matrix(value, n: int, where: str) -> tuple:
+    """An n x n matrix of expressions (strings, or numbers) read by the safe reader."""
+    if not (isinstance(value, list) and len(value) == n
+            and all(isinstance(row, list) and len(row) == n for row in value)):
+        raise InputError(f"{where} must be a {n} x {n} matrix (the size of x0) of expression "
+                         f"strings")
+    entries = []
+    for i, row in enumerate(value):
+        out = []
+        for j, entry in enumerate(row):
+            if isinstance(entry, bool) or not isinstance(entry, str | int | float):
+                raise InputError(f"{where}: entry ({i + 1}, {j + 1}) must be an expression string "
+                                 f"or a number, got {entry!r}")
+            text = entry if isinstance(entry, str) else repr(entry)
+            out.append(parse_expression(text, n, f"{where} ({i + 1}, {j + 1})")[0])
+        entries.append(tuple(out))
+    return tuple(entries)
+
+
 def _structure(value, n: int, where: str) -> np.ndarray:
     C = np.zeros((n, n, n))
     given: dict[tuple[int, int, int], float] = {}
@@ -99,47 +120,6 @@ def parse_expression(text, n: int, where: str):
     return expr, tuple(sympy.Symbol(name, real=True) for name in names)
 
 
-def to_program(expr, symbols):
-    """A program x -> tape Var computing the sympy expression (for `build_system`)."""
-    index = {s: i for i, s in enumerate(symbols)}
-
-    def conv(e, x):
-        if not e.free_symbols:
-            return float(e.evalf(20))
-        if e.is_Symbol:
-            return x[index[e]]
-        args = [conv(a, x) for a in e.args]
-        if e.is_Add:
-            return reduce(lambda a, b: a + b, args)
-        if e.is_Mul:
-            return reduce(lambda a, b: a * b, args)
-        if e.is_Pow:
-            base, power = args
-            if isinstance(base, float):
-                return tp.exp(power * float(np.log(base)))
-            return base ** power
-        f = type(e).__name__
-        (a,) = args
-        if f in ("exp", "log", "sin", "cos"):
-            return getattr(tp, f)(a)
-        if f == "tan":
-            return tp.sin(a) / tp.cos(a)
-        ep, em = tp.exp(a), tp.exp(-a)
-        return {"sinh": 0.5 * (ep - em), "cosh": 0.5 * (ep + em),
-                "tanh": (ep - em) / (ep + em)}[f]
-
-    def program(x):
-        value = conv(expr, x)
-        return value if isinstance(value, tp.Var) else x[0] * 0.0 + value
-
-    program.expression = str(expr)
-    return program
-
-
-def _numeric(f):
-    return lambda x: float(f(*x))
-
-
 def load_spec(path, realisation: str = "symmetric") -> PoissonSystem:
     """A PoissonSystem from a spec file (see the module docstring for the keys)."""
     import sympy
@@ -168,29 +148,37 @@ def load_spec(path, realisation: str = "symmetric") -> PoissonSystem:
             raise InputError(f"{where}: casimirs must be a list of expressions")
         exprs = [parse_expression(c, n, f"{where}: casimirs")[0] for c in data["casimirs"]]
         symbols = tuple(sympy.Symbol(name, real=True) for name in variable_names(n))
-        casimirs = tuple(_numeric(sympy.lambdify(symbols, e, "numpy")) for e in exprs)
+        casimirs = tuple(numeric_function(e, symbols) for e in exprs)
         names = tuple(str(e) for e in exprs)
     t_final = data.get("t_final", 10.0)
     if not isinstance(t_final, int | float) or not np.isfinite(t_final) or t_final <= 0:
         raise InputError(f"{where}: t_final must be a positive number, got {t_final!r}")
     needed = {"lie-poisson": "structure_constants", "log-canonical": "lambda",
-              "constant": "poisson"}[family]
+              "constant": "poisson", "general": "poisson"}[family]
     for key in ("structure_constants", "lambda", "poisson"):
         if key != needed and key in data:
             raise InputError(f"{where}: key {key} does not belong to family {family}")
     if needed not in data:
         raise InputError(f"{where}: family {family} needs key {needed}")
-    common = dict(name=data.get("name", path.stem), x0=x0, t_final=float(t_final),
+    common = dict(name=data.get("name", path.stem), t_final=float(t_final),
                   realisation=realisation, description=f"from {path.name}: H = {H.expression}")
-    if family == "lie-poisson":
+    if family == "general":
+        from .general import general
+
+        entries = _expression_matrix(data[needed], n, f"{where}: poisson")
+        system = general(entries, H, casimirs=exprs if "casimirs" in data else (),
+                         where=f"{where}: poisson", x0=x0, **common)
+    elif family == "lie-poisson":
         C = _structure(data[needed], n, f"{where}: structure_constants")
-        system = lie_poisson(C, H, casimirs=casimirs or (), casimir_names=names, **common)
+        system = lie_poisson(C, H, casimirs=casimirs or (), casimir_names=names, x0=x0, **common)
     elif family == "log-canonical":
         L = _matrix(data[needed], n, f"{where}: lambda")
-        system = log_canonical(L, H, casimirs=casimirs, casimir_names=names, **common)
+        system = log_canonical(L, H, casimirs=casimirs, casimir_names=names, x0=x0, **common)
     else:
         P = _matrix(data[needed], n, f"{where}: poisson")
-        system = constant(P, H, casimirs=casimirs, casimir_names=names, **common)
+        system = constant(P, H, casimirs=casimirs, casimir_names=names, x0=x0, **common)
+    if not np.isfinite(system.hamiltonian(x0)):
+        raise InputError(f"{where}: the hamiltonian is not finite at x0 = {x0.tolist()}")
     if not system.in_domain(x0):
         raise InputError(f"{where}: x0 = {x0.tolist()} is outside the domain ({system.domain})")
     return system
