@@ -83,17 +83,28 @@ BUILTINS: dict[str, Callable[[str], PoissonSystem]] = {
 
 
 def builtin_systems() -> tuple[str, ...]:
-    """Names of the built-in systems."""
-    return tuple(BUILTINS)
+    """Names of the built-in systems: NOTES §6's three, then the reference problems of
+    `rkhp.systems.problems` (``toda`` and ``volterra-lattice`` also as ``NAME:SIZE``)."""
+    from .problems import PROBLEMS, problem_data
+
+    # the general-family problems join the list with the exact spray realisation (issue 10, E);
+    # until then they are built with --realisation truncated:K
+    return tuple(BUILTINS) + tuple(p for p in PROBLEMS if problem_data(p).family != "general")
 
 
 def get_system(name_or_path, realisation: str = "symmetric") -> PoissonSystem:
-    """A built-in system by name, or a system from a spec file (.toml or .json)."""
+    """A built-in system by name (``toda:12``: with its size), or a system from a spec file
+    (.toml or .json)."""
     from pathlib import Path
+
+    from .problems import build, problem_data
 
     key = str(name_or_path)
     if key in BUILTINS:
         return BUILTINS[key](realisation)
+    data = problem_data(key)
+    if data is not None:
+        return build(data, realisation)
     path = Path(key)
     if path.suffix.lower() in (".toml", ".json"):
         from .spec import load_spec
@@ -101,7 +112,8 @@ def get_system(name_or_path, realisation: str = "symmetric") -> PoissonSystem:
         return load_spec(path, realisation)
     import difflib
 
-    close = difflib.get_close_matches(key, BUILTINS, n=2)
+    names = builtin_systems()
+    close = difflib.get_close_matches(key, names, n=2)
     hint = f"; did you mean {' or '.join(close)}?" if close else ""
-    raise InputError(f"unknown system {key!r} (built-ins: {', '.join(BUILTINS)}, or a .toml/.json "
+    raise InputError(f"unknown system {key!r} (built-ins: {', '.join(names)}, or a .toml/.json "
                      f"spec file){hint}")
