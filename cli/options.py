@@ -13,6 +13,21 @@ def format_option(*choices: str, default: str = "table"):
     )
 
 
+def executor_options(what: str):
+    """`--workers N` and `--scheduler ADDRESS`: where the independent tasks of ``what`` run
+    (rkhp.executors; docs/distributed.md). The command passes both to rkhp.executors.open_executor."""
+
+    def decorate(f):
+        f = click.option("--scheduler", default=None, metavar="ADDRESS",
+                         help=f"Run the {what} on the Dask cluster of this scheduler (tcp://host:8786); "
+                              "default: $DASK_SCHEDULER_ADDRESS when set and --workers is not given. "
+                              "Needs rkhp[distributed].")(f)
+        return click.option("--workers", type=int, default=1, show_default=True,
+                            help=f"Processes on this machine for the {what}.")(f)
+
+    return decorate
+
+
 def emit_json(obj) -> None:
     """Write a JSON document to stdout (stable key order as given)."""
     import json

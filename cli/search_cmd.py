@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from .options import console, emit_json, format_option, progress
+from .options import console, emit_json, executor_options, format_option, progress
 from .render import print_table
 from .show_cmd import print_array
 
@@ -29,7 +29,7 @@ def _class_of(degenerate: bool, symmetric: bool) -> str:
                    "no limit for restarts, 60 s for --prove).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed: restart k of order N "
               "starts from numpy default_rng([seed, S, N, k]).")
-@click.option("--workers", type=int, default=1, show_default=True, help="Processes for the restarts.")
+@executor_options("restarts")
 @click.option("--optimize", type=click.Choice(["error"]), default=None,
               help="Minimise the principal error norm at order N+1 on the solution family.")
 @click.option("--digits", type=int, default=30, show_default=True,
@@ -40,7 +40,7 @@ def _class_of(degenerate: bool, symmetric: bool) -> str:
               help="Write the tableau found to a .toml or .json file (loadable by verify).")
 @format_option("table", "json")
 def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit, seed, workers,
-           optimize, digits, prove, save, fmt):
+           scheduler, optimize, digits, prove, save, fmt):
     """Search Runge–Kutta tableaux meeting the RKHP order conditions (paper §5).
 
     Solves the order conditions over T (general), T_0 (--degenerate) or the symmetric class from
@@ -50,6 +50,7 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
     the first order not reached is impossible.
     """
     from rkhp.errors import InputError
+    from rkhp.executors import open_executor
     from rkhp.search.driver import SearchOptions
     from rkhp.search.driver import search as run_search
     from rkhp.search.system import check_problem
@@ -61,10 +62,10 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
                                "to fail: give one of them")
     if save and not save.lower().endswith((".toml", ".json")):
         raise InputError(f"--save {save}: the file name must end in .toml or .json")
-    options = SearchOptions(restarts=restarts, seed=seed, workers=workers, time_limit=time_limit,
+    options = SearchOptions(restarts=restarts, seed=seed, time_limit=time_limit,
                             digits=digits, optimize=optimize, prove=prove)
     options.check()
-    with progress(fmt != "json") as bar:
+    with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         tasks: dict[int, int] = {}
 
         def on_progress(n, done, total):
@@ -72,7 +73,7 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
                 tasks[n] = bar.add_task(f"order {n}", total=total)
             bar.update(tasks[n], completed=done)
 
-        result = run_search(stages, order, cls, implicit, options, on_progress)
+        result = run_search(stages, order, cls, implicit, options, on_progress, executor)
     if save and result.found is not None:
         _save(result, save)
     if fmt == "json":

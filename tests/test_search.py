@@ -16,6 +16,7 @@ import sys
 import numpy as np
 import pytest
 
+from rkhp.executors import open_executor
 from rkhp.search.driver import SearchOptions, search
 from rkhp.search.multistart import Problem, run_restarts
 from rkhp.search.polish import polish
@@ -129,7 +130,8 @@ def test_restarts_are_reproducible_and_independent_of_workers():
     problem = Problem(3, 4, "degenerate")
     one = run_restarts(problem, 6, seed=3, stop_after=None)
     again = run_restarts(problem, 6, seed=3, stop_after=None)
-    two = run_restarts(problem, 6, seed=3, workers=2, stop_after=None)
+    with open_executor(workers=2) as pool:
+        two = run_restarts(problem, 6, seed=3, executor=pool, stop_after=None)
     assert [a.x for a in one.attempts] == [a.x for a in again.attempts] == [a.x for a in two.attempts]
     assert [a.success for a in one.attempts] == [a.success for a in two.attempts]
 
@@ -188,7 +190,9 @@ def _cli(*args):
                                   ["--stages", "2", "--order", "3", "--prove", "--optimize", "error"],
                                   ["--stages", "2", "--save", "out.txt"],
                                   ["--stages", "2", "--digits", "5"],
-                                  ["--stages", "2", "--workers", "0"]])
+                                  ["--stages", "2", "--workers", "0"],
+                                  ["--stages", "2", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
+                                  ["--stages", "2", "--scheduler", "tcp://127.0.0.1:1 ; rm"]])
 def test_bad_input_is_one_line_exit_2(args):
     out = _cli("search", *args)
     assert out.returncode == 2

@@ -33,12 +33,12 @@ OPTIMISATION_STARTS = 8
 
 @dataclass(frozen=True)
 class SearchOptions:
-    """How to search: restart budget, seed, workers, time limit (per order and for the proof),
-    digits D, ``optimize`` ("error" or None), ``prove``, ``closed_form`` (recognition)."""
+    """How to search: restart budget, seed, time limit (per order and for the proof), digits D,
+    ``optimize`` ("error" or None), ``prove``, ``closed_form`` (recognition). Where the restarts
+    run is not an option of the search: it is the executor handed to :func:`search`."""
 
     restarts: int = 50
     seed: int = 0
-    workers: int = 1
     time_limit: float | None = None
     digits: int = DEFAULT_DIGITS
     optimize: str | None = None
@@ -46,9 +46,8 @@ class SearchOptions:
     closed_form: bool = True
 
     def check(self) -> None:
-        for name, value, low in (("restarts", self.restarts, 1), ("workers", self.workers, 1)):
-            if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise InputError(f"--{name} must be an integer >= {low}, got {value!r}")
+        if isinstance(self.restarts, bool) or not isinstance(self.restarts, int) or self.restarts < 1:
+            raise InputError(f"--restarts must be an integer >= 1, got {self.restarts!r}")
         if self.time_limit is not None and not self.time_limit > 0:
             raise InputError(f"--time-limit must be positive, got {self.time_limit!r}")
         if not MIN_DIGITS <= self.digits <= MAX_DIGITS:
@@ -279,8 +278,10 @@ def content_name(tableau, base: str) -> str:
 
 
 def search(stages: int, order: int | None = None, cls: str = "general", implicit: bool = False,
-           options: SearchOptions = SearchOptions(), on_progress=None) -> SearchResult:
-    """Search tableaux (see the module docstring). ``on_progress(order, done, total)``."""
+           options: SearchOptions = SearchOptions(), on_progress=None, executor=None) -> SearchResult:
+    """Search tableaux (see the module docstring). ``on_progress(order, done, total)``; the
+    restarts run on ``executor`` (:mod:`rkhp.executors`; default: in this process), with the same
+    result whatever the executor."""
     from ..conditions import check_class
 
     check_problem(stages, order)
@@ -298,7 +299,7 @@ def search(stages: int, order: int | None = None, cls: str = "general", implicit
             problem = Problem(stages, n, cls, implicit)
             want_many = options.optimize and (order is None or n == order)
             run = run_restarts(
-                problem, options.restarts, options.seed, options.workers, options.time_limit,
+                problem, options.restarts, options.seed, executor, options.time_limit,
                 options.digits, stop_after=OPTIMISATION_STARTS if want_many else 1,
                 on_progress=None if on_progress is None else
                 (lambda d, tot, n=n: on_progress(n, d, tot)))

@@ -4,7 +4,8 @@ Restart k of a problem starts from ``numpy.random.default_rng([seed, stages, ord
 restart is reproducible on its own, whatever the number of workers or the order they finish in.
 A restart succeeds when scipy's least_squares (trust region, exact Jacobian) brings every residual
 below 1e-6 with coefficients bounded by ``bound``, and Newton in mpmath then polishes it to D digits.
-Restarts run in a process pool with ``workers`` > 1; Ctrl-C stops and returns what was found.
+Restarts run on an executor (:mod:`rkhp.executors`: in process, local processes or a Dask cluster);
+Ctrl-C cancels them and returns what was found.
 """
 
 from __future__ import annotations
@@ -155,22 +156,21 @@ class Restarts:
         return min((a.residual for a in self.attempts), default=float("inf"))
 
 
-def _ignore_sigint() -> None:
-    import signal
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-def run_restarts(problem: Problem, restarts: int, seed: int = 0, workers: int = 1,
+def run_restarts(problem: Problem, restarts: int, seed: int = 0, executor=None,
                  time_limit: float | None = None, digits: int = 30, stop_after: int | None = 1,
                  on_progress=None) -> Restarts:
-    """Run up to ``restarts`` restarts (indices 0..restarts-1), stopping after ``stop_after``
-    successes (None: run them all).
+    """Run up to ``restarts`` restarts (indices 0..restarts-1) on ``executor`` (default: in this
+    process; see :mod:`rkhp.executors`), stopping after ``stop_after`` successes (None: run them all).
 
     The restarts kept are those of index up to the ``stop_after``-th success, and every one of
-    them has run, so the answer does not depend on ``workers`` (only the time does).
-    ``on_progress(done, total)`` is called after each restart.
+    them has run, so the answer does not depend on the executor or its number of workers (only the
+    time does). About twice as many restarts as the executor has slots are submitted at a time;
+    those beyond the needed success are cancelled. ``on_progress(done, total)`` is called after
+    each finished restart. Ctrl-C cancels the submitted restarts and returns what finished.
     """
+    from ..executors import InProcess, first_done
+
+    executor = InProcess() if executor is None else executor
     t0 = time.perf_counter()
     deadline = None if time_limit is None else t0 + time_limit
     done: dict[int, Attempt] = {}
@@ -193,59 +193,33 @@ def run_restarts(problem: Problem, restarts: int, seed: int = 0, workers: int = 
         return wins[stop_after - 1] if len(wins) >= stop_after else None
 
     problem.system()  # build once here (and in forked workers' memory)
+    pending: dict[int, tuple] = {}  # id(task) -> (task, restart index)
+    next_index = 0
     try:
-        if workers <= 1:
-            for k in range(restarts):
+        while True:
+            win = last_needed()
+            while (len(pending) < 2 * executor.slots and next_index < restarts
+                   and (win is None or next_index < win)):
                 if deadline is not None and time.perf_counter() > deadline:
                     timed_out = True
                     break
-                record(attempt(problem, seed, k, digits))
-                if last_needed() is not None:
-                    break
-        else:
-            timed_out = _run_pool(problem, restarts, seed, workers, deadline, digits, record,
-                                  last_needed)
+                task = executor.submit(attempt, problem, seed, next_index, digits)
+                pending[id(task)] = (task, next_index)
+                next_index += 1
+            if win is not None:
+                beyond = [key for key, (_, k) in pending.items() if k > win]
+                executor.cancel([pending.pop(key)[0] for key in beyond])
+            if not pending:
+                break
+            task = first_done(executor, [t for t, _ in pending.values()])
+            del pending[id(task)]
+            record(task.result())
     except KeyboardInterrupt:
         interrupted = True
+    finally:
+        executor.cancel([t for t, _ in pending.values()])
     attempts = tuple(done[k] for k in sorted(done))
     last = last_needed()
     if last is not None:
         attempts = tuple(a for a in attempts if a.index <= last)
     return Restarts(problem, attempts, time.perf_counter() - t0, interrupted, timed_out, first_at)
-
-
-def _run_pool(problem, restarts, seed, workers, deadline, digits, record, last_needed) -> bool:
-    """Process-pool loop of :func:`run_restarts`; returns whether the time limit stopped it."""
-    import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-
-    ctx = multiprocessing.get_context("fork")
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_ignore_sigint)
-    pending: dict = {}
-    next_index = 0
-    timed_out = False
-    try:
-        while True:
-            win = last_needed()
-            while (len(pending) < 2 * workers and next_index < restarts
-                   and (win is None or next_index < win)):
-                if deadline is not None and time.perf_counter() > deadline:
-                    timed_out = True
-                    break
-                fut = pool.submit(attempt, problem, seed, next_index, digits)
-                pending[fut] = next_index
-                next_index += 1
-            if win is not None:
-                for fut, k in list(pending.items()):
-                    if k > win and fut.cancel():
-                        del pending[fut]
-            if not pending:
-                break
-            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for fut in finished:
-                del pending[fut]
-                if not fut.cancelled():
-                    record(fut.result())
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
-    return timed_out

@@ -1,0 +1,353 @@
+"""Executors: where the independent tasks of a search, a study or an ensemble run (docs/distributed.md).
+
+One interface, three implementations; the library's loops (restarts, convergence rows, primes of a
+relation derivation, chunks of an ensemble) are written once against :class:`Executor` and do not
+know which one runs them:
+
+- :class:`InProcess`: in this process, one task at a time, lazily (a task runs when its result is
+  waited for, so a task cancelled before then never runs);
+- :class:`LocalProcesses`: a pool of ``workers`` processes on this machine (``--workers N``);
+- :class:`DaskCluster`: the workers of a Dask scheduler (``--scheduler ADDRESS`` or
+  ``$DASK_SCHEDULER_ADDRESS``); Dask retries the tasks of a lost worker on another one.
+
+Every task is a pure function of its arguments (seeds travel with the task), and the loops reduce
+results in task order, never in completion order, so a result never depends on the executor, on
+the number of workers or on a lost worker (only the wall time does). Dask and distributed are
+imported only when a scheduler is used.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import closing, contextmanager
+from typing import Any, Protocol
+
+from .errors import InputError
+
+#: The environment variable Dask itself reads for the scheduler's address.
+SCHEDULER_VARIABLE = "DASK_SCHEDULER_ADDRESS"
+#: Seconds allowed to reach a scheduler before giving up with one line.
+CONNECT_SECONDS = 10
+#: Largest --workers accepted (a local pool; a larger run belongs on a cluster).
+MAX_LOCAL_WORKERS = 256
+_ADDRESS = re.compile(r"((tcp|tls|ws|wss|ucx|inproc)://)?[A-Za-z0-9_.\-\[\]:]{1,200}")
+
+
+class Task(Protocol):
+    """A submitted task: its result (re-raising the task's exception) and whether it finished."""
+
+    def result(self) -> Any: ...
+
+    def done(self) -> bool: ...
+
+
+class Executor(Protocol):
+    """Runs independent tasks. ``kind``: "in-process", "processes" or "dask"; ``slots``: how many
+    tasks run at once (the loops keep about twice that many submitted)."""
+
+    kind: str
+    slots: int
+
+    def submit(self, fn: Callable, /, *args) -> Task:
+        """Start ``fn(*args)`` (arguments and result are pickled, except in-process)."""
+
+    def as_completed(self, tasks: Iterable[Task]) -> Iterator[Task]:
+        """The tasks, each as it finishes."""
+
+    def cancel(self, tasks: Iterable[Task]) -> None:
+        """Cancel tasks not finished yet (on a cluster: removed from the scheduler)."""
+
+    def close(self) -> None:
+        """Release the workers (a Dask cluster itself keeps running)."""
+
+
+def first_done(executor: Executor, tasks: Iterable[Task]) -> Task:
+    """The first of ``tasks`` to finish (waits for it)."""
+    with closing(executor.as_completed(tasks)) as stream:
+        return next(iter(stream))
+
+
+def run_all(executor: Executor, fn: Callable, argument_tuples: Iterable[tuple], on_done=None) -> list:
+    """``[fn(*args) for args in argument_tuples]`` on the executor, results in the given order;
+    ``on_done(done, total)`` after each completion (progress from the workers' finished tasks).
+    On an error or Ctrl-C the unfinished tasks are cancelled and the exception goes on."""
+    tasks = [executor.submit(fn, *args) for args in argument_tuples]
+    order = {id(t): k for k, t in enumerate(tasks)}
+    results: list = [None] * len(tasks)
+    try:
+        for count, task in enumerate(executor.as_completed(tasks), start=1):
+            results[order[id(task)]] = task.result()
+            if on_done is not None:
+                on_done(count, len(tasks))
+    except BaseException:
+        executor.cancel(tasks)
+        raise
+    return results
+
+
+# ----------------------------------------------------------------------------- in this process
+
+
+class _Deferred:
+    """An in-process task, run when it is first waited for."""
+
+    def __init__(self, fn, args):
+        self._call = (fn, args)
+        self._outcome = None
+
+    def done(self) -> bool:
+        return self._outcome is not None
+
+    def cancelled(self) -> bool:
+        return self._call is None and self._outcome is None
+
+    def cancel(self) -> None:
+        if self._outcome is None:
+            self._call = None
+
+    def run(self) -> None:
+        """Compute the outcome once (an exception is kept and re-raised by :meth:`result`)."""
+        if self._outcome is None and self._call is not None:
+            fn, args = self._call
+            try:
+                self._outcome = (True, fn(*args))
+            except Exception as exc:
+                self._outcome = (False, exc)
+
+    def result(self):
+        if self.cancelled():
+            raise InputError("the task was cancelled")
+        self.run()
+        ok, value = self._outcome
+        if not ok:
+            raise value
+        return value
+
+
+class InProcess:
+    """Tasks run one after another in this process, in submission order."""
+
+    kind = "in-process"
+    slots = 1
+
+    def submit(self, fn, /, *args) -> _Deferred:
+        return _Deferred(fn, args)
+
+    def as_completed(self, tasks):
+        for task in list(tasks):
+            if not task.cancelled():
+                task.run()
+                yield task
+
+    def cancel(self, tasks) -> None:
+        for task in tasks:
+            task.cancel()
+
+    def close(self) -> None:
+        pass
+
+
+# ----------------------------------------------------------------------------- processes on this machine
+
+
+def _ignore_sigint() -> None:
+    """Pool workers leave Ctrl-C to the parent, which cancels and reports."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _call_pickled(payload: bytes):
+    import pickle
+
+    fn, args = pickle.loads(payload)
+    return fn(*args)
+
+
+class LocalProcesses:
+    """A pool of ``workers`` forked processes. Tasks travel by cloudpickle (systems hold closures)."""
+
+    kind = "processes"
+
+    def __init__(self, workers: int):
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        self.slots = workers
+        self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
+                                         initializer=_ignore_sigint)
+
+    def submit(self, fn, /, *args):
+        import cloudpickle
+
+        return self._pool.submit(_call_pickled, cloudpickle.dumps((fn, args)))
+
+    def as_completed(self, tasks):
+        from concurrent.futures import as_completed
+
+        return as_completed(list(tasks))
+
+    def cancel(self, tasks) -> None:
+        for task in tasks:
+            task.cancel()
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=True)
+
+
+# ----------------------------------------------------------------------------- a Dask cluster
+
+
+class DaskCluster:
+    """The workers of the Dask scheduler at ``address``; ``slots`` = their threads when connected."""
+
+    kind = "dask"
+
+    def __init__(self, address: str, connect_seconds: float = CONNECT_SECONDS):
+        try:
+            from distributed import Client
+        except ImportError:
+            raise InputError("--scheduler needs Dask: pip install 'rkhp[distributed]'") from None
+        try:
+            self._client = Client(address, timeout=connect_seconds, set_as_default=False)
+        except (OSError, TimeoutError) as exc:
+            raise InputError(f"cannot reach the Dask scheduler at {address} within {connect_seconds:g} s "
+                             f"({type(exc).__name__})") from None
+        self.address = address
+        self.slots = max(1, sum(self._client.nthreads().values()))
+
+    def submit(self, fn, /, *args):
+        return self._client.submit(fn, *args, pure=False)
+
+    def as_completed(self, tasks):
+        from distributed import as_completed
+
+        yield from as_completed(list(tasks), loop=self._client.loop)
+
+    def cancel(self, tasks) -> None:
+        tasks = [t for t in tasks if not t.done()]
+        if tasks:
+            self._client.cancel(tasks)
+
+    def close(self) -> None:
+        self._client.close()
+
+
+# ----------------------------------------------------------------------------- choosing one
+
+
+def check_scheduler(address: str, source: str = "--scheduler") -> str:
+    """A scheduler address (``tcp://host:port``, ``host:port``...), stripped; InputError otherwise."""
+    text = str(address).strip()
+    if not _ADDRESS.fullmatch(text):
+        raise InputError(f"{source} must be a Dask scheduler address such as tcp://host:8786, got {address!r}")
+    return text
+
+
+def check_workers(workers) -> int:
+    if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= MAX_LOCAL_WORKERS:
+        raise InputError(f"--workers must be an integer between 1 and {MAX_LOCAL_WORKERS}, got {workers!r}")
+    return workers
+
+
+def scheduler_address(workers: int = 1, scheduler: str | None = None, environ=None) -> str | None:
+    """The scheduler to use: ``scheduler``, else ``$DASK_SCHEDULER_ADDRESS`` unless ``workers`` > 1
+    asks for local processes; None for a run on this machine. Both given: InputError."""
+    check_workers(workers)
+    if scheduler is not None:
+        if workers > 1:
+            raise InputError("give --workers N (processes on this machine) or --scheduler ADDRESS (a Dask "
+                             "cluster), not both")
+        return check_scheduler(scheduler)
+    env = (os.environ if environ is None else environ).get(SCHEDULER_VARIABLE, "").strip()
+    if env and workers == 1:
+        return check_scheduler(env, f"${SCHEDULER_VARIABLE}")
+    return None
+
+
+def make_executor(workers: int = 1, scheduler: str | None = None, environ=None) -> Executor:
+    """The executor for ``--workers`` / ``--scheduler`` (see :func:`scheduler_address`)."""
+    address = scheduler_address(workers, scheduler, environ)
+    if address is not None:
+        return DaskCluster(address)
+    return LocalProcesses(workers) if workers > 1 else InProcess()
+
+
+@contextmanager
+def open_executor(workers: int = 1, scheduler: str | None = None, environ=None):
+    """``with open_executor(workers, scheduler) as ex:`` the executor, closed afterwards."""
+    executor = make_executor(workers, scheduler, environ)
+    try:
+        yield executor
+    finally:
+        executor.close()
+
+
+# ----------------------------------------------------------------------------- a cluster on this machine
+
+
+class LoopbackCluster:
+    """A Dask scheduler and workers started as processes on 127.0.0.1 (see :func:`loopback_cluster`).
+
+    Attributes:
+        address: the scheduler's address (give it to ``--scheduler``).
+        workers: the worker processes (subprocess.Popen), e.g. to stop one.
+    """
+
+    def __init__(self, address: str, workers: list):
+        self.address = address
+        self.workers = workers
+
+
+@contextmanager
+def loopback_cluster(workers: int = 2, threads: int = 1, start_seconds: float = 120):
+    """``with loopback_cluster(2) as cluster:`` a scheduler and ``workers`` single-process workers
+    of ``threads`` threads each, started with ``dask scheduler`` / ``dask worker`` and bound to the
+    loopback address only; all stopped afterwards. For the tests and benchmarks/distributed.py:
+    a real cluster is started the same way on its machines (docs/distributed.md)."""
+    import json
+    import subprocess
+    import sys
+    import tempfile
+    import time
+    from pathlib import Path
+
+    dask = [sys.executable, "-m", "dask"]
+    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    procs: list = []
+    with tempfile.TemporaryDirectory(prefix="rkhp-dask-") as tmp:
+        info = Path(tmp) / "scheduler.json"
+        try:
+            procs.append(subprocess.Popen([*dask, "scheduler", "--host", "127.0.0.1", "--port", "0",
+                                           "--no-dashboard", "--scheduler-file", str(info)], **quiet))
+            deadline = time.monotonic() + start_seconds
+            address = None
+            while address is None:
+                if procs[0].poll() is not None or time.monotonic() > deadline:
+                    raise RuntimeError("the Dask scheduler did not start")
+                time.sleep(0.1)
+                try:
+                    address = json.loads(info.read_text())["address"]
+                except (OSError, ValueError, KeyError):
+                    address = None
+            pool = [subprocess.Popen([*dask, "worker", address, "--host", "127.0.0.1", "--nthreads", str(threads),
+                                      "--no-nanny", "--no-dashboard", "--name", f"loopback-{k}",
+                                      "--local-directory", tmp], **quiet)
+                    for k in range(workers)]
+            procs.extend(pool)
+            from distributed import Client
+
+            with Client(address, timeout=start_seconds, set_as_default=False) as client:
+                client.wait_for_workers(workers, timeout=start_seconds)
+            yield LoopbackCluster(address, pool)
+        finally:
+            for proc in reversed(procs):
+                proc.terminate()
+            for proc in procs:
+                try:
+                    proc.wait(timeout=15)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()

@@ -1,0 +1,144 @@
+"""Searches, studies and ensembles on a Dask cluster (issue 16; docs/distributed.md).
+
+The reference values are the single-process runs with the same seed: a restart, a convergence row
+or a chunk of an ensemble is a pure function of its arguments, so the cluster must give the same
+numbers bit for bit, and a worker killed mid-search must change nothing (Dask reruns its tasks).
+The cluster is a real one: `dask scheduler` and two `dask worker` processes on 127.0.0.1.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from rkhp.errors import InputError
+from rkhp.executors import loopback_cluster, open_executor, scheduler_address
+
+pytest.importorskip("distributed", reason="the distributed tests need rkhp[distributed] (make test installs it)")
+
+
+def _rkhp(*args, env=None):
+    proc = subprocess.run([sys.executable, "-m", "rkhp", *args], capture_output=True, text=True, timeout=300,
+                          env={**os.environ, **(env or {})})
+    return proc.returncode, proc.stdout, proc.stderr
+
+
+def _without(doc, keys=("seconds", "compile_seconds")):
+    """The document less its wall-time fields (the only ones a run on other processes may change)."""
+    if isinstance(doc, dict):
+        return {k: _without(v, keys) for k, v in doc.items() if k not in keys}
+    if isinstance(doc, list):
+        return [_without(v, keys) for v in doc]
+    return doc
+
+
+# ----------------------------------------------------------------------------- no cluster needed
+
+
+def test_light_commands_never_import_dask():
+    code = ("import atexit, sys; "
+            "atexit.register(lambda: sys.stderr.write('DASK:' + ','.join("
+            "m for m in ('dask', 'distributed') if m in sys.modules))); "
+            "sys.argv = ['rkhp'] + sys.argv[1:]; "
+            "from rkhp_cli.main import main; main()")
+    for args in (["conditions", "--order", "5", "--degenerate"],
+                 ["search", "--stages", "2", "--order", "2", "--restarts", "2", "--workers", "2"]):
+        env = {k: v for k, v in os.environ.items() if k != "DASK_SCHEDULER_ADDRESS"}
+        proc = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, env=env)
+        assert proc.returncode == 0, proc.stderr
+        assert proc.stderr.split("DASK:")[1].strip() == "", args
+
+
+def test_scheduler_choice():
+    assert scheduler_address(1, None, {}) is None
+    assert scheduler_address(1, " tcp://10.0.0.1:8786 ", {}) == "tcp://10.0.0.1:8786"
+    env = {"DASK_SCHEDULER_ADDRESS": "tcp://127.0.0.1:8786"}
+    assert scheduler_address(1, None, env) == "tcp://127.0.0.1:8786"
+    assert scheduler_address(4, None, env) is None  # --workers N asks for this machine
+    for workers, scheduler in [(2, "tcp://127.0.0.1:8786"), (0, None), (1, "tcp://x:1; rm -rf /"), (1, "")]:
+        with pytest.raises(InputError):
+            scheduler_address(workers, scheduler, {})
+
+
+def test_unreachable_scheduler_is_one_line_exit_2():
+    rc, _, err = _rkhp("search", "--stages", "2", "--order", "2", env={"DASK_SCHEDULER_ADDRESS": "tcp://127.0.0.1:1"})
+    assert rc == 2 and len(err.strip().splitlines()) == 1 and "cannot reach the Dask scheduler" in err
+
+
+# ----------------------------------------------------------------------------- on a cluster of two workers
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    with loopback_cluster(2) as running:
+        yield running
+
+
+def test_search_on_the_cluster_equals_the_single_process_run(cluster):
+    args = ["search", "--stages", "3", "--order", "4", "--degenerate", "--seed", "1", "--restarts", "12",
+            "--format", "json"]
+    rc, alone, err = _rkhp(*args, env={"DASK_SCHEDULER_ADDRESS": ""})
+    assert rc == 0, err
+    rc, on_cluster, err = _rkhp(*args, "--scheduler", cluster.address)
+    assert rc == 0, err
+    rc, by_env, err = _rkhp(*args, env={"DASK_SCHEDULER_ADDRESS": cluster.address})
+    assert rc == 0, err
+    alone = json.loads(alone)
+    assert alone["found"] and alone["verified_orders"]["degenerate"] == 4
+    assert _without(json.loads(on_cluster)) == _without(alone) == _without(json.loads(by_env))
+
+
+def test_converge_on_the_cluster_equals_the_single_process_run(cluster):
+    args = ["converge", "rigid-body", "--method", "paper-three-stage,classical:rk4", "--steps", "20",
+            "--refinements", "3", "--format", "json"]
+    rc, alone, err = _rkhp(*args)
+    assert rc == 0, err
+    rc, on_cluster, err = _rkhp(*args, "--scheduler", cluster.address)
+    assert rc == 0, err
+    alone = json.loads(alone)
+    assert [m["expected_order"] for m in alone["methods"]] == [4, 4]
+    assert _without(json.loads(on_cluster)) == _without(alone)
+
+
+def test_ensemble_on_the_cluster_equals_the_single_process_run(cluster):
+    from rkhp.integrators import integrate_ensemble
+    from rkhp.studies.bench import ensemble_starts
+    from rkhp.systems import get_system
+
+    system = get_system("rigid-body")
+    starts = ensemble_starts(system, 9, seed=4)
+    alone = integrate_ensemble(system, "paper-three-stage", 0.05, 40, starts)
+    with open_executor(scheduler=cluster.address) as dask:
+        spread = integrate_ensemble(system, "paper-three-stage", 0.05, 40, starts, executor=dask)
+    assert np.array_equal(alone, spread)
+    # each final state is the one trajectory's (not a reordering of the chunks)
+    from rkhp.integrators import integrate
+
+    assert np.array_equal(spread[5], integrate(system, "paper-three-stage", 0.05, 40, x0=starts[5]).final_state)
+
+
+def test_killing_a_worker_mid_search_changes_nothing(cluster):
+    # last in this file: it leaves the cluster with one worker
+    from rkhp.search.multistart import Problem, run_restarts
+
+    problem = Problem(4, 5, "degenerate")
+    alone = run_restarts(problem, 10, seed=2, stop_after=None)
+    killed = []
+
+    def kill_after_two(done, total):
+        if done == 2 and not killed:
+            cluster.workers[0].kill()
+            killed.append(done)
+
+    with open_executor(scheduler=cluster.address) as dask:
+        again = run_restarts(problem, 10, seed=2, executor=dask, stop_after=None, on_progress=kill_after_two)
+    assert killed and cluster.workers[0].wait(timeout=30) != 0
+    assert [a.index for a in again.attempts] == list(range(10))
+    assert [(a.x, a.residual, a.success) for a in again.attempts] == [(a.x, a.residual, a.success)
+                                                                      for a in alone.attempts]
+    assert any(a.success for a in alone.attempts)
