@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import click
 
-from .options import console, emit_json, format_option, progress
+from .options import console, emit_json, executor_options, format_option, progress
 
 
 @click.command()
@@ -17,20 +17,24 @@ from .options import console, emit_json, format_option, progress
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the random instances (--regenerate).")
 @click.option("--output", type=click.Path(dir_okay=False, writable=True),
               help="Write the relations document (the shipped format) to this JSON file.")
+@executor_options("evaluations of --regenerate (one task per prime)")
 @format_option("table", "json")
-def relations(order, regenerate, seed, output, fmt):
+def relations(order, regenerate, seed, output, workers, scheduler, fmt):
     """Relations among F(t), t in T_0, valid for every symmetric birealisation, per order.
 
     For each order: the number of T_0 trees, of relations and of symmetric order conditions, the
     relations (sum c_t F(t) = 0) and the conditions (sum w_t r(t) = 0, r(t) = gamma(t) a(t) - 1).
     """
+    from rkhp.executors import open_executor
     from rkhp.relations import relations_for
 
     if output and not regenerate:
         raise click.UsageError("--output writes freshly derived relations: add --regenerate")
-    with progress(fmt != "json") as bar:
+    if (scheduler or workers != 1) and not regenerate:
+        raise click.UsageError("--workers and --scheduler run the derivation: add --regenerate")
+    with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("deriving relations", total=None)
-        data = relations_for(order, regenerate=regenerate, seed=seed,
+        data = relations_for(order, regenerate=regenerate, seed=seed, executor=executor,
                              progress=(lambda step: bar.update(task, description=step)) if regenerate else None)
     doc = data.to_json()
     doc["source"] = "regenerated" if regenerate else "shipped"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from .options import console, emit_json, format_option, progress
+from .options import console, emit_json, executor_options, format_option, progress
 from .render import compact_table
 
 METHOD_HELP = ("Method: a tableau name or file used as an RKHP method, classical:NAME for classical "
@@ -81,17 +81,20 @@ def _f(x, digits=2) -> str:
 @click.option("--steps", help="Numbers of steps N1,N2,... (one value: the coarsest, doubled --refinements times).")
 @click.option("--refinements", type=int, help="Halvings of h after the coarsest step (default 6, from N = 20).")
 @click.option("--plot", type=click.Path(dir_okay=False), help="Log-log plot of error against h (.png, .svg, .pdf).")
+@executor_options("runs")
 @format_option("table", "json")
-def converge(system, methods, realisation, t_final, steps, refinements, plot, fmt):
+def converge(system, methods, realisation, t_final, steps, refinements, plot, workers, scheduler, fmt):
     """Empirical convergence: global error at T against h, observed and expected orders, verdicts."""
+    from rkhp.executors import open_executor
     from rkhp.studies.converge import converge as run
     from rkhp.studies.converge import step_counts
 
     counts = step_counts(_ints(steps, "--steps"), refinements)
     sys_, resolved = _setup(system, realisation, methods, t_final, plot)
-    with progress(fmt != "json") as bar:
+    with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("converge", total=len(resolved) * len(counts))
-        study = run(sys_, resolved, counts, t_final, on_run=lambda *_: bar.advance(task))
+        study = run(sys_, resolved, counts, t_final, executor=executor,
+                    on_run=lambda done, _: bar.update(task, completed=done))
     if plot:
         from rkhp.studies.plots import plot_convergence
 
@@ -168,9 +171,12 @@ def _render_converge(study, plot) -> None:
 @click.option("--ensemble", type=int, help="Time K initial conditions near x0 at once (per-trajectory times).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the ensemble's starts.")
 @click.option("--plot", type=click.Path(dir_okay=False), help="Log-log plot of time against error (.png, .svg, .pdf).")
+@executor_options("curves (with --ensemble: the trajectories)")
 @format_option("table", "json")
-def bench(system, methods, realisation, peers, t_final, steps, tolerances, repeats, ensemble, seed, plot, fmt):
+def bench(system, methods, realisation, peers, t_final, steps, tolerances, repeats, ensemble, seed, plot, workers,
+          scheduler, fmt):
     """Work-precision: wall time (median of repeats) against error, methods and peers."""
+    from rkhp.executors import open_executor
     from rkhp.studies import bench as B
 
     step_list = _ints(steps, "--steps") or B.DEFAULT_STEPS
@@ -179,10 +185,10 @@ def bench(system, methods, realisation, peers, t_final, steps, tolerances, repea
     for p in peer_list:
         B.resolve_peer(p)
     sys_, resolved = _setup(system, realisation, methods, t_final, plot)
-    with progress(fmt != "json") as bar:
+    with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("bench", total=len(resolved) + len(peer_list))
         study = B.bench(sys_, resolved, peer_list, step_list, tol_list, t_final, repeats, ensemble, seed,
-                        on_curve=lambda *_: bar.advance(task))
+                        on_curve=lambda done, _: bar.update(task, completed=done), executor=executor)
     if plot:
         from rkhp.studies.plots import plot_work_precision
 
@@ -237,20 +243,23 @@ def _render_bench(study, plot) -> None:
               help="Part (a) sweeps h = T/N upward from N = this down to 1.")
 @click.option("--round-off-steps", help="Numbers of steps of part (d) over T (default 32 to 10^5).")
 @click.option("--plot", type=click.Path(dir_okay=False), help="Plot of the long run's drift (.png, .svg, .pdf).")
+@executor_options("runs of each part")
 @format_option("table", "json")
-def stress(system, methods, realisation, t_final, long_steps, long_h, sweep_coarsest, round_off_steps, plot, fmt):
+def stress(system, methods, realisation, t_final, long_steps, long_h, sweep_coarsest, round_off_steps, plot, workers,
+           scheduler, fmt):
     """Stress tests: (a) step sweep to Newton failure, (b) long-run drift, (c) near-singular starts,
     (d) round-off floor; each part ends with a verdict."""
+    from rkhp.executors import open_executor
     from rkhp.studies import stress as S
 
     ro = _ints(round_off_steps, "--round-off-steps") or S.ROUND_OFF_STEPS
     if len(ro) < 3:
         raise click.BadParameter("a fit needs at least 3 step sizes", param_hint="--round-off-steps")
     sys_, resolved = _setup(system, realisation, methods, t_final, plot)
-    with progress(fmt != "json") as bar:
+    with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("stress", total=4)
         study = S.stress(sys_, resolved, t_final, long_steps, long_h, sweep_coarsest, ro,
-                         on_part=lambda *_: bar.advance(task))
+                         on_part=lambda *_: bar.advance(task), executor=executor)
     if plot:
         from rkhp.studies.plots import plot_stress
 

@@ -320,8 +320,9 @@ def loopback_cluster(workers: int = 2, threads: int = 1, start_seconds: float = 
     with tempfile.TemporaryDirectory(prefix="rkhp-dask-") as tmp:
         info = Path(tmp) / "scheduler.json"
         try:
-            procs.append(subprocess.Popen([*dask, "scheduler", "--host", "127.0.0.1", "--port", "0",
-                                           "--no-dashboard", "--scheduler-file", str(info)], **quiet))
+            loopback = ["--host", "127.0.0.1", "--dashboard-address", "127.0.0.1:0"]
+            procs.append(subprocess.Popen([*dask, "scheduler", *loopback, "--port", "0", "--scheduler-file", str(info)],
+                                          **quiet))
             deadline = time.monotonic() + start_seconds
             address = None
             while address is None:
@@ -332,8 +333,8 @@ def loopback_cluster(workers: int = 2, threads: int = 1, start_seconds: float = 
                     address = json.loads(info.read_text())["address"]
                 except (OSError, ValueError, KeyError):
                     address = None
-            pool = [subprocess.Popen([*dask, "worker", address, "--host", "127.0.0.1", "--nthreads", str(threads),
-                                      "--no-nanny", "--no-dashboard", "--name", f"loopback-{k}",
+            pool = [subprocess.Popen([*dask, "worker", address, *loopback, "--nthreads", str(threads),
+                                      "--no-nanny", "--name", f"loopback-{k}",
                                       "--local-directory", tmp], **quiet)
                     for k in range(workers)]
             procs.extend(pool)

@@ -29,6 +29,7 @@ from functools import lru_cache
 from math import gcd, lcm
 
 from .errors import InputError, NumericalFailure
+from .executors import InProcess
 from .trees import Tree, check_order, format_tree, parse_tree, trees_of_order
 
 #: Orders whose relations ship in ``rkhp/data/symmetric_relations.json``.
@@ -141,10 +142,12 @@ def relations_from_json(doc: dict, where: str = "relations document") -> Relatio
         raise InputError(f"{where}: malformed relations document ({exc!r})") from exc
 
 
-def relations_for(max_order: int, regenerate: bool = False, seed: int = 0, progress=None) -> RelationData:
-    """Shipped relations up to max_order, or freshly derived ones when ``regenerate``."""
+def relations_for(max_order: int, regenerate: bool = False, seed: int = 0, progress=None,
+                  executor=None) -> RelationData:
+    """Shipped relations up to max_order, or freshly derived ones when ``regenerate`` (on
+    ``executor``, see :func:`derive_relations`)."""
     if regenerate:
-        return derive_relations(max_order, seed, progress=progress)
+        return derive_relations(max_order, seed, progress=progress, executor=executor)
     check_order(max_order, what="relation order")
     shipped_order(max_order)
     data = shipped_relations()
@@ -207,7 +210,7 @@ def _primitive(row) -> tuple[Fraction, ...]:
 
 def derive_relations(max_order: int, seed: int = 0, dim: int = 6, extra: int = 10,
                      cross_check: bool = True, exact_instances: int = 2,
-                     progress=None) -> RelationData:
+                     progress=None, executor=None) -> RelationData:
     """Derive the relations and symmetric conditions of orders 1..max_order from scratch.
 
     Args:
@@ -219,46 +222,64 @@ def derive_relations(max_order: int, seed: int = 0, dim: int = 6, extra: int = 1
         cross_check: check the relation space on Lie–Poisson so(3)* (symmetric realisation).
         exact_instances: instances on which each relation is checked in exact integers.
         progress: optional callable(step: str) told about each stage.
+        executor: where the independent evaluations run (rkhp.executors; default: in this
+            process): the first three primes and the Lie–Poisson instances at once, then one prime
+            at a time, then the exact check; the result does not depend on it (each prime has its
+            own seeded stream).
     Raises NumericalFailure when the primes disagree, reconstruction fails or a check fails.
     """
     import numpy as np
 
-    from .differentials import constant_pi_values
     from .modular import PRIMES
 
     check_order(max_order, MAX_REGENERATE_ORDER, what="relation order")
     if dim < 2:
         raise InputError(f"dimension must be at least 2, got {dim}")
     tell = progress or (lambda step: None)
+    executor = executor or InProcess()
     all_trees = [t for n in range(1, max_order + 1) for t in trees_of_order(n, True)]
     batch = len(trees_of_order(max_order, True)) + extra
     streams = np.random.SeedSequence(seed).spawn(len(PRIMES) + 2)
 
-    # 1-2. null spaces modulo primes; CRT and rational reconstruction until a further prime confirms
-    spaces = []
-    for k, p in enumerate(PRIMES):
-        tell(f"constant pi, dimension {dim}, {batch} instances modulo {p}")
-        values = constant_pi_values(all_trees, max_order, dim, batch, np.random.default_rng(streams[k]), p)
-        spaces.append(_null_spaces(values, max_order, p))
-        result = _reconstruct(spaces, PRIMES[: k + 1], max_order) if k >= 2 else None
-        if result is not None:
-            break
-    else:
-        raise NumericalFailure(f"rational reconstruction of the relations did not stabilise with {len(PRIMES)} primes")
-    relations, used = result
-    checks = {n: {"primes": list(used[:-1]), "confirmed_modulo": used[-1], "instances": batch,
-                  "dimension": dim} for n in range(1, max_order + 1)}
-    # 3. exact integers on fresh instances; another family of symmetric birealisations
-    if exact_instances:
-        tell(f"exact integer check on {exact_instances} instances")
-        _exact_check(relations, all_trees, max_order, dim, exact_instances, np.random.default_rng(streams[-2]))
-        for n in checks:
-            checks[n]["exact_instances"] = exact_instances
-    if cross_check:
-        tell(f"Lie–Poisson so(3)*, {batch} instances modulo {PRIMES[0]}")
-        for n, found in _lie_poisson_check(relations, all_trees, max_order, batch,
-                                           np.random.default_rng(streams[-1])).items():
-            checks[n]["lie_poisson_so3"] = found
+    def prime_task(k):
+        return (all_trees, max_order, dim, batch, streams[k], PRIMES[k])
+
+    # 1-2. null spaces modulo primes (the first three and the Lie–Poisson instances at once); CRT
+    # and rational reconstruction, one more prime at a time until a further prime confirms
+    first = 3
+    tell(f"constant pi, dimension {dim}, {batch} instances modulo {', '.join(map(str, PRIMES[:first]))}"
+         + (f"; Lie–Poisson so(3)*, {batch} instances modulo {PRIMES[0]}" if cross_check else ""))
+    tasks = [executor.submit(_prime_null_spaces, *prime_task(k)) for k in range(first)]
+    lie = (executor.submit(_general_null_spaces, all_trees, max_order, "lie-poisson", batch, streams[-1], PRIMES[0])
+           if cross_check else None)
+    try:
+        spaces = [t.result() for t in tasks]
+        result = _reconstruct(spaces, PRIMES[:first], max_order)
+        for k in range(first, len(PRIMES)):
+            if result is not None:
+                break
+            tell(f"constant pi, dimension {dim}, {batch} instances modulo {PRIMES[k]}")
+            spaces.append(executor.submit(_prime_null_spaces, *prime_task(k)).result())
+            result = _reconstruct(spaces, PRIMES[: k + 1], max_order)
+        if result is None:
+            raise NumericalFailure(f"rational reconstruction of the relations did not stabilise with "
+                                   f"{len(PRIMES)} primes")
+        relations, used = result
+        checks = {n: {"primes": list(used[:-1]), "confirmed_modulo": used[-1], "instances": batch,
+                      "dimension": dim} for n in range(1, max_order + 1)}
+        # 3. exact integers on fresh instances; another family of symmetric birealisations
+        if exact_instances:
+            tell(f"exact integer check on {exact_instances} instances")
+            executor.submit(_exact_check, relations, all_trees, max_order, dim, exact_instances,
+                            streams[-2]).result()
+            for n in checks:
+                checks[n]["exact_instances"] = exact_instances
+        if lie is not None:
+            for n, found in _lie_poisson_check(relations, lie.result(), max_order).items():
+                checks[n]["lie_poisson_so3"] = found
+    except BaseException:
+        executor.cancel([*tasks, *([lie] if lie is not None else [])])
+        raise
     orders = []
     for n in range(1, max_order + 1):
         trees = trees_of_order(n, True)
@@ -270,6 +291,26 @@ def derive_relations(max_order: int, seed: int = 0, dim: int = 6, extra: int = 1
               "cross_check": "Lie–Poisson so(3)*" if cross_check else None,
               "regenerate": f"rkhp relations --order {max_order} --regenerate --seed {seed}"}
     return RelationData(max_order, tuple(orders), method)
+
+
+def _prime_null_spaces(all_trees, max_order: int, dim: int, batch: int, stream, p: int) -> dict:
+    """A task: the null spaces modulo p of F(t) on ``batch`` constant-pi instances from ``stream``."""
+    import numpy as np
+
+    from .differentials import constant_pi_values
+
+    values = constant_pi_values(all_trees, max_order, dim, batch, np.random.default_rng(stream), p)
+    return _null_spaces(values, max_order, p)
+
+
+def _general_null_spaces(all_trees, max_order: int, family: str, batch: int, stream, p: int) -> dict:
+    """A task: the null spaces modulo p of F(t) on ``batch`` instances of another ``family``."""
+    import numpy as np
+
+    from .differentials import general_values
+
+    values = general_values(all_trees, max_order, family, batch, np.random.default_rng(stream), p)
+    return _null_spaces(values, max_order, p)
 
 
 def _null_spaces(values, max_order: int, p: int) -> dict:
@@ -321,11 +362,13 @@ def _reconstruct(spaces, primes, max_order):
     return relations, tuple(primes)
 
 
-def _exact_check(relations, all_trees, max_order, dim, count, rng) -> None:
+def _exact_check(relations, all_trees, max_order, dim, count, stream) -> None:
     """Every relation, evaluated in exact integers on ``count`` fresh constant-pi instances, is 0."""
+    import numpy as np
+
     from .differentials import constant_pi_values
 
-    exact = constant_pi_values(all_trees, max_order, dim, count, rng, None)
+    exact = constant_pi_values(all_trees, max_order, dim, count, np.random.default_rng(stream), None)
     for n in range(1, max_order + 1):
         trees = trees_of_order(n, True)
         for row in relations[n]:
@@ -336,15 +379,14 @@ def _exact_check(relations, all_trees, max_order, dim, count, rng) -> None:
                                            f"arithmetic (value {total})")
 
 
-def _lie_poisson_check(relations, all_trees, max_order, batch, rng) -> dict:
-    """Per order: the relation space of so(3)* (symmetric realisation) must contain the relations."""
+def _lie_poisson_check(relations, other, max_order) -> dict:
+    """Per order: the relation space ``other`` of so(3)* (symmetric realisation, modulo the first
+    prime) must contain the relations."""
     import numpy as np
 
-    from .differentials import general_values
     from .modular import PRIMES, to_residue
 
     p = PRIMES[0]
-    other = _null_spaces(general_values(all_trees, max_order, "lie-poisson", batch, rng, p), max_order, p)
     out = {}
     for n in range(1, max_order + 1):
         mine = np.array([[to_residue(c, p) for c in row] for row in relations[n]], dtype=np.int64)

@@ -14,6 +14,7 @@ import time
 import numpy as np
 
 from ..errors import InputError
+from ..executors import run_all
 from .trajectory import Trajectory
 
 NEWTON_TOLERANCE = 1e-15
@@ -121,16 +122,14 @@ def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLER
 
 
 def integrate_ensemble(system, tableau, h, n_steps, x0s, *, tol: float = NEWTON_TOLERANCE,
-                       max_iter: int = NEWTON_MAX_ITERATIONS, threads: int | None = None
-                       ) -> np.ndarray:
+                       max_iter: int = NEWTON_MAX_ITERATIONS, threads: int | None = None,
+                       executor=None) -> np.ndarray:
     """Final states of many trajectories at once (shape (m, n)), in `threads` threads (default:
-    the CPUs available) running the compiled loop without the GIL (the "vmap"); NumericalFailure
+    the CPUs available) running the compiled loop without the GIL (the "vmap"); with an
+    `executor` (rkhp.executors), the starts are cut into one chunk per slot and each chunk runs so
+    on a worker (same final states: each trajectory is computed on its own). NumericalFailure
     naming the first failing trajectory if any fails."""
-    import os
-    from concurrent.futures import ThreadPoolExecutor
-
     from ..errors import NumericalFailure
-    from .engine import rkhp_run
 
     tableau = resolve_tableau(tableau)
     h, n_steps = check_step(h, n_steps)
@@ -141,6 +140,28 @@ def integrate_ensemble(system, tableau, h, n_steps, x0s, *, tol: float = NEWTON_
         if not system.in_domain(x):
             raise InputError(f"initial condition {i} = {x.tolist()} is outside the domain")
     A, b = explicit_arrays(tableau)
+    settings = (float(tol), int(max_iter), threads)
+    if executor is None:
+        finals, done, codes = _ensemble_chunk(system, A, b, h, n_steps, x0s, *settings)
+    else:
+        chunks = np.array_split(x0s, max(1, min(len(x0s), executor.slots)))
+        parts = run_all(executor, _ensemble_chunk, [(system, A, b, h, n_steps, c, *settings) for c in chunks])
+        finals, done, codes = (np.concatenate([p[k] for p in parts]) for k in range(3))
+    bad = np.flatnonzero(codes)
+    if bad.size:
+        i = int(bad[0])
+        raise NumericalFailure(f"trajectory {i} of {len(x0s)}: "
+                               + failure_status(int(codes[i]), int(done[i]), h, system))
+    return finals
+
+
+def _ensemble_chunk(system, A, b, h, n_steps, x0s, tol, max_iter, threads):
+    """(final states, steps done, status codes) of the trajectories from ``x0s``, in threads."""
+    import os
+    from concurrent.futures import ThreadPoolExecutor
+
+    from .engine import rkhp_run
+
     tapes, space, n_slots = engine_data(system, len(b))
     m = len(x0s)
     finals = np.zeros_like(x0s)
@@ -154,15 +175,9 @@ def integrate_ensemble(system, tableau, h, n_steps, x0s, *, tol: float = NEWTON_
         iterations = np.zeros(max(n_steps, 1), dtype=np.int64)
         for t in range(lo, hi):
             done[t], codes[t] = rkhp_run(x0s[t], A, b, h, n_steps, tapes, space, n_slots,
-                                         system.domain_code, float(tol), int(max_iter), last,
-                                         iterations, False)
+                                         system.domain_code, tol, max_iter, last, iterations, False)
             finals[t] = last[0]
 
     with ThreadPoolExecutor(max_workers=len(bounds) - 1) as pool:
         list(pool.map(batch, bounds[:-1], bounds[1:]))
-    bad = np.flatnonzero(codes)
-    if bad.size:
-        i = int(bad[0])
-        raise NumericalFailure(f"trajectory {i} of {len(x0s)}: "
-                               + failure_status(int(codes[i]), int(done[i]), h, system))
-    return finals
+    return finals, done, codes

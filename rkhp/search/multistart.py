@@ -16,6 +16,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..executors import InProcess, first_done
 from .polish import Polished, polish
 from .system import ResidualSystem
 
@@ -168,8 +169,6 @@ def run_restarts(problem: Problem, restarts: int, seed: int = 0, executor=None,
     those beyond the needed success are cancelled. ``on_progress(done, total)`` is called after
     each finished restart. Ctrl-C cancels the submitted restarts and returns what finished.
     """
-    from ..executors import InProcess, first_done
-
     executor = InProcess() if executor is None else executor
     t0 = time.perf_counter()
     deadline = None if time_limit is None else t0 + time_limit

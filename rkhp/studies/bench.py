@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..executors import InProcess, run_all
 from .methods import Method, resolve_method
 from .reference import Reference, dop853_reference, reference
 
@@ -210,12 +211,14 @@ def _ensemble_errors(ensemble_states, refs) -> float | None:
     return max(errors) if all(np.isfinite(errors)) else None
 
 
-def _ensemble_method_curve(method: Method, system, refs, floor, starts, steps, t_final, repeats) -> BenchCurve:
+def _ensemble_method_curve(method: Method, system, refs, floor, starts, steps, t_final, repeats,
+                           executor=None) -> BenchCurve:
     if method.kind == "rkhp":
         from ..integrators import integrate_ensemble
 
         def run(n):
-            return np.asarray(_final_states(integrate_ensemble(system, method.tableau, t_final / n, n, starts)))
+            return np.asarray(_final_states(integrate_ensemble(system, method.tableau, t_final / n, n, starts,
+                                                               executor=executor)))
 
         count = len(starts)
     else:
@@ -267,8 +270,14 @@ def _ensemble_scipy_curve(solver, system, refs, floor, starts, tolerances, t_fin
 
 def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=DEFAULT_TOLERANCES,
           t_final=None, repeats: int = 3, ensemble: int | None = None, seed: int = 0,
-          on_curve=None) -> BenchStudy:
-    """Work-precision study of ``methods`` (resolved Methods) and ``peers`` (names) on ``system``."""
+          on_curve=None, executor=None) -> BenchStudy:
+    """Work-precision study of ``methods`` (resolved Methods) and ``peers`` (names) on ``system``.
+
+    With an ``executor`` (rkhp.executors): one trajectory per point, each curve is one task, timed
+    on the worker that runs it; in ensemble mode the curves run here one after another and each
+    RKHP point spreads its K trajectories over the workers (the time per trajectory is then the
+    workers' throughput). The errors do not depend on the executor; ``on_curve(done, total)``.
+    """
     from .converge import check_t_final
 
     t_final = check_t_final(system.t_final if t_final is None else t_final)
@@ -278,28 +287,31 @@ def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=
     if not steps or steps[0] < 1:
         raise InputError(f"numbers of steps must be positive, got {list(steps)}")
     resolved = [resolve_peer(p) for p in peers]
-    curves = []
+    integrators = [*methods, *(p for p in resolved if isinstance(p, Method))]
+    solvers = [p for p in resolved if isinstance(p, str)]
     if ensemble is None:
         ref = reference(system, t_final)
-        for m in [*methods, *(p for p in resolved if isinstance(p, Method))]:
-            curves.append(_method_curve(m, system, ref, steps, t_final, repeats))
-            if on_curve:
-                on_curve(m.name)
-        for p in (p for p in resolved if isinstance(p, str)):
-            curves.append(_scipy_curve(p, system, ref, tolerances, t_final, repeats))
-            if on_curve:
-                on_curve(p)
+        jobs = [(_method_curve, (m, system, ref, steps, t_final, repeats)) for m in integrators]
+        jobs += [(_scipy_curve, (p, system, ref, tolerances, t_final, repeats)) for p in solvers]
+        curves = run_all(executor or InProcess(), _job, jobs, on_curve)
     else:
         starts = ensemble_starts(system, ensemble, seed)
         refs = [dop853_reference(system, t_final, x) for x in starts[:ENSEMBLE_CHECKED]]
         ref = max(refs, key=lambda r: r.error_estimate)
-        for m in [*methods, *(p for p in resolved if isinstance(p, Method))]:
-            curves.append(_ensemble_method_curve(m, system, refs, ref.floor, starts, steps, t_final, repeats))
+        curves = []
+        for m in integrators:
+            curves.append(_ensemble_method_curve(m, system, refs, ref.floor, starts, steps, t_final, repeats,
+                                                 executor))
             if on_curve:
-                on_curve(m.name)
-        for p in (p for p in resolved if isinstance(p, str)):
+                on_curve(len(curves), len(integrators) + len(solvers))
+        for p in solvers:
             curves.append(_ensemble_scipy_curve(p, system, refs, ref.floor, starts, tolerances, t_final, repeats))
             if on_curve:
-                on_curve(p)
+                on_curve(len(curves), len(integrators) + len(solvers))
     return BenchStudy(system.name, system.realisation, t_final, ref, repeats, ensemble, tuple(curves),
                       cheapest(curves))
+
+
+def _job(curve, args) -> BenchCurve:
+    """One curve (a task: the function and its arguments)."""
+    return curve(*args)

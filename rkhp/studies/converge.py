@@ -16,6 +16,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import InputError
+from ..executors import InProcess, run_all
 from .fit import MIN_FIT_POINTS, OrderFit, fit_order, verdict
 from .invariants import max_deviations
 from .methods import condition_class
@@ -154,13 +155,18 @@ def run_row(method, system, ref: Reference, steps: int, t_final: float) -> Conve
                           traj.compile_seconds, "ok", measured)
 
 
-def study_method(method, system, ref: Reference, steps, t_final: float, on_run=None) -> MethodConvergence:
-    """One method's convergence table, fit and verdict."""
-    rows = []
-    for n in steps:
-        rows.append(run_row(method, system, ref, n, t_final))
-        if on_run:
-            on_run(method.name, n)
+def study_methods(methods, system, ref: Reference, steps, t_final: float, on_run=None,
+                  executor=None) -> tuple[MethodConvergence, ...]:
+    """Each method's convergence table, fit and verdict. Every (method, steps) run is one task on
+    ``executor`` (rkhp.executors; default: in this process), reduced in method and step order;
+    ``on_run(done, total)`` after each finished run."""
+    runs = [(m, system, ref, n, t_final) for m in methods for n in steps]
+    rows = run_all(executor or InProcess(), run_row, runs, on_run)
+    return tuple(_method_convergence(m, system, ref, rows[k * len(steps):(k + 1) * len(steps)])
+                 for k, m in enumerate(methods))
+
+
+def _method_convergence(method, system, ref: Reference, rows) -> MethodConvergence:
     fit = fit_order([r.h for r in rows], [r.measured_error for r in rows], floor=ref.floor)
     rows = [_with_local_order(r, p) for r, p in zip(rows, fit.local_orders, strict=True)]
     expected = method.expected_order_on(system)
@@ -173,12 +179,15 @@ def _with_local_order(row: ConvergenceRow, p) -> ConvergenceRow:
     return replace(row, local_order=p)
 
 
-def converge(system, methods, steps=None, t_final=None, refinements=None, on_run=None) -> ConvergenceStudy:
+def converge(system, methods, steps=None, t_final=None, refinements=None, on_run=None,
+             executor=None) -> ConvergenceStudy:
     """Run a convergence study of ``methods`` (resolved :class:`~rkhp.studies.methods.Method`
-    values) on ``system`` up to ``t_final`` (default: the system's)."""
+    values) on ``system`` up to ``t_final`` (default: the system's). The runs are independent tasks
+    on ``executor`` (rkhp.executors; default: in this process), ``on_run(done, total)`` after each;
+    the reference is computed here, once."""
     t_final = check_t_final(system.t_final if t_final is None else t_final)
     counts = step_counts(steps, refinements)
     ref = reference(system, t_final)
-    results = tuple(study_method(m, system, ref, counts, t_final, on_run) for m in methods)
+    results = study_methods(methods, system, ref, counts, t_final, on_run, executor)
     return ConvergenceStudy(system.name, system.realisation, bool(system.degenerate), t_final, ref, results,
                             condition_class(system))

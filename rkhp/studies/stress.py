@@ -21,7 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from .converge import check_t_final, study_method
+from ..executors import InProcess, run_all
+from .converge import check_t_final, study_methods
 from .fit import fit_order
 from .invariants import invariant_deviations, max_deviations, window_maxima
 from .methods import resolve_method
@@ -195,13 +196,15 @@ def _long_run(method, system, h: float, steps: int, windows: int) -> LongRun:
                    traj.status, traj.run_seconds)
 
 
-def long_run(methods, system, h: float, steps: int = LONG_STEPS, windows: int = LONG_WINDOWS) -> LongRunResult:
-    """Part (b): Casimir and energy error per window, the methods against classical RK4."""
+def long_run(methods, system, h: float, steps: int = LONG_STEPS, windows: int = LONG_WINDOWS,
+             executor=None) -> LongRunResult:
+    """Part (b): Casimir and energy error per window, the methods against classical RK4 (one task
+    per method on ``executor``, rkhp.executors)."""
     if steps < windows:
         raise InputError(f"a long run needs at least {windows} steps, got {steps}")
-    runs = tuple(_long_run(m, system, h, steps, windows) for m in methods)
-    peer = _long_run(resolve_method("classical:rk4"), system, h, steps, windows)
-    return LongRunResult(h, steps, windows, runs, peer)
+    everyone = [*methods, resolve_method("classical:rk4")]
+    *runs, peer = run_all(executor or InProcess(), _long_run, [(m, system, h, steps, windows) for m in everyone])
+    return LongRunResult(h, steps, windows, tuple(runs), peer)
 
 
 @dataclass(frozen=True)
@@ -248,23 +251,25 @@ class SingularResult:
 
 
 def near_singular(methods, system, t_final: float, steps: int = SINGULAR_STEPS,
-                  values=SINGULAR_VALUES) -> SingularResult:
-    """Part (c): starts with the first species at 1e-3 and 1e-6 (log-canonical systems only)."""
+                  values=SINGULAR_VALUES, executor=None) -> SingularResult:
+    """Part (c): starts with the first species at 1e-3 and 1e-6 (log-canonical systems only), one
+    task per start and method on ``executor`` (rkhp.executors)."""
     if system.family != "log-canonical":
         return SingularResult(False, (), f"near-singular starts are defined for log-canonical systems, "
                                          f"{system.name} is {system.family}")
-    runs = []
-    for value in values:
-        x0 = np.array(system.x0, dtype=float)
-        x0[0] = value
-        for m in methods:
-            traj = m.integrate(system, t_final / steps, steps, x0=x0)
-            if traj.ok:
-                casimir, _ = max_deviations(system, traj.states)
-                runs.append(SingularRun(m.name, value, "ok", float(traj.states.min()), casimir))
-            else:
-                runs.append(SingularRun(m.name, value, traj.status, None, None))
+    runs = run_all(executor or InProcess(), _singular_run,
+                   [(m, system, t_final, steps, value) for value in values for m in methods])
     return SingularResult(True, tuple(runs))
+
+
+def _singular_run(method, system, t_final: float, steps: int, value: float) -> SingularRun:
+    x0 = np.array(system.x0, dtype=float)
+    x0[0] = value
+    traj = method.integrate(system, t_final / steps, steps, x0=x0)
+    if not traj.ok:
+        return SingularRun(method.name, value, traj.status, None, None)
+    casimir, _ = max_deviations(system, traj.states)
+    return SingularRun(method.name, value, "ok", float(traj.states.min()), casimir)
 
 
 def _floor_row(fit) -> int | None:
@@ -319,11 +324,12 @@ class RoundOffResult:
                 "methods": out, "verdict": self.verdict()}
 
 
-def round_off(methods, system, t_final: float, steps=ROUND_OFF_STEPS) -> RoundOffResult:
+def round_off(methods, system, t_final: float, steps=ROUND_OFF_STEPS, executor=None) -> RoundOffResult:
     """Part (d): errors at T and energy errors for h down to T/10^5; the first row past the
-    asymptotic range of each fit (energy errors at or below 2 eps |H(x0)| are not measurements)."""
+    asymptotic range of each fit (energy errors at or below 2 eps |H(x0)| are not measurements).
+    Each run is a task on ``executor`` (rkhp.executors)."""
     ref = reference(system, t_final)
-    studies = tuple(study_method(m, system, ref, tuple(steps), t_final) for m in methods)
+    studies = study_methods(methods, system, ref, tuple(steps), t_final, executor=executor)
     h0 = abs(float(system.hamiltonian(np.asarray(system.x0, dtype=float))))
     energy_floor = 2 * np.finfo(float).eps * max(h0, 1e-300)
     energy = tuple(fit_order([r.h for r in m.rows], [r.energy_error for r in m.rows], floor=energy_floor)
@@ -355,8 +361,11 @@ class StressStudy:
 
 
 def stress(system, methods, t_final=None, long_steps: int = LONG_STEPS, long_h: float | None = None,
-           sweep_coarsest: int = SWEEP_COARSEST, round_off_steps=ROUND_OFF_STEPS, on_part=None) -> StressStudy:
-    """Run parts (a)-(d) for ``methods`` (resolved Methods) on ``system``."""
+           sweep_coarsest: int = SWEEP_COARSEST, round_off_steps=ROUND_OFF_STEPS, on_part=None,
+           executor=None) -> StressStudy:
+    """Run parts (a)-(d) for ``methods`` (resolved Methods) on ``system``, one part after the
+    other, each part's independent runs as tasks on ``executor`` (rkhp.executors; default: in this
+    process); the results do not depend on it."""
     t_final = check_t_final(system.t_final if t_final is None else t_final)
     if long_steps < 1 or sweep_coarsest < 1:
         raise InputError("numbers of steps must be positive")
@@ -368,12 +377,13 @@ def stress(system, methods, t_final=None, long_steps: int = LONG_STEPS, long_h: 
         if on_part:
             on_part(part)
 
-    a = tuple(sweep(m, system, t_final, sweep_coarsest) for m in methods)
+    executor = executor or InProcess()
+    a = tuple(run_all(executor, sweep, [(m, system, t_final, sweep_coarsest) for m in methods]))
     tick("a")
-    b = long_run(methods, system, h_long, long_steps)
+    b = long_run(methods, system, h_long, long_steps, executor=executor)
     tick("b")
-    c = near_singular(methods, system, t_final)
+    c = near_singular(methods, system, t_final, executor=executor)
     tick("c")
-    d = round_off(methods, system, t_final, round_off_steps)
+    d = round_off(methods, system, t_final, round_off_steps, executor=executor)
     tick("d")
     return StressStudy(system.name, system.realisation, t_final, a, b, c, d)
