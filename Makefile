@@ -3,8 +3,9 @@ PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+DOCS_STAMP := $(VENV)/.docs-installed
 
-.PHONY: install demo test test-all bench lint check-install clean
+.PHONY: install demo test test-all bench lint docs check-install clean
 
 install: $(STAMP)
 
@@ -25,8 +26,17 @@ demo: install
 test: install
 	$(PY) -m pytest -m "not slow" -q -p no:cacheprovider
 
-test-all: install
+test-all: install $(DOCS_STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider
+
+$(DOCS_STAMP): $(STAMP)
+	$(PY) -m pip install --quiet -e '.[test,docs]'
+	touch $(DOCS_STAMP)
+
+# The documentation site (Sphinx, see docs/index.md): offline, warnings are errors, every
+# cross-reference must resolve (-n). Output: docs/_build/html/index.html.
+docs: $(DOCS_STAMP)
+	$(VENV)/bin/sphinx-build -E -W --keep-going -n -q -b html docs docs/_build/html
 
 bench: install
 	-$(PY) -m pip install --quiet -e '.[bench]'
@@ -45,4 +55,4 @@ check-install:
 	cd /tmp && /tmp/rkhp-check-install/bin/python -c "import rkhp, rkhp_cli, importlib.util as u; assert u.find_spec('cli') is None; print('no top-level cli module: ok')"
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build *.egg-info docs/_build docs/_generated

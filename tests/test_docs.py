@@ -1,0 +1,40 @@
+"""Every code block of README.md and docs/ runs, and shown outputs match (docs/CONTRIBUTING-DOCS.md).
+
+One test per page (its blocks share a namespace and a scratch folder, in order); blocks marked
+``<!-- docs: slow -->`` run only in the slow variant (`make test-all`). The site build test is in
+tests/test_site.py.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "docs" / "_ext"))
+
+from doccode import Settings, has_slow_blocks, run_page  # noqa: E402
+
+
+def pages() -> list[Path]:
+    """README.md and every Markdown page of docs/ (build outputs excluded)."""
+    docs = [p for p in sorted((ROOT / "docs").rglob("*.md"))
+            if not any(part.startswith("_") for part in p.relative_to(ROOT / "docs").parts)]
+    return [ROOT / "README.md", *docs]
+
+
+def page_id(path: Path) -> str:
+    return str(path.relative_to(ROOT))
+
+
+@pytest.mark.parametrize("page", pages(), ids=page_id)
+def test_page_examples(page, tmp_path):
+    run_page(page, Settings(scratch=tmp_path))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("page", [p for p in pages() if has_slow_blocks(p)], ids=page_id)
+def test_page_examples_with_slow_blocks(page, tmp_path):
+    run_page(page, Settings(scratch=tmp_path, slow=True))
