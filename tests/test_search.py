@@ -270,7 +270,9 @@ def test_degenerate_order_5_needs_4_stages():
                                             ("search-degenerate-o5-s4-min-error", "degenerate", 5),
                                             ("search-degenerate-o6-s6", "degenerate", 6),
                                             ("search-symmetric-o6-s5", "symmetric", 6),
-                                            ("search-general-o6-s7", "general", 6)])
+                                            ("search-general-o6-s7", "general", 6),
+                                            ("search-degenerate-o7-s7", "degenerate", 7),
+                                            ("search-symmetric-o8-s7", "symmetric", 8)])
 def test_saved_tables_verify(name, cls, order):
     tab = load_tableau(name)
     ver = verify(tab)
@@ -325,7 +327,8 @@ def test_symmetric_class_needs_fewer_stages():
                                   "search-degenerate-o5-s4-min-error", "search-degenerate-o6-s6",
                                   "search-symmetric-o4-s3", "search-symmetric-o5-s4",
                                   "search-symmetric-o6-s5", "search-symmetric-o7-s6",
-                                  "search-general-o6-s7"])
+                                  "search-general-o6-s7", "search-degenerate-o7-s7",
+                                  "search-symmetric-o8-s7"])
 def test_saved_tables_are_reproduced_by_their_reference_command(name, tmp_path):
     tab = load_tableau(name)
     words = tab.reference.split()
