@@ -140,24 +140,28 @@ def _sorted_insert(J: tuple[int, ...], i: int) -> tuple[int, ...]:
     return tuple(sorted(J + (i,)))
 
 
-def elementary_differentials(trees, max_order: int, ring: JetRing, partials, transform):
-    """Values at the base point of F(t) for the trees given (and all their subtrees).
+def elementary_differentials(trees, max_order: int, ring: JetRing, partials, transform,
+                             nspace: int | None = None, jets: bool = False):
+    """F(t) for the trees given (and all their subtrees), at the base point or as jets.
 
     ``partials(J, m)``: d_p^J f(x, 0) for a sorted index tuple J as a jet truncated at degree m
     (shape (size(m), batch)); ``transform(grad, m)``: the vectors that fill the slots from the
     gradient list of a child (identity for the general form, pi grad for constant pi).
-    Returns a dict tree -> array (batch,) of F(t) at the base point.
+    ``nspace``: the number of space variables x (the first ones of the ring; default all of them):
+    further variables, such as the step h of a graded series (docs/theory.md §11), are
+    parameters that derivatives leave alone. Returns a dict tree -> array (batch,) of F(t) at the
+    base point, or with ``jets`` the jet of F(t) truncated at degree max_order - |t|.
     """
-    nvars = ring.basis.nvars
-    jets: dict[Tree, np.ndarray] = {}
+    nvars = ring.basis.nvars if nspace is None else nspace
+    table_of: dict[Tree, np.ndarray] = {}
     slots: dict[Tree, list[np.ndarray]] = {}
 
     def need(t: Tree) -> int:
         return max_order - t.order
 
     def jet(t: Tree) -> np.ndarray:
-        if t in jets:
-            return jets[t]
+        if t in table_of:
+            return table_of[t]
         m = need(t)
         if not t.children:
             value = partials((), m)
@@ -171,7 +175,7 @@ def elementary_differentials(trees, max_order: int, ring: JetRing, partials, tra
                     for J in _multisets(nvars, pos)
                 }
             value = table[()]
-        jets[t] = value
+        table_of[t] = value
         return value
 
     def vectors(s: Tree, m: int) -> list[np.ndarray]:
@@ -182,10 +186,36 @@ def elementary_differentials(trees, max_order: int, ring: JetRing, partials, tra
         size = ring.size(m)
         return [v[:size] for v in slots[s]]
 
-    out = {}
-    for t in trees:
-        out[t] = jet(t)[0]
-    return out
+    return {t: jet(t) if jets else jet(t)[0] for t in trees}
+
+
+def _derivatives(ring: JetRing, K: np.ndarray):
+    """dK(J): the partial derivative d^J K (J a sorted index tuple) truncated at degree - |J|, cached."""
+    cache: dict[tuple[int, ...], np.ndarray] = {(): K}
+    degree = ring.basis.degree
+
+    def dK(J):
+        if J not in cache:
+            cache[J] = ring.derivative(dK(J[:-1]), J[-1], degree - len(J))
+        return cache[J]
+
+    return dK
+
+
+def _exponent(J: tuple[int, ...], dim: int) -> tuple[tuple[int, ...], int]:
+    """The multi-index of a sorted index tuple and its factorial: (0, 2, 2) -> ((1, 0, 2), 2)."""
+    e = [0] * dim
+    for j in J:
+        e[j] += 1
+    scale = 1
+    for c in e:
+        scale *= factorial(c)
+    return tuple(e), scale
+
+
+def _index_tuple(exponent) -> tuple[int, ...]:
+    """The sorted index tuple of a multi-index: (1, 0, 2) -> (0, 2, 2)."""
+    return tuple(v for v in range(len(exponent)) for _ in range(int(exponent[v])))
 
 
 def _sum(ring: JetRing, terms: list[np.ndarray]) -> np.ndarray:
@@ -223,26 +253,86 @@ def constant_pi_jets(trees, max_order: int, H: np.ndarray, pi: np.ndarray, p: in
 
     ``H``: (M, batch) coefficients of polynomials of degree max_order - 1 over
     ``monomial_basis(dim, max_order - 1)``; ``pi``: (dim, dim, batch) antisymmetric matrices.
+    With alpha = x - pi p / 2 the slots take (-1/2) pi grad; the factor (-1/2)^(|t|-1), common to
+    the trees of one order, is left out: this is :func:`constant_matrix_jets` with D = pi.
     """
-    dim = pi.shape[0]
-    basis = monomial_basis(dim, max(max_order - 1, 0))
-    ring = JetRing(basis, p)
-    H = ring.reduce(H)
-    pi = ring.reduce(pi)
-    cache: dict[tuple[int, ...], np.ndarray] = {(): H}
+    basis = monomial_basis(pi.shape[0], max(max_order - 1, 0))
+    return constant_matrix_jets(trees, max_order, H, pi, p, basis)
 
-    def dH(J):
-        if J not in cache:
-            cache[J] = ring.derivative(dH(J[:-1]), J[-1], basis.degree - len(J))
-        return cache[J]
+
+def constant_matrix_jets(trees, max_order: int, K: np.ndarray, D: np.ndarray, p: int | None,
+                         basis: MonomialBasis, jets: bool = False) -> dict[Tree, np.ndarray]:
+    """F(t) for alpha(x, p) = x + D p with a constant matrix D (dim, dim, batch) per instance.
+
+    Then d_p^k f(x, 0)[v1..vk] = D^k K(x)[D v1, ..., D vk]: the partials are derivatives of K and
+    the slots take D grad. ``K``: (M, batch) coefficients over ``basis``, whose first dim variables
+    are x (further ones are parameters, e.g. h; docs/theory.md §11). D = -pi/2 is the symmetric
+    constant-pi realisation, D = Q - pi/2 (Q symmetric) the shifted one (§4).
+    """
+    dim = D.shape[0]
+    ring = JetRing(basis, p)
+    D = ring.reduce(D)
+    dK = _derivatives(ring, ring.reduce(K))
 
     def partials(J, m):
-        return dH(J)[: ring.size(m)]
+        return dK(J)[: ring.size(m)]
 
     def transform(grad, m):
-        return [_sum(ring, [ring.reduce(pi[i, j][None, :] * grad[j]) for j in range(dim)]) for i in range(dim)]
+        return [_sum(ring, [ring.reduce(D[i, j][None, :] * grad[j]) for j in range(dim)]) for i in range(dim)]
 
-    return elementary_differentials(trees, max_order, ring, partials, transform)
+    return elementary_differentials(trees, max_order, ring, partials, transform, dim, jets)
+
+
+class PolynomialShift:
+    """The realisation alpha(x, p) = x + A(p), A a polynomial map in p alone (no x), modulo a prime.
+
+    f(x, p) = sum_beta d^beta K(x) A(p)^beta / beta!, so d_p^J f(x, 0) = sum_beta c_J,beta d^beta K(x)
+    with c_J,beta = J! [p^J] A(p)^beta / beta!, scalars per instance: the partials are combinations
+    of derivatives of K. ``A``: dim arrays (M_p, batch) over ``monomial_basis(dim, degree)`` in the
+    variables p, without constant term; the powers A^beta/beta! are computed once. Covers the
+    quartic realisation A(p) = -pi p / 2 + grad K(p) (degenerate, not symmetric; docs/theory.md §8)
+    and its non-degenerate variants with a quadratic K.
+    """
+
+    def __init__(self, A: list[np.ndarray], p: int, degree: int):
+        self.dim = len(A)
+        self.p = p
+        pring = JetRing(monomial_basis(self.dim, max(degree, 1)), p)
+        self.pbasis = pbasis = pring.basis
+        top = pbasis.degree
+        one = np.zeros((pbasis.sizes[top], A[0].shape[1]), dtype=np.int64)
+        one[0] = 1
+        powers = [one]
+        for idx in range(1, pbasis.sizes[top]):
+            e = tuple(int(x) for x in pbasis.exponents[idx])
+            v = next(i for i in range(self.dim) if e[i])
+            lower = list(e)
+            lower[v] -= 1
+            prev = powers[pbasis.index[tuple(lower)]]
+            powers.append(pring.reduce(pring.mul(prev, pring.reduce(A[v]), top) * pow(e[v], -1, p)))
+        self.powers = np.array(powers)  # (monomials beta, monomials of p, batch)
+        self.betas = [_index_tuple(e) for e in pbasis.exponents]
+
+    def jets(self, trees, max_order: int, K: np.ndarray, basis: MonomialBasis, jets: bool = False):
+        """F(t) of the Hamiltonian K (coefficients over ``basis``, whose first dim variables are x)."""
+        dim, pbasis = self.dim, self.pbasis
+        ring = JetRing(basis, self.p)
+        K = ring.reduce(K)
+        dK = _derivatives(ring, K)
+        pcache: dict[tuple[int, ...], np.ndarray] = {(): K}
+
+        def partials(J, m):
+            if J not in pcache:
+                pexp, scale = _exponent(J, dim)
+                size = ring.size(basis.degree - len(J))
+                stop = pbasis.sizes[len(J)]
+                coeffs = self.powers[1:stop, pbasis.index[pexp]]
+                derivs = np.array([dK(self.betas[idx])[:size] for idx in range(1, stop)])
+                total = ring.reduce(ring.reduce(derivs * coeffs[:, None, :]).sum(axis=0))
+                pcache[J] = ring.reduce(total * scale)
+            return pcache[J][: ring.size(m)]
+
+        return elementary_differentials(trees, max_order, ring, partials, lambda grad, m: grad, dim, jets)
 
 
 def _bernoulli_plus(n: int) -> list[Fraction]:
@@ -279,13 +369,8 @@ def _composite_partials(alpha_increment, H, dim: int, ring2: JetRing):
 
     @cache
     def rows(J, m):
-        pexp = [0] * dim
-        for j in J:
-            pexp[j] += 1
-        scale = 1
-        for c in pexp:
-            scale *= factorial(c)
-        ids = [index2[tuple(int(x) for x in xi_basis.exponents[i]) + tuple(pexp)]
+        pexp, scale = _exponent(J, dim)
+        ids = [index2[tuple(int(x) for x in xi_basis.exponents[i]) + pexp]
                for i in range(xi_basis.sizes[m])]
         return np.array(ids, dtype=np.int64), scale
 

@@ -123,3 +123,122 @@ def rref_fraction(rows) -> tuple[tuple[tuple[Fraction, ...], ...], tuple[int, ..
         if r == len(a):
             break
     return tuple(tuple(row) for row in a[:r]), tuple(pivots)
+
+
+# ----------------------------------------------------------------------------- number fields
+
+
+class FieldEmbeddings:
+    """The ring maps of Q(theta) into F_p, theta the primitive element of an algebraic number field.
+
+    A tableau with radical entries has its weights in a number field K = Q(theta) of degree d
+    (sympy's ``QQ.algebraic_field``; None for Q, d = 1). Modulo a prime p at which the minimal
+    polynomial of theta splits into d distinct linear factors, each root r gives a ring map
+    x = sum_j q_j theta^j -> sum_j q_j r^j (mod p). A computation that is polynomial in such
+    numbers with rational coefficients commutes with these maps, so it can run modulo p once per
+    root; the d images of a result give back its coordinates q_j modulo p (a Vandermonde system),
+    and the coordinates over several primes give the rationals (:func:`crt_pair`,
+    :func:`rational_reconstruction`).
+    """
+
+    def __init__(self, field=None):
+        self.field = field
+        if field is None:
+            self.degree = 1
+            self._minpoly = (1, 0)  # theta = 0: Q itself
+        else:
+            coeffs = [Fraction(int(c.numerator), int(c.denominator)) for c in field.mod.to_list()]
+            den = 1
+            for c in coeffs:
+                den = den * c.denominator // _gcd(den, c.denominator)
+            self.degree = len(coeffs) - 1
+            self._minpoly = tuple(int(c * den) for c in coeffs)
+
+    def primes(self):
+        """Yield (p, roots): primes below 2^31, from the largest down, at which the minimal
+        polynomial has ``degree`` distinct roots (every prime for Q)."""
+        p = 1 << 31
+        while True:
+            p = _previous_prime(p)
+            roots = self._roots(p)
+            if roots is not None:
+                yield p, roots
+
+    def _roots(self, p: int):
+        if self.field is None:
+            return (0,)
+        if self._minpoly[0] % p == 0:
+            return None
+        from sympy import Poly, symbols
+
+        x = symbols("x")
+        poly = Poly(list(self._minpoly), x, modulus=p)
+        _, factors = poly.factor_list()
+        roots = []
+        for f, mult in factors:
+            if f.degree() != 1 or mult != 1:
+                return None
+            a, b = (int(c) for c in f.all_coeffs())
+            roots.append(-b * pow(a, -1, p) % p)
+        return tuple(sorted(roots)) if len(roots) == self.degree else None
+
+    def coordinates(self, x) -> tuple[Fraction, ...]:
+        """The rational coordinates (q_0, ..., q_{d-1}) of x in the basis 1, theta, ..., theta^(d-1)."""
+        if self.field is None:
+            return (Fraction(x),)
+        if isinstance(x, (int, Fraction)):
+            return (Fraction(x),) + (Fraction(0),) * (self.degree - 1)
+        element = x if hasattr(x, "to_list") else self.field.from_sympy(x)
+        high_first = [Fraction(int(c.numerator), int(c.denominator)) for c in element.to_list()]
+        low_first = high_first[::-1]
+        return tuple(low_first) + (Fraction(0),) * (self.degree - len(low_first))
+
+    def images(self, x, p: int, roots) -> tuple[int, ...]:
+        """The residues of x under the maps theta -> r, r in ``roots``."""
+        q = [to_residue(c, p) for c in self.coordinates(x)]
+        return tuple(sum(c * pow(r, j, p) for j, c in enumerate(q)) % p for r in roots)
+
+    def coordinates_mod(self, values, p: int, roots) -> tuple[int, ...]:
+        """Coordinates modulo p of the element whose images under ``roots`` are ``values``."""
+        if self.field is None:
+            return (int(values[0]) % p,)
+        V = [[pow(r, j, p) for j in range(self.degree)] + [int(v) % p] for r, v in zip(roots, values)]
+        rows, pivots = rref_mod(np.array(V, dtype=np.int64), p)
+        if pivots != tuple(range(self.degree)):
+            raise ValueError("singular Vandermonde system (repeated roots)")
+        return tuple(int(rows[j, -1]) for j in range(self.degree))
+
+    def element(self, coordinates):
+        """The exact number with these rational coordinates: a Fraction for Q, else a sympy number."""
+        if self.field is None:
+            return Fraction(coordinates[0])
+        import sympy
+
+        theta = self.field.ext.as_expr() if hasattr(self.field.ext, "as_expr") else self.field.ext
+        expr = sum(sympy.Rational(c.numerator, c.denominator) * theta ** j for j, c in enumerate(coordinates))
+        expr = sympy.radsimp(sympy.expand(expr))
+        return Fraction(int(expr.p), int(expr.q)) if expr.is_Rational else expr
+
+
+def reconstruct_coordinates(residues: list[tuple[int, ...]], primes: list[int]) -> tuple[Fraction, ...]:
+    """Rational coordinates from their residues modulo several primes (CRT, then rational
+    reconstruction of each); ValueError when the modulus is still too small."""
+    out = []
+    for j in range(len(residues[0])):
+        value, modulus = residues[0][j], primes[0]
+        for res, p in zip(residues[1:], primes[1:]):
+            value, modulus = crt_pair(value, modulus, res[j], p), modulus * p
+        out.append(rational_reconstruction(value, modulus))
+    return tuple(out)
+
+
+def _gcd(a: int, b: int) -> int:
+    from math import gcd
+
+    return gcd(a, b)
+
+
+def _previous_prime(n: int) -> int:
+    from sympy import prevprime
+
+    return int(prevprime(n))

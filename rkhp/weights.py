@@ -218,7 +218,7 @@ class ExactArithmetic:
             from sympy import QQ
 
             generators = sorted({g for x in entries if not isinstance(x, Fraction)
-                                 for g in _radicals(x)}, key=sympy.default_sort_key)
+                                 for g in radical_generators(x)}, key=sympy.default_sort_key)
             self.field = QQ.algebraic_field(*generators)
             self.one = self.field.one
 
@@ -277,7 +277,7 @@ class ExactArithmetic:
         return x * self.field.convert(QQ(w.numerator, w.denominator))
 
 
-def _radicals(expr) -> set:
+def radical_generators(expr) -> set:
     """The algebraic generators of an exact entry: its irrational powers (e.g. sqrt(3))."""
     import sympy
 
