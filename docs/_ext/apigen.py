@@ -101,12 +101,14 @@ KINDS = {"func": ("function", "method", "classmethod", "staticmethod"), "class":
 def resolve_short_name(app, env, node, contnode):
     """missing-reference: a Python name written short in a docstring (``Trajectory``,
     ``rkhp.systems.PoissonSystem`` for a re-export) links to the one documented object whose
-    full name ends with it, or with its last component; ambiguous or unknown names stay
-    unresolved (and fail a nitpicky build)."""
+    full name ends with it, or with its last component; a private name (``_Graph``) is shown
+    without a link; ambiguous or unknown names stay unresolved (and fail a nitpicky build)."""
     if node.get("refdomain") != "py":
         return None
     domain = env.get_domain("py")
     target = node["reftarget"].lstrip("~.")
+    if any(part.startswith("_") for part in target.split(".")):
+        return contnode  # a private name: not documented, shown as code without a link
     kinds = KINDS.get(node.get("reftype"), ())
     for suffix in (target, target.rsplit(".", 1)[-1]):
         found = [name for name, entry in domain.objects.items()

@@ -10,7 +10,9 @@ block quote. This extension keeps their meaning and makes them valid reST:
    used: it reads ``a, b: text`` or a property's ``text: more`` as types);
 2. outside inline literals and roles, ``|`` and ``*`` are escaped;
 3. a blank line is put wherever the indentation changes between two lines of text, so that
-   continuation lines and lists never end without one.
+   continuation lines and lists never end without one;
+4. docstrings that are not rkhp's (a property made of ``itemgetter``, a NamedTuple field's
+   "Alias for field number 0") are left out.
 
 Single backquotes (```x```) render as inline code (``default_role = "code"`` in conf.py).
 """
@@ -99,8 +101,20 @@ def separate_blocks(lines: list[str]) -> list[str]:
     return out
 
 
+def foreign(obj) -> bool:
+    """Whether a docstring is not rkhp's own: a property built on a C-level getter (itemgetter)
+    or a NamedTuple field ("Alias for field number 0")."""
+    getter = getattr(obj, "fget", None)
+    if getter is not None and not (getattr(getter, "__module__", "") or "").startswith("rkhp"):
+        return True
+    return type(obj).__name__ == "_tuplegetter"
+
+
 def process_docstring(app, what, name, obj, options, lines):
     """autodoc-process-docstring: escaping, sections as lists, blank lines between blocks."""
+    if foreign(obj):
+        lines[:] = []
+        return
     escaped = [line if line.lstrip().startswith(".. ") else escape_markup(line) for line in lines]
     lines[:] = separate_blocks(sections_as_lists(escaped))
 
