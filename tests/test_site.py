@@ -98,3 +98,12 @@ def test_no_broken_internal_link(site):
                 if unquote(parts.fragment) not in ids:
                     broken.append(f"{path.relative_to(site)}: {link} (no such anchor)")
     assert not broken, "\n".join(broken)
+
+
+@pytest.mark.slow
+def test_cli_reference_documents_every_command(site):
+    from rkhp_cli.main import COMMANDS
+
+    ids = parse(site / "reference" / "cli.html").ids
+    missing = [name for name in COMMANDS if f"rkhp-{name}" not in ids]
+    assert not missing, f"commands missing from the CLI reference: {missing}"
