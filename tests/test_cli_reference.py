@@ -5,7 +5,6 @@ help, which is what sphinx-click renders."""
 from __future__ import annotations
 
 import click
-
 from rkhp_cli.main import COMMANDS, rkhp
 
 
