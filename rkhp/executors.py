@@ -30,6 +30,8 @@ from .errors import InputError
 SCHEDULER_VARIABLE = "DASK_SCHEDULER_ADDRESS"
 #: Seconds allowed to reach a scheduler before giving up with one line.
 CONNECT_SECONDS = 10
+#: How often a Dask executor asks the scheduler how many worker threads it has (seconds).
+SLOTS_SECONDS = 5.0
 #: Largest --workers accepted (a local pool; a larger run belongs on a cluster).
 MAX_LOCAL_WORKERS = 256
 _ADDRESS = re.compile(r"((tcp|tls|ws|wss|ucx|inproc)://)?[A-Za-z0-9_.\-\[\]:]{1,200}")
@@ -201,7 +203,7 @@ class LocalProcesses:
 
 
 class DaskCluster:
-    """The workers of the Dask scheduler at ``address``; ``slots`` = their threads when connected."""
+    """The workers of the Dask scheduler at ``address``; ``slots`` = their threads."""
 
     kind = "dask"
 
@@ -216,7 +218,19 @@ class DaskCluster:
             raise InputError(f"cannot reach the Dask scheduler at {address} within {connect_seconds:g} s "
                              f"({type(exc).__name__})") from None
         self.address = address
-        self.slots = max(1, sum(self._client.nthreads().values()))
+        self._slots = (0.0, 1)
+
+    @property
+    def slots(self) -> int:
+        """The workers' threads now (asked of the scheduler at most every SLOTS_SECONDS, so that
+        workers joining or leaving during a run change how many tasks are kept submitted)."""
+        import time
+
+        asked, count = self._slots
+        if time.monotonic() - asked > SLOTS_SECONDS:
+            count = max(1, sum(self._client.nthreads().values()))
+            self._slots = (time.monotonic(), count)
+        return count
 
     def submit(self, fn, /, *args):
         return self._client.submit(fn, *args, pure=False)
