@@ -80,27 +80,30 @@ def cluster():
 
 
 def test_search_on_the_cluster_equals_the_single_process_run(cluster):
-    args = ["search", "--stages", "3", "--order", "4", "--degenerate", "--seed", "1", "--restarts", "12",
-            "--format", "json"]
-    rc, alone, err = _rkhp(*args, env={"DASK_SCHEDULER_ADDRESS": ""})
+    from rkhp.search.driver import SearchOptions, search
+
+    options = SearchOptions(seed=1, restarts=12)
+    alone = search(3, 4, "degenerate", options=options).to_json()
+    with open_executor(scheduler=cluster.address) as dask:
+        on_cluster = search(3, 4, "degenerate", options=options, executor=dask).to_json()
+    # the command line, with the scheduler from the environment (Dask's convention)
+    rc, by_env, err = _rkhp("search", "--stages", "3", "--order", "4", "--degenerate", "--seed", "1",
+                            "--restarts", "12", "--format", "json", env={"DASK_SCHEDULER_ADDRESS": cluster.address})
     assert rc == 0, err
-    rc, on_cluster, err = _rkhp(*args, "--scheduler", cluster.address)
-    assert rc == 0, err
-    rc, by_env, err = _rkhp(*args, env={"DASK_SCHEDULER_ADDRESS": cluster.address})
-    assert rc == 0, err
-    alone = json.loads(alone)
     assert alone["found"] and alone["verified_orders"]["degenerate"]["order"] == 4
-    assert _without(json.loads(on_cluster)) == _without(alone) == _without(json.loads(by_env))
+    assert _without(on_cluster) == _without(alone) == _without(json.loads(by_env))
 
 
 def test_converge_on_the_cluster_equals_the_single_process_run(cluster):
-    args = ["converge", "rigid-body", "--method", "paper-three-stage", "--steps", "20",
-            "--refinements", "3", "--format", "json"]
-    rc, alone, err = _rkhp(*args)
+    from rkhp.studies.converge import converge
+    from rkhp.studies.methods import resolve_methods
+    from rkhp.systems import get_system
+
+    alone = converge(get_system("rigid-body"), resolve_methods(["paper-three-stage"]), [20], refinements=3)
+    rc, on_cluster, err = _rkhp("converge", "rigid-body", "--method", "paper-three-stage", "--steps", "20",
+                                "--refinements", "3", "--format", "json", "--scheduler", cluster.address)
     assert rc == 0, err
-    rc, on_cluster, err = _rkhp(*args, "--scheduler", cluster.address)
-    assert rc == 0, err
-    alone = json.loads(alone)
+    alone = json.loads(json.dumps(alone.to_json()))  # as the command writes it
     assert [m["expected_order"] for m in alone["methods"]] == [4]
     assert _without(json.loads(on_cluster)) == _without(alone)
 
