@@ -7,6 +7,7 @@ tests/test_site.py.
 
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -38,3 +39,32 @@ def test_page_examples(page, tmp_path):
 @pytest.mark.parametrize("page", [p for p in pages() if has_slow_blocks(p)], ids=page_id)
 def test_page_examples_with_slow_blocks(page, tmp_path):
     run_page(page, Settings(scratch=tmp_path, slow=True))
+
+
+LINK = re.compile(r"\]\(([^)\s]+)\)")
+
+
+def test_readme_links_reach_files():
+    """README is not part of the site (whose links the site test checks): its relative links must
+    name files of the repository, and their anchors headings of those pages."""
+    broken = []
+    for target in LINK.findall((ROOT / "README.md").read_text(encoding="utf-8")):
+        if "://" in target or target.startswith("mailto:"):
+            continue
+        path, _, anchor = target.partition("#")
+        file = ROOT / path
+        if not file.exists():
+            broken.append(target)
+        elif anchor and anchor not in heading_slugs(file):
+            broken.append(target)
+    assert not broken, broken
+
+
+def heading_slugs(page: Path) -> set[str]:
+    """GitHub/MyST-style anchors of a page's headings (lowercase, punctuation dropped, spaces -> -)."""
+    slugs = set()
+    for line in page.read_text(encoding="utf-8").splitlines():
+        if line.startswith("#"):
+            text = line.lstrip("#").strip().lower()
+            slugs.add(re.sub(r"\s", "-", re.sub(r"[^\w\s-]", "", text)))
+    return slugs
