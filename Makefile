@@ -39,7 +39,8 @@ docs: $(DOCS_STAMP)
 	$(VENV)/bin/sphinx-build -E -W --keep-going -n -q -b html docs docs/_build/html
 
 bench: install
-	-$(PY) -m pip install --quiet -e '.[bench]'
+	$(PY) -m pip install --quiet -e '.[bench]'
+	$(PY) -c "import nodepy.runge_kutta_method, nodepy.rooted_trees"  # the peers must import: no silent skip
 	for b in benchmarks/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
 lint: install

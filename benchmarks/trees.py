@@ -62,7 +62,7 @@ def main():
         import nodepy.rooted_trees as rt
         import nodepy.runge_kutta_method as rk
     except Exception as exc:  # nodepy is optional (extra `bench`)
-        rows.append((f"nodepy not importable ({type(exc).__name__})", float("nan"), ""))
+        rows.append((f"nodepy not importable ({exc}; pip install -e '.[bench]')", float("nan"), ""))
     else:
         t0 = time.perf_counter()
         strings = [rk.elementary_weight_str(tree) for p in range(1, 11) for tree in rt.list_trees(p)]

@@ -71,9 +71,9 @@ def main() -> None:
     for name in ("gauss3", "dop853", "feagin10", "feagin12"):
         show(f"{name}, default precision", run(CHILD, name, "default", "2"))
     try:
-        import nodepy  # noqa: F401
-    except ImportError:
-        print("nodepy not installed (pip install -e '.[bench]'): no comparison")
+        import nodepy.runge_kutta_method  # noqa: F401
+    except ImportError as exc:
+        print(f"nodepy not importable ({exc}; pip install -e '.[bench]'): no comparison")
         return
     print("nodepy order() on the same float64 coefficients (its default tolerance)")
     for name in ("rk4", "dop853", "feagin10", "feagin12", "feagin14"):

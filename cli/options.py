@@ -1,4 +1,4 @@
-"""Options and helpers shared by the command modules (click only; no library imports here)."""
+"""Options and helpers shared by the command modules (click; library modules imported lazily)."""
 
 from __future__ import annotations
 
@@ -26,6 +26,29 @@ def executor_options(what: str):
                             help=f"Processes on this machine for the {what}.")(f)
 
     return decorate
+
+
+METHOD_HELP = ("A tableau name or file (an RKHP method), thpN or thpN-t0 (Taylor integrator of order N "
+               "over T or T_0), classical:NAME (classical Runge-Kutta on xdot = pi grad H), "
+               "implicit-midpoint (docs/methods.md).")
+
+
+def x0_option():
+    """The `--x0` option of every command that integrates a system."""
+    return click.option("--x0", default=None, metavar="X1,X2,...",
+                        help="Initial state, comma-separated (default: the system's).")
+
+
+def parse_x0(text: str | None):
+    """The numbers of an --x0 value (None stays None); InputError for anything else."""
+    if text is None:
+        return None
+    from rkhp.errors import InputError
+
+    try:
+        return [float(v) for v in text.split(",")]
+    except ValueError:
+        raise InputError(f"--x0 must be comma-separated numbers, got {text!r}") from None
 
 
 def emit_json(obj) -> None:

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import click
 
-from .options import console, emit_json, executor_options, format_option, progress
+from .options import METHOD_HELP, console, emit_json, executor_options, format_option, parse_x0, progress, x0_option
 from .render import compact_table
 
-METHOD_HELP = ("Method: a tableau name or file used as an RKHP method, classical:NAME for classical "
-               "explicit RK on xdot = pi grad H, or implicit-midpoint. Repeat or separate by commas. "
-               "Default: euler, paper-two-stage, paper-three-stage, rk4.")
+METHODS_HELP = (METHOD_HELP + " Repeat or separate by commas. Default: euler, paper-two-stage, "
+                "paper-three-stage, rk4.")
 
 
 def _names(values) -> tuple[str, ...]:
@@ -39,24 +38,28 @@ def _common(f):
                      help="Birealisation: symmetric (degenerate), shifted (general), quartic "
                           "(degenerate, not symmetric) or truncated:K (the spray series to degree "
                           "K in p, K = 1..12; the expected order is bounded accordingly).")(f)
-    f = click.option("--method", "methods", multiple=True, help=METHOD_HELP)(f)
+    f = x0_option()(f)
+    f = click.option("--method", "methods", multiple=True, metavar="METHOD", help=METHODS_HELP)(f)
     f = click.argument("system")(f)
     return f
 
 
-def _setup(system_name, realisation, methods, t_final, plot):
+def _setup(system_name, realisation, x0, methods, t_final, plot):
     """Validate the cheap inputs first (plot path, T), then load the system and the methods."""
+    from rkhp.methods import resolve_methods, resolve_system
     from rkhp.studies.converge import check_t_final
-    from rkhp.studies.methods import resolve_methods
     from rkhp.studies.plots import check_plot_path
-    from rkhp.systems import get_system
 
     if plot:
         check_plot_path(plot)
     if t_final is not None:
         check_t_final(t_final)
-    system = get_system(system_name, realisation=realisation)
+    system = resolve_system(system_name, realisation, parse_x0(x0))
     return system, resolve_methods(_names(methods))
+
+
+def _vector(x) -> str:
+    return "(" + ", ".join(f"{v:.6g}" for v in x) + ")"
 
 
 def _e(x) -> str:
@@ -83,14 +86,14 @@ def _f(x, digits=2) -> str:
 @click.option("--plot", type=click.Path(dir_okay=False), help="Log-log plot of error against h (.png, .svg, .pdf).")
 @executor_options("runs")
 @format_option("table", "json")
-def converge(system, methods, realisation, t_final, steps, refinements, plot, workers, scheduler, fmt):
+def converge(system, methods, x0, realisation, t_final, steps, refinements, plot, workers, scheduler, fmt):
     """Empirical convergence: global error at T against h, observed and expected orders, verdicts."""
     from rkhp.executors import open_executor
     from rkhp.studies.converge import converge as run
     from rkhp.studies.converge import step_counts
 
     counts = step_counts(_ints(steps, "--steps"), refinements)
-    sys_, resolved = _setup(system, realisation, methods, t_final, plot)
+    sys_, resolved = _setup(system, realisation, x0, methods, t_final, plot)
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("converge", total=len(resolved) * len(counts))
         study = run(sys_, resolved, counts, t_final, executor=executor,
@@ -120,7 +123,8 @@ def _render_converge(study, plot) -> None:
     out = console()
     ref = study.reference
     out.print(f"[bold]{study.system}[/] ({study.realisation} realisation, "
-              f"{'degenerate' if study.degenerate else 'not degenerate'}), T = {study.t_final:g}")
+              f"{'degenerate' if study.degenerate else 'not degenerate'}), x0 = {_vector(study.x0)}, "
+              f"T = {study.t_final:g}")
     out.print(f"reference: {ref.kind}, estimated error {ref.error_estimate:.1e} ({ref.detail}); "
               f"errors <= {ref.floor:.1e} are not reported as measurements")
     for m in study.methods:
@@ -143,7 +147,8 @@ def _render_converge(study, plot) -> None:
               "floor = round-off floor, drift = order drift, <ref = below the reference's accuracy)")
     out.print("[bold]verdicts[/]")
     for m in study.methods:
-        kind = study.condition_class if m.kind == "rkhp" else "general"
+        kind = {"rkhp": study.condition_class, "taylor": "THP", "implicit-midpoint": "midpoint rule"}.get(
+            m.kind, "general")
         left = ", ".join(f"row {i} {why}" for i, why in m.fit.excluded) or "none"
         basis = f"{kind} order"
         if m.realisation_bound is not None:
@@ -161,9 +166,10 @@ def _render_converge(study, plot) -> None:
 
 @click.command()
 @_common
-@click.option("--peers", default="dop853,rk45,rk4,midpoint", show_default=True,
-              help="Peers: scipy solve_ivp methods (dop853, rk45, rk23, radau, bdf, lsoda), rk4 (classical), "
-                   "midpoint (implicit midpoint rule), classical:NAME; empty for none.")
+@click.option("--peers", default="scipy:dop853,scipy:rk45,classical:rk4,implicit-midpoint", show_default=True,
+              help="Peers, in the grammar of --method but not RKHP tableaux: scipy:NAME (solve_ivp's "
+                   "dop853, rk45, rk23, radau, bdf, lsoda, run by tolerance), classical:NAME, "
+                   "implicit-midpoint, thpN; empty for none (docs/methods.md).")
 @click.option("--t-final", type=float, help="Final time T (default: the system's).")
 @click.option("--steps", help="Numbers of steps of the integrators (default 10,20,...,2560).")
 @click.option("--tolerances", help="rtol values of the scipy peers (default 1e-3,...,1e-13; atol = 1e-3 rtol).")
@@ -173,8 +179,8 @@ def _render_converge(study, plot) -> None:
 @click.option("--plot", type=click.Path(dir_okay=False), help="Log-log plot of time against error (.png, .svg, .pdf).")
 @executor_options("curves (with --ensemble: the trajectories)")
 @format_option("table", "json")
-def bench(system, methods, realisation, peers, t_final, steps, tolerances, repeats, ensemble, seed, plot, workers,
-          scheduler, fmt):
+def bench(system, methods, x0, realisation, peers, t_final, steps, tolerances, repeats, ensemble, seed, plot,
+          workers, scheduler, fmt):
     """Work-precision: wall time (median of repeats) against error, methods and peers."""
     from rkhp.executors import open_executor
     from rkhp.studies import bench as B
@@ -184,7 +190,7 @@ def bench(system, methods, realisation, peers, t_final, steps, tolerances, repea
     peer_list = _names([peers]) if peers else ()
     for p in peer_list:
         B.resolve_peer(p)
-    sys_, resolved = _setup(system, realisation, methods, t_final, plot)
+    sys_, resolved = _setup(system, realisation, x0, methods, t_final, plot)
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("bench", total=len(resolved) + len(peer_list))
         study = B.bench(sys_, resolved, peer_list, step_list, tol_list, t_final, repeats, ensemble, seed,
@@ -204,7 +210,8 @@ def _render_bench(study, plot) -> None:
     ref = study.reference
     mode = (f"ensemble of {study.ensemble} starts, seconds per trajectory" if study.ensemble
             else "one trajectory")
-    out.print(f"[bold]{study.system}[/] ({study.realisation} realisation), T = {study.t_final:g}, {mode}; "
+    out.print(f"[bold]{study.system}[/] ({study.realisation} realisation), x0 = {_vector(study.x0)}, "
+              f"T = {study.t_final:g}, {mode}; "
               f"median of {study.repeats} repeats")
     out.print(f"reference: {ref.kind}, estimated error {ref.error_estimate:.1e}")
     for c in study.curves:
@@ -245,8 +252,8 @@ def _render_bench(study, plot) -> None:
 @click.option("--plot", type=click.Path(dir_okay=False), help="Plot of the long run's drift (.png, .svg, .pdf).")
 @executor_options("runs of each part")
 @format_option("table", "json")
-def stress(system, methods, realisation, t_final, long_steps, long_h, sweep_coarsest, round_off_steps, plot, workers,
-           scheduler, fmt):
+def stress(system, methods, x0, realisation, t_final, long_steps, long_h, sweep_coarsest, round_off_steps, plot,
+           workers, scheduler, fmt):
     """Stress tests: (a) step sweep to Newton failure, (b) long-run drift, (c) near-singular starts,
     (d) round-off floor; each part ends with a verdict."""
     from rkhp.executors import open_executor
@@ -255,7 +262,7 @@ def stress(system, methods, realisation, t_final, long_steps, long_h, sweep_coar
     ro = _ints(round_off_steps, "--round-off-steps") or S.ROUND_OFF_STEPS
     if len(ro) < 3:
         raise click.BadParameter("a fit needs at least 3 step sizes", param_hint="--round-off-steps")
-    sys_, resolved = _setup(system, realisation, methods, t_final, plot)
+    sys_, resolved = _setup(system, realisation, x0, methods, t_final, plot)
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("stress", total=4)
         study = S.stress(sys_, resolved, t_final, long_steps, long_h, sweep_coarsest, ro,
@@ -273,7 +280,8 @@ def stress(system, methods, realisation, t_final, long_steps, long_h, sweep_coar
 def _render_stress(study, plot) -> None:
     out = console()
     verdicts = study.verdicts()
-    out.print(f"[bold]{study.system}[/] ({study.realisation} realisation), T = {study.t_final:g}")
+    out.print(f"[bold]{study.system}[/] ({study.realisation} realisation), x0 = {_vector(study.x0)}, "
+              f"T = {study.t_final:g}")
     out.print("[bold](a) step-size sweep[/]")
     for s in study.sweep:
         table = compact_table(s.method)

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import math
-import re
 
 import click
 
-from .options import console, emit_json, format_option
+from .options import METHOD_HELP, console, emit_json, format_option, parse_x0, x0_option
 from .render import compact_table, print_table
 
 
@@ -96,17 +95,6 @@ def check(system, realisation, samples, seed, fmt):
                           f"({bad} > {result.tolerance:g})")
 
 
-def _parse_x0(text: str | None):
-    if text is None:
-        return None
-    from rkhp.errors import InputError
-
-    try:
-        return [float(v) for v in text.split(",")]
-    except ValueError:
-        raise InputError(f"--x0 must be comma-separated numbers, got {text!r}") from None
-
-
 def steps_and_h(t_final: float, steps: int | None, h: float | None) -> tuple[int, float]:
     """(number of steps, h) from --steps or --h over [0, t_final]."""
     from rkhp.errors import InputError
@@ -152,42 +140,29 @@ def integration_report(system, trajectory, method: str, h: float, steps: int) ->
 
 @click.command("integrate")
 @click.argument("system")
-@click.option("--method", "method", required=True,
-              help="Explicit tableau (built-in name or .toml/.json/.txt file), or thpN / thpN-t0: "
-                   "the Taylor integrator of order N over T / T_0.")
+@click.option("--method", "method", required=True, metavar="METHOD", help=METHOD_HELP)
 @click.option("--steps", type=int, default=None, help="Number of steps over [0, T].")
 @click.option("--h", "h", type=float, default=None, help="Step size (steps = T / h).")
 @click.option("--t-final", type=float, default=None, help="Final time T (default: the system's).")
-@click.option("--x0", default=None, help="Initial state, comma-separated (default: the system's).")
+@x0_option()
 @realisation_option()
 @format_option("table", "json")
 def integrate(system, method, steps, h, t_final, x0, realisation, fmt):
-    """Integrate SYSTEM (built-in or spec file) with the RKHP method of an explicit tableau."""
+    """Integrate SYSTEM (built-in or spec file) with METHOD (docs/methods.md)."""
     from rkhp.errors import NumericalFailure
-    from rkhp.integrators.rkhp_method import integrate as run
-    from rkhp.systems import get_system
-    from rkhp.tablefiles import load_tableau
+    from rkhp.methods import resolve_method, resolve_system
 
-    poisson = get_system(system, realisation)
-    taylor = re.fullmatch(r"thp(\d+)(-t0)?", method)
-    tableau = None if taylor else load_tableau(method)
-    if x0 is not None:
-        poisson = poisson.with_x0(_parse_x0(x0))
+    poisson = resolve_system(system, realisation, parse_x0(x0))
+    chosen = resolve_method(method)
     n, step = steps_and_h(poisson.t_final if t_final is None else t_final, steps, h)
-    if taylor:
-        from rkhp.integrators.taylor import integrate_taylor
-
-        trajectory = integrate_taylor(poisson, int(taylor[1]), bool(taylor[2]), step, n)
-    else:
-        trajectory = run(poisson, tableau, step, n)
-    name = method if taylor else tableau.name
-    report = integration_report(poisson, trajectory, name, step, n)
+    trajectory = chosen.integrate(poisson, step, n)
+    report = integration_report(poisson, trajectory, chosen.name, step, n)
     if fmt == "json":
         emit_json(report)
     else:
         _print_integration(report)
     if not trajectory.ok:
-        raise NumericalFailure(f"{poisson.name}, {name}, h = {step:g}: "
+        raise NumericalFailure(f"{poisson.name}, {chosen.name}, h = {step:g}: "
                                f"{trajectory.status}")
 
 

@@ -126,9 +126,9 @@ def test_ensemble_on_the_cluster_equals_the_single_process_run(cluster):
 
 
 def test_stress_bench_and_relations_on_the_cluster_equal_the_single_process_runs(cluster):
+    from rkhp.methods import resolve_methods
     from rkhp.relations import derive_relations, shipped_relations
     from rkhp.studies.bench import bench
-    from rkhp.studies.methods import resolve_methods
     from rkhp.studies.stress import stress
     from rkhp.systems import get_system
 
@@ -138,7 +138,7 @@ def test_stress_bench_and_relations_on_the_cluster_equal_the_single_process_runs
     def studies(executor=None):
         s = stress(system, methods, long_steps=600, sweep_coarsest=8, round_off_steps=(30, 100, 300),
                    executor=executor)
-        b = bench(system, methods, peers=("dop853",), steps=(20, 40), tolerances=(1e-6, 1e-8), repeats=1,
+        b = bench(system, methods, peers=("scipy:dop853",), steps=(20, 40), tolerances=(1e-6, 1e-8), repeats=1,
                   executor=executor)
         return _without(s.to_json()), _without(b.to_json(), ("seconds", "compile_seconds", "cheapest"))
 

@@ -250,8 +250,8 @@ def test_general_spec_refusals(tmp_path, kind):
 
 
 def _orders(system, method, realisation, steps):
+    from rkhp.methods import resolve_methods
     from rkhp.studies.converge import converge
-    from rkhp.studies.methods import resolve_methods
 
     study = converge(get_system(system, realisation), resolve_methods([method]), steps=steps,
                      t_final=None)

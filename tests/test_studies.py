@@ -127,8 +127,8 @@ def test_dop853_error_estimate_is_honest_against_mpmath():
 
 
 def _study(system, realisation, methods, steps, t_final=None):
+    from rkhp.methods import resolve_methods
     from rkhp.studies.converge import converge
-    from rkhp.studies.methods import resolve_methods
 
     return converge(get_system(system, realisation=realisation), resolve_methods(methods), steps, t_final)
 
@@ -189,7 +189,7 @@ def _run(args):
     return result
 
 
-CONVERGE_KEYS = {"system", "realisation", "degenerate", "symmetric", "t_final", "reference", "methods"}
+CONVERGE_KEYS = {"system", "realisation", "degenerate", "symmetric", "x0", "t_final", "reference", "methods"}
 METHOD_KEYS = {"method", "expected_order", "observed_order", "verdict", "fit_rows", "rows",
                "realisation_bound"}
 ROW_KEYS = {"h", "steps", "error", "local_order", "casimir_error", "energy_error", "newton_mean", "newton_max",
@@ -236,6 +236,13 @@ def test_converge_table_ends_with_verdicts():
         (["converge", "rigid-body", "--plot", "x.gif"], "extension"),
         (["converge", "rigid-body", "--steps", "a,b"], "integers"),
         (["bench", "rigid-body", "--peers", "nope"], "nope"),
+        (["bench", "rigid-body", "--peers", "midpoint"], "implicit-midpoint (the implicit midpoint rule)"),
+        (["bench", "rigid-body", "--peers", "dop853"], "scipy:dop853"),
+        (["bench", "rigid-body", "--peers", "paper-two-stage"], "give it with --method"),
+        (["converge", "rigid-body", "--method", "scipy:dop853"], "runs by tolerance"),
+        (["converge", "rigid-body", "--method", "thp9"], "from 1 to 8"),
+        (["converge", "rigid-body", "--x0", "1,2"], "has dimension 3"),
+        (["stress", "rigid-body", "--x0", "a,b,c"], "comma-separated numbers"),
         (["bench", "rigid-body", "--plot", "x.jpg"], "extension"),
         (["stress", "no-such-system"], "no-such-system"),
         (["stress", "rigid-body", "--t-final", "nan"], "final time"),
@@ -277,13 +284,14 @@ def _bench_json(args):
 
 def test_bench_error_falls_as_cost_rises(tmp_path):
     plot = tmp_path / "wp.png"
-    data = _bench_json(["--method", "paper-three-stage", "--peers", "dop853,rk4", "--steps", "10,20,40,80,160",
+    data = _bench_json(["--method", "paper-three-stage", "--peers", "scipy:dop853,classical:rk4",
+                        "--steps", "10,20,40,80,160",
                         "--tolerances", "1e-4,1e-6,1e-8", "--repeats", "1", "--plot", str(plot)])
     assert plot.read_bytes().startswith(b"\x89PNG")
-    assert set(data) == {"system", "realisation", "t_final", "reference", "repeats", "ensemble", "curves",
+    assert set(data) == {"system", "realisation", "x0", "t_final", "reference", "repeats", "ensemble", "curves",
                          "cheapest"}
     kinds = {c["method"]: c["kind"] for c in data["curves"]}
-    assert kinds == {"paper-three-stage": "rkhp", "classical:rk4": "classical", "dop853": "scipy"}
+    assert kinds == {"paper-three-stage": "rkhp", "classical:rk4": "classical", "scipy:dop853": "scipy"}
     for c in data["curves"]:
         points = c["points"]
         cost = [p["steps"] if p["steps"] is not None else p["evaluations"] for p in points]
@@ -303,7 +311,7 @@ def test_bench_error_falls_as_cost_rises(tmp_path):
 
 
 def test_bench_ensemble_mode():
-    data = _bench_json(["--method", "paper-three-stage", "--peers", "dop853", "--steps", "20,40,80",
+    data = _bench_json(["--method", "paper-three-stage", "--peers", "scipy:dop853", "--steps", "20,40,80",
                         "--tolerances", "1e-6,1e-9", "--repeats", "1", "--ensemble", "6"])
     assert data["ensemble"] == 6
     rkhp_curve, scipy_curve = data["curves"]
@@ -317,7 +325,7 @@ def test_bench_ensemble_mode():
 
 
 def test_stress_finds_the_newton_failure_range_of_the_rigid_body():
-    from rkhp.studies.methods import resolve_method
+    from rkhp.methods import resolve_method
     from rkhp.studies.stress import sweep
 
     rigid = get_system("rigid-body")
@@ -337,7 +345,7 @@ def test_stress_cli_parts_end_with_verdicts(tmp_path):
     assert result.exit_code == 0, result.output
     assert plot.read_bytes().startswith(b"%PDF-")
     data = json.loads(result.output)
-    assert set(data) == {"system", "realisation", "t_final", "sweep", "long_run", "near_singular", "round_off"}
+    assert set(data) == {"system", "realisation", "x0", "t_final", "sweep", "long_run", "near_singular", "round_off"}
     for part in ("sweep", "long_run", "near_singular", "round_off"):
         assert data[part]["verdict"]
     runs = data["long_run"]["runs"]
@@ -380,7 +388,7 @@ def test_full_default_converge_and_bench():
 
 def test_round_off_floor_of_the_energy_error():
     """Part (d): the energy error of the 3-stage method stops falling at round-off level."""
-    from rkhp.studies.methods import resolve_method
+    from rkhp.methods import resolve_method
     from rkhp.studies.stress import round_off
 
     rigid = get_system("rigid-body")

@@ -22,16 +22,17 @@ import numpy as np
 
 from ..errors import InputError
 from ..executors import InProcess, run_all
-from .methods import Method, resolve_method
+from ..methods import DEFAULT_METHODS, SCIPY_METHODS, Method, resolve_method, resolve_system
 from .reference import Reference, dop853_reference, reference
 
 TARGETS = (1e-4, 1e-6, 1e-8, 1e-10)
 DEFAULT_STEPS = tuple(10 * 2**k for k in range(9))
 DEFAULT_TOLERANCES = tuple(10.0**-k for k in range(3, 14))
-SCIPY_PEERS = {"dop853": "DOP853", "rk45": "RK45", "rk23": "RK23", "radau": "Radau", "bdf": "BDF",
-               "lsoda": "LSODA"}
-PEER_ALIASES = {"rk4": "classical:rk4", "midpoint": "implicit-midpoint"}
-DEFAULT_PEERS = ("dop853", "rk45", "rk4", "midpoint")
+DEFAULT_PEERS = ("scipy:dop853", "scipy:rk45", "classical:rk4", "implicit-midpoint")
+PEER_KINDS = ("scipy", "classical", "implicit-midpoint", "taylor")
+#: Bare peer names of earlier versions (each is also a tableau name): refused with their spelling.
+FORMER_PEER_NAMES = {**{k: f"scipy:{k}" for k in SCIPY_METHODS}, "rk4": "classical:rk4",
+                     "midpoint": "implicit-midpoint (the implicit midpoint rule) or classical:midpoint"}
 ENSEMBLE_TIMED = 16
 ENSEMBLE_CHECKED = 4
 ENSEMBLE_SPREAD = 0.05
@@ -97,26 +98,30 @@ class BenchStudy:
     curves: tuple[BenchCurve, ...]
     cheapest: tuple[Cheapest, ...]
     targets: tuple[float, ...] = TARGETS
+    x0: tuple[float, ...] = ()
 
     def to_json(self) -> dict:
-        return {"system": self.system, "realisation": self.realisation, "t_final": self.t_final,
+        return {"system": self.system, "realisation": self.realisation, "x0": list(self.x0),
+                "t_final": self.t_final,
                 "reference": {"kind": self.reference.kind, "error_estimate": self.reference.error_estimate},
                 "repeats": self.repeats, "ensemble": self.ensemble,
                 "curves": [c.to_json() for c in self.curves],
                 "cheapest": [c.to_json() for c in self.cheapest]}
 
 
-def resolve_peer(name: str):
-    """A peer name: a scipy method name (str, its solve_ivp name) or a :class:`Method`."""
-    key = name.strip().lower()
-    if key in SCIPY_PEERS:
-        return key
-    if key in PEER_ALIASES:
-        return resolve_method(PEER_ALIASES[key])
-    if key.startswith("classical:") or key == "implicit-midpoint":
-        return resolve_method(key)
-    known = ", ".join([*SCIPY_PEERS, *PEER_ALIASES, "classical:NAME", "implicit-midpoint"])
-    raise InputError(f"unknown peer {name!r}; known peers: {known}")
+def resolve_peer(name) -> Method:
+    """A peer: a method of the grammar of :mod:`rkhp.methods` that is not an RKHP tableau
+    (``scipy:NAME``, ``classical:NAME``, ``implicit-midpoint``, ``thpN``). A bare tableau name is
+    refused, so that a name means the same in --peers as in --method (docs/methods.md)."""
+    key = name.strip().lower() if isinstance(name, str) else None
+    if key in FORMER_PEER_NAMES:
+        raise InputError(f"peer {name!r} is a tableau name, an RKHP method (give it with --method); "
+                         f"as a peer write {FORMER_PEER_NAMES[key]}")
+    method = resolve_method(name)
+    if method.kind not in PEER_KINDS:
+        raise InputError(f"peer {method.name!r} is an RKHP method: give it with --method; peers are "
+                         "scipy:NAME, classical:NAME, implicit-midpoint or thpN")
+    return method
 
 
 def _median_seconds(call, repeats: int):
@@ -152,11 +157,11 @@ def _solve_ivp(system, solver: str, x0, t_final: float, rtol: float):
     from ..integrators.classical import vector_field
 
     f = vector_field(system)
-    return solve_ivp(lambda t, x: f(x), (0.0, t_final), x0, method=SCIPY_PEERS[solver], rtol=rtol,
-                     atol=1e-3 * rtol)
+    return solve_ivp(lambda t, x: f(x), (0.0, t_final), x0, method=solver, rtol=rtol, atol=1e-3 * rtol)
 
 
-def _scipy_curve(solver: str, system, ref: Reference, tolerances, t_final: float, repeats: int) -> BenchCurve:
+def _scipy_curve(method: Method, system, ref: Reference, tolerances, t_final: float, repeats: int) -> BenchCurve:
+    solver = method.solver
     x0 = np.asarray(system.x0, dtype=float)
     _solve_ivp(system, solver, x0, t_final, max(tolerances))  # warm-up: loads the compiled vector field
     points = []
@@ -166,7 +171,7 @@ def _scipy_curve(solver: str, system, ref: Reference, tolerances, t_final: float
         measured = float(np.linalg.norm(sol.y[:, -1] - ref.state)) if ok else None
         points.append(_point(measured, ref.floor, steps=None, tolerance=rtol, seconds=seconds,
                              evaluations=int(sol.nfev), status="ok" if ok else f"failed: {sol.message}"))
-    return BenchCurve(solver, "scipy", 0.0, 1, tuple(points))
+    return BenchCurve(method.name, "scipy", 0.0, 1, tuple(points))
 
 
 def cheapest(curves, targets=TARGETS) -> tuple[Cheapest, ...]:
@@ -252,7 +257,8 @@ def _final_states(result):
     return states[:, -1, :] if states.ndim == 3 else states
 
 
-def _ensemble_scipy_curve(solver, system, refs, floor, starts, tolerances, t_final, repeats) -> BenchCurve:
+def _ensemble_scipy_curve(method, system, refs, floor, starts, tolerances, t_final, repeats) -> BenchCurve:
+    solver = method.solver
     count = min(len(starts), ENSEMBLE_TIMED)
     _solve_ivp(system, solver, starts[0], t_final, max(tolerances))  # warm-up, untimed
     points = []
@@ -265,13 +271,14 @@ def _ensemble_scipy_curve(solver, system, refs, floor, starts, tolerances, t_fin
         measured = _ensemble_errors(finals, refs)
         points.append(_point(measured, floor, steps=None, tolerance=rtol, seconds=seconds / count,
                              evaluations=nfev // count, status="ok" if measured is not None else "failed"))
-    return BenchCurve(solver, "scipy", 0.0, count, tuple(points))
+    return BenchCurve(method.name, "scipy", 0.0, count, tuple(points))
 
 
 def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=DEFAULT_TOLERANCES,
           t_final=None, repeats: int = 3, ensemble: int | None = None, seed: int = 0,
           on_curve=None, executor=None) -> BenchStudy:
-    """Work-precision study of ``methods`` (resolved Methods) and ``peers`` (names) on ``system``.
+    """Work-precision study of ``methods`` and ``peers`` (names of :mod:`rkhp.methods`, or Methods;
+    a method may be ``scipy:NAME`` too) on ``system`` (a name, a spec file or a PoissonSystem).
 
     With an ``executor`` (rkhp.executors): one trajectory per point, each curve is one task, timed
     on the worker that runs it; in ensemble mode the curves run here one after another and each
@@ -280,15 +287,17 @@ def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=
     """
     from .converge import check_t_final
 
+    system = resolve_system(system)
     t_final = check_t_final(system.t_final if t_final is None else t_final)
     if repeats < 1:
         raise InputError(f"repeats must be >= 1, got {repeats}")
     steps = tuple(sorted(set(int(n) for n in steps)))
     if not steps or steps[0] < 1:
         raise InputError(f"numbers of steps must be positive, got {list(steps)}")
-    resolved = [resolve_peer(p) for p in peers]
-    integrators = [*methods, *(p for p in resolved if isinstance(p, Method))]
-    solvers = [p for p in resolved if isinstance(p, str)]
+    curves_of = [*(resolve_method(m) for m in methods or DEFAULT_METHODS),
+                 *(resolve_peer(p) for p in peers)]
+    integrators = [m for m in curves_of if m.kind != "scipy"]
+    solvers = [m for m in curves_of if m.kind == "scipy"]
     if ensemble is None:
         ref = reference(system, t_final)
         jobs = [(_method_curve, (m, system, ref, steps, t_final, repeats)) for m in integrators]
@@ -309,7 +318,7 @@ def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=
             if on_curve:
                 on_curve(len(curves), len(integrators) + len(solvers))
     return BenchStudy(system.name, system.realisation, t_final, ref, repeats, ensemble, tuple(curves),
-                      cheapest(curves))
+                      cheapest(curves), x0=tuple(float(v) for v in system.x0))
 
 
 def _job(curve, args) -> BenchCurve:

@@ -17,9 +17,9 @@ import numpy as np
 
 from ..errors import InputError
 from ..executors import InProcess, run_all
+from ..methods import condition_class, require_steps, resolve_methods, resolve_system
 from .fit import MIN_FIT_POINTS, OrderFit, fit_order, verdict
 from .invariants import max_deviations
-from .methods import condition_class
 from .reference import Reference, reference
 
 DEFAULT_COARSEST = 20
@@ -92,6 +92,7 @@ class ConvergenceStudy:
     reference: Reference
     methods: tuple[MethodConvergence, ...]
     condition_class: str = "general"
+    x0: tuple[float, ...] = ()
 
     @property
     def symmetric(self) -> bool:
@@ -99,7 +100,7 @@ class ConvergenceStudy:
 
     def to_json(self) -> dict:
         return {"system": self.system, "realisation": self.realisation, "degenerate": self.degenerate,
-                "symmetric": self.symmetric,
+                "symmetric": self.symmetric, "x0": list(self.x0),
                 "t_final": self.t_final,
                 "reference": {"kind": self.reference.kind, "error_estimate": self.reference.error_estimate},
                 "methods": [m.to_json() for m in self.methods]}
@@ -170,7 +171,7 @@ def _method_convergence(method, system, ref: Reference, rows) -> MethodConvergen
     fit = fit_order([r.h for r in rows], [r.measured_error for r in rows], floor=ref.floor)
     rows = [_with_local_order(r, p) for r, p in zip(rows, fit.local_orders, strict=True)]
     expected = method.expected_order_on(system)
-    bound = system.realisation_order if method.kind == "rkhp" else None
+    bound = method.realisation_bound(system)
     return MethodConvergence(method.name, method.kind, expected, fit, verdict(fit.slope, expected), tuple(rows),
                              bound)
 
@@ -181,13 +182,16 @@ def _with_local_order(row: ConvergenceRow, p) -> ConvergenceRow:
 
 def converge(system, methods, steps=None, t_final=None, refinements=None, on_run=None,
              executor=None) -> ConvergenceStudy:
-    """Run a convergence study of ``methods`` (resolved :class:`~rkhp.studies.methods.Method`
-    values) on ``system`` up to ``t_final`` (default: the system's). The runs are independent tasks
-    on ``executor`` (rkhp.executors; default: in this process), ``on_run(done, total)`` after each;
-    the reference is computed here, once."""
+    """Run a convergence study of ``methods`` (names of :mod:`rkhp.methods` or Methods; the
+    defaults when empty) on ``system`` (a name, a spec file or a PoissonSystem) up to ``t_final``
+    (default: the system's). The runs are independent tasks on ``executor`` (rkhp.executors;
+    default: in this process), ``on_run(done, total)`` after each; the reference is computed here,
+    once."""
+    system = resolve_system(system)
+    methods = require_steps(resolve_methods(methods))
     t_final = check_t_final(system.t_final if t_final is None else t_final)
     counts = step_counts(steps, refinements)
     ref = reference(system, t_final)
     results = study_methods(methods, system, ref, counts, t_final, on_run, executor)
     return ConvergenceStudy(system.name, system.realisation, bool(system.degenerate), t_final, ref, results,
-                            condition_class(system))
+                            condition_class(system), tuple(float(v) for v in system.x0))

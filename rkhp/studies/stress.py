@@ -22,10 +22,10 @@ import numpy as np
 
 from ..errors import InputError
 from ..executors import InProcess, run_all
+from ..methods import require_steps, resolve_method, resolve_methods, resolve_system
 from .converge import check_t_final, study_methods
 from .fit import fit_order
 from .invariants import invariant_deviations, max_deviations, window_maxima
-from .methods import resolve_method
 from .reference import reference
 
 SWEEP_COARSEST = 200
@@ -348,13 +348,15 @@ class StressStudy:
     long_run: LongRunResult
     near_singular: SingularResult
     round_off: RoundOffResult
+    x0: tuple[float, ...] = ()
 
     def verdicts(self) -> dict[str, str]:
         return {"a": " | ".join(s.verdict() for s in self.sweep), "b": self.long_run.verdict(),
                 "c": self.near_singular.verdict(), "d": self.round_off.verdict()}
 
     def to_json(self) -> dict:
-        return {"system": self.system, "realisation": self.realisation, "t_final": self.t_final,
+        return {"system": self.system, "realisation": self.realisation, "x0": list(self.x0),
+                "t_final": self.t_final,
                 "sweep": {"methods": [s.to_json() for s in self.sweep], "verdict": self.verdicts()["a"]},
                 "long_run": self.long_run.to_json(), "near_singular": self.near_singular.to_json(),
                 "round_off": self.round_off.to_json()}
@@ -363,9 +365,12 @@ class StressStudy:
 def stress(system, methods, t_final=None, long_steps: int = LONG_STEPS, long_h: float | None = None,
            sweep_coarsest: int = SWEEP_COARSEST, round_off_steps=ROUND_OFF_STEPS, on_part=None,
            executor=None) -> StressStudy:
-    """Run parts (a)-(d) for ``methods`` (resolved Methods) on ``system``, one part after the
-    other, each part's independent runs as tasks on ``executor`` (rkhp.executors; default: in this
+    """Run parts (a)-(d) for ``methods`` (names of :mod:`rkhp.methods` or Methods; the defaults
+    when empty) on ``system`` (a name, a spec file or a PoissonSystem), one part after the other,
+    each part's independent runs as tasks on ``executor`` (rkhp.executors; default: in this
     process); the results do not depend on it."""
+    system = resolve_system(system)
+    methods = require_steps(resolve_methods(methods))
     t_final = check_t_final(system.t_final if t_final is None else t_final)
     if long_steps < 1 or sweep_coarsest < 1:
         raise InputError("numbers of steps must be positive")
@@ -386,4 +391,4 @@ def stress(system, methods, t_final=None, long_steps: int = LONG_STEPS, long_h: 
     tick("c")
     d = round_off(methods, system, t_final, round_off_steps, executor=executor)
     tick("d")
-    return StressStudy(system.name, system.realisation, t_final, a, b, c, d)
+    return StressStudy(system.name, system.realisation, t_final, a, b, c, d, tuple(float(v) for v in system.x0))

@@ -1,0 +1,236 @@
+"""One grammar of method names, for every command and for the Python API (docs/methods.md).
+
+A method is named by a string (or given as a :class:`Method` or a
+:class:`~rkhp.tableau.Tableau`):
+
+- ``NAME`` or ``FILE``: a tableau (built-in name or alias, or a .toml/.json/.txt tableau file)
+  used as an RKHP method (paper §5.2, docs/theory.md §5), e.g. ``rk4`` is RK4 used as an RKHP
+  tableau; explicit or implicit (whether the engine integrates an implicit one is the engine's
+  business, not the resolver's);
+- ``thpN`` / ``thpN-t0``: the Taylor Hamiltonian Poisson integrator of order N over T / over
+  T_0 (paper Thm 5.1; :mod:`rkhp.integrators.taylor`);
+- ``classical:NAME`` or ``classical:FILE``: that tableau as a classical Runge–Kutta method on
+  ``xdot = pi(x) grad H(x)``;
+- ``implicit-midpoint``: the implicit midpoint rule (Newton per step);
+- ``scipy:NAME``: scipy's adaptive ``solve_ivp`` method NAME (dop853, rk45, rk23, radau, bdf,
+  lsoda), run by tolerance: a peer of ``rkhp bench`` only.
+
+The expected order comes from the verify engine: for RKHP, the symmetric order (the reduced
+conditions of docs/theory.md §8) on a symmetric realisation, the degenerate order (over T_0) on
+a degenerate one and the general order (over T) otherwise (paper, Theorems 4.4 and 5.1); for THP
+the same classes applied to its B-series (:func:`taylor_orders`); for a classical method its
+order over T; 2 for the midpoint rule.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from .errors import InputError
+
+DEFAULT_METHODS = ("euler", "paper-two-stage", "paper-three-stage", "rk4")
+CLASSICAL_PREFIX = "classical:"
+SCIPY_PREFIX = "scipy:"
+MIDPOINT = "implicit-midpoint"
+SCIPY_METHODS = {"dop853": "DOP853", "rk45": "RK45", "rk23": "RK23", "radau": "Radau", "bdf": "BDF",
+                 "lsoda": "LSODA"}
+_TAYLOR = re.compile(r"thp(\d+)(-t0)?")
+KINDS = ("rkhp", "taylor", "classical", "implicit-midpoint", "scipy")
+
+
+@dataclass(frozen=True)
+class Method:
+    """A named method.
+
+    Attributes:
+        name: the name as given (or the tableau's name).
+        kind: one of :data:`KINDS`.
+        tableau: a :class:`rkhp.tableau.Tableau` (rkhp and classical kinds), else None.
+        order: the THP order N (taylor kind), else None.
+        degenerate: THP over T_0 (``thpN-t0``).
+        solver: scipy's name of the method (scipy kind), else None.
+    """
+
+    name: str
+    kind: str
+    tableau: object = None
+    order: int | None = None
+    degenerate: bool = False
+    solver: str | None = None
+
+    def integrate(self, system, h: float, n_steps: int, x0=None):
+        """Run the method; returns a :class:`~rkhp.integrators.trajectory.Trajectory`."""
+        if self.kind == "rkhp":
+            from .integrators import integrate
+
+            return integrate(system, self.tableau, h, n_steps, x0)
+        if self.kind == "taylor":
+            from .integrators.taylor import integrate_taylor
+
+            return integrate_taylor(system, self.order, self.degenerate, h, n_steps, x0)
+        if self.kind == "classical":
+            from .integrators.classical import integrate_classical
+
+            return integrate_classical(system, self.tableau, h, n_steps, x0)
+        if self.kind == "implicit-midpoint":
+            from .integrators.classical import integrate_midpoint
+
+            return integrate_midpoint(system, h, n_steps, x0)
+        raise InputError(f"{self.name} is scipy's adaptive {self.solver}: it runs by tolerance, not "
+                         "by steps (a peer of `rkhp bench`, --peers)")
+
+    def expected_order(self, condition_class: str) -> int:
+        """Order expected on a realisation of `condition_class` (see :func:`condition_class`)."""
+        if self.kind == "implicit-midpoint":
+            return 2
+        if self.kind == "taylor":
+            return taylor_orders(self.order, self.degenerate)[condition_class]
+        if self.kind == "scipy":
+            raise InputError(f"{self.name} is adaptive: it has no order in h")
+        return _orders(self.tableau)[condition_class if self.kind == "rkhp" else "general"]
+
+
+    def realisation_bound(self, system) -> int | None:
+        """The order the system's realisation allows a method that runs through it (RKHP and THP;
+        ``truncated:K``: docs/theory.md §9), or None when it sets no bound."""
+        return system.realisation_order if self.kind in ("rkhp", "taylor") else None
+
+    def expected_order_on(self, system) -> int:
+        """Order expected on `system`: the class's order, bounded by :meth:`realisation_bound`."""
+        order = self.expected_order(condition_class(system))
+        bound = self.realisation_bound(system)
+        return order if bound is None else min(order, bound)
+
+
+def condition_class(system) -> str:
+    """The class of order conditions an RKHP method meets on `system`'s realisation: "symmetric"
+    (beta(x, p) = alpha(x, -p), docs/theory.md §8), "degenerate" (paper, eq. (degen)) or
+    "general"."""
+    if system.symmetric:
+        return "symmetric"
+    return "degenerate" if system.degenerate else "general"
+
+
+_ORDERS: dict[tuple, dict[str, int]] = {}
+
+
+def _orders(tableau) -> dict[str, int]:
+    """Order per condition class of a tableau by the verify engine (cached by entries)."""
+    key = (tableau.name, str(tableau.A), str(tableau.b))
+    if key not in _ORDERS:
+        from .verify import verify
+
+        orders = verify(tableau, classes=("general", "degenerate", "symmetric")).orders
+        # each class's conditions follow from the previous class's (T_0 is part of T; the symmetric
+        # conditions combine T_0 residuals), so its order is at least theirs: this matters where a
+        # class is checked to a lower order (the symmetric relations ship up to order 8)
+        general = int(orders["general"])
+        degenerate = max(general, int(orders["degenerate"]))
+        _ORDERS[key] = {"general": general, "degenerate": degenerate,
+                        "symmetric": max(degenerate, int(orders["symmetric"]))}
+    return _ORDERS[key]
+
+
+def taylor_orders(order: int, degenerate: bool) -> dict[str, int]:
+    """Order per condition class of the THP of order N over T (or T_0 when ``degenerate``).
+
+    Its B-series is exact up to order N on the trees it sums: r(t) = gamma(t) a(t) - 1 is 0 for
+    those and -1 for every other tree. A class's order is the last order n whose conditions
+    sum_k w_k r(t_k) = 0 all hold; over T_0 the general class fails at b[b] (order 1), and in the
+    symmetric class a combination whose weights sum to 0 holds for r = -1 too (so that odd N
+    gains an order: docs/methods.md).
+    """
+    from .conditions import conditions_of_order
+
+    def r(t) -> int:
+        return 0 if t.order <= order and (not degenerate or t.in_t0) else -1
+
+    out = {}
+    for cls in ("general", "degenerate", "symmetric"):
+        n = 0
+        while n < order + 4:
+            try:
+                conditions = conditions_of_order(n + 1, cls)
+            except InputError:  # the symmetric relations ship up to some order
+                break
+            if any(sum(w * r(t) for w, t in zip(c.weights, c.trees, strict=True)) for c in conditions):
+                break
+            n += 1
+        out[cls] = n
+    return out
+
+
+def resolve_method(spec) -> Method:
+    """The method a name stands for (a Method or a Tableau is taken as it is).
+
+    InputError for an empty or unknown name, or a malformed THP or scipy name.
+    """
+    from .tableau import Tableau
+    from .tablefiles import load_tableau
+
+    if isinstance(spec, Method):
+        return spec
+    if isinstance(spec, Tableau):
+        return Method(spec.name, "rkhp", spec)
+    if not isinstance(spec, str):
+        raise InputError(f"a method is a name, a Tableau or a Method, got {type(spec).__name__}")
+    spec = spec.strip()
+    if not spec:
+        raise InputError("empty method name")
+    if spec == MIDPOINT:
+        return Method(spec, "implicit-midpoint")
+    taylor = _TAYLOR.fullmatch(spec)
+    if taylor:
+        order = int(taylor[1])
+        if not 1 <= order <= 8:
+            raise InputError(f"method {spec}: the THP order N must be from 1 to 8")
+        return Method(spec, "taylor", order=order, degenerate=bool(taylor[2]))
+    if spec.startswith(SCIPY_PREFIX):
+        key = spec[len(SCIPY_PREFIX):].lower()
+        if key not in SCIPY_METHODS:
+            raise InputError(f"method {spec}: unknown scipy method (known: "
+                             f"{', '.join(SCIPY_PREFIX + k for k in SCIPY_METHODS)})")
+        return Method(spec, "scipy", solver=SCIPY_METHODS[key])
+    if spec.startswith(CLASSICAL_PREFIX):
+        return Method(spec, "classical", load_tableau(spec[len(CLASSICAL_PREFIX):]))
+    return Method(spec, "rkhp", load_tableau(spec))
+
+
+def resolve_methods(specs) -> tuple[Method, ...]:
+    """Resolve several names (the default methods when none are given); duplicates are refused."""
+    specs = tuple(specs) or DEFAULT_METHODS
+    names = [s if isinstance(s, str) else getattr(s, "name", s) for s in specs]
+    if len(set(names)) != len(names):
+        raise InputError(f"a method is named twice in {', '.join(map(str, names))}")
+    return tuple(resolve_method(s) for s in specs)
+
+
+def require_steps(methods) -> tuple[Method, ...]:
+    """The methods, if each runs by steps (InputError for a scipy method, which runs by tolerance)."""
+    for m in methods:
+        if m.kind == "scipy":
+            raise InputError(f"{m.name} runs by tolerance, not by steps: it is a peer of `rkhp bench` "
+                             "(--peers); converge and stress need methods of fixed step")
+    return tuple(methods)
+
+
+def resolve_system(system, realisation: str = "symmetric", x0=None):
+    """A :class:`~rkhp.systems.PoissonSystem` from a built-in name, a spec file or a system
+    object (kept with its own realisation), started at ``x0`` when given."""
+    from .systems import PoissonSystem, get_system
+
+    if not isinstance(system, PoissonSystem):
+        system = get_system(system, realisation)
+    return system if x0 is None else system.with_x0(x0)
+
+
+def integrate(system, method, h, n_steps, x0=None, *, realisation: str = "symmetric"):
+    """Integrate ``system`` (a name, a spec file or a PoissonSystem) with ``method`` (any name of
+    the grammar above, a Tableau or a Method): ``n_steps`` steps of size ``h`` from ``x0`` (default:
+    the system's start). Returns a :class:`~rkhp.integrators.trajectory.Trajectory`.
+
+    ``rkhp.integrate("rigid-body", "rk4", 0.1, 100)`` integrates the rigid body (symmetric
+    realisation) with RK4 used as an RKHP method.
+    """
+    return resolve_method(method).integrate(resolve_system(system, realisation), h, n_steps, x0)
