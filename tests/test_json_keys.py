@@ -1,0 +1,58 @@
+"""Every JSON key of the commands is documented in docs/json.md, in one style (issue 15).
+
+Each command runs once, small, with --format json; every key of every object it prints (except
+the keys that are data: numbers such as the orders of `counts`) must be lower snake_case (or `A`,
+the Butcher matrix, as in tableau files) and appear quoted in docs/json.md.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+from rkhp_cli.main import rkhp as cli
+
+DOC = (Path(__file__).resolve().parent.parent / "docs" / "json.md").read_text()
+
+COMMANDS = [
+    ["trees", "--order", "3"],
+    ["trees", "--order", "3", "--count"],
+    ["conditions", "--order", "5", "--symmetric"],
+    ["verify", "paper-two-stage"],
+    ["verify", "dop853"],
+    ["show", "rk4"],
+    ["search", "--stages", "2", "--degenerate", "--restarts", "3"],
+    ["systems"],
+    ["check", "rigid-body", "--samples", "3"],
+    ["integrate", "rigid-body", "--method", "rk4", "--steps", "10"],
+    ["converge", "rigid-body", "--method", "paper-two-stage", "--steps", "20", "--refinements", "2"],
+    ["bench", "rigid-body", "--method", "euler", "--peers", "scipy:rk45", "--steps", "10,20",
+     "--tolerances", "1e-4", "--repeats", "1"],
+    ["stress", "lotka-volterra", "--method", "paper-two-stage", "--t-final", "2", "--long-steps", "200",
+     "--sweep-coarsest", "8", "--round-off-steps", "8,16,32"],
+    ["relations", "--order", "4"],
+]
+
+
+def _keys(doc, out: set) -> set:
+    if isinstance(doc, dict):
+        for k, v in doc.items():
+            if not k.isdigit():
+                out.add(k)
+            _keys(v, out)
+    elif isinstance(doc, list):
+        for v in doc:
+            _keys(v, out)
+    return out
+
+
+@pytest.mark.parametrize("args", COMMANDS, ids=lambda a: " ".join(a[:2]))
+def test_every_key_is_documented_in_one_style(args):
+    result = CliRunner().invoke(cli, [*args, "--format", "json"])
+    assert result.exit_code == 0, result.output
+    keys = _keys(json.loads(result.stdout), set())
+    assert not [k for k in keys if not re.fullmatch(r"[a-z][a-z0-9_]*|A", k)]  # A: as in tableau files
+    assert not sorted(k for k in keys if f'"{k}"' not in DOC)
