@@ -27,13 +27,13 @@ def modified(method, order, degenerate, symmetric, modifying, seed, fmt):
     radicals), found order by order on generic systems modulo primes; c(t) = beta(t)/sigma(t) in the
     canonical basis of the class (docs/modified.md). Exits 1 at the first order whose term is not a
     combination of the F(t) of the class."""
+    from rkhp.methods import resolve_method
     from rkhp.modified import MAX_ORDER, method_character, modified_hamiltonian, modifying_hamiltonian
-    from rkhp.tablefiles import load_tableau
     from rkhp.trees import check_order
 
     cls = _class_of(degenerate, symmetric)
     check_order(order, MAX_ORDER, what="order of the modified Hamiltonian")
-    tab = load_tableau(method)
+    tab = resolve_method(method).rkhp_tableau("the modified Hamiltonian")
     character = method_character(tab, order)
     solve = modifying_hamiltonian if modifying else modified_hamiltonian
     with progress(fmt != "json") as bar:

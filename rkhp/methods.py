@@ -80,6 +80,13 @@ class Method:
         raise InputError(f"{self.name} is scipy's adaptive {self.solver}: it runs by tolerance, not "
                          "by steps (a peer of `rkhp bench`, --peers)")
 
+    def rkhp_tableau(self, what: str):
+        """The tableau of an RKHP method; InputError naming ``what`` needs one for other kinds."""
+        if self.kind != "rkhp":
+            raise InputError(f"{what} needs an RKHP method (a tableau name or file, docs/methods.md); "
+                             f"{self.name} is a {self.kind} method")
+        return self.tableau
+
     def expected_order(self, condition_class: str) -> int:
         """Order expected on a realisation of `condition_class` (see :func:`condition_class`)."""
         if self.kind == "implicit-midpoint":
