@@ -95,8 +95,8 @@ def test_search_on_the_cluster_equals_the_single_process_run(cluster):
 
 
 def test_converge_on_the_cluster_equals_the_single_process_run(cluster):
+    from rkhp.methods import resolve_methods
     from rkhp.studies.converge import converge
-    from rkhp.studies.methods import resolve_methods
     from rkhp.systems import get_system
 
     alone = converge(get_system("rigid-body"), resolve_methods(["paper-three-stage"]), [20], refinements=3)
