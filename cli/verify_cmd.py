@@ -84,15 +84,38 @@ def _render(result, tab, show: int) -> None:
         for k, f in enumerate(failures[:show]):
             row = [escape(f.label), f"{f.residual:.6e}"]
             if exact:
-                row.append(escape(exact[k]))
+                row.append(escape(_exact_cell(exact[k])))
             t.add_row(*row)
         if len(failures) > show:
             t.caption = f"... and {len(failures) - show} more (--show N, or --format json)"
         print_table(out, t)
+    if result.approximate is not None:
+        approx = result.approximate
+        largest = max(x.denominator for x in tab.entries())
+        orders = ", ".join(f"{cls} {'>= ' if approx.is_lower_bound(cls) else ''}{n}"
+                           for cls, n in approx.orders.items())
+        out.print(f"[yellow]note:[/yellow] the entries look like rational approximations (denominators up "
+                  f"to {largest:.1e}): their exact residuals are nonzero but below the {approx.precision} "
+                  f"they pin down, at which the orders are {orders} (JSON approximate_orders); the "
+                  "claims are checked against these")
     if not result.claim_ok:
         out.print("[red]claimed orders do not match:[/red] "
                   + ", ".join(f"{cls}: {status}" for cls, status in result.claims.items()
                               if status != "ok"))
+
+
+EXACT_SHOWN = 32
+
+
+def _exact_cell(text: str) -> str:
+    """An exact residual as the table shows it: whole up to EXACT_SHOWN characters, else its size
+    (the JSON holds it whole)."""
+    if len(text) <= EXACT_SHOWN:
+        return text
+    parts = text.lstrip("-").split("/")
+    if len(parts) == 2 and all(p.isdigit() for p in parts):
+        return f"a fraction of {len(parts[0])}/{len(parts[1])} digits (JSON)"
+    return f"{len(text)} characters (JSON)"
 
 
 @click.command()

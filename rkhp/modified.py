@@ -457,18 +457,10 @@ def _read_character(character: Mapping, trees) -> dict:
 
 
 def _field_of(values):
-    """The number field of the values (None for Q): sympy's field of their radicals."""
-    gens = set()
-    for x in values:
-        if not isinstance(x, Fraction):
-            from .weights import radical_generators
+    """The number field of the values (None for Q): :func:`rkhp.weights.number_field`."""
+    from .weights import number_field
 
-            gens |= radical_generators(x)
-    if not gens:
-        return None
-    import sympy
-
-    return sympy.QQ.algebraic_field(*sorted(gens, key=sympy.default_sort_key))
+    return number_field(values)
 
 
 def _is_zero(x) -> bool:

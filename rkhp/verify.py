@@ -21,8 +21,9 @@ residuals divided by sigma (of the condition's first tree) over the conditions o
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from fractions import Fraction
 from typing import NamedTuple
 
@@ -32,12 +33,16 @@ from .conditions import CLASSES, OrderCondition, check_class, conditions_of_orde
 from .errors import InputError
 from .tableau import Tableau
 from .trees import MAX_ENUMERATION_ORDER, Tree, check_order
-from .weights import ExactArithmetic, arithmetic_for, tree_plan, weights_by_order
+from .weights import ExactArithmetic, NoNumberField, arithmetic_for, tree_plan, weights_by_order
 
 #: Tolerance factor on the rounding unit u (float64 or the given digits).
 TOLERANCE_FACTOR = 1e4
 #: Without --max-order, the check grows up to this order at most.
 AUTO_MAX_ORDER = 16
+#: Digits of the verification when the entries' number field is out of reach.
+FIELD_FALLBACK_DIGITS = 50
+#: Rational entries with a denominator at least this long are read as approximations too.
+APPROXIMATION_DENOMINATOR = 10**7
 
 
 class Failure(NamedTuple):
@@ -100,6 +105,7 @@ class Verification:
     class_checked_up_to: dict[str, int] = field(default_factory=dict)
     failing_exact: dict[str, tuple[str, ...]] = field(default_factory=dict)
     conditions_checked: dict[str, int] = field(default_factory=dict)
+    approximate: Verification | None = None
 
     @property
     def order(self) -> int | None:
@@ -131,6 +137,12 @@ class Verification:
         if cls not in self.orders:
             return None
         return {"order": self.orders[cls], "lower_bound": self.is_lower_bound(cls)}
+
+    @property
+    def approximate_orders(self) -> dict[str, int] | None:
+        """The orders at the digits that rational approximations pin down (None unless the
+        entries look like rational approximations whose exact residuals fall below them)."""
+        return None if self.approximate is None else self.approximate.orders
 
     def _failing_json(self, cls: str) -> list[dict]:
         exact = self.failing_exact.get(cls)
@@ -165,6 +177,9 @@ class Verification:
             "class_checked_up_to": dict(self.class_checked_up_to),
             "conditions_checked": dict(self.conditions_checked),
             "c_mismatch": [{"stage": i + 1, "difference": d} for i, d in self.c_mismatch],
+            "approximate_orders": None if self.approximate is None else {
+                cls: self.approximate.order_json(cls) for cls in self.approximate.orders},
+            "approximate_precision": None if self.approximate is None else self.approximate.precision,
         }
 
 
@@ -348,17 +363,58 @@ def verify(tableau, max_order: int | None = None, precision=None, classes=None,
            on_order=None) -> Verification:
     """Verify the orders of a tableau (a Tableau, a built-in name or a file) in every class.
 
-    ``precision``: "float", "exact", a number of digits, or None for :func:`default_precision`.
-    ``max_order``: check every condition up to this order; by default up to the order found plus
-    one (at most AUTO_MAX_ORDER). ``on_order(n, N)`` is called after each order (progress).
+    ``precision``: "float", "exact", a number of digits, or None for :func:`default_precision`
+    (exact when every entry is exact and their number field is within reach, else
+    FIELD_FALLBACK_DIGITS digits). ``max_order``: check every condition up to this order; by
+    default up to the order found plus one (at most AUTO_MAX_ORDER). ``on_order(n, N)`` is called
+    after each order (progress). Rational entries with long denominators that miss an order by
+    less than the digits they pin down get :attr:`Verification.approximate` (docs/verify.md).
     """
     from .tablefiles import load_tableau
 
     tableau = load_tableau(tableau)
     precision = parse_precision(precision)
+    note = ""
     if precision is None:
         precision = default_precision(tableau)
-    arithmetic = arithmetic_for(tableau, precision)
+        try:
+            arithmetic = arithmetic_for(tableau, precision)
+        except NoNumberField as exc:
+            precision = FIELD_FALLBACK_DIGITS
+            note = f"no exact number field ({exc.reason}), so {FIELD_FALLBACK_DIGITS} digits: "
+            arithmetic = arithmetic_for(tableau, precision)
+    else:
+        arithmetic = arithmetic_for(tableau, precision)
+    result = _verify(tableau, max_order, arithmetic, classes, on_order, note)
+    digits = approximation_digits(tableau) if arithmetic.exact else None
+    if digits is not None and any(s < result.checked_up_to for s in result.orders.values()):
+        approximate = _verify(tableau, max_order, arithmetic_for(tableau, digits), classes, None, "")
+        if approximate.orders != result.orders:
+            result = replace(result, approximate=approximate,
+                             claims=_claims(tableau, approximate.orders, approximate.class_checked_up_to))
+    return result
+
+
+def approximation_digits(tableau: Tableau) -> int | None:
+    """Digits that long rational entries pin down, or None when the entries are not all rational
+    or none has a long denominator (at least APPROXIMATION_DENOMINATOR).
+
+    A rational p/q read as an approximation of a real number fixes it to about 1/q^2 (a best
+    approximation is within 1/q^2) or, for a decimal (q divides a power of 10), to 1/q; the
+    shortest long denominator decides: 2 log10 q or log10 q digits (at least 16).
+    """
+    if not tableau.is_rational:
+        return None
+    digits = []
+    for x in tableau.entries():
+        q = x.denominator
+        if q >= APPROXIMATION_DENOMINATOR:
+            decimal = 10 ** len(str(q)) % q == 0
+            digits.append(int(math.log10(q) * (1 if decimal else 2)))
+    return max(16, min(digits)) if digits else None
+
+
+def _verify(tableau, max_order, arithmetic, classes, on_order, note: str) -> Verification:
     tolerance, rule = _tolerance(arithmetic, tableau)
     classes = tuple(check_class(c) for c in classes) if classes else available_classes()
     if max_order is not None:
@@ -375,19 +431,22 @@ def verify(tableau, max_order: int | None = None, precision=None, classes=None,
             N = min(N + 2, AUTO_MAX_ORDER)
     orders = {cls: _found(s, N) for cls, s in states.items()}
     class_checked = {cls: _checked(s, N) for cls, s in states.items()}
-    claimed = tableau.claims
-    claims = {cls: _claim_status(claimed[cls], orders[cls], class_checked[cls])
-              for cls in claimed if claimed[cls] is not None and cls in orders}
     return Verification(
         name=tableau.name, stages=tableau.stages, kind=tableau.kind, orders=orders,
-        checked_up_to=N, precision=arithmetic.name, tolerance=tolerance, tolerance_rule=rule,
+        checked_up_to=N, precision=arithmetic.name, tolerance=tolerance, tolerance_rule=note + rule,
         failing={cls: s.failing for cls, s in states.items()},
         principal_error={cls: s.principal for cls, s in states.items()},
         principal_error_max={cls: s.principal_max for cls, s in states.items()},
-        claimed=claimed, claims=claims, c_mismatch=tuple(tableau.c_mismatch()),
-        class_checked_up_to=class_checked,
+        claimed=tableau.claims, claims=_claims(tableau, orders, class_checked),
+        c_mismatch=tuple(tableau.c_mismatch()), class_checked_up_to=class_checked,
         failing_exact={cls: s.failing_exact for cls, s in states.items() if s.failing_exact},
         conditions_checked={cls: s.checked for cls, s in states.items()})
+
+
+def _claims(tableau: Tableau, orders, class_checked) -> dict[str, str]:
+    claimed = tableau.claims
+    return {cls: _claim_status(claimed[cls], orders[cls], class_checked[cls])
+            for cls in claimed if claimed[cls] is not None and cls in orders}
 
 
 def _checked(state: _ClassState, N: int) -> int:

@@ -27,6 +27,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from .errors import InputError
 from .tableau import Tableau, as_sympy, is_exact, to_fraction
 from .trees import LEAF, Tree, check_order, count_trees, trees_up_to
 
@@ -214,18 +215,16 @@ class ExactArithmetic:
             self.field = None
             self.one = Fraction(1)
         else:
-            import sympy
-            from sympy import QQ
-
-            generators = sorted({g for x in entries if not isinstance(x, Fraction)
-                                 for g in radical_generators(x)}, key=sympy.default_sort_key)
-            self.field = QQ.algebraic_field(*generators)
+            self.field = number_field(entries)
             self.one = self.field.one
 
     def _value(self, x):
         if self.field is None:
             return x
-        return self.field.from_sympy(as_sympy(x))
+        try:
+            return self.field.from_sympy(as_sympy(x))
+        except Exception as exc:  # sympy's failures have no common base class
+            raise NoNumberField(f"{x} is not in {self.field} ({type(exc).__name__})") from None
 
     def matrix(self, tableau: Tableau):
         A = np.array([[self._value(x) for x in row] for row in tableau.A], dtype=object)
@@ -277,17 +276,54 @@ class ExactArithmetic:
         return x * self.field.convert(QQ(w.numerator, w.denominator))
 
 
-def radical_generators(expr) -> set:
-    """The algebraic generators of an exact entry: its irrational powers (e.g. sqrt(3))."""
+class NoNumberField(InputError):
+    """The entries' number field is out of reach (too large, or sympy cannot build it);
+    ``reason`` says why."""
+
+    def __init__(self, reason: str, message: str | None = None):
+        super().__init__(message or reason)
+        self.reason = reason
+
+
+#: Largest degree over Q of a number field built for exact verification (product of the
+#: generators' degrees); beyond it the entries are verified at a number of digits.
+MAX_FIELD_DEGREE = 64
+
+
+def field_generators(expr) -> set:
+    """The algebraic generators of an exact entry: its irrational powers (``sqrt(3)``) and its
+    function values (``cos(pi/18)``, algebraic of degree 6)."""
     import sympy
 
-    return {p for p in expr.atoms(sympy.Pow) if not p.exp.is_Integer}
+    return ({p for p in expr.atoms(sympy.Pow) if not p.exp.is_Integer}
+            | {f for f in expr.atoms(sympy.Function) if not f.is_Rational})
+
+
+def number_field(values):
+    """Q(generators of the values), None for Q itself; NoNumberField when its degree exceeds
+    MAX_FIELD_DEGREE or sympy cannot build it."""
+    import sympy
+    from sympy import QQ
+
+    generators = sorted({g for x in values if not isinstance(x, Fraction) for g in field_generators(x)},
+                        key=sympy.default_sort_key)
+    if not generators:
+        return None
+    try:
+        degree = math.prod(sympy.minimal_polynomial(g).as_poly().degree() for g in generators)
+    except Exception as exc:  # sympy's failures have no common base class
+        raise NoNumberField(f"no minimal polynomial for the entries ({type(exc).__name__})") from None
+    if degree > MAX_FIELD_DEGREE:
+        raise NoNumberField(f"their number field has degree up to {degree} > {MAX_FIELD_DEGREE}")
+    try:
+        return QQ.algebraic_field(*generators)
+    except Exception as exc:
+        raise NoNumberField(f"sympy cannot build Q({', '.join(map(str, generators))}) "
+                            f"({type(exc).__name__})") from None
 
 
 def arithmetic_for(tableau: Tableau, precision):
     """The arithmetic for a precision: "float", "exact" or a number of decimal digits."""
-    from .errors import InputError
-
     if precision == "float":
         return FloatArithmetic()
     if precision == "exact":
@@ -296,7 +332,13 @@ def arithmetic_for(tableau: Tableau, precision):
             raise InputError(f"{tableau.source or tableau.name}: exact precision needs exact "
                              f"entries, but {bad.text if hasattr(bad, 'text') else bad} is given "
                              f"to {getattr(bad, 'digits', 17)} digits (use a number of digits)")
-        return ExactArithmetic(tableau)
+        try:
+            arithmetic = ExactArithmetic(tableau)
+            arithmetic.matrix(tableau)  # every entry in the field, or NoNumberField now
+        except NoNumberField as exc:
+            raise NoNumberField(exc.reason, f"{tableau.source or tableau.name}: no exact verification: "
+                                f"{exc.reason} (use a number of digits)") from None
+        return arithmetic
     if isinstance(precision, int) and not isinstance(precision, bool):
         if not 16 <= precision <= 2000:
             raise InputError(f"precision must be float, exact or 16..2000 digits, got {precision}")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from fractions import Fraction
+from pathlib import Path
 
 import pytest
 
@@ -237,3 +238,41 @@ def test_json_says_which_orders_are_lower_bounds(run_cli):
     assert doc["orders"]["symmetric"] == doc["symmetric_order"]
     rc, out, err = run_cli("verify", "dop853")
     assert ">= 8" in out
+
+
+# ----------------------------------------------------------------------------- nodepy's tableaux
+
+DATA = Path(__file__).resolve().parent / "data"
+
+
+def test_sdirk34_with_cos_pi_18_verifies_exactly_as_order_4():
+    # Norsett's SDIRK34 (nodepy's coefficients, tests/data): order 4 (Norsett 1974; HW II, IV.6)
+    v = verify(str(DATA / "nodepy-sdirk34.toml"))
+    assert v.precision == "exact" and "cos(pi/18)" in v.tolerance_rule
+    assert v.orders["general"] == 4 and v.claim_ok and v.approximate_orders is None
+
+
+def test_rk58_rational_approximations_reach_order_5_at_their_precision(run_cli):
+    # Kennedy, Carpenter & Lewis's RK5(4)8[3R+]C has order 5; nodepy's 13-digit rationals miss
+    # sum b_i = 1 by 3.8e-27, far below what denominators of 13 digits pin down
+    path = str(DATA / "nodepy-rk58-3r-c.toml")
+    v = verify(path)
+    assert v.orders["general"] == 0 and v.failing["general"][0].residual == pytest.approx(3.8e-27, rel=0.01)
+    assert v.approximate_orders == {"general": 5, "degenerate": 5, "symmetric": 5}
+    assert v.approximate.precision == "24 digits" and v.claims == {"general": "ok"}
+    rc, out, err = run_cli("verify", path, "--format", "json")
+    doc = json.loads(out)
+    assert rc == 0 and doc["approximate_orders"]["general"] == {"order": 5, "lower_bound": False}
+    rc, out, err = run_cli("verify", path)
+    assert rc == 0 and "look like rational approximations" in out
+
+
+def test_entries_beyond_a_reachable_number_field_are_verified_at_digits(run_cli, tmp_path):
+    # cos(pi/97)^2 + sin(pi/97)^2 = 1: Euler's weight written in a field of huge degree
+    path = tmp_path / "big.toml"
+    path.write_text('A = [["0"]]\nb = ["cos(pi/97)**2 + sin(pi/97)**2"]\n')
+    v = verify(str(path))
+    assert v.precision == "50 digits" and "no exact number field" in v.tolerance_rule
+    assert v.orders["general"] == 1  # Euler
+    rc, out, err = run_cli("verify", str(path), "--precision", "exact")
+    assert rc == 2 and "no exact verification" in err and err.count("\n") == 1
