@@ -15,7 +15,8 @@ The rules a page follows are in docs/CONTRIBUTING-DOCS.md. In short:
   ```` ```{toctree} ```` are not code and are left alone).
 
 Comparison: trailing spaces and blank lines at both ends are ignored, the scratch folder's path
-reads ``.``, durations (a number followed by s, ms or us) read ``<time>``, a line ``...`` matches
+reads ``.``, durations (a number followed by s, ms or us) read ``<time>``, numbers below 1e-13
+written with an exponent read ``<round-off>``, a line ``...`` matches
 any number of lines and ``...`` inside a line matches any text. A command may exit with a
 non-zero status only when the output shown ends with rkhp's one-line error (``rkhp: ...``).
 
@@ -40,6 +41,9 @@ from sybil.parsers.markdown.lexers import DirectiveInHTMLCommentLexer, FencedCod
 RUN_LANGUAGES = ("console", "python")
 MARKERS = ("file", "no-compare", "slow", "skip")
 DURATION = re.compile(r"(?<![\w.])\d+(?:\.\d+)?(?:e[-+]?\d+)? ?(?:s|ms|us)\b")
+# magnitudes at the float64 round-off level (Casimir errors, axiom deviations): their digits change
+# with the machine's instruction set, so they compare as one token
+ROUND_OFF = re.compile(r"(?<![\w.])-?\d(?:\.\d+)?e-(?:1[4-9]|[2-9]\d|\d{3})\b")
 COMMAND_TIMEOUT = 600
 DOCTEST_FLAGS = doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE
 
@@ -160,6 +164,7 @@ def commands(source: str) -> list[tuple[str, str]]:
 def normalise(text: str, scratch: Path) -> str:
     text = text.replace(str(scratch) + os.sep, "").replace(str(scratch), ".")
     text = DURATION.sub("<time>", text)
+    text = ROUND_OFF.sub("<round-off>", text)
     return "\n".join(line.rstrip() for line in text.strip("\n").splitlines()).strip("\n")
 
 
