@@ -69,7 +69,7 @@ def _render(data, source: str) -> None:
             continue
         out.print(f"\n[bold]Order {o.order}[/bold]")
         for k in range(len(o.relations)):
-            out.print(f"  relation   {relation_text(o, k)}", soft_wrap=True, markup=False)
+            out.print(f"  relation   {relation_text(o, k)}", markup=False)
         for trees, weights in o.conditions:
-            out.print(f"  condition  {condition_text(trees, weights)}", soft_wrap=True, markup=False)
+            out.print(f"  condition  {condition_text(trees, weights)}", markup=False)
     out.print("\nr(t) = gamma(t) a(t) - 1 over T_0; a relation is sum c_t F(t) = 0.", markup=False)

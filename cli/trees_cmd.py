@@ -8,6 +8,7 @@ from rkhp.conditions import order_conditions
 from rkhp.trees import MAX_COUNT_ORDER, MAX_ENUMERATION_ORDER, check_order, count_trees, trees_up_to
 
 from .options import console, emit_json, format_option
+from .render import print_table
 
 FORMATS = ("table", "json", "latex", "markdown")
 
@@ -126,7 +127,7 @@ def _rich_table(title, header, rows, counts) -> None:
 
     table = Table(title=title, title_justify="left")
     for h in header:
-        table.add_column(h, no_wrap=h != header[-1])
+        table.add_column(h)
     previous = None
     for row in rows:
         if previous is not None and row[0] != previous:
@@ -135,7 +136,7 @@ def _rich_table(title, header, rows, counts) -> None:
         table.add_row(*(Text(c) for c in cells))  # brackets are trees, not rich markup
         previous = row[0]
     out = console()
-    out.print(table)
+    print_table(out, table)  # a tree or a condition is never cut
     total = sum(counts.values())
     out.print("Count per order: " + ", ".join(f"{n}: {c}" for n, c in counts.items()) + f"; total {total}")
 

@@ -132,3 +132,15 @@ def test_show_at_80_columns(name):
     table = _run("show", name)
     _check(table, {k: doc[k] for k in ("name", "aliases", "stages", "source", "reference", "claimed",
                                       "A", "b", "c", "decimals")})
+
+
+@pytest.mark.parametrize("args", [("conditions", "--order", "6", "--symmetric"), ("relations", "--order", "6"),
+                                  ("trees", "--order", "6")])
+def test_trees_and_conditions_at_80_columns(args):
+    table = _run(*args)
+    doc = json.loads(_run(*args, "--format", "json"))
+    if "orders" in doc:  # relations: their text, term by term
+        _check(table, [r["text"] for o in doc["orders"] for r in (*o["relations"], *o["conditions"])])
+        return
+    rows = doc.get("conditions") or doc.get("trees")
+    _check(table, [t for r in rows for t in (r.get("trees") or [r["tree"]])])
