@@ -21,6 +21,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "systems": ("rkhp_cli.systems_cmd", "systems", "List the built-in Poisson systems."),
     "check": ("rkhp_cli.systems_cmd", "check", "Check a system's birealisation axioms (AD)."),
     "integrate": ("rkhp_cli.systems_cmd", "integrate", "Integrate a Poisson system with an RKHP method."),
+    "compose": ("rkhp_cli.compose_cmd", "compose", "Composition of RKHP steps against the Butcher product."),
     "modified": ("rkhp_cli.modified_cmd", "modified", "Modified Hamiltonian of a method (backward error analysis)."),
     "relations": ("rkhp_cli.relations_cmd", "relations", "Relations of symmetric birealisations (NOTES §8)."),
     "converge": ("rkhp_cli.studies_cmd", "converge", "Convergence study: error against h, observed orders."),

@@ -111,3 +111,33 @@ def _latex(series, method: str) -> None:
     title = escape_text(f"{series.kind.capitalize()} Hamiltonian of {method} ({series.cls} class, to order "
                         f"{series.order}): ") + f"${symbol} = \\sum_t h^{{|t|-1}} c(t)\\,F(t)$"
     click.echo(standalone(longtable(("h^{k}", "t", "c(t)"), rows), title=title, tables=True, trees=True))
+
+
+def modified_series(system, method, order: int, show_progress: bool):
+    """The modified Hamiltonian of an RKHP or THP method (rkhp.methods.Method) to ``order``, in the
+    class of the system's realisation (for ``rkhp integrate --modified N``)."""
+    from rkhp.errors import InputError
+    from rkhp.integrators.modified_energy import taylor_character
+    from rkhp.methods import condition_class
+    from rkhp.modified import MAX_ORDER, method_character, modified_hamiltonian
+    from rkhp.trees import check_order
+
+    check_order(order, MAX_ORDER, what="--modified order")
+    if method.kind == "taylor":
+        character = taylor_character(method.order, order)
+    elif method.kind == "rkhp":
+        character = method_character(method.tableau, order)
+    else:
+        raise InputError(f"--modified needs an RKHP or THP method; {method.name} is a {method.kind} method")
+    with progress(show_progress) as bar:
+        bar.add_task(f"modified Hamiltonian to order {order}", total=None)
+        return modified_hamiltonian(character, order, condition_class(system))
+
+
+def modified_energy_report(system, series, h: float, states, show_progress: bool) -> dict:
+    """The keys that ``rkhp integrate --modified N`` adds (docs/modified.md)."""
+    from rkhp.integrators.modified_energy import energy_errors
+
+    with progress(show_progress) as bar:
+        task = bar.add_task(f"H~_{series.order} along the run", total=len(states))
+        return energy_errors(system, series, h, states, lambda: bar.advance(task))

@@ -297,11 +297,12 @@ def _render_stress(study, plot) -> None:
     out.print(f"[bold](b) long run[/]: {lr.steps} steps of h = {lr.h:g}, max error per window ({lr.windows} windows)")
     table = compact_table(None)
     table.add_column("method", no_wrap=True)
-    for col in ("Casimir max", "energy, 1st window", "last window", "growth", "seconds"):
+    for col in ("Casimir max", "energy, 1st window", "last window", "growth", "modified energy max", "seconds"):
         table.add_column(col, justify="right")
     for r in (*lr.runs, lr.peer):
+        modified = "—" if r.modified is None else f"{_e(r.modified.max)} (H~_{r.modified.order})"
         table.add_row(r.method, _e(r.casimir_max), _e(r.energy_windows[0]), _e(r.energy_windows[-1]),
-                      "—" if r.energy_growth is None else f"x{r.energy_growth:.2g}", f"{r.seconds:.2f}")
+                      "—" if r.energy_growth is None else f"x{r.energy_growth:.2g}", modified, f"{r.seconds:.2f}")
     out.print(table)
     for r in (*lr.runs, lr.peer):
         if r.status != "ok":

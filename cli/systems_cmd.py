@@ -145,9 +145,12 @@ def integration_report(system, trajectory, method: str, h: float, steps: int) ->
 @click.option("--h", "h", type=float, default=None, help="Step size (steps = T / h).")
 @click.option("--t-final", type=float, default=None, help="Final time T (default: the system's).")
 @x0_option()
+@click.option("--modified", "modified_order", type=int, default=None, metavar="N",
+              help="Also report max over the run of |H~_N(y_n) - H~_N(y_0)|, H~_N the method's modified "
+                   "Hamiltonian to order N (docs/modified.md).")
 @realisation_option()
 @format_option("table", "json")
-def integrate(system, method, steps, h, t_final, x0, realisation, fmt):
+def integrate(system, method, steps, h, t_final, x0, modified_order, realisation, fmt):
     """Integrate SYSTEM (built-in or spec file) with METHOD (docs/methods.md)."""
     from rkhp.errors import NumericalFailure
     from rkhp.methods import resolve_method, resolve_system
@@ -155,8 +158,17 @@ def integrate(system, method, steps, h, t_final, x0, realisation, fmt):
     poisson = resolve_system(system, realisation, parse_x0(x0))
     chosen = resolve_method(method)
     n, step = steps_and_h(poisson.t_final if t_final is None else t_final, steps, h)
+    series = None
+    if modified_order is not None:
+        from .modified_cmd import modified_series
+
+        series = modified_series(poisson, chosen, modified_order, fmt != "json")
     trajectory = chosen.integrate(poisson, step, n)
     report = integration_report(poisson, trajectory, chosen.name, step, n)
+    if series is not None and trajectory.ok:
+        from .modified_cmd import modified_energy_report
+
+        report.update(modified_energy_report(poisson, series, step, trajectory.states, fmt != "json"))
     if fmt == "json":
         emit_json(report)
     else:
@@ -164,6 +176,14 @@ def integrate(system, method, steps, h, t_final, x0, realisation, fmt):
     if not trajectory.ok:
         raise NumericalFailure(f"{poisson.name}, {chosen.name}, h = {step:g}: "
                                f"{trajectory.status}")
+
+
+def _modified_rows(r: dict) -> list[tuple[str, str]]:
+    if "modified_energy_error" not in r:
+        return []
+    return [("max energy error over the run", _fmt(r["energy_error_max"], 3)),
+            (f"modified energy error (H~_{r['modified_order']}, {r['modified_class']})",
+             _fmt(r["modified_energy_error"], 3))]
 
 
 def _print_integration(r: dict) -> None:
@@ -178,6 +198,7 @@ def _print_integration(r: dict) -> None:
             ("error vs exact solution", _fmt(r["exact_error"], 3)),
             ("Casimir error", _fmt(r["casimir_error"], 3)),
             ("energy error", _fmt(r["energy_error"], 3)),
+            *_modified_rows(r),
             ("Newton iterations (mean, max)", f"{r['newton_mean']:.2f}, {r['newton_max']}"),
             ("status", r["status"]),
             ("compile seconds", f"{r['compile_seconds']:.3f}"),

@@ -297,6 +297,7 @@ class PolynomialShift:
     def __init__(self, A: list[np.ndarray], p: int, degree: int):
         self.dim = len(A)
         self.p = p
+        self.A = A
         pring = JetRing(monomial_basis(self.dim, max(degree, 1)), p)
         self.pbasis = pbasis = pring.basis
         top = pbasis.degree
@@ -333,6 +334,65 @@ class PolynomialShift:
             return pcache[J][: ring.size(m)]
 
         return elementary_differentials(trees, max_order, ring, partials, lambda grad, m: grad, dim, jets)
+
+
+@dataclass(eq=False)
+class RandomRealisations:
+    """Random birealisations alpha(x, p) = x + A(p), beta(x, p) = x + A(p) + pi p with constant pi,
+    one per column of a batch, modulo a prime: the generic instances of a class (docs/theory.md §11).
+
+    A(p) = D p + grad K(p): symmetric class, D = -pi/2 and K = 0 (alpha = x - pi p / 2); degenerate,
+    D = -pi/2 and a random K of degrees 3..N (the quartic kind, not symmetric); general, a random K
+    of degrees 2..N (its quadratic part is the shifted kind, D = Q - pi/2). With ``linear``, K keeps
+    its quadratic part only (general) or vanishes. Symmetric and linear instances draw pi (and Q)
+    per column; the others share one realisation (random modulo p, hence generic but for a set of
+    probability O(1/p)), so that A's powers are computed once.
+    """
+
+    p: int
+    pi: np.ndarray  # (n, n, columns or 1)
+    D: np.ndarray  # (n, n, columns or 1): d_p A(0)
+    shift: PolynomialShift | None  # None when A(p) = D p
+
+    @classmethod
+    def of_class(cls, kind: str, n: int, N: int, ncols: int, rng: np.random.Generator, p: int,
+                 linear: bool = False) -> RandomRealisations:
+        shared = not (kind == "symmetric" or linear)
+        cols = 1 if shared else ncols
+        upper = rng.integers(0, p, size=(n, n, cols), dtype=np.int64)
+        pi = (upper - upper.transpose(1, 0, 2)) % p
+        D = pi * to_residue(Fraction(-1, 2), p) % p
+        if kind == "symmetric" or (linear and kind == "degenerate"):
+            return cls(p, pi, D, None)
+        if linear:
+            q = rng.integers(0, p, size=(n, n, cols), dtype=np.int64)
+            return cls(p, pi, (D + q + q.transpose(1, 0, 2)) % p, None)
+        pdeg = max(N - 1, 1)
+        pb = monomial_basis(n, pdeg)
+        A = [np.zeros((pb.sizes[pdeg], 1), dtype=np.int64) for _ in range(n)]
+        for i in range(n):
+            for j in range(n):
+                A[i][pb.index[tuple(1 if v == j else 0 for v in range(n))]] = D[i, j]
+        lowest = 3 if kind == "degenerate" else 2
+        kb = monomial_basis(n, max(N, lowest))
+        for idx in range(kb.sizes[lowest - 1], kb.sizes[kb.degree]):  # d/dp_i of k_m p^m
+            m = [int(v) for v in kb.exponents[idx]]
+            coef = int(rng.integers(0, p))
+            for i in range(n):
+                if m[i] and sum(m) - 1 <= pdeg:
+                    lower = m.copy()
+                    lower[i] -= 1
+                    row = pb.index[tuple(lower)]
+                    A[i][row] = (A[i][row] + coef * m[i]) % p
+        linear_part = np.array([[A[i][pb.index[tuple(1 if v == j else 0 for v in range(n))]] for j in range(n)]
+                                for i in range(n)])
+        return cls(p, pi, linear_part, PolynomialShift(A, p, pdeg))
+
+    def jets(self, trees, max_order: int, K: np.ndarray, basis: MonomialBasis) -> dict[Tree, np.ndarray]:
+        """F(t) jets of the Hamiltonian K (coefficients over ``basis``, first variables x)."""
+        if self.shift is None:
+            return constant_matrix_jets(trees, max_order, K, self.D, self.p, basis, jets=True)
+        return self.shift.jets(trees, max_order, K, basis, jets=True)
 
 
 def _bernoulli_plus(n: int) -> list[Fraction]:

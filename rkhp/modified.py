@@ -132,11 +132,6 @@ def method_character(tableau, order: int) -> dict[Tree, object]:
     return elementary_weights(tableau, order, "exact")
 
 
-def exact_flow_character(order: int) -> dict[Tree, Fraction]:
-    """e(t) = 1/gamma(t) (paper eq. (17) ``eq:e``)."""
-    return {t: t.e for t in trees_up_to(order)}
-
-
 def canonical_basis(n: int, cls: str) -> tuple[Tree, ...]:
     """The canonical basis trees of order n (module docstring)."""
     check_class(cls)
@@ -208,46 +203,26 @@ def _series(kind: str, character: Mapping, order: int, cls: str, seed: int) -> H
 
 def _solve(problem: _Problem):
     """Coordinates of every basis coefficient, over primes until a further prime confirms."""
-    from .modular import reconstruct_coordinates
+    from .modular import Inconsistent, solve_over_primes
 
-    streams = np.random.SeedSequence(problem.seed).spawn(MAX_PRIMES)
-    results = []  # (p, roots, residues by tree)
-    inconsistent: list[int] = []
-    for k, (p, roots) in zip(range(MAX_PRIMES), problem.embeddings.primes()):
-        outcome = _solve_modulo(problem, p, roots, np.random.default_rng(streams[k]))
-        if isinstance(outcome, int):
-            inconsistent.append(outcome)
-            if len(inconsistent) >= 2 and inconsistent[-1] == inconsistent[-2]:
-                n = inconsistent[-1]
-                raise NotATreeSeries(
-                    f"order {n}: the h^{n - 1} term of the {problem.kind} Hamiltonian is not a combination "
-                    f"of the elementary Hamiltonians F(t), |t| = {n}, of the {problem.cls} class (an exact "
-                    f"check modulo two primes); its tree series stops at order {n - 1}", n)
-            continue
-        results.append((p, roots, outcome))
-        if len(results) < 3:
-            continue
-        try:
-            primes = [r[0] for r in results[:-1]]
-            coordinates = {t: reconstruct_coordinates([r[2][t] for r in results[:-1]], primes)
-                           for level in problem.basis for t in level}
-        except ValueError:
-            continue
-        last_p, last_roots, last = results[-1]
-        confirm = {t: tuple(x % last_p for x in _coordinate_residues(coordinates[t], last_p)) for t in coordinates}
-        if all(confirm[t] == last[t] for t in coordinates):
-            checks = {"primes": primes, "confirmed_modulo": last_p, "instances": _batch(problem),
-                      "dimension": DIMENSION, "seed": problem.seed,
-                      "field_degree": problem.embeddings.degree, "family": _FAMILY_TEXT[problem.cls]}
-            return coordinates, checks
-    raise NumericalFailure(f"the {problem.kind} Hamiltonian's coefficients did not reconstruct with "
-                           f"{MAX_PRIMES} primes (rerun with another --seed)")
-
-
-def _coordinate_residues(coordinates, p):
-    from .modular import to_residue
-
-    return tuple(to_residue(c, p) for c in coordinates)
+    keys = [t for level in problem.basis for t in level]
+    try:
+        coordinates, primes, last = solve_over_primes(
+            lambda p, roots, rng: _solve_modulo(problem, p, roots, rng), keys, problem.embeddings, problem.seed,
+            MAX_PRIMES)
+    except Inconsistent as exc:
+        n = exc.order
+        raise NotATreeSeries(
+            f"order {n}: the h^{n - 1} term of the {problem.kind} Hamiltonian is not a combination "
+            f"of the elementary Hamiltonians F(t), |t| = {n}, of the {problem.cls} class (an exact "
+            f"check modulo two primes); its tree series stops at order {n - 1}", n) from None
+    except ValueError:
+        raise NumericalFailure(f"the {problem.kind} Hamiltonian's coefficients did not reconstruct with "
+                               f"{MAX_PRIMES} primes (rerun with another --seed)") from None
+    checks = {"primes": primes, "confirmed_modulo": last, "instances": _batch(problem),
+              "dimension": DIMENSION, "seed": problem.seed,
+              "field_degree": problem.embeddings.degree, "family": _FAMILY_TEXT[problem.cls]}
+    return coordinates, checks
 
 
 def _batch(problem: _Problem) -> int:
@@ -386,39 +361,11 @@ _FAMILY_TEXT = {
 
 
 def _family(cls: str, n: int, N: int, ncols: int, rng, p: int):
-    """jets(trees, max_order, K, basis): F(t) jets of K on random instances of the class.
+    """jets(trees, max_order, K, basis): F(t) jets of K on random instances of the class
+    (:class:`rkhp.differentials.RandomRealisations`)."""
+    from .differentials import RandomRealisations
 
-    Symmetric: a random pi per instance. Degenerate and general: one random realisation (pi and
-    the shift K(p)) shared by the instances, which differ by their Hamiltonians; random modulo p,
-    it is generic but for a set of probability O(1/p).
-    """
-    from .differentials import PolynomialShift, constant_matrix_jets, monomial_basis
-    from .modular import to_residue
-
-    shared = cls != "symmetric"
-    upper = rng.integers(0, p, size=(n, n, 1 if shared else ncols), dtype=np.int64)
-    D = (upper - upper.transpose(1, 0, 2)) * to_residue(Fraction(-1, 2), p) % p
-    if not shared:
-        return lambda trees, max_order, K, basis: constant_matrix_jets(trees, max_order, K, D, p, basis, jets=True)
-    lowest = 3 if cls == "degenerate" else 2
-    pdeg = max(N - 1, 1)
-    pb = monomial_basis(n, pdeg)
-    A = [np.zeros((pb.sizes[pdeg], 1), dtype=np.int64) for _ in range(n)]
-    for i in range(n):
-        for j in range(n):
-            A[i][pb.index[tuple(1 if v == j else 0 for v in range(n))]] = D[i, j]
-    # grad K for a random K(p) with terms of degrees lowest..N: d/dp_i of sum_m k_m p^m
-    kb = monomial_basis(n, max(N, lowest))
-    for idx in range(kb.sizes[lowest - 1], kb.sizes[kb.degree]):
-        m = [int(v) for v in kb.exponents[idx]]
-        coef = int(rng.integers(0, p))
-        for i in range(n):
-            if m[i] and sum(m) - 1 <= pdeg:
-                lower = m.copy()
-                lower[i] -= 1
-                A[i][pb.index[tuple(lower)]] = (A[i][pb.index[tuple(lower)]] + coef * m[i]) % p
-    shift = PolynomialShift(A, p, pdeg)
-    return lambda trees, max_order, K, basis: shift.jets(trees, max_order, K, basis, jets=True)
+    return RandomRealisations.of_class(cls, n, N, ncols, rng, p).jets
 
 
 # ----------------------------------------------------------------------------- helpers

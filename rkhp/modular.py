@@ -242,3 +242,46 @@ def _previous_prime(n: int) -> int:
     from sympy import prevprime
 
     return int(prevprime(n))
+
+
+class Inconsistent(Exception):
+    """A linear system of order ``order`` had no solution modulo two primes (an exact finding)."""
+
+    def __init__(self, order: int):
+        super().__init__(order)
+        self.order = order
+
+
+def solve_over_primes(compute, keys, embeddings: FieldEmbeddings, seed: int, max_primes: int = 8):
+    """Exact coordinates of quantities computed modulo primes (docs/theory.md §8, §11).
+
+    ``compute(p, roots, rng)`` returns, for each key, the residues modulo p of its coordinates in
+    the basis 1, theta, ..., theta^(d-1) of the number field, or an int n: the order at which its
+    linear system was inconsistent. Primes come from ``embeddings.primes()``, each with its own
+    random stream of ``seed``. Returns (coordinates by key, primes used, confirming prime) once
+    the reconstruction from all primes but the last agrees with the last. Raises
+    :class:`Inconsistent` when two primes report the same inconsistent order, ValueError when
+    ``max_primes`` primes do not reconstruct.
+    """
+    streams = np.random.SeedSequence(seed).spawn(max_primes)
+    results: list[tuple[int, dict]] = []
+    inconsistent: list[int] = []
+    for k, (p, roots) in zip(range(max_primes), embeddings.primes()):
+        outcome = compute(p, roots, np.random.default_rng(streams[k]))
+        if isinstance(outcome, int):
+            inconsistent.append(outcome)
+            if len(inconsistent) >= 2 and inconsistent[-1] == inconsistent[-2]:
+                raise Inconsistent(outcome)
+            continue
+        results.append((p, outcome))
+        if len(results) < 3:
+            continue
+        primes = [q for q, _ in results[:-1]]
+        try:
+            coordinates = {key: reconstruct_coordinates([r[key] for _, r in results[:-1]], primes) for key in keys}
+        except ValueError:
+            continue
+        last_p, last = results[-1]
+        if all(tuple(to_residue(c, last_p) for c in coordinates[key]) == last[key] for key in keys):
+            return coordinates, primes, last_p
+    raise ValueError(f"no reconstruction with {max_primes} primes")

@@ -18,3 +18,28 @@ def run_cli():
         return proc.returncode, proc.stdout, proc.stderr
 
     return run
+
+
+@pytest.fixture
+def oscillator_values():
+    """order -> {t: F(t)(x0) / H(x0)} exactly, on the harmonic oscillator H = |x|^2/2 in R^2 with
+    pi = [[0, 1], [-1, 0]], alpha = x - pi p / 2, at x0 = (1, 0) (docs/theory.md §11)."""
+    from fractions import Fraction
+
+    import numpy as np
+
+    from rkhp.differentials import constant_matrix_jets, monomial_basis
+    from rkhp.trees import trees_up_to
+
+    def values(order):
+        basis = monomial_basis(2, order - 1)
+        K = np.full((basis.sizes[-1], 1), Fraction(0), dtype=object)
+        for e, v in (((0, 0), Fraction(1, 2)), ((1, 0), Fraction(1)), ((2, 0), Fraction(1, 2)),
+                     ((0, 2), Fraction(1, 2))):
+            K[basis.index[e], 0] = v
+        half = Fraction(1, 2)
+        D = np.array([[[Fraction(0)], [-half]], [[half], [Fraction(0)]]], dtype=object)
+        F = constant_matrix_jets(trees_up_to(order, True), order, K, D, None, basis)
+        return {t: F[t][0] / half for t in trees_up_to(order, True)}
+
+    return values

@@ -15,13 +15,12 @@ import numpy as np
 import pytest
 import sympy
 
-from rkhp.differentials import constant_matrix_jets, monomial_basis
+from rkhp.algebra import exact_flow_character
 from rkhp.errors import InputError
 from rkhp.modified import (
     NotATreeSeries,
     canonical_basis,
     canonical_coefficients,
-    exact_flow_character,
     method_character,
     modified_hamiltonian,
     modifying_hamiltonian,
@@ -129,20 +128,8 @@ def test_degenerate_and_symmetric_results_agree_modulo_the_relations():
 # ----------------------------------------------------------------------------- harmonic oscillator
 
 
-def _oscillator_values(order):
-    """F(t)(x0) / H(x0) exactly: H = |x|^2/2 in R^2, pi = [[0, 1], [-1, 0]], alpha = x - pi p / 2, x0 = (1, 0)."""
-    basis = monomial_basis(2, order - 1)
-    K = np.full((basis.sizes[-1], 1), Fraction(0), dtype=object)
-    for e, v in (((0, 0), Fraction(1, 2)), ((1, 0), Fraction(1)), ((2, 0), Fraction(1, 2)), ((0, 2), Fraction(1, 2))):
-        K[basis.index[e], 0] = v
-    half = Fraction(1, 2)
-    D = np.array([[[Fraction(0)], [-half]], [[half], [Fraction(0)]]], dtype=object)
-    F = constant_matrix_jets(trees_up_to(order, True), order, K, D, None, basis)
-    return {t: F[t][0] / half for t in trees_up_to(order, True)}
-
-
-def _h_coefficients(series, order):
-    values = _oscillator_values(order)
+def _h_coefficients(series, order, oscillator_values):
+    values = oscillator_values(order)
     out = [Fraction(0)] * order
     for t, c in series.terms():
         out[t.order - 1] += c * values[t]
@@ -150,17 +137,17 @@ def _h_coefficients(series, order):
 
 
 @pytest.mark.parametrize("cls", ["degenerate", "symmetric"])
-def test_implicit_midpoint_on_the_harmonic_oscillator_is_the_arctan_series(cls):
+def test_implicit_midpoint_on_the_harmonic_oscillator_is_the_arctan_series(cls, oscillator_values):
     """The implicit midpoint rule rotates by 2 arctan(h/2): H~ = (2/h) arctan(h/2) H
     = (1 - h^2/12 + h^4/80 - ...) H, to the order computed (6: the tree series stops there)."""
-    got = _h_coefficients(modified_hamiltonian(_euler(6), 6, cls), 6)
+    got = _h_coefficients(modified_hamiltonian(_euler(6), 6, cls), 6, oscillator_values)
     assert got == [1, 0, Fraction(-1, 12), 0, Fraction(1, 80), 0]
 
 
-def test_modifying_hamiltonian_of_the_midpoint_rule_is_the_tan_series():
+def test_modifying_hamiltonian_of_the_midpoint_rule_is_the_tan_series(oscillator_values):
     """A midpoint step of K = c H rotates by 2 arctan(c h / 2): the exact rotation by h needs
     c = (2/h) tan(h/2) = 1 + h^2/12 + h^4/120 + ..."""
-    got = _h_coefficients(modifying_hamiltonian(_euler(6), 6, "symmetric"), 6)
+    got = _h_coefficients(modifying_hamiltonian(_euler(6), 6, "symmetric"), 6, oscillator_values)
     assert got == [1, 0, Fraction(1, 12), 0, Fraction(1, 120), 0]
 
 
@@ -220,3 +207,62 @@ def test_cli_errors_are_one_line(run_cli):
     assert code == 2 and len(err.strip().splitlines()) == 1
     code, out, err = run_cli("modified", "--method", "euler", "--order", "3", "--symmetric", "--degenerate")
     assert code == 2 and len(err.strip().splitlines()) == 1
+
+
+# ----------------------------------------------------------------------------- evaluation on systems
+
+
+def test_midpoint_modified_hamiltonian_on_the_pendulum():
+    """H~ = H - h^2/24 H''(f, f), f = pi grad H (Hairer-Lubich-Wanner, ch. IX), for RKHP Euler on the
+    pendulum H = p^2/2 - cos q: H''(f, f) = cos(q) p^2 + sin(q)^2."""
+    from rkhp.integrators.modified_energy import ModifiedEnergy
+    from rkhp.systems import get_system
+
+    pendulum = get_system("pendulum")
+    h = 0.3
+    H3 = ModifiedEnergy(pendulum, modified_hamiltonian(_euler(3), 3, "symmetric"), h)
+    for q, p in np.random.default_rng(1).uniform(-2, 2, size=(5, 2)):
+        expected = p * p / 2 - np.cos(q) - h * h / 24 * (np.cos(q) * p * p + np.sin(q) ** 2)
+        assert H3([q, p]) == pytest.approx(expected, abs=1e-14)
+
+
+def test_integrate_reports_the_modified_energy_error(run_cli):
+    code, out, err = run_cli("integrate", "pendulum", "--method", "euler", "--h", "0.1", "--t-final", "20",
+                             "--modified", "6", "--format", "json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["modified_order"] == 6 and doc["modified_class"] == "symmetric"
+    # the implicit midpoint rule conserves H~_6 to O(h^6) while H oscillates at O(h^2)
+    assert doc["modified_energy_error"] < 1e-3 * doc["energy_error_max"]
+    code, out, err = run_cli("integrate", "pendulum", "--method", "euler", "--h", "0.1", "--t-final", "1",
+                             "--modified", "7")
+    assert code == 1 and "order 7" in err and len(err.strip().splitlines()) == 1
+
+
+def test_stress_long_run_has_the_modified_energy():
+    from rkhp.methods import resolve_method
+    from rkhp.studies.stress import long_run
+    from rkhp.systems import get_system
+
+    result = long_run([resolve_method("paper-three-stage")], get_system("lotka-volterra"), 0.1, 3000)
+    run = result.runs[0]
+    assert run.modified.order == 6 and run.modified.condition_class == "symmetric" and run.modified.stride == 2
+    assert run.modified.max < max(run.energy_windows) / 5
+    assert result.peer.modified is None
+
+
+@pytest.mark.slow
+def test_rigid_body_modified_energy_of_the_paper_method(run_cli):
+    """Issue 14: paper-three-stage on the rigid body, h = 0.2, 10^4 steps: the error of H~_N falls as
+    N goes 4, 6, 8, and at N = 8 it is at least 100 times below the energy error of H."""
+    errors = {}
+    for N in (4, 6, 8):
+        code, out, err = run_cli("integrate", "rigid-body", "--method", "paper-three-stage", "--h", "0.2",
+                                 "--t-final", "2000", "--modified", str(N), "--format", "json")
+        assert code == 0, err
+        doc = json.loads(out)
+        assert doc["steps"] == 10_000
+        errors[N] = doc["modified_energy_error"]
+        energy = doc["energy_error_max"]
+    assert errors[4] > errors[6] > errors[8]
+    assert errors[8] * 100 <= energy

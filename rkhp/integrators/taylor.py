@@ -41,13 +41,17 @@ def _index(n_vars: int, degree: int) -> dict[tuple[int, ...], int]:
 class _Tower:
     """Per-system buffers and the tree list of a THP of order N."""
 
-    def __init__(self, system, order: int, degenerate: bool):
+    def __init__(self, system, order: int, degenerate: bool, trees=None, margin: int = 2):
+        """``trees``: the trees to evaluate, closed under taking subtrees and sorted by order
+        (default: all of T or T_0 up to ``order``); ``margin``: the jet degree beyond N - |t|
+        (2: psi and its Jacobian; 0: values only, as for a modified Hamiltonian)."""
         from ..trees import trees_up_to
 
         self.system = system
         self.n = system.dim
         self.order = order
-        self.trees = trees_up_to(order, degenerate)
+        self.trees = trees_up_to(order, degenerate) if trees is None else tuple(trees)
+        self.margin = margin
         self.n_slots = max(t.n_slots for t in (system.f_tape, system.h_tape, system.alpha_tape,
                                                system.beta_tape))
 
@@ -68,11 +72,11 @@ class _Tower:
         return jet
 
     def elementary(self, x0) -> dict:
-        """F(t) as a jet in dx (degree 2 + N - |t|) for every tree t."""
+        """F(t) as a jet in dx (degree margin + N - |t|) for every tree t."""
         n, N = self.n, self.order
         F: dict = {}
         for t in self.trees:
-            D = 2 + N - t.order
+            D = self.margin + N - t.order
             small = jet_space(n, D).size
             if t.order == 1:
                 inputs = [self._x_jet(x0, k, small) for k in range(n)] + [np.zeros(1)] * n
@@ -81,22 +85,19 @@ class _Tower:
             groups = [(u, len(list(g))) for u, g in groupby(t.children)]
             q, m = len(groups), len(t.children)
             nb, Db = n + q, D + m
-            big = _index(nb, Db)
-            size = len(big)
+            size = jet_space(nb, Db).size
             inputs = [self._x_jet(x0, k, size) for k in range(n)]
             for k in range(n):
                 p = np.zeros(size)
                 for r, (u, _) in enumerate(groups):
-                    grad = _gradient(F[u], n, 2 + N - u.order, k)
-                    eps = tuple(1 if j == r else 0 for j in range(q))
-                    for a, i in _index(n, Db - 1).items():
-                        if i < len(grad):
-                            p[big[a + eps]] = grad[i]
+                    grad = _gradient(F[u], n, self.margin + N - u.order, k)
+                    rows = _slot_rows(n, q, Db, r)
+                    common = min(len(rows), len(grad))
+                    p[rows[:common]] = grad[:common]
                 inputs.append(p)
             out = self._run(self.system.f_tape, nb, Db, inputs)[0]
             weight = float(np.prod([factorial(c) for _, c in groups]))
-            ks = tuple(c for _, c in groups)
-            F[t] = np.array([weight * out[big[a + ks]] for a in _monomials(n, D)])
+            F[t] = weight * out[_coefficient_rows(n, tuple(c for _, c in groups), D)]
         return F
 
     def psi(self, x0, h: float):
@@ -123,6 +124,23 @@ class _Tower:
         inputs += [np.concatenate([[p0[k]], Jp[k]]) for k in range(n)]
         out = self._run(self.system.alpha_tape, n, 1, inputs)
         return out[:, 0].copy(), out[:, 1: 1 + n].copy()
+
+
+@lru_cache(maxsize=1024)
+def _slot_rows(n: int, q: int, degree: int, r: int) -> np.ndarray:
+    """Rows of the (dx, eps) jet space of degree ``degree`` holding dx^a eps_r, for the monomials a
+    of degree <= degree - 1 in their order."""
+    big = _index(n + q, degree)
+    eps = tuple(1 if j == r else 0 for j in range(q))
+    return np.array([big[a + eps] for a in _monomials(n, degree - 1)], dtype=np.intp)
+
+
+@lru_cache(maxsize=1024)
+def _coefficient_rows(n: int, ks: tuple[int, ...], degree: int) -> np.ndarray:
+    """Rows of the (dx, eps) jet space holding dx^a prod eps_r^k_r, for the monomials a of degree
+    <= ``degree``."""
+    big = _index(n + len(ks), degree + sum(ks))
+    return np.array([big[a + ks] for a in _monomials(n, degree)], dtype=np.intp)
 
 
 def _gradient(jet: np.ndarray, n: int, degree: int, k: int) -> np.ndarray:
