@@ -182,7 +182,7 @@ def _modified_rows(r: dict) -> list[tuple[str, str]]:
     if "modified_energy_error" not in r:
         return []
     return [("max energy error over the run", _fmt(r["energy_error_max"], 3)),
-            (f"modified energy error (H~_{r['modified_order']}, {r['modified_class']})",
+            (f"modified energy error (H~_{r['modified_order']})",
              _fmt(r["modified_energy_error"], 3))]
 
 
