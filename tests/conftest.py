@@ -21,9 +21,10 @@ def run_cli():
 
 
 @pytest.fixture
-def oscillator_values():
-    """order -> {t: F(t)(x0) / H(x0)} exactly, on the harmonic oscillator H = |x|^2/2 in R^2 with
-    pi = [[0, 1], [-1, 0]], alpha = x - pi p / 2, at x0 = (1, 0) (docs/theory.md §11)."""
+def oscillator():
+    """(coefficients {t: c(t)}, order) -> [k-th coefficient of sum_t h^(|t|-1) c(t) F(t) / H]:
+    exact, on the harmonic oscillator H = |x|^2/2 in R^2 with pi = [[0, 1], [-1, 0]],
+    alpha = x - pi p / 2, where every F(t) of T_0 is a rational multiple of H (docs/theory.md §11)."""
     from fractions import Fraction
 
     import numpy as np
@@ -42,4 +43,11 @@ def oscillator_values():
         F = constant_matrix_jets(trees_up_to(order, True), order, K, D, None, basis)
         return {t: F[t][0] / half for t in trees_up_to(order, True)}
 
-    return values
+    def series(coefficients, order):
+        ratios = values(order)
+        out = [Fraction(0)] * order
+        for t, c in coefficients.items():
+            out[t.order - 1] += c * ratios[t]
+        return out
+
+    return series

@@ -128,26 +128,18 @@ def test_degenerate_and_symmetric_results_agree_modulo_the_relations():
 # ----------------------------------------------------------------------------- harmonic oscillator
 
 
-def _h_coefficients(series, order, oscillator_values):
-    values = oscillator_values(order)
-    out = [Fraction(0)] * order
-    for t, c in series.terms():
-        out[t.order - 1] += c * values[t]
-    return out
-
-
 @pytest.mark.parametrize("cls", ["degenerate", "symmetric"])
-def test_implicit_midpoint_on_the_harmonic_oscillator_is_the_arctan_series(cls, oscillator_values):
+def test_implicit_midpoint_on_the_harmonic_oscillator_is_the_arctan_series(cls, oscillator):
     """The implicit midpoint rule rotates by 2 arctan(h/2): H~ = (2/h) arctan(h/2) H
     = (1 - h^2/12 + h^4/80 - ...) H, to the order computed (6: the tree series stops there)."""
-    got = _h_coefficients(modified_hamiltonian(_euler(6), 6, cls), 6, oscillator_values)
+    got = oscillator(modified_hamiltonian(_euler(6), 6, cls).coefficients, 6)
     assert got == [1, 0, Fraction(-1, 12), 0, Fraction(1, 80), 0]
 
 
-def test_modifying_hamiltonian_of_the_midpoint_rule_is_the_tan_series(oscillator_values):
+def test_modifying_hamiltonian_of_the_midpoint_rule_is_the_tan_series(oscillator):
     """A midpoint step of K = c H rotates by 2 arctan(c h / 2): the exact rotation by h needs
     c = (2/h) tan(h/2) = 1 + h^2/12 + h^4/120 + ..."""
-    got = _h_coefficients(modifying_hamiltonian(_euler(6), 6, "symmetric"), 6, oscillator_values)
+    got = oscillator(modifying_hamiltonian(_euler(6), 6, "symmetric").coefficients, 6)
     assert got == [1, 0, Fraction(1, 12), 0, Fraction(1, 120), 0]
 
 
