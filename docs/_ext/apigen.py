@@ -101,8 +101,9 @@ KINDS = {"func": ("function", "method", "classmethod", "staticmethod"), "class":
 def resolve_short_name(app, env, node, contnode):
     """missing-reference: a Python name written short in a docstring (``Trajectory``,
     ``rkhp.systems.PoissonSystem`` for a re-export) links to the one documented object whose
-    full name ends with it, or with its last component; a private name (``_Graph``) is shown
-    without a link; ambiguous or unknown names stay unresolved (and fail a nitpicky build)."""
+    full name ends with it, or with its last component; a private name (``_Graph``) or a module
+    constant without a docstring is shown without a link; ambiguous or unknown names stay
+    unresolved (and fail a nitpicky build)."""
     if node.get("refdomain") != "py":
         return None
     domain = env.get_domain("py")
@@ -117,7 +118,21 @@ def resolve_short_name(app, env, node, contnode):
             return domain.resolve_xref(env, node["refdoc"], app.builder, "obj", found[0], node, contnode)
         if found:
             return None
+    if exists_undocumented(node.get("py:module"), target):
+        return contnode  # a real module constant without a docstring: shown as code, no link
     return None
+
+
+def exists_undocumented(module: str | None, target: str) -> bool:
+    """Whether ``target`` names an attribute of ``module`` (where the docstring is) or a dotted
+    path that imports: data such as a tuple of names has no docstring and so no entry."""
+    try:
+        if module and hasattr(importlib.import_module(module), target):
+            return True
+        parent, _, name = target.rpartition(".")
+        return bool(parent) and hasattr(importlib.import_module(parent), name)
+    except ImportError:
+        return False
 
 
 def setup(app):
