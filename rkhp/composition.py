@@ -90,7 +90,7 @@ class CompositionSeries:
 def composition_series(characters, order: int, cls: str = "symmetric", names=None, seed: int = 0) -> CompositionSeries:
     """The composition of steps with the given characters (each a mapping tree -> exact a(t) on T),
     applied in the order given (module docstring)."""
-    from .modified import _field_of, _read_character, canonical_basis
+    from .modified import MAX_FIELD_DEGREE, _field_of, _read_character, canonical_basis
     from .modular import FieldEmbeddings
 
     check_class(cls)
@@ -101,6 +101,9 @@ def composition_series(characters, order: int, cls: str = "symmetric", names=Non
     chars = [_read_character(a, all_trees) for a in characters]
     field_ = _field_of([v for a in chars for v in a.values()])
     embeddings = FieldEmbeddings(field_)
+    if embeddings.degree > MAX_FIELD_DEGREE:
+        raise InputError(f"the weights lie in a number field of degree {embeddings.degree} (at most "
+                         f"{MAX_FIELD_DEGREE} here)")
     if field_ is not None:
         import sympy
 

@@ -51,6 +51,8 @@ MAX_ORDER = 8
 DIMENSION = 4
 #: Instances beyond the number of basis trees of the largest order.
 EXTRA_INSTANCES = 4
+#: Largest degree of the weights' number field (the solve runs once per embedding).
+MAX_FIELD_DEGREE = 8
 #: Primes tried before giving up on rational reconstruction.
 MAX_PRIMES = 8
 KINDS = ("modified", "modifying")
@@ -189,6 +191,9 @@ def _series(kind: str, character: Mapping, order: int, cls: str, seed: int) -> H
     if _is_zero(inner[LEAF]):
         raise InputError("a(b) = 0: the method is not consistent, its steps are no near-identity flows")
     embeddings = FieldEmbeddings(_field_of(method.values()))
+    if embeddings.degree > MAX_FIELD_DEGREE:
+        raise InputError(f"the weights lie in a number field of degree {embeddings.degree}: the exact solve runs "
+                         f"once per embedding and handles degree <= {MAX_FIELD_DEGREE}")
     basis = tuple(canonical_basis(n, cls) for n in range(1, order + 1))
     problem = _Problem(kind, cls, order, inner, target, embeddings, basis, seed)
     coordinates, checks = _solve(problem)

@@ -154,11 +154,12 @@ class FieldEmbeddings:
             self.degree = len(coeffs) - 1
             self._minpoly = tuple(int(c * den) for c in coeffs)
 
-    def primes(self):
+    def primes(self, scan: int = 20_000):
         """Yield (p, roots): primes below 2^31, from the largest down, at which the minimal
-        polynomial has ``degree`` distinct roots (every prime for Q)."""
+        polynomial has ``degree`` distinct roots (every prime for Q); at most ``scan`` primes are
+        tried (a polynomial of degree d splits at about one prime in d! or fewer)."""
         p = 1 << 31
-        while True:
+        for _ in range(scan):
             p = _previous_prime(p)
             roots = self._roots(p)
             if roots is not None:
@@ -239,9 +240,34 @@ def _gcd(a: int, b: int) -> int:
 
 
 def _previous_prime(n: int) -> int:
-    from sympy import prevprime
+    """The largest prime below n (n <= 2^31 + 1)."""
+    n -= 1
+    while not _is_prime(n):
+        n -= 1
+    return n
 
-    return int(prevprime(n))
+
+def _is_prime(n: int) -> bool:
+    """Miller–Rabin with the bases 2, 3, 5, 7: deterministic below 3,215,031,751 > 2^31."""
+    if n < 2:
+        return False
+    for q in (2, 3, 5, 7):
+        if n % q == 0:
+            return n == q
+    d, r = n - 1, 0
+    while d % 2 == 0:
+        d, r = d // 2, r + 1
+    for a in (2, 3, 5, 7):
+        x = pow(a, d, n)
+        if x in (1, n - 1):
+            continue
+        for _ in range(r - 1):
+            x = x * x % n
+            if x == n - 1:
+                break
+        else:
+            return False
+    return True
 
 
 class Inconsistent(Exception):

@@ -302,11 +302,13 @@ def field_generators(expr) -> set:
 def number_field(values):
     """Q(generators of the values), None for Q itself; NoNumberField when its degree exceeds
     MAX_FIELD_DEGREE or sympy cannot build it."""
+    irrational = [x for x in values if not isinstance(x, Fraction)]
+    if not irrational:  # Q: no sympy (it costs ~0.5 s to import)
+        return None
     import sympy
     from sympy import QQ
 
-    generators = sorted({g for x in values if not isinstance(x, Fraction) for g in field_generators(x)},
-                        key=sympy.default_sort_key)
+    generators = sorted({g for x in irrational for g in field_generators(x)}, key=sympy.default_sort_key)
     if not generators:
         return None
     try:
