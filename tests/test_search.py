@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,6 +27,7 @@ from rkhp.search.system import ResidualSystem
 from rkhp.tablefiles import builtin_names, load_tableau
 from rkhp.verify import verify
 
+ROOT = Path(__file__).resolve().parent.parent
 ISSUE_KEYS = ["stages", "degenerate", "implicit", "order", "found", "tableau", "residual",
               "restarts", "successes", "seconds", "principal_error", "proof",
               "evidence_next_order"]
@@ -337,3 +339,18 @@ def test_saved_tables_are_reproduced_by_their_reference_command(name, tmp_path):
     assert out.returncode == 0, out.stderr
     again = load_tableau(str(tmp_path / "again.toml"))
     assert again.A == tab.A and again.b == tab.b
+
+
+@pytest.mark.slow
+def test_the_demo_search_shows_the_error_optimal_tableau():
+    # the Makefile's demo search: the error-optimal 3-stage tableau of degenerate order 4, whose
+    # principal error equals the shipped optimum's (60 digits) and beats the first one found
+    line = next(w for w in (ROOT / "Makefile").read_text().splitlines() if "bin/rkhp search" in w)
+    args = line.split("rkhp", 1)[1].split()
+    out = _cli(*args, "--format", "json")
+    data = json.loads(out.stdout)
+    assert "--optimize" in args and data["order"] == 4
+    optimum = verify("search-degenerate-o4-s3-min-error").principal_error["degenerate"]
+    assert data["principal_error"] == pytest.approx(optimum, rel=1e-6)
+    assert data["principal_error"] < verify("search-degenerate-o4-s3").principal_error["degenerate"]
+    assert data["order_restarts"] < data["restarts"] - data["evidence_next_order"]["restarts"]
