@@ -21,14 +21,14 @@ EXACT = "exact"
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the generic instances.")
 @format_option("table", "json")
 def compose(methods, order, degenerate, symmetric, seed, fmt):
-    """Compose RKHP steps of size h (METHOD names or files, applied left to right; `exact` is the
-    exact flow) and compare the generating function of the composition with the Butcher products
+    """Compose RKHP steps of size h (tableau names or files, or thpN, applied left to right; `exact`
+    is the exact flow) and compare the generating function of the composition with the Butcher products
     of the methods' characters. Exact, on generic systems modulo primes (docs/modified.md)."""
     from rkhp.algebra import exact_flow_character
     from rkhp.composition import MAX_ORDER, composition_series
     from rkhp.errors import InputError
+    from rkhp.methods import resolve_method
     from rkhp.modified import method_character
-    from rkhp.tablefiles import load_tableau
     from rkhp.trees import check_order
 
     cls = _class_of(degenerate, symmetric)
@@ -43,8 +43,7 @@ def compose(methods, order, degenerate, symmetric, seed, fmt):
         if name == EXACT:
             characters.append(exact_flow_character(order))
         else:
-            tab = load_tableau(name)
-            characters.append(method_character(tab, order))
+            characters.append(method_character(resolve_method(name), order))
     with progress(fmt != "json") as bar:
         bar.add_task("composing on generic systems modulo primes", total=None)
         series = composition_series(characters, order, cls, names, seed)

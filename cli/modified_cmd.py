@@ -10,8 +10,9 @@ from .trees_cmd import _class_of
 
 
 @click.command()
-@click.option("--method", "-m", "method", required=True, metavar="NAME|FILE",
-              help="A built-in tableau (rkhp tables) or a tableau file with exact entries.")
+@click.option("--method", "-m", "method", required=True, metavar="METHOD",
+              help="An RKHP method: a built-in tableau or a tableau file with exact entries, or thpN / thpN-t0 "
+                   "(docs/methods.md).")
 @click.option("--order", "-n", "order", type=int, required=True,
               help="Largest tree order N: the series up to h^(N-1) (at most 8).")
 @click.option("--degenerate", is_flag=True, help="Degenerate birealisations: trees of T_0.")
@@ -33,19 +34,19 @@ def modified(method, order, degenerate, symmetric, modifying, seed, fmt):
 
     cls = _class_of(degenerate, symmetric)
     check_order(order, MAX_ORDER, what="order of the modified Hamiltonian")
-    tab = resolve_method(method).rkhp_tableau("the modified Hamiltonian")
-    character = method_character(tab, order)
+    chosen = resolve_method(method)
+    character = method_character(chosen, order)
     solve = modifying_hamiltonian if modifying else modified_hamiltonian
     with progress(fmt != "json") as bar:
         bar.add_task(f"solving order by order to order {order}", total=None)
         series = solve(character, order, cls, seed=seed)
-    doc = series_json(series, tab.name)
+    doc = series_json(series, chosen.name)
     if fmt == "json":
         emit_json(doc)
     elif fmt == "latex":
-        _latex(series, tab.name)
+        _latex(series, chosen.name)
     else:
-        _render(series, tab.name)
+        _render(series, chosen.name)
 
 
 def series_json(series, method: str) -> dict:
@@ -116,19 +117,12 @@ def _latex(series, method: str) -> None:
 def modified_series(system, method, order: int, show_progress: bool):
     """The modified Hamiltonian of an RKHP or THP method (rkhp.methods.Method) to ``order``, in the
     class of the system's realisation (for ``rkhp integrate --modified N``)."""
-    from rkhp.errors import InputError
-    from rkhp.integrators.modified_energy import taylor_character
     from rkhp.methods import condition_class
     from rkhp.modified import MAX_ORDER, method_character, modified_hamiltonian
     from rkhp.trees import check_order
 
     check_order(order, MAX_ORDER, what="--modified order")
-    if method.kind == "taylor":
-        character = taylor_character(method.order, order)
-    elif method.kind == "rkhp":
-        character = method_character(method.tableau, order)
-    else:
-        raise InputError(f"--modified needs an RKHP or THP method; {method.name} is a {method.kind} method")
+    character = method_character(method, order)
     with progress(show_progress) as bar:
         bar.add_task(f"modified Hamiltonian to order {order}", total=None)
         return modified_hamiltonian(character, order, condition_class(system))

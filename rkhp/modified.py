@@ -124,10 +124,20 @@ def modifying_hamiltonian(character: Mapping, order: int, cls: str = "general", 
     return _series("modifying", character, order, cls, seed)
 
 
-def method_character(tableau, order: int) -> dict[Tree, object]:
-    """The exact elementary weights a(t) of a tableau on T up to ``order`` (docs/theory.md §2)."""
+def method_character(method, order: int) -> dict[Tree, object]:
+    """The character a(t) on T up to ``order`` of a method: a tableau (its exact elementary weights,
+    docs/theory.md §2), or a :class:`rkhp.methods.Method` of kind rkhp (its tableau's) or taylor
+    (the THP of order N, paper Thm 5.1: e(t) for |t| <= N, over T_0 for ``thpN-t0``, 0 elsewhere)."""
+    from .tableau import Tableau
     from .weights import elementary_weights
 
+    if isinstance(method, Tableau):
+        tableau = method
+    elif method.kind == "taylor":
+        return {t: t.e if t.order <= method.order and (t.in_t0 or not method.degenerate) else Fraction(0)
+                for t in trees_up_to(order)}
+    else:
+        tableau = method.rkhp_tableau("the modified Hamiltonian")
     if not tableau.is_exact:
         raise InputError(f"{tableau.name}: the modified Hamiltonian is exact and needs exact tableau entries "
                          f"(rationals or radicals), but some are given as decimals")

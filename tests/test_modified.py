@@ -258,3 +258,12 @@ def test_rigid_body_modified_energy_of_the_paper_method(run_cli):
         energy = doc["energy_error_max"]
     assert errors[4] > errors[6] > errors[8]
     assert errors[8] * 100 <= energy
+
+
+def test_the_taylor_integrator_misses_exactly_the_next_order():
+    """THP of order N (paper Thm 5.1) has the character e up to N and 0 above: its first correction
+    is -sum over the trees of order N + 1 of e(t)/sigma(t) F(t)."""
+    from rkhp.methods import resolve_method
+
+    series = modified_hamiltonian(method_character(resolve_method("thp4-t0"), 5), 5, "degenerate")
+    assert series.terms() == [(LEAF, 1)] + [(t, -t.e / t.sigma) for t in trees_of_order(5, True)]

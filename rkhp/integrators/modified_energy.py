@@ -65,13 +65,6 @@ def method_series(character, order: int, cls: str, seed: int = 0):
         return modified_hamiltonian(character, exc.order - 1, cls, seed)
 
 
-def taylor_character(order: int, max_order: int) -> dict:
-    """The character of the THP of order ``order`` (paper Thm 5.1): e(t) up to ``order``, then 0."""
-    from ..trees import trees_up_to
-
-    return {t: t.e if t.order <= order else 0 for t in trees_up_to(max_order)}
-
-
 def _subtree_closure(trees) -> list:
     """The trees and all their subtrees, by increasing order."""
     seen = set()
