@@ -90,9 +90,10 @@ class CompositionSeries:
 def composition_series(characters, order: int, cls: str = "symmetric", names=None, seed: int = 0) -> CompositionSeries:
     """The composition of steps with the given characters (each a mapping tree -> exact a(t) on T),
     applied in the order given (module docstring)."""
-    from .modified import MAX_FIELD_DEGREE, _field_of, _read_character, canonical_basis
+    from .modified import MAX_FIELD_DEGREE, _field_of, _read_character, canonical_basis, check_seed
     from .modular import FieldEmbeddings
 
+    check_seed(seed)
     check_class(cls)
     check_order(order, MAX_ORDER, what="order of the composition")
     if len(characters) < 2:

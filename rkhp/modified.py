@@ -189,9 +189,17 @@ class _Problem:
     seed: int
 
 
+def check_seed(seed) -> int:
+    """A seed of the generic instances: a non-negative integer."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise InputError(f"the seed must be a non-negative integer, got {seed!r}")
+    return seed
+
+
 def _series(kind: str, character: Mapping, order: int, cls: str, seed: int) -> HamiltonianSeries:
     from .modular import FieldEmbeddings
 
+    check_seed(seed)
     check_class(cls)
     check_order(order, MAX_ORDER, what="order of the modified Hamiltonian")
     trees = trees_up_to(order, degenerate=cls != "general")

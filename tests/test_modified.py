@@ -179,6 +179,8 @@ def test_bad_input_is_refused():
         modifying_hamiltonian(zero, 3, "general")
     with pytest.raises(InputError):
         method_character(load_tableau("dop853"), 3)
+    with pytest.raises(InputError):
+        modified_hamiltonian(_euler(3), 3, "symmetric", seed=-1)
 
 
 def test_cli_json_keys_and_values(run_cli):
