@@ -103,7 +103,8 @@ def _render(series, doc) -> None:
                        ("composition_vs_butcher_product_reversed", "composed steps vs ak*...*a1"),
                        ("hamilton_jacobi_vs_butcher_product", "Hamilton–Jacobi composition vs a1*...*ak")):
         n = doc["first_difference"][key]
-        verdict = "equal to the order computed" if n is None else f"differ from order {n}"
+        reach = series.order if key.startswith("hamilton") else top
+        verdict = f"equal up to order {reach}" if n is None else f"differ from order {n}"
         if key.startswith("hamilton") and series.restart is None:
             verdict = "not computed (realisations not linear in p)"
         out.print(f"{label}: {verdict}", markup=False)
