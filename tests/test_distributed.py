@@ -150,6 +150,31 @@ def test_stress_bench_and_relations_on_the_cluster_equal_the_single_process_runs
     assert relations.orders == shipped_relations().orders[:5]  # the shipped data (orders <= 8)
 
 
+def test_ctrl_c_cancels_the_tasks_on_the_cluster(cluster):
+    import time
+
+    from rkhp.search.multistart import Problem, run_restarts
+
+    def interrupt_after_two(done, total):
+        if done == 2:
+            raise KeyboardInterrupt
+
+    def attempts_on_the_scheduler(dask_scheduler):
+        return [key for key in dask_scheduler.tasks if str(key).startswith("attempt")]
+
+    with open_executor(scheduler=cluster.address) as dask:
+        run = run_restarts(Problem(4, 5, "degenerate"), 40, seed=2, executor=dask, stop_after=None,
+                           on_progress=interrupt_after_two)
+        left = dask._client.run_on_scheduler(attempts_on_the_scheduler)
+        for _ in range(50):
+            if not left:
+                break
+            time.sleep(0.2)
+            left = dask._client.run_on_scheduler(attempts_on_the_scheduler)
+    assert run.interrupted and len(run.attempts) == 2  # the two finished before Ctrl-C
+    assert left == []
+
+
 def test_killing_a_worker_mid_search_changes_nothing(cluster):
     # last in this file: it leaves the cluster with one worker
     from rkhp.search.multistart import Problem, run_restarts
