@@ -1,5 +1,5 @@
 """`rkhp relations`: linear relations among elementary differentials of symmetric birealisations
-and the symmetric order conditions they leave (NOTES §8)."""
+and the symmetric order conditions they leave (docs/theory.md §8)."""
 
 from __future__ import annotations
 

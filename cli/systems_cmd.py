@@ -28,7 +28,7 @@ def _fmt(v, digits=6) -> str:
 @click.command("systems")
 @format_option("table", "json")
 def systems(fmt):
-    """List the built-in Poisson systems (NOTES §6)."""
+    """List the built-in Poisson systems (docs/theory.md §6)."""
     from rkhp.systems import builtin_systems, get_system
 
     rows = []

@@ -35,7 +35,7 @@ _CLASS_TREES = {"general": "T", "degenerate": "T_0", "symmetric": "T_0 (symmetri
 @click.option("--count", is_flag=True, help="Only the counts per order (no trees are built).")
 @format_option(*FORMATS)
 def trees(order, degenerate, exact_order, count, fmt):
-    """Enumerate the Butcher trees of order <= N over T or T_0 (paper §3, NOTES §1)."""
+    """Enumerate the Butcher trees of order <= N over T or T_0 (paper §3, docs/theory.md §1)."""
     orders = [order] if exact_order else list(range(1, order + 1))
     if count:
         check_order(order, MAX_COUNT_ORDER)

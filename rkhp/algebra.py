@@ -155,7 +155,7 @@ def forest_value(a: Character, f: Forest):
 def butcher_product(a1: Character, a2: Character, t: Tree):
     """(a1 * a2)(t) = sum over Delta(t) of a1(t \\ s) a2(s), a2(empty) = 1 (paper §4).
 
-    a1 is the method applied first: the composition of B-series (NOTES §3).
+    a1 is the method applied first: the composition of B-series (docs/theory.md §3).
     """
     total = 0
     for (cut, sub), m in coproduct(t).items():

@@ -3,10 +3,10 @@
 Paper §5 (Theorem "order conditions" and Table 1): an RKHP method with coefficient map a has order
 N when a(t) = e(t) = 1/gamma(t) for every tree t of T with |t| <= N (general birealisations), or
 for every t of T_0 under the degeneracy condition (eq. (degen)). The third class, "symmetric"
-(issue 7, NOTES §8), replaces the T_0 conditions of each order by fewer linear combinations of the
+(issue 7, docs/theory.md §8), replaces the T_0 conditions of each order by fewer linear combinations of the
 residuals r(t) = gamma(t) a(t) - 1; its rows come from :mod:`rkhp.relations`.
 
-The Butcher form folds the leaves into c_i = sum_j a_ij (NOTES §2):
+The Butcher form folds the leaves into c_i = sum_j a_ij (docs/theory.md §2):
 ``b[b[b,b]]`` -> ``sum_{i,j} b_i a_ij c_j^2``. Index letters follow a depth-first walk over the
 vertices that are not leaves, children in increasing canonical order (the paper's writing order).
 """
@@ -83,7 +83,7 @@ def condition_trees(n: int, cls: str = "general") -> tuple[Tree, ...]:
 
 
 def conditions_of_order(n: int, cls: str = "general") -> tuple[OrderCondition, ...]:
-    """The order conditions of order exactly n in the class (paper Thm 5.1–5.2; NOTES §8)."""
+    """The order conditions of order exactly n in the class (paper Thm 5.1–5.2; docs/theory.md §8)."""
     check_class(cls)
     if cls == "symmetric":
         from .relations import symmetric_order_conditions
@@ -154,7 +154,7 @@ def _folded_product(t: Tree, a_factor) -> tuple[list[str], list[str]]:
 
 
 def butcher_form(t: Tree) -> str:
-    """Left-hand side in plain text: ``sum_{i,j} b_i c_i a_ij c_j^2`` (NOTES §2)."""
+    """Left-hand side in plain text: ``sum_{i,j} b_i c_i a_ij c_j^2`` (docs/theory.md §2)."""
     names, parts = _folded_product(t, lambda x, y: f"a_{x}{y}" if len(x) == len(y) == 1 else f"a_{{{x},{y}}}")
     head = f"sum_{names[0]}" if len(names) == 1 else "sum_{" + ",".join(names) + "}"
     return head + " " + " ".join(parts)

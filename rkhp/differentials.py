@@ -1,4 +1,4 @@
-"""Elementary differentials F(t) on truncated Taylor jets, exactly (NOTES §5 and §8).
+"""Elementary differentials F(t) on truncated Taylor jets, exactly (docs/theory.md §5 and §8).
 
 F(b) = H and F(b[t1..tk])(x) = d^k_p f(x, 0)[grad F(t1)(x), ..., grad F(tk)(x)] with
 f = H o alpha (paper §5.1, Theorem "superconvergence"). Every function of x is held as its Taylor
@@ -7,7 +7,7 @@ tree of order <= N sits at depth <= N - |s|, so F(s) is needed to degree N - |s|
 N - 1. Coefficients are residues modulo a prime below 2^31 (numpy int64, vectorised over a batch
 of random instances) or exact Python integers (``p=None``, object arrays).
 
-Two families of symmetric birealisations (NOTES §4):
+Two families of symmetric birealisations (docs/theory.md §4):
 - constant pi: alpha = x - pi p / 2, so d^k_p f(x,0)[v1..vk] = (-1/2)^k D^k H(x)[pi v1, ..., pi vk];
   the factor (-1/2)^(|t|-1) is common to all trees of one order and is left out (integers stay
   integers, relations are unchanged);
@@ -447,7 +447,7 @@ def general_values(trees, max_order: int, family: str, batch: int, rng: np.rando
 
     Families: ``"lie-poisson"`` (so(3)*, symmetric realisation), ``"log-canonical"`` (dimension
     ``dim``, symmetric), and ``"quartic"``: constant pi composed with the time-1 flow of
-    K(p) = sum_k (u_k . p)^4 / 24, alpha = x + grad K(p) - pi p / 2 (NOTES §8), degenerate but not
+    K(p) = sum_k (u_k . p)^4 / 24, alpha = x + grad K(p) - pi p / 2 (docs/theory.md §8), degenerate but not
     symmetric — the control on which the symmetric relations must fail.
     """
     D = max(max_order - 1, 1)

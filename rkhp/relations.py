@@ -1,7 +1,7 @@
-"""Linear relations among elementary differentials of symmetric birealisations (NOTES §8).
+"""Linear relations among elementary differentials of symmetric birealisations (docs/theory.md §8).
 
 For a symmetric birealisation, beta(x, p) = alpha(x, -p), the elementary differentials F(t),
-t in T_0 of one order n (paper §5, Theorem "superconvergence"; NOTES §5), satisfy linear relations
+t in T_0 of one order n (paper §5, Theorem "superconvergence"; docs/theory.md §5), satisfy linear relations
 beyond those of the degenerate theory: the relation space L_n = {c : sum_t c_t F(t) = 0 for every
 symmetric system}. An RKHP method has *symmetric order* N when for every n <= N its error
 coefficients d_t = (a(t) - e(t)) / sigma(t) over T_0 of order n form a relation, i.e. P_n d = 0 for
@@ -15,7 +15,7 @@ Derivation (:func:`derive_relations`, ``rkhp relations --regenerate``), exact th
    as rationals by rational reconstruction (:mod:`rkhp.modular`), then confirmed modulo a third
    prime; more primes are added until a further prime confirms;
 3. checks: exact integer evaluation of every relation on fresh instances, and the relation space of
-   a second family (Lie–Poisson so(3)*, symmetric realisation alpha = phi(K(p)) x, NOTES §4),
+   a second family (Lie–Poisson so(3)*, symmetric realisation alpha = phi(K(p)) x, docs/theory.md §4),
    which must contain L_n (and here equals it).
 The result up to order 8 ships as ``rkhp/data/symmetric_relations.json``.
 """

@@ -1,7 +1,7 @@
 """Butcher tableaux: the value, its entries (exact or at the digits given), its kind.
 
 Paper §5.2: an RKHP method is defined by a Runge–Kutta tableau (A, b); the stage abscissae are
-the row sums c_i = sum_j a_ij (NOTES §2), so a ``c`` given in a file is only compared with them.
+the row sums c_i = sum_j a_ij (docs/theory.md §2), so a ``c`` given in a file is only compared with them.
 
 Entries keep the precision they were given with (see :func:`parse_entry`):
 
@@ -200,7 +200,7 @@ def _readonly(array):
 
 @dataclass(frozen=True)
 class Tableau:
-    """A Runge–Kutta tableau (A, b) with its metadata (paper §5.2; NOTES §2).
+    """A Runge–Kutta tableau (A, b) with its metadata (paper §5.2; docs/theory.md §2).
 
     Attributes:
         name: the method's name (a built-in name, or the file's).
@@ -284,7 +284,7 @@ class Tableau:
 
     @cached_property
     def c(self) -> tuple:
-        """Row sums c_i = sum_j a_ij (NOTES §2)."""
+        """Row sums c_i = sum_j a_ij (docs/theory.md §2)."""
         return tuple(_sum(list(row)) for row in self.A)
 
     def entries(self):

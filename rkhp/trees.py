@@ -1,7 +1,7 @@
 """Rooted, non-planar (Butcher) trees: the value, bracket notation, sigma, gamma, enumeration.
 
 Paper §3 (trees T, the grading |t|, the coefficient e(t) of eq. (e)) and Theorem "superconvergence"
-(the subset T_0 of trees with no vertex whose only child is a leaf). Conventions: NOTES §1.
+(the subset T_0 of trees with no vertex whose only child is a leaf). Conventions: docs/theory.md §1.
 
 A :class:`Tree` is immutable and hashable; equality is isomorphism. Its canonical identity is
 ``key``: the canonical level sequence (root at level 1, children in decreasing key order), stored as
@@ -10,7 +10,7 @@ key, the Beyer–Hedetniemi order, which is the order of the paper's Table 1 (ta
 
 Enumeration builds every tree of order n as ``b[c1, *rest]`` from its largest child ``c1`` and the
 tree ``r = b[rest]`` (all children of r at most c1): sigma, gamma and the key follow in O(1) from
-those of c1 and r. T_0 is built the same way from T_0 trees directly (NOTES §1), never by filtering T.
+those of c1 and r. T_0 is built the same way from T_0 trees directly (docs/theory.md §1), never by filtering T.
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ class Tree(tuple):
         gamma: the density, gamma(t) = |t| prod gamma(ti); the order condition is a(t) = 1/gamma.
         key: the canonical level sequence as bytes (equality and ordering).
         rest: the tree b[children[1:]] (None for the leaf), so that t = b[children[0]] merged
-            with rest: elementary weights need one product per tree (NOTES §2).
+            with rest: elementary weights need one product per tree (docs/theory.md §2).
     """
 
     __slots__ = ()
@@ -220,7 +220,7 @@ def parse_tree(text: str) -> Tree:
 
 
 def in_t0(t: Tree) -> bool:
-    """No vertex, root included, has a leaf as its only child (NOTES §1)."""
+    """No vertex, root included, has a leaf as its only child (docs/theory.md §1)."""
     if len(t.children) == 1 and t.children[0].order == 1:
         return False
     return all(in_t0(c) for c in t.children)

@@ -2,7 +2,7 @@
 
 A tableau has order p in a class when every condition of order <= p holds: in the general class
 a(t) = 1/gamma(t) for all t in T, in the degenerate class for t in T_0, in the symmetric class
-the combinations of :func:`rkhp.conditions.conditions_of_order` (NOTES §2, §8). Every condition
+the combinations of :func:`rkhp.conditions.conditions_of_order` (docs/theory.md §2, §8). Every condition
 up to the order found plus one is checked (at most ``max_order``), from the elementary weights of
 all trees of T computed in one pass (:mod:`rkhp.weights`).
 

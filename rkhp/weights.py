@@ -1,6 +1,6 @@
 """Elementary weights a(t) of every tree up to order N, in one pass, in several arithmetics.
 
-NOTES §2: Phi_i(b) = 1, Phi_i(b[t1..tn]) = prod_k (A Phi(tk))_i, a(t) = b . Phi(t). The trees are
+docs/theory.md §2: Phi_i(b) = 1, Phi_i(b[t1..tn]) = prod_k (A Phi(tk))_i, a(t) = b . Phi(t). The trees are
 built as in the enumeration of :mod:`rkhp.trees`: t = b[c1, *rest] from its largest child c1 and
 r = b[rest], so that
 
@@ -86,7 +86,7 @@ def tree_plan(max_order: int) -> TreePlan:
         starts.append(starts[-1] + count_trees(m))
     first_ = np.array(first, dtype=np.intp)
     rest_ = np.array(rest, dtype=np.intp)
-    # T_0 (NOTES §1): no vertex has a leaf as its only child. t = b[c1, rest] has all its
+    # T_0 (docs/theory.md §1): no vertex has a leaf as its only child. t = b[c1, rest] has all its
     # children in T_0 when c1 is in T_0 and r's children are; only b[b] then fails at its root.
     kids_ok = np.ones(n, dtype=bool)
     in_t0 = np.ones(n, dtype=bool)
@@ -431,7 +431,7 @@ def tableau_symbols(s: int, explicit: bool = True):
 def symbolic_weights(trees, s: int, explicit: bool = True, c_symbols: bool = False) -> dict:
     """a(t) for each tree as a sympy polynomial in the a_i_j and b_i of :func:`tableau_symbols`.
 
-    Leaves are folded into c_i (Butcher's form, NOTES §2): c_i is the row sum of A, or the symbol
+    Leaves are folded into c_i (Butcher's form, docs/theory.md §2): c_i is the row sum of A, or the symbol
     c_i when ``c_symbols`` (then the row-sum conditions c_i = sum_j a_ij are left to the caller).
     Stage vectors are computed once per subtree, in a sparse polynomial ring.
     """

@@ -167,7 +167,7 @@ def test_leaf_graft_is_root_attachment():
 
 
 def _weights(A, b, order):
-    """Elementary weights a(t) = sum_i b_i Phi_i(t) by the recursion of NOTES §2 (test oracle)."""
+    """Elementary weights a(t) = sum_i b_i Phi_i(t) by the recursion of docs/theory.md §2 (test oracle)."""
     s = len(b)
     phi = {}
     out = {}
@@ -182,7 +182,7 @@ def _weights(A, b, order):
 
 
 def test_composition_of_tableaux_is_the_butcher_product():
-    # NOTES §3: one step 2h of the concatenated tableau = method 1 then method 2 with step h, so
+    # docs/theory.md §3: one step 2h of the concatenated tableau = method 1 then method 2 with step h, so
     # its weight at t is (a1 * a2)(t) / 2^|t|. Method 1: Heun's RK2, method 2: Kutta's RK3.
     F = Fraction
     A1, b1 = [[F(0), F(0)], [F(1), F(0)]], [F(1, 2), F(1, 2)]

@@ -30,7 +30,7 @@ def _error(traj, system, t):
 @pytest.mark.parametrize("name", ["rigid-body", "lotka-volterra", "pendulum"])
 @pytest.mark.parametrize("realisation", ["symmetric", "shifted"])
 def test_vector_field_from_tapes_is_pi_grad_h(name, realisation):
-    """pi = D^T - D with D = d_p alpha(x, 0) (NOTES §4) in both realisations."""
+    """pi = D^T - D with D = d_p alpha(x, 0) (docs/theory.md §4) in both realisations."""
     system = get_system(name, realisation=realisation)
     f = vector_field(system)
     rng = np.random.default_rng(1)
@@ -85,7 +85,7 @@ def test_midpoint_order_and_quadratic_casimir(rigid):
 
 
 def test_midpoint_equals_rkhp_euler_on_constant_pi():
-    """NOTES §5: RKHP Euler on a constant Poisson structure is the implicit midpoint rule."""
+    """docs/theory.md §5: RKHP Euler on a constant Poisson structure is the implicit midpoint rule."""
     from rkhp.integrators import integrate
 
     pendulum = get_system("pendulum")

@@ -1,4 +1,4 @@
-"""Order conditions in Butcher's form: the paper's Table 1 and the forms quoted in NOTES §2."""
+"""Order conditions in Butcher's form: the paper's Table 1 and the forms quoted in docs/theory.md §2."""
 
 from __future__ import annotations
 

@@ -19,7 +19,7 @@ STEPS = (20, 40, 80, 160)
 
 
 def observed_order(system, method, steps=STEPS, t_final=T_ORDERS) -> float:
-    """Least-squares slope of log(error) against log(h) (NOTES §6), error vs the exact solution."""
+    """Least-squares slope of log(error) against log(h) (docs/theory.md §6), error vs the exact solution."""
     hs, errors = [], []
     for n in steps:
         h = t_final / n
@@ -68,7 +68,7 @@ def _implicit_midpoint(system, h, n):
 
 
 def test_euler_on_constant_pi_is_implicit_midpoint():
-    """NOTES §5: RKHP Euler on a constant pi is the implicit midpoint rule."""
+    """docs/theory.md §5: RKHP Euler on a constant pi is the implicit midpoint rule."""
     for realisation in ("symmetric",):
         system = get_system("pendulum", realisation)
         tr = integrate(system, "euler", 0.1, 50).raise_if_failed()
@@ -143,7 +143,7 @@ def test_cli_integrate_json_and_failures():
     assert list(doc)[: len(keys)] == keys
     assert doc["status"] == "ok" and doc["steps"] == 100 and doc["h"] == pytest.approx(0.1)
     assert doc["casimir_error"] < 1e-14
-    # NOTES §7: the paper's 3-stage method reaches 3e-8 at T = 10 in 100 steps
+    # docs/theory.md §7: the paper's 3-stage method reaches 3e-8 at T = 10 in 100 steps
     assert 1e-8 < doc["exact_error"] < 5e-8
     res = runner.invoke(rkhp, ["integrate", "lotka-volterra", "--method", "rk4", "--h", "1"])
     assert res.exit_code == 1

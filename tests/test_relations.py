@@ -1,4 +1,4 @@
-"""Relations among elementary differentials of symmetric birealisations (NOTES §8, issue 7)."""
+"""Relations among elementary differentials of symmetric birealisations (docs/theory.md §8, issue 7)."""
 
 from __future__ import annotations
 
@@ -85,7 +85,7 @@ def test_rref_modulo_p_agrees_with_exact_rref():
 
 
 def test_jets_match_the_definition_by_symbolic_differentiation():
-    """F(t)(0) on jets equals NOTES §5's definition differentiated by sympy (constant pi)."""
+    """F(t)(0) on jets equals docs/theory.md §5's definition differentiated by sympy (constant pi)."""
     import sympy
 
     from rkhp.differentials import constant_pi_jets, monomial_basis
@@ -129,7 +129,7 @@ def test_jets_match_the_definition_by_symbolic_differentiation():
 
 
 def test_order_four_oddness_on_every_family():
-    """F(b[b,b,b]) + F(b[b[b,b]]) = 0 (NOTES §8) on constant pi, so(3)* and log-canonical."""
+    """F(b[b,b,b]) + F(b[b[b,b]]) = 0 (docs/theory.md §8) on constant pi, so(3)* and log-canonical."""
     from rkhp.differentials import constant_pi_values, general_values
 
     trees = trees_of_order(4, True)
@@ -143,7 +143,7 @@ def test_order_four_oddness_on_every_family():
 
 
 def test_quartic_realisation_breaks_the_symmetric_relations():
-    """Degenerate but not symmetric (NOTES §8): trees outside T_0 still vanish, the relations fail."""
+    """Degenerate but not symmetric (docs/theory.md §8): trees outside T_0 still vanish, the relations fail."""
     from rkhp.differentials import general_values
 
     p = PRIMES[1]
@@ -174,7 +174,7 @@ def test_shipped_counts_add_up_to_t0():
     data = shipped_relations()
     assert data.max_order == MAX_SHIPPED_ORDER == 8
     counts = [len(o.trees) for o in data.orders]
-    assert counts == [1, 0, 1, 2, 4, 8, 17, 36]  # paper Table 1 and NOTES §1
+    assert counts == [1, 0, 1, 2, 4, 8, 17, 36]  # paper Table 1 and docs/theory.md §1
     for o in data.orders:
         assert len(o.relations) + len(o.conditions) == len(o.trees)
         assert _rank(o.relations) == len(o.relations)

@@ -219,7 +219,7 @@ def test_cli_json_keys_and_save_round_trip(tmp_path):
 
 
 def test_cli_symmetric_save_claims_the_symmetric_order(tmp_path):
-    # NOTES §8: symmetric order 4 with 3 stages (degenerate order 3 only)
+    # docs/theory.md §8: symmetric order 4 with 3 stages (degenerate order 3 only)
     path = tmp_path / "sym.toml"
     out = _cli("search", "--stages", "3", "--order", "4", "--symmetric", "--restarts", "10",
                "--save", str(path))
@@ -324,7 +324,7 @@ def test_error_optimal_three_stage_degenerate_order_4():
 
 @pytest.mark.slow
 def test_symmetric_class_needs_fewer_stages():
-    # NOTES §8: fewer conditions for symmetric birealisations; order 5 still needs 4 stages
+    # docs/theory.md §8: fewer conditions for symmetric birealisations; order 5 still needs 4 stages
     three = search(3, 5, "symmetric", options=SearchOptions(restarts=10, prove=True))
     assert three.found is None and three.proof.proved
     five = search(5, 6, "symmetric", options=SearchOptions(restarts=30, seed=0))

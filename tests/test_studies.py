@@ -107,7 +107,7 @@ def test_dop853_reference_of_lotka_volterra_keeps_its_casimir():
 
 
 def test_dop853_error_estimate_is_honest_against_mpmath():
-    """Lotka–Volterra (NOTES §6) solved independently by mpmath's Taylor integrator at 25 digits:
+    """Lotka–Volterra (docs/theory.md §6) solved independently by mpmath's Taylor integrator at 25 digits:
     the DOP853 reference is within its own error estimate."""
     import mpmath
 
@@ -123,7 +123,7 @@ def test_dop853_error_estimate_is_honest_against_mpmath():
 
 
 # ----------------------------------------------------------------------------------------------
-# convergence studies with the RKHP integrators (orders: paper Table 1 / Theorem 5.1, NOTES §6)
+# convergence studies with the RKHP integrators (orders: paper Table 1 / Theorem 5.1, docs/theory.md §6)
 
 
 def _study(system, realisation, methods, steps, t_final=None):

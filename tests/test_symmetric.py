@@ -1,11 +1,11 @@
-"""Symmetric birealisations as a third class (issue 7, NOTES §8): the quartic realisation, the
+"""Symmetric birealisations as a third class (issue 7, docs/theory.md §8): the quartic realisation, the
 symmetric check, minimal stage counts, saved tableaux, and convergence on the integrators.
 
 Values from outside the code: the birealisation axioms and the definition of the quartic
-realisation (NOTES §8: alpha'' = alpha(x + grad K(p), p), K(p) = sum_k (u_k . p)^4 / 24, here
+realisation (docs/theory.md §8: alpha'' = alpha(x + grad K(p), p), K(p) = sum_k (u_k . p)^4 / 24, here
 differentiated independently by finite differences); the target orders of the searches; orders
 observed with the integrators against the exact (rigid body) or DOP853 (Lotka–Volterra,
-pendulum) reference solution. (The relations, the order-4/5 conditions of NOTES §8 and the
+pendulum) reference solution. (The relations, the order-4/5 conditions of docs/theory.md §8 and the
 paper's methods' symmetric orders are tested in tests/test_relations.py; the 3-stage proof for
 symmetric order 5 and a 5-stage order-6 search in tests/test_search.py.)
 """

@@ -64,7 +64,7 @@ def _rigid_alpha_mp(x, p):
 
 
 def test_rigid_body_alpha_against_mpmath():
-    """Relative error <= 1e-15 for |p| from 1e-12 to 6 (NOTES §4; the closed form alone loses
+    """Relative error <= 1e-15 for |p| from 1e-12 to 6 (docs/theory.md §4; the closed form alone loses
     every digit for small |p|)."""
     mpmath.mp.dps = 40
     system = get_system("rigid-body")

@@ -1,4 +1,4 @@
-"""Trees: counts against OEIS, T_0 against its definition, notation, sigma and gamma (NOTES §1)."""
+"""Trees: counts against OEIS, T_0 against its definition, notation, sigma and gamma (docs/theory.md §1)."""
 
 from __future__ import annotations
 

@@ -24,7 +24,7 @@ from rkhp.weights import (
 
 
 def direct_weight(A, b, t):
-    """a(t) straight from the definition (NOTES §2), recursively, no sharing."""
+    """a(t) straight from the definition (docs/theory.md §2), recursively, no sharing."""
 
     def phi(u):
         out = np.ones(len(b))

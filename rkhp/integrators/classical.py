@@ -1,4 +1,4 @@
-"""Classical peers of the RKHP integrators, in the same harness (paper §5; NOTES §4).
+"""Classical peers of the RKHP integrators, in the same harness (paper §5; docs/theory.md §4).
 
 Both integrate the Poisson ODE ``xdot = f(x) = pi(x) grad H(x)`` of a
 :class:`rkhp.systems.PoissonSystem` directly, without the birealisation:
@@ -7,13 +7,13 @@ Both integrate the Poisson ODE ``xdot = f(x) = pi(x) grad H(x)`` of a
   classical RK4). It keeps neither the Casimirs nor the symplectic leaf; it is the baseline the
   RKHP methods are compared with in ``rkhp converge``, ``rkhp bench`` and ``rkhp stress``.
 - :func:`integrate_midpoint`: the implicit midpoint rule, solved by Newton's method with a
-  finite-difference Jacobian of ``f``. It equals RKHP Euler when ``pi`` is constant (NOTES §5)
+  finite-difference Jacobian of ``f``. It equals RKHP Euler when ``pi`` is constant (docs/theory.md §5)
   and keeps quadratic Casimirs (e.g. ``|x|^2`` of the rigid body).
 
 The whole loop is one numba-compiled function (cached on disk like the RKHP engine, see
 :mod:`rkhp.integrators.cache`), generic over systems: ``grad H`` is read off the system's
 Hamiltonian tape evaluated in first-order jets, and ``pi(x) = D^T - D`` with
-``D = d_p alpha(x, 0)`` off its alpha tape (NOTES §4), so the tableau and the system are data.
+``D = d_p alpha(x, 0)`` off its alpha tape (docs/theory.md §4), so the tableau and the system are data.
 
 Both return a :class:`~rkhp.integrators.trajectory.Trajectory`; a failure (Newton not converging,
 non-finite values, leaving the system's domain) ends the run and is named in its status with the
@@ -365,7 +365,7 @@ def integrate_midpoint(system, h, n_steps, x0=None) -> Trajectory:
 
 
 def vector_field(system):
-    """The compiled Poisson vector field ``x -> pi(x) grad H(x)`` of a system (NOTES §4)."""
+    """The compiled Poisson vector field ``x -> pi(x) grad H(x)`` of a system (docs/theory.md §4)."""
     ws = _workspace(system)
     ht, at, space, Wh, Wa, sh, sa = ws
     _verify("field", system, ws)

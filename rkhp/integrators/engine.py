@@ -1,4 +1,4 @@
-"""The explicit RKHP step as a compiled "Taylor tower" (paper §5.2, NOTES §5 and §7).
+"""The explicit RKHP step as a compiled "Taylor tower" (paper §5.2, docs/theory.md §5 and §7).
 
 At the Newton iterate x0, each stage function g_i(x) = f(x, Z_i(x)), f = H o alpha, is held as its
 Taylor polynomial in dx = x - x0, truncated at degree s + 2 - i (1-based i); g_1 = H;
@@ -6,7 +6,7 @@ Z_i = h sum_{j<i} a_ij grad g_j is read off the coefficients. psi = h sum_i b_i 
 Jacobian are the degree-0 and degree-1 coefficients. Newton solves alpha(x, psi(x)) = y (Jacobian
 by the same jets) from a predicted start, then chord steps with value-only towers, stopping when
 the predicted next correction is below the tolerance (then psi + Dpsi dx is reused at the new x,
-NOTES §7); a last cheap correction of x at fixed p makes alpha(x, p) = y hold to round-off (so
+docs/theory.md §7); a last cheap correction of x at fixed p makes alpha(x, p) = y hold to round-off (so
 the Casimirs are kept); y_next = beta(x, p). Each stage is computed once: the cost is
 polynomial in s (see `rkhp_step`).
 
@@ -142,7 +142,7 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
     Jacobian; it is the last when max(2 L, 1/max(1, |y|)) |dx|^2 is below the tolerance. Later
     iterations are chord steps with value-only towers (one degree less, about half the cost),
     stopped when theta/(1 - theta) |dx_k| is (theta = |dx_k|/|dx_{k-1}|); the Jacobian is
-    refreshed when theta > 1/4 (NOTES §7 measured 2 full towers per step instead of 3).
+    refreshed when theta > 1/4 (docs/theory.md §7 measured 2 full towers per step instead of 3).
     """
     W, G, scratch, deg, psi, Jpsi, alpha, Jalpha, x, delta, res, LU, v = buf
     n = y.shape[0]
@@ -230,7 +230,7 @@ def _polish(y, x, p, atape, space, W, scratch, deg, J, alpha, delta, LU, v, scal
     given approximate J (the last tower's), from values of alpha only.
 
     With p fixed, C(beta(x, p)) = C(alpha(x, p)) for every Casimir C, so the final such step keeps
-    the Casimirs to round-off whatever the accuracy of psi (NOTES §4): only alpha's residual
+    the Casimirs to round-off whatever the accuracy of psi (docs/theory.md §4): only alpha's residual
     matters. Its correction is below the Newton tolerance, so J's O(h) inexactness is harmless.
     """
     n = y.shape[0]

@@ -1,4 +1,4 @@
-"""Truncated multivariate Taylor arithmetic ("jets") and the compiled tape interpreter (NOTES §7).
+"""Truncated multivariate Taylor arithmetic ("jets") and the compiled tape interpreter (docs/theory.md §7).
 
 A jet in m variables truncated at total degree D is the array of its Taylor coefficients over the
 monomials of degree <= D, in graded order (degree 0, then the m monomials of degree 1 in the order
@@ -268,7 +268,7 @@ def _crb_value(u_hi, u_lo):
 
 @nb.njit(**NJIT_NRT)
 def crb_coef(u0, u_lo, D, coef):
-    """Taylor coefficients at u0 of c(u) = (1 - (sqrt(u)/2) cot(sqrt(u)/2)) / u (NOTES §4).
+    """Taylor coefficients at u0 of c(u) = (1 - (sqrt(u)/2) cot(sqrt(u)/2)) / u (docs/theory.md §4).
 
     Power series (exact to round-off) for |u0| < 20; closed form in univariate jets for
     20 <= u0 < (2 pi)^2, the value from u0 + u_lo in double-double; NaN beyond the first pole

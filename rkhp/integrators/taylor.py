@@ -1,4 +1,4 @@
-"""The Taylor Hamiltonian Poisson integrator (THP) of order N (paper Thm 5.1, NOTES §5).
+"""The Taylor Hamiltonian Poisson integrator (THP) of order N (paper Thm 5.1, docs/theory.md §5).
 
 S(x) = sum_{|t| <= N} h^|t| e(t)/sigma(t) F(t)(x) over T (general birealisations) or T_0
 (degenerate ones), F(b) = H, F(b[t1..tm])(x) = d^m_p f(x, 0)[grad F(t1)(x), ..., grad F(tm)(x)],

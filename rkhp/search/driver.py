@@ -2,7 +2,7 @@
 
 ``search(stages, order)`` looks for an explicit (or implicit) tableau with ``stages`` stages meeting
 the order conditions of a class (paper, Theorems 5.1–5.2: "general" over T, "degenerate" over
-T_0; NOTES §8 for "symmetric") up to ``order``; without an order it raises N until the restarts
+T_0; docs/theory.md §8 for "symmetric") up to ``order``; without an order it raises N until the restarts
 fail and reports the evidence against the first order not reached. Every reported tableau has
 been verified by :func:`rkhp.verify.verify`, exactly when a closed form was recognised, else at D
 digits after Newton polishing; ``decided_by`` says which.

@@ -1,7 +1,7 @@
 """Error-optimal methods: minimise the principal error norm on the solution set of the conditions.
 
 The principal error of a method of order N is the vector (a(t) - 1/gamma(t)) / sigma(t) over the
-trees of order N+1 of the class (NOTES §2). On the family of tableaux satisfying the conditions up
+trees of order N+1 of the class (docs/theory.md §2). On the family of tableaux satisfying the conditions up
 to order N, its squared 2-norm is minimised by SLSQP with the conditions as equality constraints
 (exact gradients from the forward pass), from several solutions found by the multistart. The
 best optimum is then refined in mpmath by Newton's method on the Karush–Kuhn–Tucker system

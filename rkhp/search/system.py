@@ -1,8 +1,8 @@
 """The residual system of a tableau search: unknowns, order-condition residuals, exact Jacobian.
 
 Unknowns x = (a_ij over the strict lower triangle, or every (i, j) when implicit; then b_i), with
-c = row sums of A (NOTES §2). For each condition of :func:`rkhp.conditions.order_conditions`
-(paper, Theorems 5.1–5.2; the "symmetric" class of NOTES §8 plugs in the same way) the residual is
+c = row sums of A (docs/theory.md §2). For each condition of :func:`rkhp.conditions.order_conditions`
+(paper, Theorems 5.1–5.2; the "symmetric" class of docs/theory.md §8 plugs in the same way) the residual is
 sum_k w_k r(t_k) with r(t) = gamma(t) a(t) - 1, so every residual is of order one.
 
 Elementary weights and their derivatives are computed in one forward pass over the trees, by
@@ -54,7 +54,7 @@ class ResidualSystem:
         pattern: positions of the unknown a_ij (then come the s unknowns b_i).
         conditions: the OrderCondition objects (rkhp.conditions).
         trees: every tree needed (condition trees and their subtrees), children before parents.
-        error_trees: the trees of order ``order + 1`` of the class (principal error, NOTES §2).
+        error_trees: the trees of order ``order + 1`` of the class (principal error, docs/theory.md §2).
     """
 
     stages: int
@@ -208,7 +208,7 @@ class ResidualSystem:
         return r, J
 
     def principal_error(self, x, jacobian: bool = True):
-        """Entries (a(t) - 1/gamma(t)) / sigma(t) over the trees of order N+1 (NOTES §2)."""
+        """Entries (a(t) - 1/gamma(t)) / sigma(t) over the trees of order N+1 (docs/theory.md §2)."""
         if not self.error_trees:
             raise ValueError("ResidualSystem built without with_error=True")
         values, grads = self.weights(x, jacobian)

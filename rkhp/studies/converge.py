@@ -1,9 +1,9 @@
 """Empirical convergence studies: global error at T against h, observed and expected orders.
 
-For each method and step size: the global error at T (2-norm against the reference, NOTES §6),
+For each method and step size: the global error at T (2-norm against the reference, docs/theory.md §6),
 the local observed order, Casimir and energy errors (max over the run), Newton iterations and run
 time; per method the fitted slope over the asymptotic range (see :mod:`rkhp.studies.fit`), the
-expected order from the verify engine (symmetric order on a symmetric realisation, NOTES §8;
+expected order from the verify engine (symmetric order on a symmetric realisation, docs/theory.md §8;
 degenerate order on a degenerate one, else general order: paper, Theorem 5.1 and §4), bounded by
 what a ``truncated:K`` realisation allows (docs/theory.md §9), and a verdict.
 """

@@ -1,6 +1,6 @@
 """Observed orders of convergence: local orders, the asymptotic range, the fitted slope, verdicts.
 
-NOTES §6: the observed order is the least-squares slope of log(error) against log(h) over the
+docs/theory.md §6: the observed order is the least-squares slope of log(error) against log(h) over the
 asymptotic range, leaving out the points at the round-off floor. Here the asymptotic range is found
 from the data alone (never from the expected order): the finest run of at least three consecutive
 usable rows whose local orders agree to within ``spread``, extended to coarser rows while they

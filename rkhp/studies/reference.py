@@ -1,4 +1,4 @@
-"""Reference solutions for measured errors, with their own accuracy (NOTES §6).
+"""Reference solutions for measured errors, with their own accuracy (docs/theory.md §6).
 
 - ``exact``: the system's closed-form solution (rigid body: Jacobi elliptic functions), when the
   start is the system's default ``x0``. Its error is the float64 evaluation error of the closed

@@ -1,4 +1,4 @@
-"""Poisson systems and their birealisations (NOTES §4, paper §2).
+"""Poisson systems and their birealisations (docs/theory.md §4, paper §2).
 
 `get_system(name_or_path, realisation="symmetric")` returns a :class:`PoissonSystem`;
 `builtin_systems()` lists the built-in names. Constructors for the three families are in

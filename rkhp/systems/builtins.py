@@ -1,4 +1,4 @@
-"""Built-in systems (NOTES §6): the rigid body, Lotka–Volterra (3 species) and the pendulum."""
+"""Built-in systems (docs/theory.md §6): the rigid body, Lotka–Volterra (3 species) and the pendulum."""
 
 from __future__ import annotations
 
@@ -49,7 +49,7 @@ def rigid_body_exact(inertia, x0) -> Callable | None:
 
 
 def rigid_body(realisation: str = "symmetric") -> PoissonSystem:
-    """Free rigid body on so(3)*, H = sum x_i^2 / (2 I_i), I = (2, 1, 2/3) (HLW, NOTES §6)."""
+    """Free rigid body on so(3)*, H = sum x_i^2 / (2 I_i), I = (2, 1, 2/3) (HLW, docs/theory.md §6)."""
     inertia = RIGID_BODY_I
     return so3(lambda x: sum((0.5 / inertia[i]) * (x[i] * x[i]) for i in range(3)),
                name="rigid-body", x0=RIGID_BODY_X0, t_final=10.0, realisation=realisation,
@@ -58,7 +58,7 @@ def rigid_body(realisation: str = "symmetric") -> PoissonSystem:
 
 
 def lotka_volterra(realisation: str = "symmetric") -> PoissonSystem:
-    """3-species Lotka–Volterra, log-canonical, H = sum (x_i - log x_i) (NOTES §6)."""
+    """3-species Lotka–Volterra, log-canonical, H = sum (x_i - log x_i) (docs/theory.md §6)."""
     return log_canonical(
         LV_LAMBDA, lambda x: sum(x[i] - tp.log(x[i]) for i in range(3)), name="lotka-volterra",
         x0=LV_X0, t_final=10.0, realisation=realisation,
@@ -83,7 +83,7 @@ BUILTINS: dict[str, Callable[[str], PoissonSystem]] = {
 
 
 def builtin_systems() -> tuple[str, ...]:
-    """Names of the built-in systems: NOTES §6's three, then the reference problems of
+    """Names of the built-in systems: docs/theory.md §6's three, then the reference problems of
     `rkhp.systems.problems` (``toda`` and ``volterra-lattice`` also as ``NAME:SIZE``)."""
     from .problems import PROBLEMS, problem_data
 

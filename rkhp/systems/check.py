@@ -1,11 +1,11 @@
-"""Check the birealisation axioms of a system at random points (NOTES §4, paper §2).
+"""Check the birealisation axioms of a system at random points (docs/theory.md §4, paper §2).
 
 On T*M, {F, G} = F_x . G_p - F_p . G_x. With the Jacobians of alpha and beta at (x, p), computed
 exactly by forward-mode automatic differentiation (degree-1 jets in the 2n variables, the same
 compiled interpreter as the integrators), the axioms read
 alpha(x, 0) = beta(x, 0) = x, {alpha_i, alpha_j} = pi_ij(alpha), {beta_i, beta_j} = -pi_ij(beta),
 {alpha_i, beta_j} = 0. Degeneracy (paper, eq. (degen)): d_p alpha(x, 0) is antisymmetric.
-Symmetry (NOTES §8): beta(x, p) = alpha(x, -p) to round-off at the samples.
+Symmetry (docs/theory.md §8): beta(x, p) = alpha(x, -p) to round-off at the samples.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The Poisson system value and its realisations (NOTES §4, paper §2).
+"""The Poisson system value and its realisations (docs/theory.md §4, paper §2).
 
 A system is given by its Poisson matrix pi(x), its Hamiltonian H and a *base* birealisation
 (alpha, beta) that is symmetric, beta(x, p) = alpha(x, -p). A realisation composes the base with a
@@ -6,7 +6,7 @@ symplectomorphism of T*M fixing the zero section, (x, p) -> (x + s(p), p):
 
 - ``symmetric``: s = 0 (degenerate: d_p alpha(x, 0) = -pi(x)/2 is antisymmetric);
 - ``shifted``: s(p) = Q p with the constant symmetric matrix Q = SHIFT_Q (diagonal 1/2,
-  off-diagonal 1/4; NOTES §4), which breaks the degeneracy: d_p alpha(x, 0) = -pi(x)/2 + Q;
+  off-diagonal 1/4; docs/theory.md §4), which breaks the degeneracy: d_p alpha(x, 0) = -pi(x)/2 + Q;
 - further kinds join with :func:`register_realisation` (e.g. issue 7's ``quartic``,
   s(p) = grad K(p) with K(p) even in p, which stays degenerate).
 
@@ -67,10 +67,10 @@ def register_realisation(name: str, shift: Callable, degenerate: bool, descripti
     REALISATIONS[name] = Realisation(name, shift, degenerate, description, symmetric)
 
 
-register_realisation("symmetric", _no_shift, True, "beta(x, p) = alpha(x, -p) (NOTES §4)",
+register_realisation("symmetric", _no_shift, True, "beta(x, p) = alpha(x, -p) (docs/theory.md §4)",
                      symmetric=True)
 register_realisation("shifted", _q_shift, False,
-                     "alpha(x + Q p, p), Q = 1/2 on the diagonal and 1/4 off it (NOTES §4)")
+                     "alpha(x + Q p, p), Q = 1/2 on the diagonal and 1/4 off it (docs/theory.md §4)")
 
 
 #: modules that register further realisations when imported (e.g. issue 7's quartic kind)
@@ -162,7 +162,7 @@ class PoissonSystem:
 
     @property
     def symmetric(self) -> bool:
-        """beta(x, p) = alpha(x, -p) (NOTES §8): the symmetric order conditions apply."""
+        """beta(x, p) = alpha(x, -p) (docs/theory.md §8): the symmetric order conditions apply."""
         return realisation(self.realisation).symmetric
 
     @property

@@ -1,4 +1,4 @@
-"""Constructors for the three families of Poisson systems and their birealisations (NOTES §4).
+"""Constructors for the three families of Poisson systems and their birealisations (docs/theory.md §4).
 
 - Lie–Poisson: pi_ij(x) = sum_k C_ij^k x_k; K(p) with K(p) x = -pi(x) p; alpha = phi(K(p)) x,
   beta = phi(-K(p)) x, phi(z) = z / (1 - e^{-z}) (power series with a guard, |K| < 0.9 * 2 pi).
@@ -100,7 +100,7 @@ def _cross(a, b):
 
 
 def so3_alpha(x, p, sign=1.0):
-    """alpha = x + (p x x)/2 + c(|p|^2) p x (p x x) on so(3)* (beta: sign = -1; NOTES §4)."""
+    """alpha = x + (p x x)/2 + c(|p|^2) p x (p x x) on so(3)* (beta: sign = -1; docs/theory.md §4)."""
     px = _cross(p, x)
     ppx = _cross(p, px)
     c = tp.crb(p)

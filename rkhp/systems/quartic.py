@@ -1,4 +1,4 @@
-"""The ``quartic`` realisation: degenerate but not symmetric (NOTES §8, issue 7).
+"""The ``quartic`` realisation: degenerate but not symmetric (docs/theory.md §8, issue 7).
 
 Every system's base birealisation (alpha, beta) is symmetric, beta(x, p) = alpha(x, -p). The
 quartic realisation composes it with the time-1 flow of the Hamiltonian K(p) on T*M, the
@@ -13,7 +13,7 @@ u_{n+1} = (1, 1, ..., 1). Since grad K(p) = O(|p|^3), d_p alpha''(x, 0) = d_p al
 antisymmetric: the realisation is degenerate (paper, eq. (degen)), the trees outside T_0 still
 vanish and the degenerate order conditions suffice. But grad K is odd, so
 alpha''(x, -p) = beta(x - grad K(p), p) differs from beta''(x, p): the realisation is not
-symmetric and the relations of NOTES §8 among the F(t) fail (already at order 4). A method with
+symmetric and the relations of docs/theory.md §8 among the F(t) fail (already at order 4). A method with
 symmetric order q but degenerate order d < q drops to order d here, while a method of degenerate
 order q keeps it.
 """
@@ -49,4 +49,4 @@ def quartic_shift(p):
 register_realisation(
     "quartic", quartic_shift, True,
     "alpha(x + grad K(p), p), K(p) = sum_k (u_k . p)^4 / 24, u_k = e_1..e_n and (1,...,1): "
-    "degenerate, not symmetric (NOTES §8)")
+    "degenerate, not symmetric (docs/theory.md §8)")

@@ -2,7 +2,7 @@
 
 A system describes H, alpha and beta as tapes over the 2n inputs (x, p); the compiled engine
 (`rkhp.integrators.jets`) evaluates a tape in truncated multivariate Taylor arithmetic, which is
-what the RKHP step needs (NOTES §7, "Taylor tower"). A tape is data, so one compilation of the
+what the RKHP step needs (docs/theory.md §7, "Taylor tower"). A tape is data, so one compilation of the
 interpreter serves every system.
 
 Operations (opcode, out, a, b, k, f): out receives the result; a, b are operand slots; k an
@@ -130,7 +130,7 @@ class TapeBuilder:
         return self._consts[value]
 
     def phimv(self, K: list[list[Var]], x: list[Var]) -> list[Var]:
-        """phi(K) x with phi(z) = z / (1 - exp(-z)) (NOTES §4, Lie–Poisson realisation)."""
+        """phi(K) x with phi(z) = z / (1 - exp(-z)) (docs/theory.md §4, Lie–Poisson realisation)."""
         n = len(x)
         start = len(self.args)
         self.args.extend(self._lift(v).slot for row in K for v in row)
@@ -174,7 +174,7 @@ sqrt = _unary(SQRT, "sqrt")
 
 
 def crb(p: list[Var]) -> Var:
-    """c(|p|^2), c(u) = (1 - (sqrt(u)/2) cot(sqrt(u)/2)) / u: the so(3)* coefficient (NOTES §4).
+    """c(|p|^2), c(u) = (1 - (sqrt(u)/2) cot(sqrt(u)/2)) / u: the so(3)* coefficient (docs/theory.md §4).
 
     The operation also lists the slots of p, so that the interpreter can form |p|^2 in
     double-double where c is ill-conditioned (near |p| = 2 pi)."""
