@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import ast
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -59,6 +60,9 @@ class Limits:
 
 
 LIMITS = Limits()
+#: the limits of a tableau entry (a number such as ``(6 - sqrt(6))/10``; exact arithmetic with it
+#: must stay cheap)
+ENTRY_LIMITS = Limits(length=4_000, depth=12, nodes=200, exponent=16, digits=2_000)
 
 _BINARY = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.Pow: "**"}
 _UNARY = {ast.USub: "-", ast.UAdd: "+"}
@@ -94,7 +98,9 @@ def _tree(text: str, where: str, limits: Limits) -> ast.expr:
     if "\x00" in text:
         raise _refuse(where, text, "NUL character")
     try:
-        return ast.parse(text.strip().replace("^", "**"), mode="eval").body
+        with warnings.catch_warnings():  # "invalid decimal literal" and the like: one line, ours
+            warnings.simplefilter("ignore")
+            return ast.parse(text.strip().replace("^", "**"), mode="eval").body
     except (SyntaxError, ValueError) as exc:
         reason = exc.msg if isinstance(exc, SyntaxError) else str(exc)
         raise _refuse(where, text, f"syntax error ({' '.join(reason.split())})") from None
@@ -192,11 +198,16 @@ def _sizes(node: ast.expr, text: str, where: str, limits: Limits, variables) -> 
             size = None if current.id in variables else _Size(1.0, _CONSTANT_VALUES[current.id])
         elif isinstance(current, ast.Constant):
             literal = ast.get_source_segment(source, current) or ""
-            size = _Size(float(max(len(literal), 1)), float(current.value))
+            size = _Size(_literal_digits(literal), float(current.value))
         elif None in sub:
             size = None
         elif isinstance(current, ast.Call):
-            size = _Size(sub[0].digits + 1.0, _approx(_FLOAT_FUNCTIONS[current.func.id], sub[0].value))
+            name = current.func.id
+            value = _approx(_FLOAT_FUNCTIONS[name], sub[0].value)
+            if not (math.isfinite(sub[0].value) and math.isfinite(value)):
+                raise _refuse(where, text, f"the constant {name}(...) is not a real number (or not finite) "
+                                           "in floating point")
+            size = _Size(sub[0].digits + 1.0, value)
         elif isinstance(current, ast.UnaryOp):
             size = _Size(sub[0].digits, -sub[0].value if isinstance(current.op, ast.USub) else sub[0].value)
         else:
@@ -204,6 +215,18 @@ def _sizes(node: ast.expr, text: str, where: str, limits: Limits, variables) -> 
         if size is not None and size.digits > limits.digits:
             raise _refuse(where, text, f"a constant with more than {limits.digits} digits")
         sizes[id(current)] = size
+
+
+def _literal_digits(literal: str) -> float:
+    """Decimal digits of the exact value of a number literal: its mantissa's digits plus the size
+    of its exponent (``1e-400`` is read exactly as 10^-400: 401 digits)."""
+    s = literal.replace("_", "").lower()
+    if "e" not in s or s.startswith(("0x", "0o", "0b")):
+        return float(max(len(s), 1))
+    mantissa, exponent = s.split("e", 1)
+    if len(exponent.lstrip("+-")) > 9:
+        return math.inf
+    return float(len(mantissa) + abs(int(exponent)))
 
 
 def _binary_size(node: ast.BinOp, sub) -> _Size:
@@ -269,12 +292,12 @@ def parse_expression(text, variables: Sequence[str] = (), *, where: str = "expre
     Raises InputError with one line naming `where`, the text and the reason for anything outside
     the grammar or the limits; non-finite results (``1/0``, ``log(0)``) are refused too.
     """
-    import sympy
-
     names = frozenset(variables) | frozenset(CONSTANTS)
     root = _tree(text, where, limits)
     _walk(root, text, where, names, limits)
     _sizes(root, text, where, limits, frozenset(variables))
+    import sympy  # only for text that passed every check
+
     symbols = {name: sympy.Symbol(name, real=True) for name in variables}
     symbols.update({name: getattr(sympy, target) for name, target in CONSTANTS.items()})
     try:

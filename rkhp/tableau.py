@@ -23,6 +23,7 @@ from functools import cached_property
 
 import mpmath
 
+from .bounds import MAX_DECIMAL_DIGITS, MAX_DECIMAL_EXPONENT
 from .errors import InputError
 
 #: Decimals with at most this many significant digits are read as exact decimals.
@@ -68,6 +69,8 @@ def parse_entry(value, where: str = "entry"):
     if isinstance(value, bool) or value is None:
         raise InputError(f"{where}: expected a number, got {value!r}")
     if isinstance(value, int):
+        if value.bit_length() > 3.33 * MAX_DECIMAL_DIGITS:
+            raise InputError(f"{where}: an integer of more than {MAX_DECIMAL_DIGITS} digits")
         return Fraction(value)
     if type(value).__module__ == "numpy":
         value = value.item()
@@ -94,20 +97,33 @@ def _decimal(text: str):
     return GivenDecimal(text, digits)
 
 
+def _check_decimal(s: str, where: str) -> None:
+    """Bound a decimal's digits and exponent before any exact arithmetic (``1e999999999`` would
+    take hours to read exactly; docs/input.md)."""
+    mantissa, _, exponent = s.lower().partition("e")
+    if len(mantissa) > MAX_DECIMAL_DIGITS + 2:
+        raise InputError(f"{where}: a decimal of more than {MAX_DECIMAL_DIGITS} digits")
+    if exponent and (len(exponent.lstrip("+-")) > 6 or abs(int(exponent)) > MAX_DECIMAL_EXPONENT):
+        raise InputError(f"{where}: the exponent of {s[:40]!r} is beyond +-{MAX_DECIMAL_EXPONENT}")
+
+
 def _parse_text(text: str, where: str):
     s = text.strip()
     if _DECIMAL.match(s):
+        _check_decimal(s, where)
         return _decimal(s)
     if _RATIONAL.match(s):
+        if len(s) > 2 * MAX_DECIMAL_DIGITS + 3:
+            raise InputError(f"{where}: a fraction of more than {MAX_DECIMAL_DIGITS} digits")
         num, den = (int(x) for x in s.split("/"))
         if den == 0:
             raise InputError(f"{where}: division by zero in {text!r}")
         return Fraction(num, den)
     if s.lower().lstrip("+-") in ("nan", "inf", "infinity"):
         raise InputError(f"{where}: non-finite value {text!r}")
-    from .expressions import parse_expression
+    from .expressions import ENTRY_LIMITS, parse_expression
 
-    expr = parse_expression(s, (), where=where)
+    expr = parse_expression(s, (), where=where, limits=ENTRY_LIMITS)
     return _exact_expression(expr, where, text)
 
 

@@ -26,6 +26,8 @@ import re
 from functools import lru_cache
 from pathlib import Path
 
+from .bounds import MAX_CLAIMED_ORDER, MAX_STAGES
+from .documents import parse_document, read_text
 from .errors import InputError
 from .tableau import Tableau, entry_text, parse_entry
 
@@ -111,27 +113,11 @@ def load_tableau(name_or_path) -> Tableau:
 def load_file(path) -> Tableau:
     """Read a tableau file (.toml, .json or a 60-digit .txt)."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read the file ({exc})") from None
+    text = read_text(path, "tableau file")
     suffix = path.suffix.lower()
-    if suffix == ".json":
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise InputError(f"{path}: JSON syntax error: {exc}") from None
-    elif suffix == ".txt":
+    if suffix == ".txt":
         return parse_digits_file(text, str(path), path.stem)
-    else:
-        import tomllib
-
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise InputError(f"{path}: TOML syntax error: {exc}") from None
+    data = parse_document(text, str(path), "json" if suffix == ".json" else "toml")
     return tableau_from_mapping(data, str(path), path.stem)
 
 
@@ -148,6 +134,13 @@ def tableau_from_mapping(data, where: str, default_name: str) -> Tableau:
     A = data["A"]
     if not isinstance(A, list) or not all(isinstance(r, list) for r in A):
         raise InputError(f"{where}: A must be a list of rows (lists of entries)")
+    if max(len(A), *(len(r) for r in A), len(data["b"]) if isinstance(data["b"], list) else 0) > MAX_STAGES:
+        raise InputError(f"{where}: more than {MAX_STAGES} stages")
+    for key in ("order", "degenerate_order", "symmetric_order"):
+        value = data.get(key, 1)
+        if type(value) is not int or not 1 <= value <= MAX_CLAIMED_ORDER:
+            raise InputError(f"{where}: claimed {key} must be a positive integer (at most {MAX_CLAIMED_ORDER}), "
+                             f"got {value!r}"[:300])
     for key in ("b", "c", "aliases"):
         if key in data and not isinstance(data[key], list):
             raise InputError(f"{where}: {key} must be a list")
@@ -192,18 +185,22 @@ def parse_digits_file(text: str, where: str, name: str) -> Tableau:
         if current is None or not fields:
             continue
         width = 3 if current == "A" else 2
-        if not fields[0].isdigit():
+        if not (fields[0].isascii() and fields[0].isdigit()):
             current = None  # a remark after the data
             continue
-        if len(fields) != width or not all(f.isdigit() for f in fields[:-1]):
+        if len(fields) != width or not all(f.isascii() and f.isdigit() for f in fields[:-1]):
             raise InputError(f"{where}: line {lineno}: expected {width} fields in the {current} "
                              f"section, got {line.strip()!r}")
+        if any(len(f) > 4 for f in fields[:-1]):
+            raise InputError(f"{where}: line {lineno}: index beyond the {MAX_STAGES} stages allowed")
         index = tuple(int(f) for f in fields[:-1])
         sections[current][index] = parse_entry(fields[-1], f"{where}: line {lineno}")
     for key in ("b", "A"):
         if key not in sections:
             raise InputError(f"{where}: no {key} section (expected Feagin's 60-digit format)")
-    s = max(k for (k,) in sections["b"]) + 1
+    s = max((k for (k,) in sections["b"]), default=-1) + 1
+    if not 1 <= s <= MAX_STAGES:
+        raise InputError(f"{where}: {s} stages; from 1 to {MAX_STAGES}")
     A = [[parse_entry(0)] * s for _ in range(s)]
     for (k, j), value in sections["A"].items():
         if k >= s or j >= s:

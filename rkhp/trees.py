@@ -28,6 +28,9 @@ from .errors import InputError
 MAX_ENUMERATION_ORDER = 18
 #: Largest order that counting accepts.
 MAX_COUNT_ORDER = 200
+#: Deepest tree (levels below the root) and largest tree that parse_tree reads.
+MAX_DEPTH = 253
+MAX_PARSE_ORDER = 10_000
 
 _SHIFT = bytes([0] + [min(i + 1, 255) for i in range(1, 256)])
 
@@ -130,26 +133,18 @@ LEAF = _make((), 1, 1, 1, b"\x01", 0, None)
 
 
 def from_children(children) -> Tree:
-    """The tree b[children...] (any order of the children; the result is canonical)."""
-    kids = tuple(sorted(children, key=_key_of, reverse=True))
-    if not kids:
-        return LEAF
-    order = 1 + sum(c.order for c in kids)
-    gamma = order
-    sigma = 1
-    run = 0
-    for i, c in enumerate(kids):
-        gamma *= c.gamma
-        sigma *= c.sigma
-        run = run + 1 if i and kids[i - 1].key == c.key else 1
-        sigma *= run
-    lead = 1
-    while lead < len(kids) and kids[lead].key == kids[0].key:
-        lead += 1
-    key = b"\x01" + b"".join(c.key.translate(_SHIFT) for c in kids)
-    if len(key) != order or max(key) >= 255:
-        raise InputError(f"tree too deep: depth {max(key)} (at most 254 levels)")
-    return _make(kids, order, sigma, gamma, key, lead, from_children(kids[1:]))
+    """The tree b[children...] (any order of the children; the result is canonical).
+
+    Built iteratively from the last (smallest) child: b[c_k], b[c_{k-1}, c_k], ... by
+    :func:`graft_child`, so that a root with many children needs no recursion.
+    """
+    kids = sorted(children, key=_key_of, reverse=True)
+    tree = LEAF
+    for child in reversed(kids):
+        tree = graft_child(child, tree)
+    if tree.key and max(tree.key) >= 255:
+        raise InputError(f"tree too deep: more than {MAX_DEPTH} levels")
+    return tree
 
 
 def _key_of(t: Tree) -> bytes:
@@ -182,41 +177,53 @@ def format_tree(t: Tree) -> str:
 def parse_tree(text: str) -> Tree:
     """Parse the paper's bracket notation: ``b``, ``b[t1,...,tn]``; any child order, spaces allowed.
 
-    Also accepts the LaTeX form ``\\forest{...}``. Raises InputError naming the problem.
+    Also accepts the LaTeX form ``\\forest{...}``. Raises InputError naming the problem. The parser
+    is iterative (an explicit stack), and the text is bounded: at most MAX_PARSE_ORDER vertices
+    and MAX_DEPTH levels.
     """
     if not isinstance(text, str):
         raise InputError(f"a tree must be a string in bracket notation, got {type(text).__name__}")
+    if len(text) > 8 * MAX_PARSE_ORDER:
+        raise InputError(f"tree text of {len(text)} characters; a tree may have at most {MAX_PARSE_ORDER} vertices")
     s = "".join(text.split())
     if s.startswith("\\forest{") and s.endswith("}"):
         s = s[len("\\forest{"):-1]
     if not s:
         raise InputError("empty tree string (expected bracket notation such as b[b,b[b]])")
-    pos = 0
+    shown = text.strip() if len(text.strip()) <= 60 else text.strip()[:57] + "..."
 
-    def fail(msg: str):
-        raise InputError(f"malformed tree {text.strip()!r}: {msg} at position {pos}")
+    def fail(msg: str, pos: int):
+        raise InputError(f"malformed tree {shown!r}: {msg} at position {pos}")
 
-    def node() -> Tree:
-        nonlocal pos
+    stack: list[list[Tree]] = []  # the children read so far of each open b[
+    pos, vertices = 0, 0
+    while True:  # at pos a tree starts
         if pos >= len(s) or s[pos] != "b":
-            fail("expected 'b'")
+            fail("expected 'b'", pos)
+        vertices += 1
+        if vertices > MAX_PARSE_ORDER:
+            fail(f"more than {MAX_PARSE_ORDER} vertices", pos)
         pos += 1
         if pos < len(s) and s[pos] == "[":
+            if len(stack) >= MAX_DEPTH:
+                fail(f"more than {MAX_DEPTH} levels", pos)
+            stack.append([])
             pos += 1
-            kids = [node()]
-            while pos < len(s) and s[pos] == ",":
+            continue
+        tree = LEAF
+        while True:  # a tree is complete: attach it, closing the brackets that end here
+            if not stack:
+                if pos != len(s):
+                    fail("unexpected text after the tree", pos)
+                return tree
+            stack[-1].append(tree)
+            if pos < len(s) and s[pos] == ",":
                 pos += 1
-                kids.append(node())
+                break
             if pos >= len(s) or s[pos] != "]":
-                fail("expected ',' or ']'")
+                fail("expected ',' or ']'", pos)
             pos += 1
-            return from_children(kids)
-        return LEAF
-
-    t = node()
-    if pos != len(s):
-        fail("unexpected text after the tree")
-    return t
+            tree = from_children(stack.pop())
 
 
 def in_t0(t: Tree) -> bool:

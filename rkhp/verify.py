@@ -29,6 +29,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .bounds import BYTES_PER_TREE, check_tree_memory
 from .conditions import CLASSES, OrderCondition, check_class, conditions_of_order
 from .errors import InputError
 from .tableau import Tableau
@@ -43,6 +44,9 @@ AUTO_MAX_ORDER = 16
 FIELD_FALLBACK_DIGITS = 50
 #: Rational entries with a denominator at least this long are read as approximations too.
 APPROXIMATION_DENOMINATOR = 10**7
+#: bytes of one weight in exact or fixed-point arithmetic (measured: verify feagin14, 35 stages of
+#: 60 digits, takes 570 MB up to order 15, about 110 bytes per tree and stage)
+BYTES_PER_VALUE = 120
 
 
 class Failure(NamedTuple):
@@ -215,9 +219,10 @@ def parse_precision(text):
     s = str(text).strip().lower()
     if s in ("float", "exact"):
         return s
-    if s.isdigit():
+    if s.isascii() and s.isdigit() and len(s) <= 9:
         return int(s)
-    raise InputError(f"precision must be float, exact or a number of digits, got {text!r}")
+    shown = text if len(str(text)) <= 40 else str(text)[:37] + "..."
+    raise InputError(f"precision must be float, exact or a number of digits, got {shown!r}")
 
 
 def _tolerance(arithmetic, tableau: Tableau) -> tuple[float, str]:
@@ -477,6 +482,9 @@ def _run(tableau, N, arithmetic, tolerance, classes, on_order):
 
     Returns the class states and the last order checked.
     """
+    value_bytes = 8 if arithmetic.name == "float" else BYTES_PER_VALUE
+    check_tree_memory(N, False, f"verifying {tableau.name} to order {N}",
+                      per_tree=BYTES_PER_TREE + tableau.stages * value_bytes)
     plan = tree_plan(N)
     states = {cls: _ClassState(cls) for cls in classes}
     for n, blk, a in weights_by_order(tableau, N, arithmetic):
