@@ -210,7 +210,17 @@ def resolve_methods(specs) -> tuple[Method, ...]:
     names = [s if isinstance(s, str) else getattr(s, "name", s) for s in specs]
     if len(set(names)) != len(names):
         raise InputError(f"a method is named twice in {', '.join(map(str, names))}")
-    return tuple(resolve_method(s) for s in specs)
+    return check_distinct([resolve_method(s) for s in specs])
+
+
+def check_distinct(methods) -> tuple[Method, ...]:
+    """The methods, if no two are the same method under two names (an alias, a file: ``rk4`` and
+    ``classical``); InputError naming both otherwise (docs/input.md)."""
+    keys = [(m.kind, getattr(m.tableau, "name", None), m.order, m.degenerate, m.solver) for m in methods]
+    for i, key in enumerate(keys):
+        if key in keys[:i]:
+            raise InputError(f"{methods[keys.index(key)].name} and {methods[i].name} are the same method")
+    return tuple(methods)
 
 
 def require_steps(methods) -> tuple[Method, ...]:

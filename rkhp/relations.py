@@ -147,6 +147,9 @@ def relations_for(max_order: int, regenerate: bool = False, seed: int = 0, progr
     """Shipped relations up to max_order, or freshly derived ones when ``regenerate`` (on
     ``executor``, see :func:`derive_relations`)."""
     if regenerate:
+        from .bounds import seed as check_seed
+
+        check_seed(seed)
         return derive_relations(max_order, seed, progress=progress, executor=executor)
     check_order(max_order, what="relation order")
     shipped_order(max_order)

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import bounds
 from ..errors import InputError
 from .multistart import Problem, Restarts, run_restarts
 from .optimise import KnownMethod, known_methods, minimise_error, refine_optimum
@@ -46,10 +47,11 @@ class SearchOptions:
     closed_form: bool = True
 
     def check(self) -> None:
-        if isinstance(self.restarts, bool) or not isinstance(self.restarts, int) or self.restarts < 1:
-            raise InputError(f"--restarts must be an integer >= 1, got {self.restarts!r}")
-        if self.time_limit is not None and not self.time_limit > 0:
-            raise InputError(f"--time-limit must be positive, got {self.time_limit!r}")
+        bounds.integer(self.restarts, "--restarts", 1, bounds.MAX_RESTARTS)
+        bounds.seed(self.seed, "--seed")
+        if self.time_limit is not None:
+            bounds.number(self.time_limit, "--time-limit", 0.0, bounds.MAX_SECONDS, low_open=True)
+        bounds.integer(self.digits, "--digits")
         if not MIN_DIGITS <= self.digits <= MAX_DIGITS:
             raise InputError(f"--digits must be between {MIN_DIGITS} and {MAX_DIGITS}, "
                              f"got {self.digits}")

@@ -20,9 +20,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import bounds
 from ..errors import InputError
 from ..executors import InProcess, run_all
-from ..methods import DEFAULT_METHODS, SCIPY_METHODS, Method, resolve_method, resolve_system
+from ..methods import DEFAULT_METHODS, SCIPY_METHODS, Method, check_distinct, resolve_method, resolve_system
 from .reference import Reference, dop853_reference, reference
 
 TARGETS = (1e-4, 1e-6, 1e-8, 1e-10)
@@ -289,13 +290,18 @@ def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=
 
     system = resolve_system(system)
     t_final = check_t_final(system.t_final if t_final is None else t_final)
-    if repeats < 1:
-        raise InputError(f"repeats must be >= 1, got {repeats}")
-    steps = tuple(sorted(set(int(n) for n in steps)))
-    if not steps or steps[0] < 1:
-        raise InputError(f"numbers of steps must be positive, got {list(steps)}")
-    curves_of = [*(resolve_method(m) for m in methods or DEFAULT_METHODS),
-                 *(resolve_peer(p) for p in peers)]
+    bounds.integer(repeats, "repeats", 1, bounds.MAX_REPEATS)
+    steps = tuple(sorted(set(bounds.integer(n, "number of steps", 1, bounds.MAX_STEPS) for n in steps)))
+    if not steps:
+        raise InputError("no numbers of steps")
+    tolerances = tuple(bounds.tolerance(t, "rtol") for t in tolerances)
+    bounds.check_trajectory(steps[-1], system.dim, "the finest run")
+    if ensemble is not None:
+        bounds.integer(ensemble, "--ensemble", 1, bounds.MAX_ENSEMBLE)
+        bounds.check_memory(4 * 8.0 * ensemble * system.dim, f"an ensemble of {ensemble} starts")
+    bounds.seed(seed)
+    curves_of = check_distinct([*(resolve_method(m) for m in methods or DEFAULT_METHODS),
+                                *(resolve_peer(p) for p in peers)])
     integrators = [m for m in curves_of if m.kind != "scipy"]
     solvers = [m for m in curves_of if m.kind == "scipy"]
     if ensemble is None:

@@ -10,11 +10,11 @@ what a ``truncated:K`` realisation allows (docs/theory.md §9), and a verdict.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .. import bounds
 from ..errors import InputError
 from ..executors import InProcess, run_all
 from ..methods import condition_class, require_steps, resolve_methods, resolve_system
@@ -112,15 +112,12 @@ def step_counts(steps=None, refinements: int | None = None) -> tuple[int, ...]:
     ``steps`` with several values is used as given; one value N (or none: DEFAULT_COARSEST) is the
     coarsest and is doubled ``refinements`` times (default DEFAULT_REFINEMENTS).
     """
-    steps = tuple(int(s) for s in (steps or ()))
-    if any(s < 1 for s in steps):
-        raise InputError(f"numbers of steps must be positive, got {list(steps)}")
+    steps = tuple(bounds.integer(s, "numbers of steps", 1, bounds.MAX_STEPS) for s in (steps or ()))
     if len(steps) > 1 and refinements is not None:
         raise InputError("give either several --steps or --refinements, not both")
     if len(steps) <= 1:
-        k = DEFAULT_REFINEMENTS if refinements is None else int(refinements)
-        if k < 0:
-            raise InputError(f"refinements must be >= 0, got {k}")
+        k = DEFAULT_REFINEMENTS if refinements is None else refinements
+        bounds.integer(k, "refinements", 0, bounds.MAX_REFINEMENTS)
         first = steps[0] if steps else DEFAULT_COARSEST
         steps = tuple(first * 2**i for i in range(k + 1))
     if len(set(steps)) != len(steps):
@@ -133,10 +130,7 @@ def step_counts(steps=None, refinements: int | None = None) -> tuple[int, ...]:
 
 def check_t_final(t_final) -> float:
     """A positive, finite final time (InputError otherwise)."""
-    t = float(t_final)
-    if not math.isfinite(t) or t <= 0:
-        raise InputError(f"final time T must be positive and finite, got {t_final}")
-    return t
+    return bounds.positive(t_final, "final time T")
 
 
 def run_row(method, system, ref: Reference, steps: int, t_final: float) -> ConvergenceRow:
@@ -191,6 +185,7 @@ def converge(system, methods, steps=None, t_final=None, refinements=None, on_run
     methods = require_steps(resolve_methods(methods))
     t_final = check_t_final(system.t_final if t_final is None else t_final)
     counts = step_counts(steps, refinements)
+    bounds.check_trajectory(max(counts), system.dim, "the finest run")
     ref = reference(system, t_final)
     results = study_methods(methods, system, ref, counts, t_final, on_run, executor)
     return ConvergenceStudy(system.name, system.realisation, bool(system.degenerate), t_final, ref, results,

@@ -6,7 +6,6 @@ before a study runs, so a bad path costs nothing.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 from ..errors import InputError
@@ -15,19 +14,10 @@ FORMATS = ("png", "svg", "pdf")
 
 
 def check_plot_path(path) -> Path:
-    """The plot path, after checking its extension and that its folder is writable."""
-    path = Path(path)
-    ext = path.suffix.lower().lstrip(".")
-    if ext not in FORMATS:
-        raise InputError(f"plot file {path}: unknown extension {path.suffix or '(none)'}; use .png, .svg or .pdf")
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise InputError(f"plot file {path}: folder {folder} does not exist")
-    if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
-        raise InputError(f"plot file {path}: not writable")
-    if path.is_dir():
-        raise InputError(f"plot file {path}: is a folder")
-    return path
+    """The plot path, after checking its extension and that it can be written (`rkhp.bounds`)."""
+    from ..bounds import check_output_path
+
+    return check_output_path(path, tuple("." + f for f in FORMATS), "plot file")
 
 
 def _pyplot():

@@ -15,13 +15,18 @@ reported as a measurement by the studies.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import NumericalFailure
+from ..errors import InputError, NumericalFailure
 
 EPS = float(np.finfo(float).eps)
+#: steps of one DOP853 reference solve (about a minute), and the steps after which the number
+#: needed to reach T is extrapolated and checked against it
+MAX_REFERENCE_STEPS = 200_000
+PROBE_STEPS = 100
 MEASURABLE_FACTOR = 10.0
 """An error counts as a measurement only above MEASURABLE_FACTOR x the reference's error estimate."""
 
@@ -56,15 +61,30 @@ def dop853(system, t_final: float, x0, rtol: float, atol: float) -> np.ndarray:
     """x(t_final) by scipy's DOP853 on ``xdot = pi(x) grad H(x)``; NumericalFailure if it fails.
 
     The vector field is the system's own evaluation (a few thousand calls at most, no compilation:
-    the compiled one of :mod:`rkhp.integrators.classical` serves the timed peers of ``bench``)."""
-    from scipy.integrate import solve_ivp
+    the compiled one of :mod:`rkhp.integrators.classical` serves the timed peers of ``bench``).
+    The solver is stepped here (as solve_ivp does) so that a horizon too long for a reference is
+    refused early: after PROBE_STEPS steps the number of steps to T is extrapolated, and above
+    MAX_REFERENCE_STEPS the solve stops with an InputError (docs/input.md)."""
+    from scipy.integrate import DOP853
 
     f = system.vector_field
-    sol = solve_ivp(lambda t, x: f(x), (0.0, float(t_final)), np.asarray(x0, dtype=float),
-                    method="DOP853", rtol=rtol, atol=atol)
-    if not sol.success or not np.all(np.isfinite(sol.y[:, -1])):
-        raise NumericalFailure(f"reference solve (DOP853, rtol {rtol:g}) failed on {system.name}: {sol.message}")
-    return sol.y[:, -1]
+    t_final = float(t_final)
+    solver = DOP853(lambda t, x: f(x), 0.0, np.asarray(x0, dtype=float), t_final, rtol=rtol, atol=atol)
+    steps, message = 0, None
+    while solver.status == "running":
+        message = solver.step()
+        steps += 1
+        if solver.status == "running" and (steps == PROBE_STEPS or steps > MAX_REFERENCE_STEPS):
+            needed = steps * t_final / solver.t if solver.t > 0 else math.inf
+            if needed > MAX_REFERENCE_STEPS:
+                many = f"about {needed:.3g}" if math.isfinite(needed) else "unboundedly many"
+                raise InputError(f"T = {t_final:g} is too long for a reference solution of {system.name}: "
+                                 f"DOP853 would take {many} steps (at most {MAX_REFERENCE_STEPS}); "
+                                 "give a smaller --t-final")
+    if solver.status != "finished" or not np.all(np.isfinite(solver.y)):
+        raise NumericalFailure(f"reference solve (DOP853, rtol {rtol:g}) failed on {system.name}: "
+                               f"{message or 'non-finite state'}")
+    return solver.y
 
 
 def dop853_reference(system, t_final: float, x0=None) -> Reference:

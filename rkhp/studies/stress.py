@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import bounds
 from ..errors import InputError
 from ..executors import InProcess, run_all
 from ..methods import condition_class, require_steps, resolve_method, resolve_methods, resolve_system
@@ -418,11 +419,11 @@ def stress(system, methods, t_final=None, long_steps: int = LONG_STEPS, long_h: 
     system = resolve_system(system)
     methods = require_steps(resolve_methods(methods))
     t_final = check_t_final(system.t_final if t_final is None else t_final)
-    if long_steps < 1 or sweep_coarsest < 1:
-        raise InputError("numbers of steps must be positive")
-    h_long = t_final / 100 if long_h is None else float(long_h)
-    if not math.isfinite(h_long) or h_long <= 0:
-        raise InputError(f"long-run step size must be positive, got {long_h}")
+    bounds.integer(long_steps, "--long-steps", 1, bounds.MAX_STEPS)
+    bounds.integer(sweep_coarsest, "--sweep-coarsest", 1, bounds.MAX_STEPS)
+    round_off_steps = tuple(bounds.integer(n, "--round-off-steps", 1, bounds.MAX_STEPS) for n in round_off_steps)
+    bounds.check_trajectory(max(long_steps, sweep_coarsest, *round_off_steps), system.dim, "the longest run")
+    h_long = t_final / 100 if long_h is None else bounds.positive(long_h, "--long-h")
 
     def tick(part):
         if on_part:

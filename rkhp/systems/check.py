@@ -75,11 +75,11 @@ def _bracket(J: np.ndarray, K: np.ndarray, n: int) -> np.ndarray:
 def check_birealisation(system, samples: int = 100, seed: int = 0,
                         tolerance: float = TOLERANCE) -> BirealisationCheck:
     """Maximum deviation of each axiom over `samples` random points (seeded)."""
-    from ..errors import InputError
+    from .. import bounds
     from ..integrators.jets import evaluate
 
-    if samples < 1:
-        raise InputError(f"--samples must be at least 1, got {samples}")
+    bounds.integer(samples, "--samples", 1, bounds.MAX_SAMPLES)
+    bounds.seed(seed, "--seed")
     n = system.dim
     dev = dict(identity=0.0, poisson=0.0, anti_poisson=0.0, commute=0.0, degeneracy=0.0,
                symmetry=0.0)

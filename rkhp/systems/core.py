@@ -86,8 +86,8 @@ def truncated(name: str) -> Realisation:
     from .spray import MAX_TRUNCATION
 
     text = name[len(TRUNCATED):]
-    if not (text.isdigit() and 1 <= int(text) <= MAX_TRUNCATION):
-        raise InputError(f"realisation {name!r}: K in truncated:K must be an integer from 1 to "
+    if not (text.isascii() and text.isdigit() and len(text) <= 3 and 1 <= int(text) <= MAX_TRUNCATION):
+        raise InputError(f"realisation {name[:40]!r}: K in truncated:K must be an integer from 1 to "
                          f"{MAX_TRUNCATION}")
     K = int(text)
     return Realisation(f"{TRUNCATED}{K}", _no_shift, True,

@@ -23,49 +23,39 @@ on a tape (`rkhp.systems.tape`) that the compiled engine differentiates.
 
 from __future__ import annotations
 
-import json
+import math
 from pathlib import Path
 
 import numpy as np
 
+from .. import documents
+from ..bounds import MAX_DIMENSION
+from ..documents import load_document
 from ..errors import InputError
 from ..expressions import variable_names
 from .core import FAMILIES, PoissonSystem
 from .families import constant, lie_poisson, log_canonical
 from .program import numeric_function, to_program
+from .structure import check_structure, lie_poisson_matrix, log_canonical_matrix
 
 KEYS = ("name", "family", "structure_constants", "lambda", "poisson", "hamiltonian", "x0",
         "t_final", "casimirs")
 
 
 def _read(path: Path) -> dict:
-    if not path.is_file():
+    """The keys of a spec file, read safely (`rkhp.documents`: size, encoding, nesting, repeated keys)."""
+    if not path.exists() and not path.is_symlink():
         raise InputError(f"spec file {path} not found")
-    try:
-        if path.suffix.lower() == ".json":
-            data = json.loads(path.read_text())
-        else:
-            import tomllib
-
-            data = tomllib.loads(path.read_text())
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot parse: {' '.join(str(exc).split())}") from None
-    if not isinstance(data, dict):
-        raise InputError(f"{path}: expected a table of keys")
+    data = load_document(path, "spec file")
     unknown = sorted(set(data) - set(KEYS))
     if unknown:
         raise InputError(f"{path}: unknown key(s) {', '.join(unknown)}; allowed: {', '.join(KEYS)}")
     return data
 
 
-def _matrix(value, n: int, where: str) -> np.ndarray:
-    try:
-        m = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InputError(f"{where} must be a matrix of numbers") from None
-    if m.shape != (n, n):
-        raise InputError(f"{where} must be {n} x {n} (the size of x0), got shape {m.shape}")
-    return m
+def _short(value) -> str:
+    text = value if isinstance(value, str) else repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def _expression_matrix(value, n: int, where: str) -> tuple:
@@ -88,19 +78,23 @@ def _expression_matrix(value, n: int, where: str) -> tuple:
 
 
 def _structure(value, n: int, where: str) -> np.ndarray:
+    """C[i, j, k] from entries [i, j, k, value] (1-based integer indices, finite values)."""
     C = np.zeros((n, n, n))
     given: dict[tuple[int, int, int], float] = {}
     if not isinstance(value, list) or not value:
         raise InputError(f"{where} must be a non-empty list of [i, j, k, value]")
+    if len(value) > n ** 3:
+        raise InputError(f"{where}: {len(value)} entries; at most n^3 = {n ** 3}")
     for entry in value:
         if not (isinstance(entry, list) and len(entry) == 4):
-            raise InputError(f"{where}: entry {entry!r} is not [i, j, k, value]")
-        i, j, k, v = entry
-        if not all(isinstance(q, int) and 1 <= q <= n for q in (i, j, k)):
-            raise InputError(f"{where}: indices in {entry!r} must be integers from 1 to {n}")
+            raise InputError(f"{where}: entry {_short(entry)} is not [i, j, k, value]")
+        i, j, k = entry[:3]
+        if not all(type(q) is int and 1 <= q <= n for q in (i, j, k)):
+            raise InputError(f"{where}: indices in {_short(entry)} must be integers from 1 to {n}")
+        v = documents.number(entry[3], f"{where}: value in {_short(entry)}")
         if i == j:
             raise InputError(f"{where}: {{x_{i}, x_{i}}} = 0 by antisymmetry, got {entry!r}")
-        for key, val in (((i, j, k), float(v)), ((j, i, k), -float(v))):
+        for key, val in (((i, j, k), v), ((j, i, k), -v)):
             if key in given and given[key] != val:
                 raise InputError(f"{where}: {entry!r} contradicts an earlier entry")
             given[key] = val
@@ -111,48 +105,84 @@ def _structure(value, n: int, where: str) -> np.ndarray:
 def parse_expression(text, n: int, where: str):
     """A sympy expression in x1..xn read by the safe reader (`rkhp.expressions`), with its
     symbols (InputError naming unknown symbols, bad syntax or anything outside the grammar)."""
-    import sympy
-
     from ..expressions import parse_expression as read
 
     names = variable_names(n)
     expr = read(text, names, where=where)
+    import sympy
+
     return expr, tuple(sympy.Symbol(name, real=True) for name in names)
 
 
-def load_spec(path, realisation: str = "symmetric") -> PoissonSystem:
-    """A PoissonSystem from a spec file (see the module docstring for the keys)."""
+def check_finite_at(exprs, symbols, x0, where: str) -> None:
+    """Each (label, expression) and its gradient are finite real numbers at x0 (InputError naming
+    the first that is not: a Hamiltonian or Casimir undefined or infinite at the initial point)."""
     import sympy
 
+    point = [float(v) for v in x0]
+    for label, expr in exprs:
+        values = [expr] + [sympy.diff(expr, s) for s in symbols]
+        try:
+            got = sympy.lambdify(symbols, values, "math")(*point)
+        except (ValueError, OverflowError, ZeroDivisionError, TypeError) as exc:
+            got = [f"undefined ({' '.join(str(exc).split()) or type(exc).__name__})"]
+        bad = [v for v in got if not (isinstance(v, int | float) and math.isfinite(v))]
+        if bad:
+            what = "its gradient" if got[0] is not bad[0] else "its value"
+            raise InputError(f"{where}: {label} {_short(str(expr))} is not finite at x0 = {point}: "
+                             f"{what} is {bad[0]}")
+
+
+def check_start(system, where: str = "x0") -> None:
+    """The Hamiltonian and the Casimirs of `system` (and their gradients) are finite at its x0:
+    by the expressions of a spec file when it has them (:func:`check_finite_at`, no compiled code),
+    else by the system's own evaluation. InputError otherwise (a run would be wrong from its start)."""
+    x0 = [float(v) for v in system.x0]
+    if "expressions" in system.extra:
+        symbols, expressions = system.extra["expressions"]
+        check_finite_at(expressions, symbols, x0, where)
+        return
+    with np.errstate(all="ignore"):
+        values = [("the Hamiltonian", [system.hamiltonian(x0)]),
+                  ("the gradient of the Hamiltonian", list(system.grad_hamiltonian(x0))),
+                  ("a Casimir", list(system.casimir_values(x0)))]
+    for name, vals in values:
+        if not all(math.isfinite(v) for v in vals):
+            raise InputError(f"{where}: {name} is not finite at x0 = {x0}")
+
+
+def poisson_expressions(family: str, data) -> tuple[tuple, ...]:
+    """pi(x) of a lie-poisson, log-canonical or constant family's data as sympy expressions (for
+    `rkhp.systems.structure.check_structure`)."""
+    import sympy
+
+    if family == "lie-poisson":
+        return lie_poisson_matrix(data)
+    if family == "log-canonical":
+        return log_canonical_matrix(data)
+    return tuple(tuple(sympy.nsimplify(float(v)) for v in row) for row in np.asarray(data))
+
+
+def load_spec(path, realisation: str = "symmetric") -> PoissonSystem:
+    """A PoissonSystem from a spec file (see the module docstring for the keys).
+
+    Everything is checked before the system is used (docs/input.md "Spec files"): the types of
+    the keys (booleans are not numbers), finite numbers, x0 in the domain, H and the Casimirs with
+    their gradients finite at x0, the structure (antisymmetry, Jacobi identity) and that every
+    declared Casimir Poisson-commutes with every x_i (`rkhp.systems.structure`).
+    """
     path = Path(path)
     data = _read(path)
     where = str(path)
     family = data.get("family")
     if family not in FAMILIES:
-        raise InputError(f"{where}: family must be one of {', '.join(FAMILIES)}, got {family!r}")
-    try:
-        x0 = np.array(data["x0"], dtype=np.float64).reshape(-1)
-    except KeyError:
-        raise InputError(f"{where}: missing key x0") from None
-    except (TypeError, ValueError):
-        raise InputError(f"{where}: x0 must be a list of numbers") from None
+        raise InputError(f"{where}: family must be one of {', '.join(FAMILIES)}, got {_short(family)}")
+    if "x0" not in data:
+        raise InputError(f"{where}: missing key x0")
+    x0 = np.array(documents.number_list(data["x0"], f"{where}: x0", max_size=MAX_DIMENSION))
     n = x0.size
-    if n < 1 or not np.all(np.isfinite(x0)):
-        raise InputError(f"{where}: x0 must be a non-empty list of finite numbers")
-    if "hamiltonian" not in data:
-        raise InputError(f"{where}: missing key hamiltonian")
-    H = to_program(*parse_expression(data["hamiltonian"], n, f"{where}: hamiltonian"))
-    casimirs, names = None, ()
-    if "casimirs" in data:
-        if not isinstance(data["casimirs"], list):
-            raise InputError(f"{where}: casimirs must be a list of expressions")
-        exprs = [parse_expression(c, n, f"{where}: casimirs")[0] for c in data["casimirs"]]
-        symbols = tuple(sympy.Symbol(name, real=True) for name in variable_names(n))
-        casimirs = tuple(numeric_function(e, symbols) for e in exprs)
-        names = tuple(str(e) for e in exprs)
-    t_final = data.get("t_final", 10.0)
-    if not isinstance(t_final, int | float) or not np.isfinite(t_final) or t_final <= 0:
-        raise InputError(f"{where}: t_final must be a positive number, got {t_final!r}")
+    name = documents.string(data.get("name", path.stem), f"{where}: name")
+    t_final = documents.number(data.get("t_final", 10.0), f"{where}: t_final", 0.0, low_open=True)
     needed = {"lie-poisson": "structure_constants", "log-canonical": "lambda",
               "constant": "poisson", "general": "poisson"}[family]
     for key in ("structure_constants", "lambda", "poisson"):
@@ -160,25 +190,42 @@ def load_spec(path, realisation: str = "symmetric") -> PoissonSystem:
             raise InputError(f"{where}: key {key} does not belong to family {family}")
     if needed not in data:
         raise InputError(f"{where}: family {family} needs key {needed}")
-    common = dict(name=data.get("name", path.stem), t_final=float(t_final),
-                  realisation=realisation, description=f"from {path.name}: H = {H.expression}")
+    if "hamiltonian" not in data:
+        raise InputError(f"{where}: missing key hamiltonian")
+    if family == "lie-poisson":
+        matrix = _structure(data[needed], n, f"{where}: structure_constants")
+    elif family != "general":
+        matrix = np.array(documents.matrix(data[needed], f"{where}: {needed}", n))
+    h_expr, symbols = parse_expression(data["hamiltonian"], n, f"{where}: hamiltonian")
+    exprs = []
+    if "casimirs" in data:
+        if not isinstance(data["casimirs"], list):
+            raise InputError(f"{where}: casimirs must be a list of expressions")
+        exprs = [parse_expression(c, n, f"{where}: casimirs[{i + 1}]")[0]
+                 for i, c in enumerate(data["casimirs"])]
+    if family == "general":
+        matrix = _expression_matrix(data[needed], n, f"{where}: poisson")
+    H = to_program(h_expr, symbols)
+    casimirs = tuple(numeric_function(e, symbols) for e in exprs)
+    names = tuple(str(e) for e in exprs)
+    common = dict(name=name, t_final=t_final, realisation=realisation, x0=x0,
+                  description=f"from {path.name}: H = {H.expression}")
     if family == "general":
         from .general import general
 
-        entries = _expression_matrix(data[needed], n, f"{where}: poisson")
-        system = general(entries, H, casimirs=exprs if "casimirs" in data else (),
-                         where=f"{where}: poisson", x0=x0, **common)
+        system = general(matrix, H, casimirs=exprs, where=f"{where}: poisson", **common)
     elif family == "lie-poisson":
-        C = _structure(data[needed], n, f"{where}: structure_constants")
-        system = lie_poisson(C, H, casimirs=casimirs or (), casimir_names=names, x0=x0, **common)
+        system = lie_poisson(matrix, H, casimirs=casimirs, casimir_names=names, **common)
     elif family == "log-canonical":
-        L = _matrix(data[needed], n, f"{where}: lambda")
-        system = log_canonical(L, H, casimirs=casimirs, casimir_names=names, x0=x0, **common)
+        system = log_canonical(matrix, H, casimirs=casimirs or None, casimir_names=names, **common)
     else:
-        P = _matrix(data[needed], n, f"{where}: poisson")
-        system = constant(P, H, casimirs=casimirs, casimir_names=names, x0=x0, **common)
-    if not np.isfinite(system.hamiltonian(x0)):
-        raise InputError(f"{where}: the hamiltonian is not finite at x0 = {x0.tolist()}")
+        system = constant(matrix, H, casimirs=casimirs or None, casimir_names=names, **common)
     if not system.in_domain(x0):
         raise InputError(f"{where}: x0 = {x0.tolist()} is outside the domain ({system.domain})")
+    expressions = [("hamiltonian", h_expr)] + [(f"casimir {i + 1}", e) for i, e in enumerate(exprs)]
+    check_finite_at(expressions, symbols, x0, where)
+    system.extra["expressions"] = (symbols, expressions)
+    if family != "general":  # the general family checks its structure and Casimirs itself
+        check_structure(poisson_expressions(family, matrix), casimirs=exprs, x0=x0,
+                        where=f"{where}: the {family} structure")
     return system
