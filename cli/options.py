@@ -1,8 +1,101 @@
-"""Options and helpers shared by the command modules (click; library modules imported lazily)."""
+"""Options and helpers shared by the command modules (click, and the light `rkhp.bounds`; other
+library modules are imported lazily).
+
+The option types below check every value when the command line is parsed, before any work or
+heavy import (docs/input.md): a value outside its bounds is a usage error, one line and exit
+status 2.
+"""
 
 from __future__ import annotations
 
+import math
+
 import click
+
+from rkhp import bounds
+from rkhp.errors import InputError
+
+
+class Checked(click.ParamType):
+    """A click type whose text is read and checked by `read(text, label)` (InputError -> usage error)."""
+
+    def __init__(self, name: str, read):
+        self.name = name
+        self.read = read
+
+    def convert(self, value, param, ctx):
+        if not isinstance(value, str):
+            return value  # a default already of the right type
+        label = (param.opts[0] if param.opts else param.name) if param is not None else self.name
+        try:
+            return self.read(value, label)
+        except InputError as exc:  # the message names the option already
+            raise click.UsageError(str(exc), ctx) from None
+
+
+def integer(low: int | None = 1, high: int | None = None, name: str = "integer") -> Checked:
+    """An integer low..high (at most 30 digits are ever parsed)."""
+    return Checked(name, lambda text, label: bounds.integer(bounds.parse_int(text, label), label, low, high))
+
+
+def real(low: float | None = None, high: float | None = None, *, low_open: bool = False,
+         high_open: bool = False, name: str = "number") -> Checked:
+    """A finite float (nan and inf refused) within the bounds."""
+    return Checked(name, lambda text, label: bounds.number(bounds.parse_float(text, label), label, low, high,
+                                                           low_open=low_open, high_open=high_open))
+
+
+def integers(low: int = 1, high: int | None = None, name: str = "N1,N2,...") -> Checked:
+    """A comma-separated list of integers low..high, none repeated."""
+    def read(text, label):
+        values = bounds.parse_list(text, label, lambda t: bounds.integer(bounds.parse_int(t, label), label, low, high))
+        if len(set(values)) != len(values):
+            raise InputError(f"{label}: a value is repeated in {text}")
+        return values
+
+    return Checked(name, read)
+
+
+def reals(check, name: str = "X1,X2,...", distinct: bool = True) -> Checked:
+    """A comma-separated list of finite numbers, each checked by `check(value, label)` (none repeated
+    when `distinct`)."""
+    def read(text, label):
+        values = bounds.parse_list(text, label, lambda t: check(bounds.parse_float(t, label), label))
+        if distinct and len(set(values)) != len(values):
+            raise InputError(f"{label}: a value is repeated in {text}")
+        return values
+
+    return Checked(name, read)
+
+
+def names(name: str = "NAME,...") -> Checked:
+    """A comma-separated list of names, none repeated (case-insensitive); empty text: none."""
+    def read(text, label):
+        values = tuple(t.strip() for t in text.split(",") if t.strip())
+        folded = [v.lower() for v in values]
+        if len(set(folded)) != len(folded):
+            twice = next(v for v in values if folded.count(v.lower()) > 1)
+            raise InputError(f"{label}: {twice} is named twice")
+        return values
+
+    return Checked(name, read)
+
+
+def output_path(*suffixes: str) -> Checked:
+    """A file to write, checked before the work (`rkhp.bounds.check_output_path`); returns the text."""
+    return Checked("FILE", lambda text, label: str(bounds.check_output_path(text, suffixes, label)))
+
+
+#: a seed: 0 .. 2^64 - 1
+SEED = integer(0, bounds.MAX_SEED, "seed")
+#: a positive finite time
+POSITIVE = real(0.0, low_open=True, name="positive number")
+#: the number of steps of one run
+STEPS = integer(1, bounds.MAX_STEPS, "steps")
+#: an initial state: finite numbers
+X0 = reals(lambda x, label: x, "X1,X2,...", distinct=False)
+
+
 
 
 def format_option(*choices: str, default: str = "table"):
@@ -22,7 +115,7 @@ def executor_options(what: str):
                          help=f"Run the {what} on the Dask cluster of this scheduler (tcp://host:8786); "
                               "default: $DASK_SCHEDULER_ADDRESS when set and --workers is not given. "
                               "Needs rkhp[distributed].")(f)
-        return click.option("--workers", type=int, default=1, show_default=True,
+        return click.option("--workers", type=integer(1, name="N"), default=1, show_default=True,
                             help=f"Processes on this machine for the {what}.")(f)
 
     return decorate
@@ -34,28 +127,59 @@ METHOD_HELP = ("A tableau name or file (an RKHP method), thpN or thpN-t0 (Taylor
 
 
 def x0_option():
-    """The `--x0` option of every command that integrates a system."""
-    return click.option("--x0", default=None, metavar="X1,X2,...",
+    """The `--x0` option of every command that integrates a system (finite numbers, read when the
+    command line is parsed)."""
+    return click.option("--x0", type=X0, default=None, metavar="X1,X2,...",
                         help="Initial state, comma-separated (default: the system's).")
 
 
-def parse_x0(text: str | None):
-    """The numbers of an --x0 value (None stays None); InputError for anything else."""
-    if text is None:
+def parse_x0(value):
+    """The numbers of an --x0 value (None stays None; text is read as the option reads it)."""
+    if value is None:
         return None
-    from rkhp.errors import InputError
+    if isinstance(value, str):
+        value = X0.read(value, "--x0")
+    return list(value)
 
-    try:
-        return [float(v) for v in text.split(",")]
-    except ValueError:
-        raise InputError(f"--x0 must be comma-separated numbers, got {text!r}") from None
+
+#: how a non-finite float is written in JSON output (docs/input.md "JSON output"): a string
+#: that float() reads back, so that the document stays valid JSON
+NON_FINITE = {"nan": "NaN", "inf": "Infinity", "-inf": "-Infinity"}
+
+
+def json_ready(obj):
+    """A copy of `obj` with every non-finite float (numpy's too) replaced by its NON_FINITE string,
+    tuples as lists and numpy scalars and arrays as Python values (iteratively: deep data is fine)."""
+    def leaf(v):
+        if hasattr(v, "tolist") and not isinstance(v, list | tuple | dict):
+            v = v.tolist()  # numpy scalars and arrays
+        if isinstance(v, float) and not math.isfinite(v):
+            return NON_FINITE[repr(v)]
+        if isinstance(v, dict):
+            return dict(v)
+        return list(v) if isinstance(v, list | tuple) else v
+
+    root = [obj]
+    stack = [root]
+    while stack:
+        node = stack.pop()
+        for k in list(node) if isinstance(node, dict) else range(len(node)):
+            node[k] = v = leaf(node[k])
+            if isinstance(v, list | dict):
+                stack.append(v)
+    return root[0]
+
+
+def json_text(obj, indent: int = 2) -> str:
+    """A JSON document: valid JSON always (allow_nan=False after :func:`json_ready`)."""
+    import json
+
+    return json.dumps(json_ready(obj), indent=indent, ensure_ascii=False, allow_nan=False)
 
 
 def emit_json(obj) -> None:
-    """Write a JSON document to stdout (stable key order as given)."""
-    import json
-
-    click.echo(json.dumps(obj, indent=2, ensure_ascii=False))
+    """Write a JSON document to stdout (stable key order as given; non-finite values as NON_FINITE)."""
+    click.echo(json_text(obj))
 
 
 def console():

@@ -5,17 +5,27 @@ from __future__ import annotations
 
 import click
 
-from .options import console, emit_json, executor_options, format_option, progress
+from .options import (
+    SEED,
+    console,
+    emit_json,
+    executor_options,
+    format_option,
+    integer,
+    json_text,
+    output_path,
+    progress,
+)
 
 
 @click.command()
-@click.option("--order", "-n", "order", type=int, required=True,
+@click.option("--order", "-n", "order", type=integer(1, name="N"), required=True,
               help="Largest order N (shipped up to 8; up to 9 with --regenerate).")
 @click.option("--regenerate", is_flag=True,
               help="Derive the relations from scratch (exact arithmetic modulo primes) instead of reading "
                    "the shipped data.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the random instances (--regenerate).")
-@click.option("--output", type=click.Path(dir_okay=False, writable=True),
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Seed of the random instances (--regenerate).")
+@click.option("--output", type=output_path(".json"),
               help="Write the relations document (the shipped format) to this JSON file.")
 @executor_options("evaluations of --regenerate (one task per prime)")
 @format_option("table", "json")
@@ -39,13 +49,15 @@ def relations(order, regenerate, seed, output, workers, scheduler, fmt):
     doc = data.to_json()
     doc["source"] = "regenerated" if regenerate else "shipped"
     if output:
-        import json
+        from rkhp.errors import InputError
 
         document = data.to_json()
         document["method"]["regenerate"] += f" --output {output}"
-        with open(output, "w", encoding="utf-8") as fh:
-            json.dump(document, fh, indent=1, ensure_ascii=False)
-            fh.write("\n")
+        try:
+            with open(output, "w", encoding="utf-8") as fh:
+                fh.write(json_text(document, indent=1) + "\n")
+        except OSError as exc:
+            raise InputError(f"--output {output}: cannot write the file ({exc.strerror or exc})") from None
     if fmt == "json":
         emit_json(doc)
         return

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import click
 
-from .options import console, emit_json, executor_options, format_option, progress
+from rkhp import bounds
+
+from .options import SEED, console, emit_json, executor_options, format_option, integer, output_path, progress, real
 from .render import print_table
 from .show_cmd import print_array
 
@@ -16,27 +18,27 @@ def _class_of(degenerate: bool, symmetric: bool) -> str:
 
 
 @click.command()
-@click.option("--stages", "-s", type=int, required=True, help="Number of stages S (1..16).")
-@click.option("--order", "-n", type=int, default=None,
+@click.option("--stages", "-s", type=integer(1, name="S"), required=True, help="Number of stages S (1..16).")
+@click.option("--order", "-n", type=integer(1, name="N"), default=None,
               help="Order N to reach (1..8); without it, the highest order reachable with S stages.")
 @click.option("--degenerate", is_flag=True, help="Conditions over T_0 (degenerate birealisations).")
 @click.option("--symmetric", is_flag=True, help="Reduced conditions of symmetric birealisations.")
 @click.option("--implicit", is_flag=True, help="Full matrix A (implicit methods) instead of explicit.")
-@click.option("--restarts", type=int, default=50, show_default=True,
+@click.option("--restarts", type=integer(1, bounds.MAX_RESTARTS, "N"), default=50, show_default=True,
               help="Restart budget per order (random starts).")
-@click.option("--time-limit", type=float, default=None,
+@click.option("--time-limit", type=real(0.0, bounds.MAX_SECONDS, low_open=True, name="SECONDS"), default=None,
               help="Seconds allowed to the restarts of each order and to the proof (default: "
                    "no limit for restarts, 60 s for --prove).")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed: restart k of order N "
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Seed: restart k of order N "
               "starts from numpy default_rng([seed, S, N, k]).")
 @executor_options("restarts")
 @click.option("--optimize", type=click.Choice(["error"]), default=None,
               help="Minimise the principal error norm at order N+1 on the solution family.")
-@click.option("--digits", type=int, default=30, show_default=True,
+@click.option("--digits", type=integer(1, name="D"), default=30, show_default=True,
               help="Digits D of the mpmath polishing and verification (20..500).")
 @click.option("--prove", is_flag=True,
               help="When an order is not reached, try to prove that no tableau exists (Groebner).")
-@click.option("--save", type=click.Path(dir_okay=False), default=None,
+@click.option("--save", type=output_path(".toml", ".json"), default=None,
               help="Write the tableau found to a .toml or .json file (loadable by verify).")
 @format_option("table", "json")
 def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit, seed, workers,
@@ -49,7 +51,6 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
     verifies the result with the verify engine. --prove looks for a Groebner certificate that
     the first order not reached is impossible.
     """
-    from rkhp.errors import InputError
     from rkhp.executors import open_executor
     from rkhp.search.driver import SearchOptions
     from rkhp.search.driver import search as run_search
@@ -60,8 +61,6 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
     if optimize and prove and order is not None:
         raise click.UsageError("--optimize needs --order N to be reached while --prove needs it "
                                "to fail: give one of them")
-    if save and not save.lower().endswith((".toml", ".json")):
-        raise InputError(f"--save {save}: the file name must end in .toml or .json")
     options = SearchOptions(restarts=restarts, seed=seed, time_limit=time_limit,
                             digits=digits, optimize=optimize, prove=prove)
     options.check()

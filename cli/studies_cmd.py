@@ -4,8 +4,32 @@ from __future__ import annotations
 
 import click
 
-from .options import METHOD_HELP, console, emit_json, executor_options, format_option, parse_x0, progress, x0_option
+from rkhp import bounds
+
+from .options import (
+    METHOD_HELP,
+    POSITIVE,
+    SEED,
+    STEPS,
+    console,
+    emit_json,
+    executor_options,
+    format_option,
+    integer,
+    integers,
+    names,
+    output_path,
+    parse_x0,
+    progress,
+    reals,
+    x0_option,
+)
 from .render import compact_table
+
+#: the steps of one run, listed
+STEP_LIST = integers(1, bounds.MAX_STEPS)
+#: a plot to write (checked before the study)
+PLOT_FILE = output_path(".png", ".svg", ".pdf")
 
 METHODS_HELP = (METHOD_HELP + " Repeat or separate by commas. Default: euler, paper-two-stage, "
                 "paper-three-stage, rk4.")
@@ -13,24 +37,6 @@ METHODS_HELP = (METHOD_HELP + " Repeat or separate by commas. Default: euler, pa
 
 def _names(values) -> tuple[str, ...]:
     return tuple(v.strip() for value in values for v in value.split(",") if v.strip())
-
-
-def _ints(text: str | None, what: str) -> tuple[int, ...]:
-    if not text:
-        return ()
-    try:
-        return tuple(int(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        raise click.BadParameter(f"expected comma-separated integers, got {text!r}", param_hint=what) from None
-
-
-def _floats(text: str | None, what: str) -> tuple[float, ...]:
-    if not text:
-        return ()
-    try:
-        return tuple(float(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        raise click.BadParameter(f"expected comma-separated numbers, got {text!r}", param_hint=what) from None
 
 
 def _common(f):
@@ -45,13 +51,10 @@ def _common(f):
 
 
 def _setup(system_name, realisation, x0, methods, t_final, plot):
-    """Validate the cheap inputs first (plot path, T), then load the system and the methods."""
+    """Validate the cheap inputs first (T; the plot path is checked by its option type), then load the
+    system and the methods."""
     from rkhp.methods import resolve_methods, resolve_system
     from rkhp.studies.converge import check_t_final
-    from rkhp.studies.plots import check_plot_path
-
-    if plot:
-        check_plot_path(plot)
     if t_final is not None:
         check_t_final(t_final)
     system = resolve_system(system_name, realisation, parse_x0(x0))
@@ -80,10 +83,12 @@ def _f(x, digits=2) -> str:
 
 @click.command()
 @_common
-@click.option("--t-final", type=float, help="Final time T (default: the system's).")
-@click.option("--steps", help="Numbers of steps N1,N2,... (one value: the coarsest, doubled --refinements times).")
-@click.option("--refinements", type=int, help="Halvings of h after the coarsest step (default 6, from N = 20).")
-@click.option("--plot", type=click.Path(dir_okay=False), help="Log-log plot of error against h (.png, .svg, .pdf).")
+@click.option("--t-final", type=POSITIVE, help="Final time T (default: the system's).")
+@click.option("--steps", type=STEP_LIST,
+              help="Numbers of steps N1,N2,... (one value: the coarsest, doubled --refinements times).")
+@click.option("--refinements", type=integer(0, bounds.MAX_REFINEMENTS, "K"),
+              help="Halvings of h after the coarsest step (default 6, from N = 20).")
+@click.option("--plot", type=PLOT_FILE, help="Log-log plot of error against h (.png, .svg, .pdf).")
 @executor_options("runs")
 @format_option("table", "json")
 def converge(system, methods, x0, realisation, t_final, steps, refinements, plot, workers, scheduler, fmt):
@@ -92,7 +97,7 @@ def converge(system, methods, x0, realisation, t_final, steps, refinements, plot
     from rkhp.studies.converge import converge as run
     from rkhp.studies.converge import step_counts
 
-    counts = step_counts(_ints(steps, "--steps"), refinements)
+    counts = step_counts(steps, refinements)
     sys_, resolved = _setup(system, realisation, x0, methods, t_final, plot)
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("converge", total=len(resolved) * len(counts))
@@ -166,17 +171,22 @@ def _render_converge(study, plot) -> None:
 
 @click.command()
 @_common
-@click.option("--peers", default="scipy:dop853,scipy:rk45,classical:rk4,implicit-midpoint", show_default=True,
+@click.option("--peers", type=names(), default="scipy:dop853,scipy:rk45,classical:rk4,implicit-midpoint",
+              show_default=True,
               help="Peers, in the grammar of --method but not RKHP tableaux: scipy:NAME (solve_ivp's "
                    "dop853, rk45, rk23, radau, bdf, lsoda, run by tolerance), classical:NAME, "
                    "implicit-midpoint, thpN; empty for none (docs/methods.md).")
-@click.option("--t-final", type=float, help="Final time T (default: the system's).")
-@click.option("--steps", help="Numbers of steps of the integrators (default 10,20,...,2560).")
-@click.option("--tolerances", help="rtol values of the scipy peers (default 1e-3,...,1e-13; atol = 1e-3 rtol).")
-@click.option("--repeats", type=int, default=3, show_default=True, help="Timed repeats per point (median).")
-@click.option("--ensemble", type=int, help="Time K initial conditions near x0 at once (per-trajectory times).")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the ensemble's starts.")
-@click.option("--plot", type=click.Path(dir_okay=False), help="Log-log plot of time against error (.png, .svg, .pdf).")
+@click.option("--t-final", type=POSITIVE, help="Final time T (default: the system's).")
+@click.option("--steps", type=STEP_LIST, help="Numbers of steps of the integrators (default 10,20,...,2560).")
+@click.option("--tolerances", type=reals(bounds.tolerance, "RTOL,..."),
+              help=f"rtol values of the scipy peers ({bounds.MIN_TOLERANCE:g} <= rtol < 1; default 1e-3,...,1e-13; "
+                   "atol = 1e-3 rtol).")
+@click.option("--repeats", type=integer(1, bounds.MAX_REPEATS, "N"), default=3, show_default=True,
+              help="Timed repeats per point (median).")
+@click.option("--ensemble", type=integer(1, bounds.MAX_ENSEMBLE, "K"),
+              help="Time K initial conditions near x0 at once (per-trajectory times).")
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Seed of the ensemble's starts.")
+@click.option("--plot", type=PLOT_FILE, help="Log-log plot of time against error (.png, .svg, .pdf).")
 @executor_options("curves (with --ensemble: the trajectories)")
 @format_option("table", "json")
 def bench(system, methods, x0, realisation, peers, t_final, steps, tolerances, repeats, ensemble, seed, plot,
@@ -185,9 +195,9 @@ def bench(system, methods, x0, realisation, peers, t_final, steps, tolerances, r
     from rkhp.executors import open_executor
     from rkhp.studies import bench as B
 
-    step_list = _ints(steps, "--steps") or B.DEFAULT_STEPS
-    tol_list = _floats(tolerances, "--tolerances") or B.DEFAULT_TOLERANCES
-    peer_list = _names([peers]) if peers else ()
+    step_list = steps or B.DEFAULT_STEPS
+    tol_list = tolerances or B.DEFAULT_TOLERANCES
+    peer_list = peers or ()
     for p in peer_list:
         B.resolve_peer(p)
     sys_, resolved = _setup(system, realisation, x0, methods, t_final, plot)
@@ -243,13 +253,13 @@ def _render_bench(study, plot) -> None:
 
 @click.command()
 @_common
-@click.option("--t-final", type=float, help="Horizon T of parts (a) and (c) (default: the system's).")
-@click.option("--long-steps", type=int, default=100_000, show_default=True, help="Steps of the long run (b).")
-@click.option("--long-h", type=float, help="Step size of the long run (default T/100).")
-@click.option("--sweep-coarsest", type=int, default=200, show_default=True,
+@click.option("--t-final", type=POSITIVE, help="Horizon T of parts (a) and (c) (default: the system's).")
+@click.option("--long-steps", type=STEPS, default=100_000, show_default=True, help="Steps of the long run (b).")
+@click.option("--long-h", type=POSITIVE, help="Step size of the long run (default T/100).")
+@click.option("--sweep-coarsest", type=STEPS, default=200, show_default=True,
               help="Part (a) sweeps h = T/N upward from N = this down to 1.")
-@click.option("--round-off-steps", help="Numbers of steps of part (d) over T (default 32 to 10^5).")
-@click.option("--plot", type=click.Path(dir_okay=False), help="Plot of the long run's drift (.png, .svg, .pdf).")
+@click.option("--round-off-steps", type=STEP_LIST, help="Numbers of steps of part (d) over T (default 32 to 10^5).")
+@click.option("--plot", type=PLOT_FILE, help="Plot of the long run's drift (.png, .svg, .pdf).")
 @executor_options("runs of each part")
 @format_option("table", "json")
 def stress(system, methods, x0, realisation, t_final, long_steps, long_h, sweep_coarsest, round_off_steps, plot,
@@ -259,7 +269,7 @@ def stress(system, methods, x0, realisation, t_final, long_steps, long_h, sweep_
     from rkhp.executors import open_executor
     from rkhp.studies import stress as S
 
-    ro = _ints(round_off_steps, "--round-off-steps") or S.ROUND_OFF_STEPS
+    ro = round_off_steps or S.ROUND_OFF_STEPS
     if len(ro) < 3:
         raise click.BadParameter("a fit needs at least 3 step sizes", param_hint="--round-off-steps")
     sys_, resolved = _setup(system, realisation, x0, methods, t_final, plot)

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import math
-
 import click
 
-from .options import METHOD_HELP, console, emit_json, format_option, parse_x0, x0_option
+from rkhp import bounds
+
+from .options import METHOD_HELP, POSITIVE, SEED, STEPS, console, emit_json, format_option, integer, parse_x0, x0_option
 from .render import compact_table, print_table
 
 
@@ -54,9 +54,9 @@ def systems(fmt):
 @click.command("check")
 @click.argument("system")
 @realisation_option()
-@click.option("--samples", type=click.IntRange(min=1), default=100, show_default=True,
+@click.option("--samples", type=integer(1, bounds.MAX_SAMPLES, "N"), default=100, show_default=True,
               help="Random points (x, p) at which the axioms are checked.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Random seed.")
 @format_option("table", "json")
 def check(system, realisation, samples, seed, fmt):
     """Check the birealisation axioms of SYSTEM (built-in name or spec file) by automatic
@@ -95,25 +95,6 @@ def check(system, realisation, samples, seed, fmt):
                           f"({bad} > {result.tolerance:g})")
 
 
-def steps_and_h(t_final: float, steps: int | None, h: float | None) -> tuple[int, float]:
-    """(number of steps, h) from --steps or --h over [0, t_final]."""
-    from rkhp.errors import InputError
-
-    if (steps is None) == (h is None):
-        raise InputError("give exactly one of --steps and --h")
-    if not math.isfinite(t_final) or t_final <= 0:
-        raise InputError(f"--t-final must be positive and finite, got {t_final}")
-    if steps is not None:
-        if steps < 1:
-            raise InputError(f"--steps must be at least 1, got {steps}")
-        return steps, t_final / steps
-    if not math.isfinite(h) or h <= 0:
-        raise InputError(f"--h must be positive and finite, got {h}")
-    ratio = t_final / h
-    n = round(ratio) if abs(ratio - round(ratio)) <= 1e-9 * ratio else math.ceil(ratio)
-    return max(int(n), 1), h
-
-
 def integration_report(system, trajectory, method: str, h: float, steps: int) -> dict:
     """The JSON document of `rkhp integrate` (keys in the issue's order, plus exact_error)."""
     import numpy as np
@@ -141,23 +122,27 @@ def integration_report(system, trajectory, method: str, h: float, steps: int) ->
 @click.command("integrate")
 @click.argument("system")
 @click.option("--method", "method", required=True, metavar="METHOD", help=METHOD_HELP)
-@click.option("--steps", type=int, default=None, help="Number of steps over [0, T].")
-@click.option("--h", "h", type=float, default=None, help="Step size (steps = T / h).")
-@click.option("--t-final", type=float, default=None, help="Final time T (default: the system's).")
+@click.option("--steps", type=STEPS, default=None, help="Number of steps over [0, T].")
+@click.option("--h", "h", type=POSITIVE, default=None,
+              help="Step size; it must divide T (steps = T / h; docs/input.md).")
+@click.option("--t-final", type=POSITIVE, default=None, help="Final time T (default: the system's).")
 @x0_option()
-@click.option("--modified", "modified_order", type=int, default=None, metavar="N",
+@click.option("--modified", "modified_order", type=integer(1, name="N"), default=None, metavar="N",
               help="Also report max over the run of |H~_N(y_n) - H~_N(y_0)|, H~_N the method's modified "
                    "Hamiltonian to order N (docs/modified.md).")
 @realisation_option()
 @format_option("table", "json")
 def integrate(system, method, steps, h, t_final, x0, modified_order, realisation, fmt):
     """Integrate SYSTEM (built-in or spec file) with METHOD (docs/methods.md)."""
-    from rkhp.errors import NumericalFailure
+    from rkhp.errors import InputError, NumericalFailure
     from rkhp.methods import resolve_method, resolve_system
 
+    if (steps is None) == (h is None):
+        raise InputError("give exactly one of --steps and --h")
     poisson = resolve_system(system, realisation, parse_x0(x0))
     chosen = resolve_method(method)
-    n, step = steps_and_h(poisson.t_final if t_final is None else t_final, steps, h)
+    n, step = bounds.step_plan(poisson.t_final if t_final is None else t_final, steps, h)
+    bounds.check_trajectory(n, poisson.dim)
     series = None
     if modified_order is not None:
         from .modified_cmd import modified_series

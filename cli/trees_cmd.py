@@ -4,17 +4,18 @@ from __future__ import annotations
 
 import click
 
+from rkhp.bounds import check_tree_memory
 from rkhp.conditions import order_conditions
 from rkhp.trees import MAX_COUNT_ORDER, MAX_ENUMERATION_ORDER, check_order, count_trees, trees_up_to
 
-from .options import console, emit_json, format_option
+from .options import console, emit_json, format_option, integer
 from .render import print_table
 
 FORMATS = ("table", "json", "latex", "markdown")
 
 
 def _order_option(f):
-    return click.option("--order", "-n", "order", type=int, required=True,
+    return click.option("--order", "-n", "order", type=integer(1, name="N"), required=True,
                         help=f"Largest tree order N (1..{MAX_ENUMERATION_ORDER}; "
                              f"up to {MAX_COUNT_ORDER} with --count).")(f)
 
@@ -46,6 +47,7 @@ def trees(order, degenerate, exact_order, count, fmt):
             _render_counts(counts, degenerate, fmt)
         return
     check_order(order, MAX_ENUMERATION_ORDER)
+    check_tree_memory(order, degenerate)
     found = [t for t in trees_up_to(order, degenerate) if not exact_order or t.order == order]
     counts = {str(n): sum(1 for t in found if t.order == n) for n in orders}
     if fmt == "json":

@@ -4,20 +4,21 @@ from __future__ import annotations
 
 import click
 
-from .options import console, emit_json, format_option, progress
+from .options import console, emit_json, format_option, integer, progress
 from .render import compact_table, print_table
 
 _PRECISION_HELP = ("float, exact, or a number of decimal digits (fixed point). Default: exact when "
                    "every entry is exact, else the digits given when above 17, else float.")
+MAX_SHOW = 1_000_000
 _CLASS_SETS = {"general": "general (T)", "degenerate": "degenerate (T_0)"}
 
 
 @click.command()
 @click.argument("tableau", metavar="NAME|FILE")
-@click.option("--max-order", type=int, default=None,
+@click.option("--max-order", type=integer(None, name="N"), default=None,
               help="Check at most up to this order (default: the order found plus one, up to 16).")
 @click.option("--precision", default=None, metavar="float|exact|DIGITS", help=_PRECISION_HELP)
-@click.option("--show", type=int, default=10, show_default=True,
+@click.option("--show", type=integer(0, MAX_SHOW, name="N"), default=10, show_default=True,
               help="Failing conditions listed per class in the table view (JSON lists all).")
 @format_option("table", "json")
 def verify(tableau, max_order, precision, show, fmt):

@@ -35,7 +35,7 @@ SCIPY_PREFIX = "scipy:"
 MIDPOINT = "implicit-midpoint"
 SCIPY_METHODS = {"dop853": "DOP853", "rk45": "RK45", "rk23": "RK23", "radau": "Radau", "bdf": "BDF",
                  "lsoda": "LSODA"}
-_TAYLOR = re.compile(r"thp(\d+)(-t0)?")
+_TAYLOR = re.compile(r"thp(\d{1,6})(-t0)?")
 KINDS = ("rkhp", "taylor", "classical", "implicit-midpoint", "scipy")
 
 
@@ -239,7 +239,13 @@ def resolve_system(system, realisation: str = "symmetric", x0=None):
 
     if not isinstance(system, PoissonSystem):
         system = get_system(system, realisation)
-    return system if x0 is None else system.with_x0(x0)
+    if x0 is None:
+        return system
+    from .systems.spec import check_start
+
+    started = system.with_x0(x0)
+    check_start(started, "x0")
+    return started
 
 
 def integrate(system, method, h, n_steps, x0=None, *, realisation: str = "symmetric"):
