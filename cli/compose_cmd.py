@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import click
 
-from .options import console, emit_json, format_option, progress
+from .options import SEED, console, emit_json, format_option, integer, progress
 from .trees_cmd import _class_of
 
 EXACT = "exact"
@@ -13,12 +13,12 @@ EXACT = "exact"
 
 @click.command()
 @click.argument("methods", metavar="METHOD,METHOD[,...]")
-@click.option("--order", "-n", "order", type=int, default=5, show_default=True,
+@click.option("--order", "-n", "order", type=integer(None, name="N"), default=5, show_default=True,
               help="Largest tree order (at most 7).")
 @click.option("--degenerate", is_flag=True, help="Degenerate birealisations: trees of T_0.")
 @click.option("--symmetric", is_flag=True,
               help="Symmetric birealisations: T_0 modulo the relations of `rkhp relations`.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the generic instances.")
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Seed of the generic instances.")
 @format_option("table", "json")
 def compose(methods, order, degenerate, symmetric, seed, fmt):
     """Compose RKHP steps of size h (tableau names or files, or thpN, applied left to right; `exact`

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import click
 
-from .options import console, emit_json, format_option, progress
+from .options import SEED, console, emit_json, format_option, integer, progress
 from .trees_cmd import _class_of
 
 
@@ -13,14 +13,14 @@ from .trees_cmd import _class_of
 @click.option("--method", "-m", "method", required=True, metavar="METHOD",
               help="An RKHP method: a built-in tableau or a tableau file with exact entries, or thpN / thpN-t0 "
                    "(docs/methods.md).")
-@click.option("--order", "-n", "order", type=int, required=True,
+@click.option("--order", "-n", "order", type=integer(None, name="N"), required=True,
               help="Largest tree order N: the series up to h^(N-1) (at most 8).")
 @click.option("--degenerate", is_flag=True, help="Degenerate birealisations: trees of T_0.")
 @click.option("--symmetric", is_flag=True,
               help="Symmetric birealisations: T_0 modulo the relations of `rkhp relations`.")
 @click.option("--modifying", is_flag=True,
               help="The modifying Hamiltonian instead: the method applied to it is the exact flow of H.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the generic instances.")
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Seed of the generic instances.")
 @format_option("table", "json", "latex")
 def modified(method, order, degenerate, symmetric, modifying, seed, fmt):
     """Terms of the modified Hamiltonian H~ = sum_t h^(|t|-1) c(t) F(t) of an RKHP method: the method's

@@ -35,7 +35,7 @@ SCIPY_PREFIX = "scipy:"
 MIDPOINT = "implicit-midpoint"
 SCIPY_METHODS = {"dop853": "DOP853", "rk45": "RK45", "rk23": "RK23", "radau": "Radau", "bdf": "BDF",
                  "lsoda": "LSODA"}
-_TAYLOR = re.compile(r"thp(\d{1,6})(-t0)?")
+_TAYLOR = re.compile(r"thp([0-9]+)(-t0)?")
 KINDS = ("rkhp", "taylor", "classical", "implicit-midpoint", "scipy")
 
 
@@ -189,7 +189,7 @@ def resolve_method(spec) -> Method:
         return Method(spec, "implicit-midpoint")
     taylor = _TAYLOR.fullmatch(spec)
     if taylor:
-        order = int(taylor[1])
+        order = int(taylor[1]) if len(taylor[1]) <= 6 else 0  # never parse a huge number
         if not 1 <= order <= 8:
             raise InputError(f"method {spec}: the THP order N must be from 1 to 8")
         return Method(spec, "taylor", order=order, degenerate=bool(taylor[2]))

@@ -286,8 +286,11 @@ class NoNumberField(InputError):
 
 
 #: Largest degree over Q of a number field built for exact verification (product of the
-#: generators' degrees); beyond it the entries are verified at a number of digits.
-MAX_FIELD_DEGREE = 64
+#: generators' degrees); beyond it the entries are verified at a number of digits. Exact
+#: arithmetic slows down steeply with the degree (measured, 4-stage tableaux: Q(sqrt 3, cos pi/18),
+#: degree 12, 2.4 s CPU; Q(2^(1/3), sqrt 2, sqrt 3), degree 12, 4.6 s; four square roots, degree 16,
+#: 22 s), so degree 12 is the most that stays within seconds (docs/input.md).
+MAX_FIELD_DEGREE = 12
 
 
 def field_generators(expr) -> set:

@@ -8,7 +8,8 @@ create a file named PWNED in the folder (or in an absolute path inside it) if an
 them.
 
 The cases run concurrently (two at a time, the cores of the test machine) from one fixture; the
-parametrized test checks each one's result.
+parametrized test checks each one's result. Only a few cases get as far as the compiled engine
+(numerical failures, exit status 1); the fixture first fills numba's cache for them (WARM_UP).
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ class Case(NamedTuple):
     args: tuple[str, ...]
     files: dict = {}
     status: int = 2
+    env: dict = {}
 
 
 class Link(str):
@@ -446,7 +448,11 @@ def _option_cases() -> list[Case]:
         Case("bench-tolerance-negative", ("bench", "pendulum", *quick, "--tolerances", "-1e-6")),
         Case("bench-tolerance-nan", ("bench", "pendulum", *quick, "--tolerances", "nan")),
         Case("bench-tolerance-one", ("bench", "pendulum", *quick, "--tolerances", "2")),
-        Case("bench-duplicate-peers", ("bench", "pendulum", *quick, "--peers", "dop853,dop853")),
+        Case("bench-duplicate-peers", ("bench", "pendulum", *quick, "--peers", "scipy:dop853,scipy:dop853")),
+        Case("bench-duplicate-peers-case", ("bench", "pendulum", *quick, "--peers", "scipy:dop853,SCIPY:DOP853")),
+        Case("bench-duplicate-peers-alias",
+             ("bench", "pendulum", *quick, "--peers", "classical:rk4,classical:classical")),
+        Case("bench-peer-is-method", ("bench", "pendulum", "--method", "classical:rk4", "--peers", "classical:rk4")),
         Case("bench-unknown-peer", ("bench", "pendulum", *quick, "--peers", "euler-maruyama")),
         Case("bench-repeats-zero", ("bench", "pendulum", *quick, "--repeats", "0")),
         Case("bench-repeats-huge", ("bench", "pendulum", *quick, "--repeats", "100000000")),
@@ -459,11 +465,52 @@ def _option_cases() -> list[Case]:
         Case("stress-long-h-nan", ("stress", "pendulum", *quick, "--long-h", "nan")),
         Case("stress-sweep-huge", ("stress", "pendulum", *quick, "--sweep-coarsest", "1000000000000")),
         Case("stress-round-off-memory", ("stress", "pendulum", *quick, "--round-off-steps", "10,20,1000000000000")),
+        Case("modified-seed-negative", ("modified", "-m", "rk4", "-n", "3", "--seed", "-1")),
+        Case("modified-order-huge", ("modified", "-m", "rk4", "-n", "99")),
+        Case("modified-payload", ("modified", "-m", "t.toml", "-n", "3"),
+             {"t.toml": toml(RK4, b=[PAYLOADS["import"], "1/3", "1/3", "1/6"])}),
+        Case("compose-seed-huge", ("compose", "rk4,rk4", "--seed", "9" * 40)),
+        Case("compose-too-many", ("compose", ",".join(["rk4"] * 9))),
+        Case("compose-order-huge", ("compose", "rk4,rk4", "--order", "1000")),
+        Case("show-payload", ("show", "t.json"), {"t.json": jsondoc(RK4, b=[PAYLOADS["lambda"], 0, 0, 0])}),
+        Case("show-deep", ("show", "t.json"), {"t.json": "[" * 50_000}),
+        Case("realisation-truncated-huge", ("check", "pendulum", "--realisation", "truncated:" + "9" * 5000)),
+        Case("realisation-truncated-unicode", ("check", "pendulum", "--realisation", "truncated:\u00b2")),
+        Case("realisation-payload", ("check", "pendulum", "--realisation", PAYLOADS["import"])),
+        Case("problem-size-huge", ("check", "toda:99999999", "--samples", "1")),
+        Case("problem-size-digits", ("check", "toda:" + "9" * 5000, "--samples", "1")),
+        Case("integrate-thp-bignum", ("integrate", "pendulum", "--method", "thp" + "9" * 5000, "--steps", "1")),
+        Case("integrate-modified-zero", ("integrate", "pendulum", *quick, "--steps", "1", "--modified", "0")),
+        Case("integrate-scipy-method", ("integrate", "pendulum", "--method", "scipy:bogus", "--steps", "1")),
+        Case("converge-x0-nan", ("converge", "pendulum", *quick, "--x0", "nan,1")),
+        Case("converge-x0-size", ("converge", "pendulum", *quick, "--x0", "1,2,3")),
+        Case("converge-x0-nonfinite-h", ("converge", "s.toml", *quick, "--x0", "-3,0"),
+             {"s.toml": toml(PENDULUM, hamiltonian="log(x1 + 2) + x2^2")}),
+        Case("converge-workers-zero", ("converge", "pendulum", *quick, "--workers", "0")),
+        Case("converge-workers-huge", ("converge", "pendulum", *quick, "--workers", "100000")),
+        Case("memory-limit-env-bad", ("integrate", "pendulum", *quick, "--steps", "10"),
+             env={"RKHP_MEMORY_LIMIT": "lots"}),
+        Case("memory-limit-env-small", ("integrate", "pendulum", *quick, "--steps", "1000"),
+             env={"RKHP_MEMORY_LIMIT": "1K"}),
+        Case("check-failed-search", ("search", "--stages", "2", "--order", "3", "--restarts", "2", "--format", "json"),
+             status=1),
+        Case("check-failed-overclaim", ("verify", "t.toml", "--format", "json"), {"t.toml": toml(RK4, order=5)},
+             status=1),
+        Case("numerical-newton", ("integrate", "pendulum", *quick, "--h", "50", "--t-final", "500", "--format", "json"),
+             status=1),
+        Case("numerical-nonfinite",
+             ("integrate", "s.toml", "--method", "classical:rk4", "--h", "10", "--format", "json"),
+             {"s.toml": toml(PENDULUM, hamiltonian="x2^4/4 + x1^4/4", x0=[3.0, 3.0], t_final=100)}, status=1),
         Case("unknown-command", ("frobnicate",)),
         Case("unknown-option", ("trees", "--order", "3", "--colour")),
         Case("format-unknown", ("systems", "--format", "yaml")),
     ]
 
+
+#: commands run (without limits) before the corpus, so that the few cases that integrate load the
+#: compiled kernels from numba's cache instead of compiling them
+WARM_UP = (("integrate", "pendulum", "--method", "rk4", "--steps", "20"),
+           ("integrate", "pendulum", "--method", "classical:rk4", "--steps", "20"))
 
 CASES = _payload_cases() + _expression_cases() + _spec_cases() + _file_cases() + _option_cases()
 
@@ -508,7 +555,7 @@ def _run(case: Case, folder: Path) -> Outcome:
     folder.mkdir()
     _write(folder, case.files)
     env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1",
-           "MKL_NUM_THREADS": "1"}
+           "MKL_NUM_THREADS": "1", **case.env}
     before = {p.relative_to(folder) for p in folder.rglob("*")}
     args = [a.replace("{d}", str(folder)) for a in case.args]
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
@@ -535,6 +582,8 @@ def _run(case: Case, folder: Path) -> Outcome:
 def outcomes():
     import tempfile
 
+    for args in WARM_UP:  # numba's cache: a case's 10 s of CPU must not include compiling the engine
+        subprocess.run([sys.executable, "-m", "rkhp", *args], capture_output=True, check=True)
     with tempfile.TemporaryDirectory(prefix="rkhp-hostile-") as tmp:
         root = Path(tmp)
         with ThreadPoolExecutor(max_workers=2) as pool:
@@ -557,5 +606,7 @@ def test_hostile(case, outcomes):
     if case.status:
         assert o.stderr.endswith("\n") and o.stderr.count("\n") == 1, o.stderr[-2000:]
         assert o.stderr.startswith("rkhp: "), o.stderr
+    if "json" in case.args and o.stdout:  # valid JSON, no bare NaN or Infinity
+        json.loads(o.stdout, parse_constant=lambda name: pytest.fail(f"bare {name} in the JSON output"))
     assert o.cpu <= CPU_SECONDS
     assert o.rss < ADDRESS_SPACE

@@ -259,12 +259,12 @@ def problem_data(name: str) -> ProblemData | None:
         return make()
     if not sized:
         raise InputError(f"{base} has no size parameter (got {name!r})")
-    if not (size.isascii() and size.isdigit() and len(size) <= 6):
+    if not (size.isascii() and size.isdigit()):
         raise InputError(f"{name[:40]!r}: the size after ':' must be an integer")
     from ..bounds import MAX_DIMENSION
 
-    if int(size) > MAX_DIMENSION:
-        raise InputError(f"{name!r}: the size is at most {MAX_DIMENSION}")
+    if len(size) > 6 or int(size) > MAX_DIMENSION:
+        raise InputError(f"{name[:40]!r}: the size is at most {MAX_DIMENSION}")
     return make(int(size))
 
 
