@@ -19,14 +19,15 @@ from rkhp.errors import InputError
 class Checked(click.ParamType):
     """A click type whose text is read and checked by `read(text, label)` (InputError -> usage error)."""
 
-    def __init__(self, name: str, read):
+    def __init__(self, name: str, read, label: str | None = None):
         self.name = name
         self.read = read
+        self.label = label
 
     def convert(self, value, param, ctx):
         if not isinstance(value, str):
             return value  # a default already of the right type
-        label = (param.opts[0] if param.opts else param.name) if param is not None else self.name
+        label = self.label or ((param.opts[0] if param.opts else param.name) if param is not None else self.name)
         try:
             return self.read(value, label)
         except InputError as exc:  # the message names the option already
@@ -39,16 +40,17 @@ def integer(low: int | None = 1, high: int | None = None, name: str = "integer")
 
 
 def real(low: float | None = None, high: float | None = None, *, low_open: bool = False,
-         high_open: bool = False, name: str = "number") -> Checked:
-    """A finite float (nan and inf refused) within the bounds."""
+         high_open: bool = False, name: str = "number", label: str | None = None) -> Checked:
+    """A finite float (nan and inf refused) within the bounds (`label` names it in messages)."""
     return Checked(name, lambda text, label: bounds.number(bounds.parse_float(text, label), label, low, high,
-                                                           low_open=low_open, high_open=high_open))
+                                                           low_open=low_open, high_open=high_open), label)
 
 
 def integers(low: int = 1, high: int | None = None, name: str = "N1,N2,...") -> Checked:
     """A comma-separated list of integers low..high, none repeated."""
     def read(text, label):
-        values = bounds.parse_list(text, label, lambda t: bounds.integer(bounds.parse_int(t, label), label, low, high))
+        form = f"{label} (comma-separated integers)"
+        values = bounds.parse_list(text, form, lambda t: bounds.integer(bounds.parse_int(t, form), label, low, high))
         if len(set(values)) != len(values):
             raise InputError(f"{label}: a value is repeated in {text}")
         return values
@@ -60,7 +62,8 @@ def reals(check, name: str = "X1,X2,...", distinct: bool = True) -> Checked:
     """A comma-separated list of finite numbers, each checked by `check(value, label)` (none repeated
     when `distinct`)."""
     def read(text, label):
-        values = bounds.parse_list(text, label, lambda t: check(bounds.parse_float(t, label), label))
+        form = f"{label} (comma-separated numbers)"
+        values = bounds.parse_list(text, form, lambda t: check(bounds.parse_float(t, form), label))
         if distinct and len(set(values)) != len(values):
             raise InputError(f"{label}: a value is repeated in {text}")
         return values
@@ -88,8 +91,10 @@ def output_path(*suffixes: str) -> Checked:
 
 #: a seed: 0 .. 2^64 - 1
 SEED = integer(0, bounds.MAX_SEED, "seed")
-#: a positive finite time
+#: a positive finite time or step
 POSITIVE = real(0.0, low_open=True, name="positive number")
+#: the final time T
+T_FINAL = real(0.0, low_open=True, name="T", label="--t-final (final time T)")
 #: the number of steps of one run
 STEPS = integer(1, bounds.MAX_STEPS, "steps")
 #: an initial state: finite numbers

@@ -11,6 +11,7 @@ from .options import (
     POSITIVE,
     SEED,
     STEPS,
+    T_FINAL,
     console,
     emit_json,
     executor_options,
@@ -83,7 +84,7 @@ def _f(x, digits=2) -> str:
 
 @click.command()
 @_common
-@click.option("--t-final", type=POSITIVE, help="Final time T (default: the system's).")
+@click.option("--t-final", type=T_FINAL, help="Final time T (default: the system's).")
 @click.option("--steps", type=STEP_LIST,
               help="Numbers of steps N1,N2,... (one value: the coarsest, doubled --refinements times).")
 @click.option("--refinements", type=integer(0, bounds.MAX_REFINEMENTS, "K"),
@@ -176,7 +177,7 @@ def _render_converge(study, plot) -> None:
               help="Peers, in the grammar of --method but not RKHP tableaux: scipy:NAME (solve_ivp's "
                    "dop853, rk45, rk23, radau, bdf, lsoda, run by tolerance), classical:NAME, "
                    "implicit-midpoint, thpN; empty for none (docs/methods.md).")
-@click.option("--t-final", type=POSITIVE, help="Final time T (default: the system's).")
+@click.option("--t-final", type=T_FINAL, help="Final time T (default: the system's).")
 @click.option("--steps", type=STEP_LIST, help="Numbers of steps of the integrators (default 10,20,...,2560).")
 @click.option("--tolerances", type=reals(bounds.tolerance, "RTOL,..."),
               help=f"rtol values of the scipy peers ({bounds.MIN_TOLERANCE:g} <= rtol < 1; default 1e-3,...,1e-13; "
@@ -253,7 +254,7 @@ def _render_bench(study, plot) -> None:
 
 @click.command()
 @_common
-@click.option("--t-final", type=POSITIVE, help="Horizon T of parts (a) and (c) (default: the system's).")
+@click.option("--t-final", type=T_FINAL, help="Horizon T of parts (a) and (c) (default: the system's).")
 @click.option("--long-steps", type=STEPS, default=100_000, show_default=True, help="Steps of the long run (b).")
 @click.option("--long-h", type=POSITIVE, help="Step size of the long run (default T/100).")
 @click.option("--sweep-coarsest", type=STEPS, default=200, show_default=True,

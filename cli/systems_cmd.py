@@ -6,7 +6,19 @@ import click
 
 from rkhp import bounds
 
-from .options import METHOD_HELP, POSITIVE, SEED, STEPS, console, emit_json, format_option, integer, parse_x0, x0_option
+from .options import (
+    METHOD_HELP,
+    POSITIVE,
+    SEED,
+    STEPS,
+    T_FINAL,
+    console,
+    emit_json,
+    format_option,
+    integer,
+    parse_x0,
+    x0_option,
+)
 from .render import compact_table, print_table
 
 
@@ -125,7 +137,7 @@ def integration_report(system, trajectory, method: str, h: float, steps: int) ->
 @click.option("--steps", type=STEPS, default=None, help="Number of steps over [0, T].")
 @click.option("--h", "h", type=POSITIVE, default=None,
               help="Step size; it must divide T (steps = T / h; docs/input.md).")
-@click.option("--t-final", type=POSITIVE, default=None, help="Final time T (default: the system's).")
+@click.option("--t-final", type=T_FINAL, default=None, help="Final time T (default: the system's).")
 @x0_option()
 @click.option("--modified", "modified_order", type=integer(1, name="N"), default=None, metavar="N",
               help="Also report max over the run of |H~_N(y_n) - H~_N(y_0)|, H~_N the method's modified "

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from rkhp.bounds import check_tree_memory
+from rkhp.bounds import BYTES_PER_CONDITION, BYTES_PER_PRINTED_TREE, check_tree_memory
 from rkhp.conditions import order_conditions
 from rkhp.trees import MAX_COUNT_ORDER, MAX_ENUMERATION_ORDER, check_order, count_trees, trees_up_to
 
@@ -47,7 +47,7 @@ def trees(order, degenerate, exact_order, count, fmt):
             _render_counts(counts, degenerate, fmt)
         return
     check_order(order, MAX_ENUMERATION_ORDER)
-    check_tree_memory(order, degenerate)
+    check_tree_memory(order, degenerate, per_tree=BYTES_PER_PRINTED_TREE)
     found = [t for t in trees_up_to(order, degenerate) if not exact_order or t.order == order]
     counts = {str(n): sum(1 for t in found if t.order == n) for n in orders}
     if fmt == "json":
@@ -84,6 +84,7 @@ def conditions(order, degenerate, symmetric, exact_order, fmt):
     """
     cls = _class_of(degenerate, symmetric)
     check_order(order, MAX_ENUMERATION_ORDER)
+    check_tree_memory(order, cls != "general", "the conditions", per_tree=BYTES_PER_CONDITION)
     conds = order_conditions(order, cls, exact_order)
     orders = [order] if exact_order else list(range(1, order + 1))
     counts = {str(n): sum(1 for c in conds if c.order == n) for n in orders}

@@ -223,9 +223,12 @@ def check_trajectory(steps, dim: int, what: str = "the run") -> None:
     check_memory(trajectory_bytes(steps, dim), f"{what} ({steps} steps in dimension {dim})")
 
 
-#: bytes per tree of an enumeration: the tree objects and tables (290 measured at order 15) and
-#: their text when they are printed
+#: bytes per tree of an enumeration: the tree objects and tables (290 measured at order 15)
 BYTES_PER_TREE = 500
+#: bytes per tree that `rkhp trees` prints (1.7 KB measured: trees --order 15 --format json)
+BYTES_PER_PRINTED_TREE = 2000
+#: bytes per order condition that `rkhp conditions` prints (3.4 KB measured at order 13, JSON)
+BYTES_PER_CONDITION = 4000
 
 
 def check_tree_memory(order: int, degenerate: bool = False, what: str = "the enumeration",
@@ -250,7 +253,8 @@ def check_output_path(path, suffixes: tuple[str, ...] = (), what: str = "output 
     if not str(path).strip():
         raise InputError(f"{what}: empty file name")
     if suffixes and path.suffix.lower() not in suffixes:
-        raise InputError(f"{what} {path}: the name must end in {' or '.join(suffixes)}")
+        raise InputError(f"{what} {path}: unknown extension {path.suffix or '(none)'}; "
+                         f"the name must end in {' or '.join(suffixes)}")
     folder = path.parent
     if not folder.is_dir():
         reason = "is not a folder" if folder.exists() else "does not exist"
