@@ -547,6 +547,16 @@ class Outcome(NamedTuple):
     created: list
 
 
+def _end_group(pid: int) -> None:
+    """End what the case's process left behind (its session's process group: workers it forked)."""
+    import signal
+
+    try:
+        os.killpg(pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass
+
+
 def _run(case: Case, folder: Path) -> Outcome:
     """Run one case in `folder`; its CPU time and peak memory come from wait4's resource usage."""
     import tempfile
@@ -561,11 +571,12 @@ def _run(case: Case, folder: Path) -> Outcome:
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
         start = time.perf_counter()
         proc = subprocess.Popen([sys.executable, "-m", "rkhp", *args], cwd=folder, env=env, stdin=subprocess.DEVNULL,
-                                stdout=out, stderr=err, preexec_fn=_limits)
+                                stdout=out, stderr=err, preexec_fn=_limits, start_new_session=True)
         timer = threading.Timer(WALL_GUARD, proc.kill)
         timer.start()
         _, code, usage = os.wait4(proc.pid, 0)
         timer.cancel()
+        _end_group(proc.pid)
         wall = time.perf_counter() - start
         proc.returncode = status = os.waitstatus_to_exitcode(code)
         if wall >= WALL_GUARD:
