@@ -20,7 +20,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "search": ("rkhp_cli.search_cmd", "search", "Search minimal-stage tableaux; polish, recognise, prove."),
     "systems": ("rkhp_cli.systems_cmd", "systems", "List the built-in Poisson systems."),
     "check": ("rkhp_cli.systems_cmd", "check", "Check a system's birealisation axioms (AD)."),
-    "integrate": ("rkhp_cli.systems_cmd", "integrate", "Integrate a Poisson system with an RKHP method."),
+    "integrate": ("rkhp_cli.systems_cmd", "integrate", "Integrate a Poisson system with a method (docs/methods.md)."),
     "compose": ("rkhp_cli.compose_cmd", "compose", "Composition of RKHP steps against the Butcher product."),
     "modified": ("rkhp_cli.modified_cmd", "modified", "Modified Hamiltonian of a method (backward error analysis)."),
     "relations": ("rkhp_cli.relations_cmd", "relations", "Relations of symmetric birealisations (docs/theory.md §8)."),

@@ -34,6 +34,9 @@ COMMANDS = [
     ["stress", "lotka-volterra", "--method", "paper-two-stage", "--t-final", "2", "--long-steps", "200",
      "--sweep-coarsest", "8", "--round-off-steps", "8,16,32"],
     ["relations", "--order", "4"],
+    ["modified", "--method", "euler", "--order", "3", "--symmetric"],
+    ["compose", "euler,euler", "--order", "4", "--symmetric"],
+    ["integrate", "pendulum", "--method", "euler", "--steps", "10", "--modified", "3"],
 ]
 
 
