@@ -7,13 +7,19 @@ tree of order <= N sits at depth <= N - |s|, so F(s) is needed to degree N - |s|
 N - 1. Coefficients are residues modulo a prime below 2^31 (numpy int64, vectorised over a batch
 of random instances) or exact Python integers (``p=None``, object arrays).
 
-Two families of symmetric birealisations (docs/theory.md §4):
-- constant pi: alpha = x - pi p / 2, so d^k_p f(x,0)[v1..vk] = (-1/2)^k D^k H(x)[pi v1, ..., pi vk];
-  the factor (-1/2)^(|t|-1) is common to all trees of one order and is left out (integers stay
-  integers, relations are unchanged);
-- a general alpha(x, p) given as a truncated series in (x - x0, p): Lie–Poisson
-  alpha = phi(K(p)) x, phi(z) = z / (1 - e^-z), and log-canonical
-  alpha_i = x_i exp(-(1/2) sum_j lambda_ij x_j p_j).
+The birealisations are the registry's (`rkhp.systems.families`, `rkhp.systems.core`): one
+source of the formulas for the float engine and for this exact path.
+
+- :func:`general_values`: any registered family's base alpha composed with any realisation's
+  shift, the very programs that record the engine's tapes, run here on :class:`ExactJet` values
+  (truncated jets in (x - x0, p) mod p) with exact functions (:data:`EXACT_FUNCTIONS`: exp and
+  phi(K) x as their truncated series; the constants of the programs are read exactly, 0.5 as
+  1/2). Why an evaluation of its own: the engine evaluates in float64 (with guards, a closed form
+  for so(3)*), while the relations need exact residues of the same Taylor coefficients.
+- :func:`constant_pi_values`: the constant family's base alpha = x - pi p / 2 in closed form,
+  d^k_p f(x,0)[v1..vk] = (-1/2)^k D^k H(x)[pi v1, ..., pi vk] (fast for large batches); the
+  factor (-1/2)^(|t|-1) is common to all trees of one order and is left out (integers stay
+  integers, relations are unchanged).
 """
 
 from __future__ import annotations
@@ -23,10 +29,14 @@ from fractions import Fraction
 from functools import cache
 from itertools import combinations_with_replacement
 from math import comb, factorial
+from types import SimpleNamespace
 
 import numpy as np
 
 from .modular import to_residue
+from .systems.core import realisation as realisation_kind
+from .systems.families import SO3, LieAlgebra
+from .systems.families import family as poisson_family
 from .trees import Tree
 
 # ----------------------------------------------------------------------------- monomial bases
@@ -441,14 +451,127 @@ def _composite_partials(alpha_increment, H, dim: int, ring2: JetRing):
     return partials
 
 
+class ExactScalar:
+    """One residue mod p per random instance (shape (batch,)): a coefficient of a family's
+    structure in :func:`general_values`. Numbers (int, Fraction, float read exactly) combine."""
+
+    __slots__ = ("p", "values")
+
+    def __init__(self, p: int, values: np.ndarray):
+        self.p = p
+        self.values = values % p
+
+    def _residue(self, other):
+        return other.values if isinstance(other, ExactScalar) else to_residue(Fraction(other), self.p)
+
+    def __mul__(self, other):
+        if isinstance(other, ExactJet):
+            return other * self
+        return ExactScalar(self.p, self.values * self._residue(other))
+
+    __rmul__ = __mul__
+
+    def __ne__(self, other):
+        return bool(np.any((self.values - self._residue(other)) % self.p))
+
+
+class ExactJet:
+    """A jet mod p truncated at the ring's degree, shape (M, batch): + - * with jets, exact
+    scalars and numbers (the arithmetic of a family's base program, `rkhp.systems.families`)."""
+
+    __slots__ = ("ring", "coef")
+
+    def __init__(self, ring: JetRing, coef: np.ndarray):
+        self.ring = ring
+        self.coef = coef
+
+    def _scalar(self, other):
+        if isinstance(other, ExactScalar):
+            return other.values[None, :]
+        return to_residue(Fraction(other), self.ring.p)
+
+    def __add__(self, other):
+        if isinstance(other, ExactJet):
+            return ExactJet(self.ring, self.ring.reduce(self.coef + other.coef))
+        coef = self.coef.copy()
+        coef[0] = self.ring.reduce(coef[0] + self._scalar(other))
+        return ExactJet(self.ring, coef)
+
+    __radd__ = __add__
+
+    def __neg__(self):
+        return ExactJet(self.ring, self.ring.reduce(-self.coef))
+
+    def __sub__(self, other):
+        return self + (-other)
+
+    def __rsub__(self, other):
+        return (-self) + other
+
+    def __mul__(self, other):
+        if isinstance(other, ExactJet):
+            return ExactJet(self.ring, self.ring.mul(self.coef, other.coef, self.ring.basis.degree))
+        return ExactJet(self.ring, self.ring.reduce(self.coef * self._scalar(other)))
+
+    __rmul__ = __mul__
+
+
+def _exact_exp(w: ExactJet) -> ExactJet:
+    """exp(w) for a jet w with zero constant term (its truncated series)."""
+    if np.any(w.coef[0] % w.ring.p):
+        raise ValueError("exact exp needs an argument with zero constant term")
+    return ExactJet(w.ring, _exp(w.ring, w.coef, w.ring.basis.degree))
+
+
+def _exact_phimv(K, x):
+    """phi(K) x = sum_k B_k^+/k! K^k x for K with zero constant terms (entries may be 0), to the
+    ring's degree: K^k x has degree >= k."""
+    ring = x[0].ring
+    D = ring.basis.degree
+    n = len(x)
+    coeffs = [to_residue(b / factorial(k), ring.p) for k, b in enumerate(_bernoulli_plus(D))]
+    term, out = list(x), list(x)
+    for k in range(1, D + 1):
+        term = [sum((K[i][j] * term[j] for j in range(n) if isinstance(K[i][j], ExactJet)), 0 * x[0])
+                for i in range(n)]
+        out = [out[i] + term[i] * coeffs[k] for i in range(n)]
+    return out
+
+
+def _no_closed_form(p):
+    raise ValueError("the so(3)* closed form is float-only; use the structure's phi(K) x")
+
+
+#: the functions of a family's base program on exact jets (`rkhp.systems.families`)
+EXACT_FUNCTIONS = SimpleNamespace(exp=_exact_exp, phimv=_exact_phimv, crb=_no_closed_form)
+
+
+def _random_structure(family: str, dim: int, batch: int, rng: np.random.Generator, p: int):
+    """A random instance of a family's structure mod p: so(3)* for lie-poisson (dim 3), random
+    antisymmetric lambda or pi (one per instance) for log-canonical and constant."""
+    if family == "lie-poisson":
+        if dim != 3:
+            raise ValueError("the Lie–Poisson instances here are so(3)*, dimension 3")
+        return LieAlgebra(SO3)
+    if family not in ("log-canonical", "constant"):
+        raise ValueError(f"no random instances of family {family!r}")
+    upper = rng.integers(0, p, size=(dim, dim, batch), dtype=np.int64)
+    matrix = np.empty((dim, dim), dtype=object)
+    for i in range(dim):
+        for j in range(dim):
+            matrix[i, j] = ExactScalar(p, upper[i, j] - upper[j, i])
+    return matrix
+
+
 def general_values(trees, max_order: int, family: str, batch: int, rng: np.random.Generator,
-                   p: int, dim: int = 3) -> dict[Tree, np.ndarray]:
+                   p: int, dim: int = 3, realisation: str = "symmetric") -> dict[Tree, np.ndarray]:
     """F(t) at a random base point x0 for random Hamiltonian jets, modulo p.
 
-    Families: ``"lie-poisson"`` (so(3)*, symmetric realisation), ``"log-canonical"`` (dimension
-    ``dim``, symmetric), and ``"quartic"``: constant pi composed with the time-1 flow of
-    K(p) = sum_k (u_k . p)^4 / 24, alpha = x + grad K(p) - pi p / 2 (docs/theory.md §8), degenerate but not
-    symmetric — the control on which the symmetric relations must fail.
+    The birealisation is the registry's: the base alpha of `family` (`rkhp.systems.families`) on
+    a random instance of its structure (so(3)* for ``"lie-poisson"``, random antisymmetric
+    lambda or pi in dimension ``dim`` for ``"log-canonical"`` and ``"constant"``), composed with
+    the shift of `realisation` (`rkhp.systems.core`; e.g. ``"quartic"``: degenerate but not
+    symmetric, the control on which the symmetric relations must fail, docs/theory.md §8).
     """
     D = max(max_order - 1, 1)
     basis2 = monomial_basis(2 * dim, D)
@@ -460,45 +583,16 @@ def general_values(trees, max_order: int, family: str, batch: int, rng: np.rando
         e = [0] * (2 * dim)
         e[k] = 1
         v[basis2.index[tuple(e)]] = 1
-        return v
+        return ExactJet(ring2, v)
 
-    xi = [variable(i) for i in range(dim)]
-    pv = [variable(dim + i) for i in range(dim)]
     x0 = rng.integers(1, p, size=(dim, batch), dtype=np.int64)
-    x = [ring2.reduce(xi[i] + _constant(x0[i], size2)) for i in range(dim)]
-    if family == "lie-poisson":
-        if dim != 3:
-            raise ValueError("the Lie–Poisson family here is so(3)*, dimension 3")
-        # K(p) x = p cross x; alpha = sum_k B_k^+/k! K^k x
-        coeffs = [to_residue(b / factorial(k), p) for k, b in enumerate(_bernoulli_plus(D))]
-        term = x
-        y = [xi[i].copy() for i in range(dim)]  # alpha - x0 = xi + sum_k>=1 ...
-        for k in range(1, D + 1):
-            term = _cross(ring2, pv, term, D)
-            y = [ring2.reduce(y[i] + term[i] * coeffs[k]) for i in range(dim)]
-    elif family == "log-canonical":
-        upper = rng.integers(0, p, size=(dim, dim, batch), dtype=np.int64)
-        lam = (upper - upper.transpose(1, 0, 2)) % p
-        half = to_residue(Fraction(-1, 2), p)
-        y = []
-        for i in range(dim):
-            w = _sum(ring2, [ring2.reduce(ring2.mul(x[j], pv[j], D) * lam[i, j][None, :]) for j in range(dim)])
-            w = ring2.reduce(w * half)
-            y.append(ring2.reduce(ring2.mul(x[i], _exp(ring2, w, D), D) - _constant(x0[i], size2)))
-    elif family == "quartic":
-        upper = rng.integers(0, p, size=(dim, dim, batch), dtype=np.int64)
-        pi = (upper - upper.transpose(1, 0, 2)) % p
-        half = to_residue(Fraction(-1, 2), p)
-        sixth = to_residue(Fraction(1, 6), p)
-        y = [ring2.reduce(xi[i] + _sum(ring2, [ring2.reduce(pv[j] * pi[i, j][None, :]) for j in range(dim)]) * half)
-             for i in range(dim)]
-        for _ in range(2):  # grad K = sum_k u_k (u_k . p)^3 / 6, two random directions u_k
-            u = rng.integers(0, p, size=(dim, batch), dtype=np.int64)
-            up = _sum(ring2, [ring2.reduce(pv[j] * u[j][None, :]) for j in range(dim)])
-            cube = ring2.reduce(ring2.mul(ring2.mul(up, up, D), up, D) * sixth)
-            y = [ring2.reduce(y[i] + ring2.reduce(cube * u[i][None, :])) for i in range(dim)]
-    else:
-        raise ValueError(f"unknown family {family!r}")
+    structure = _random_structure(family, dim, batch, rng, p)
+    x = [variable(i) + ExactScalar(p, x0[i]) for i in range(dim)]
+    pv = [variable(dim + i) for i in range(dim)]
+    shift = realisation_kind(realisation).shift(pv)
+    shifted = x if shift is None else [xi + si for xi, si in zip(x, shift, strict=True)]
+    alpha = poisson_family(family).base(structure, 1.0)(shifted, pv, EXACT_FUNCTIONS)
+    y = [ring2.reduce(a.coef - _constant(x0[i], size2)) for i, a in enumerate(alpha)]
     hbasis = monomial_basis(dim, D)
     H = rng.integers(0, p, size=(hbasis.sizes[D], batch), dtype=np.int64)
     partials = _composite_partials(y, H, dim, ring2)
@@ -510,14 +604,6 @@ def _constant(values: np.ndarray, size: int) -> np.ndarray:
     c = np.zeros((size, values.shape[0]), dtype=np.int64)
     c[0] = values
     return c
-
-
-def _cross(ring: JetRing, a, b, m):
-    def term(i, j):
-        return ring.mul(a[i], b[j], m)
-
-    return [ring.reduce(term(1, 2) - term(2, 1)), ring.reduce(term(2, 0) - term(0, 2)),
-            ring.reduce(term(0, 1) - term(1, 0))]
 
 
 def _exp(ring: JetRing, w: np.ndarray, m: int) -> np.ndarray:

@@ -28,12 +28,11 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from .errors import InputError
+from .taylor.ops import FUNCTIONS as _TAPE_FUNCTIONS
 
-#: function name -> name of the sympy function it builds (documented in README "Expressions")
-FUNCTIONS: dict[str, str] = {
-    "exp": "exp", "log": "log", "sqrt": "sqrt", "sin": "sin", "cos": "cos", "tan": "tan",
-    "sinh": "sinh", "cosh": "cosh", "tanh": "tanh",
-}
+#: function name -> name of the sympy function it builds (documented in README "Expressions"):
+#: the functions of the opcode table `rkhp.taylor.ops`, which the engine can differentiate
+FUNCTIONS: dict[str, str] = {name: sympy_name for name, (sympy_name, _) in _TAPE_FUNCTIONS.items()}
 
 #: constant name -> name of the sympy constant
 CONSTANTS: dict[str, str] = {"pi": "pi", "E": "E"}
@@ -163,9 +162,7 @@ class _Size(NamedTuple):
     value: float
 
 
-_FLOAT_FUNCTIONS = {"exp": math.exp, "log": math.log, "sqrt": math.sqrt, "sin": math.sin,
-                    "cos": math.cos, "tan": math.tan, "sinh": math.sinh, "cosh": math.cosh,
-                    "tanh": math.tanh, "atan": math.atan}
+_FLOAT_FUNCTIONS = {name: value for name, (_, value) in _TAPE_FUNCTIONS.items()}
 _CONSTANT_VALUES = {"pi": math.pi, "E": math.e}
 
 

@@ -14,6 +14,7 @@ from rkhp.integrators.classical import (
     integrate_midpoint,
     vector_field,
 )
+from rkhp.integrators.failure import Failure
 from rkhp.systems import get_system
 from rkhp.tablefiles import load_tableau
 
@@ -98,8 +99,8 @@ def test_midpoint_equals_rkhp_euler_on_constant_pi():
 def test_midpoint_newton_failure_is_reported(rigid):
     traj = integrate_midpoint(rigid, 10.0, 5)
     assert not traj.ok
-    assert "Newton" in traj.status and "step 1" in traj.status
-    assert traj.failed_step == 1
+    assert "Newton" in traj.status and "step 0 " in traj.status  # steps numbered from 0
+    assert traj.failed_step == 0 and traj.cause != Failure.OK
     assert traj.states.shape == (1, 3)  # only the states before the failure
     with pytest.raises(Exception, match="Newton"):
         traj.raise_if_failed()
@@ -108,9 +109,9 @@ def test_midpoint_newton_failure_is_reported(rigid):
 def test_leaving_the_domain_is_reported():
     lv = get_system("lotka-volterra")
     traj = integrate_classical(lv, load_tableau("euler"), 1.0, 10)
-    assert not traj.ok and "domain" in traj.status
+    assert not traj.ok and "domain" in traj.status and traj.cause == Failure.LEFT_DOMAIN
     assert np.all(traj.states > 0)
-    assert len(traj.states) == traj.failed_step
+    assert len(traj.states) == traj.failed_step + 1
 
 
 def test_classical_loses_the_casimir_rkhp_keeps(rigid):

@@ -19,7 +19,6 @@ from click.testing import CliRunner
 from rkhp_cli.main import rkhp
 
 from rkhp.errors import InputError
-from rkhp.integrators.jets import evaluate
 from rkhp.systems import get_system
 from rkhp.systems import tape as tp
 from rkhp.systems.families import so3_matrix
@@ -30,6 +29,7 @@ from rkhp.systems.spray import (
     truncated_order,
     truncated_realisation,
 )
+from rkhp.taylor.interpreter import evaluate
 
 RIGID_BODY_GENERAL = """
 name = "rigid-body-general"

@@ -11,6 +11,7 @@ from rkhp_cli.main import rkhp
 
 from rkhp.errors import InputError, NumericalFailure
 from rkhp.integrators import integrate, integrate_ensemble
+from rkhp.integrators.failure import Failure
 from rkhp.systems import get_system
 from rkhp.tableau import Tableau
 
@@ -87,6 +88,7 @@ def test_too_large_h_is_a_newton_failure():
     system = get_system("lotka-volterra")
     tr = integrate(system, "rk4", 1.0, 10)
     assert not tr.ok and "Newton did not converge" in tr.status
+    assert tr.cause == Failure.NEWTON_NO_CONVERGENCE
     assert tr.failed_step == 0 and len(tr.states) == 1 and "t = 0" in tr.status
     with pytest.raises(NumericalFailure):
         tr.raise_if_failed()
@@ -198,9 +200,10 @@ def test_taylor_arithmetic_against_sympy():
 
     import sympy
 
-    from rkhp.integrators.jets import _monomials, jet_space, run_tape, scratch_rows
     from rkhp.systems.spec import parse_expression, to_program
-    from rkhp.systems.tape import record
+    from rkhp.taylor.interpreter import run_tape, tape_work
+    from rkhp.taylor.jets import jet_space, monomials
+    from rkhp.taylor.tape import record
 
     text = ("exp(x1) * sin(x2) / (1 + x1^2) + sqrt(x2 + 2) * cos(x1 * x2) + log(x1 + 3) "
             "- x2^(-3) + (x1 + 2)^1.5 + tan(x1 / 3) + cosh(x2) * tanh(x1)")
@@ -209,14 +212,14 @@ def test_taylor_arithmetic_against_sympy():
     x0 = (0.3, 0.7)
     D = 4
     space = jet_space(2, D)
-    W = np.zeros((tape.n_slots, space.size))
+    work = tape_work((tape,), space.size)
     for k in range(2):
-        W[k, 0] = x0[k]
-        W[k, 1 + k] = 1.0
-    run_tape(tape.packed(), W, D, space.packed(), np.zeros((scratch_rows(2), space.size)))
-    jet = W[tape.outputs[0]]
+        work.W[k, 0] = x0[k]
+        work.W[k, 1 + k] = 1.0
+    run_tape(tape, D, space, work)
+    jet = work.W[tape.outputs[0]]
     at = dict(zip(symbols, x0, strict=True))
-    for index, (e1, e2) in enumerate(_monomials(2, D)):
+    for index, (e1, e2) in enumerate(monomials(2, D)):
         exact = float(sympy.diff(expr, symbols[0], e1, symbols[1], e2).evalf(30, subs=at))
         exact /= math.factorial(e1) * math.factorial(e2)
         assert jet[index] == pytest.approx(exact, rel=1e-12, abs=1e-12), (e1, e2)

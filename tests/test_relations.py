@@ -148,7 +148,7 @@ def test_quartic_realisation_breaks_the_symmetric_relations():
 
     p = PRIMES[1]
     trees = [t for n in range(1, 6) for t in trees_of_order(n)]
-    values = general_values(trees, 5, "quartic", 12, np.random.default_rng(4), p, dim=3)
+    values = general_values(trees, 5, "constant", 12, np.random.default_rng(4), p, dim=3, realisation="quartic")
     assert all(np.all(values[t] % p == 0) for t in trees if not t.in_t0)  # paper, Thm superconvergence
     a, b = (values[t] for t in trees_of_order(4, True))
     assert np.all((a + b) % p != 0)

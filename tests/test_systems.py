@@ -84,7 +84,7 @@ def test_rigid_body_alpha_against_mpmath():
 
 def test_rigid_body_c_taylor_coefficients():
     """The Taylor coefficients of c(u) (series below u = 4, closed form above) against mpmath."""
-    from rkhp.integrators.jets import crb_coef
+    from rkhp.taylor.elementary import crb_coef
 
     mpmath.mp.dps = 40
 

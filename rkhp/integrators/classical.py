@@ -11,7 +11,7 @@ Both integrate the Poisson ODE ``xdot = f(x) = pi(x) grad H(x)`` of a
   and keeps quadratic Casimirs (e.g. ``|x|^2`` of the rigid body).
 
 The whole loop is one numba-compiled function (cached on disk like the RKHP engine, see
-:mod:`rkhp.integrators.cache`), generic over systems: ``grad H`` is read off the system's
+:mod:`rkhp.taylor.compiler`), generic over systems: ``grad H`` is read off the system's
 Hamiltonian tape evaluated in first-order jets, and ``pi(x) = D^T - D`` with
 ``D = d_p alpha(x, 0)`` off its alpha tape (docs/theory.md §4), so the tableau and the system are data.
 
@@ -28,33 +28,28 @@ import time
 import numpy as np
 
 from ..errors import InputError, NumericalFailure
-from .jets import NJIT, jet_space, nb, run_tape, scratch_rows
+from ..taylor.compiler import NJIT
+from ..taylor.compiler import numba as nb
+from ..taylor.interpreter import run_tape, tape_work
+from ..taylor.jets import jet_space
+from .engine import state_failure
+from .failure import Failure, failure_status
+from .newton import NEWTON_TOLERANCE
 from .trajectory import Trajectory
 
-NEWTON_TOLERANCE = 1e-14
-"""Relative size of the last Newton correction at which the implicit midpoint rule stops."""
-
-NEWTON_MAX_ITERATIONS = 30
+MIDPOINT_MAX_ITERATIONS = 30
 """Newton iterations after which a step of the implicit midpoint rule is declared failed."""
-
-_CAUSES = {
-    1: "non-finite state",
-    2: "state left the domain of the system",
-    3: f"Newton did not converge in {NEWTON_MAX_ITERATIONS} iterations",
-    4: "Newton diverged",
-    5: "singular Newton matrix",
-    6: "Newton iterate became non-finite",
-}
 
 
 # ----------------------------------------------------------------------------------------------
 # compiled kernels
 
 
-@nb.njit(**NJIT)
-def _field(x, htape, atape, space, Wh, Wa, sh, sa, out):
+@nb.njit(inline="always", **NJIT)
+def _field(x, htape, atape, space, wh, wa, out):
     """out = pi(x) grad H(x): grad H from the H tape, pi = D^T - D from the alpha tape."""
     n = x.shape[0]
+    Wh, Wa = wh.W, wa.W
     Wh[:, :] = 0.0
     Wa[:, :] = 0.0
     for i in range(n):
@@ -62,10 +57,10 @@ def _field(x, htape, atape, space, Wh, Wa, sh, sa, out):
         Wh[i, 1 + i] = 1.0
         Wa[i, 0] = x[i]
         Wa[n + i, 1 + i] = 1.0
-    run_tape(htape, Wh, 1, space, sh)
-    run_tape(atape, Wa, 1, space, sa)
-    ho = htape[3][0]
-    ao = atape[3]
+    run_tape(htape, np.int64(1), space, wh)
+    run_tape(atape, np.int64(1), space, wa)
+    ho = htape.outputs[0]
+    ao = atape.outputs
     for i in range(n):
         acc = 0.0
         for j in range(n):
@@ -74,19 +69,8 @@ def _field(x, htape, atape, space, Wh, Wa, sh, sa, out):
 
 
 @nb.njit(**NJIT)
-def _bad_state(x, positive):
-    """0 when x is acceptable, else the failure code (1 non-finite, 2 outside the domain)."""
-    for q in range(x.shape[0]):
-        if not math.isfinite(x[q]):
-            return 1
-        if positive and not x[q] > 0.0:
-            return 2
-    return 0
-
-
-@nb.njit(**NJIT)
-def _rk_loop(htape, atape, space, A, b, h, n_steps, x0, positive, states, Wh, Wa, sh, sa):
-    """Explicit RK steps; returns (steps done, failure code)."""
+def _rk_loop(htape, atape, space, A, b, h, n_steps, x0, domain, states, wh, wa):
+    """Explicit RK steps; returns (steps done, Failure)."""
     n = x0.shape[0]
     s = b.shape[0]
     K = np.empty((s, n))
@@ -102,23 +86,23 @@ def _rk_loop(htape, atape, space, A, b, h, n_steps, x0, positive, states, Wh, Wa
                 if a != 0.0:
                     for q in range(n):
                         xi[q] += a * K[j, q]
-            _field(xi, htape, atape, space, Wh, Wa, sh, sa, K[i])
+            _field(xi, htape, atape, space, wh, wa, K[i])
         for i in range(s):
             w = h * b[i]
             if w != 0.0:
                 for q in range(n):
                     x[q] += w * K[i, q]
-        code = _bad_state(x, positive)
-        if code:
-            return k, code
+        cause = state_failure(x, domain)
+        if cause != Failure.OK:
+            return k, cause
         states[k + 1] = x
-    return n_steps, 0
+    return n_steps, Failure.OK
 
 
 @nb.njit(**NJIT)
-def _midpoint_loop(htape, atape, space, h, n_steps, x0, positive, tol, max_it, states, newton,
-                   Wh, Wa, sh, sa):
-    """Implicit midpoint steps, Newton on the midpoint; returns (steps done, failure code)."""
+def _midpoint_loop(htape, atape, space, h, n_steps, x0, domain, tol, max_it, states, newton,
+                   wh, wa):
+    """Implicit midpoint steps, Newton on the midpoint; returns (steps done, Failure)."""
     n = x0.shape[0]
     x = x0.copy()
     m = np.empty(n)
@@ -130,7 +114,7 @@ def _midpoint_loop(htape, atape, space, h, n_steps, x0, positive, tol, max_it, s
     y = np.empty(n)
     states[0] = x
     for k in range(n_steps):
-        _field(x, htape, atape, space, Wh, Wa, sh, sa, g)
+        _field(x, htape, atape, space, wh, wa, g)
         for q in range(n):
             m[q] = x[q] + 0.5 * h * g[q]
         fresh = True
@@ -138,8 +122,8 @@ def _midpoint_loop(htape, atape, space, h, n_steps, x0, positive, tol, max_it, s
         done = False
         for it in range(1, max_it + 1):
             newton[k] = it
-            if _bad_state(m, False):
-                return k, 6
+            if state_failure(m, 0) != Failure.OK:
+                return k, Failure.NEWTON_NON_FINITE
             if fresh:
                 # Newton matrix I - (h/2) Df(m), central differences (step cbrt(eps) scaled)
                 for j in range(n):
@@ -147,16 +131,16 @@ def _midpoint_loop(htape, atape, space, h, n_steps, x0, positive, tol, max_it, s
                     for q in range(n):
                         y[q] = m[q]
                     y[j] = m[j] + d
-                    _field(y, htape, atape, space, Wh, Wa, sh, sa, fp)
+                    _field(y, htape, atape, space, wh, wa, fp)
                     y[j] = m[j] - d
-                    _field(y, htape, atape, space, Wh, Wa, sh, sa, fm)
+                    _field(y, htape, atape, space, wh, wa, fm)
                     for q in range(n):
                         J[q, j] = (1.0 if q == j else 0.0) - 0.5 * h * (fp[q] - fm[q]) / (2.0 * d)
                 if abs(np.linalg.det(J)) < 1e-300:
-                    return k, 5
+                    return k, Failure.SINGULAR
                 inv[:, :] = np.linalg.inv(J)
                 fresh = False
-            _field(m, htape, atape, space, Wh, Wa, sh, sa, g)
+            _field(m, htape, atape, space, wh, wa, g)
             size = 0.0
             scale = 1.0
             for q in range(n):
@@ -166,7 +150,7 @@ def _midpoint_loop(htape, atape, space, h, n_steps, x0, positive, tol, max_it, s
                 for j in range(n):
                     dq += inv[q, j] * y[j]
                 if not math.isfinite(dq):
-                    return k, 6
+                    return k, Failure.NEWTON_NON_FINITE
                 m[q] -= dq
                 size = max(size, abs(dq))
                 scale = max(scale, abs(m[q]))
@@ -174,30 +158,31 @@ def _midpoint_loop(htape, atape, space, h, n_steps, x0, positive, tol, max_it, s
                 done = True
                 break
             if size > 1e3 * scale:
-                return k, 4
+                return k, Failure.NEWTON_DIVERGED
             if size > 0.25 * previous:
                 fresh = True  # slow contraction: recompute the Newton matrix
             previous = size
         if not done:
-            return k, 3
+            return k, Failure.NEWTON_NO_CONVERGENCE
         for q in range(n):
             x[q] = 2.0 * m[q] - x[q]
-        code = _bad_state(x, positive)
-        if code:
-            return k, code
+        cause = state_failure(x, domain)
+        if cause != Failure.OK:
+            return k, cause
         states[k + 1] = x
-    return n_steps, 0
+    return n_steps, Failure.OK
 
 
 @nb.njit(**NJIT)
-def _hamiltonian_loop(htape, space, states, W, scratch, out):
+def _hamiltonian_loop(htape, space, states, work, out):
     n = states.shape[1]
-    ho = htape[3][0]
+    ho = htape.outputs[0]
+    W = work.W
     for r in range(states.shape[0]):
         W[:, :] = 0.0
         for i in range(n):
             W[i, 0] = states[r, i]
-        run_tape(htape, W, 0, space, scratch)
+        run_tape(htape, np.int64(0), space, work)
         out[r] = W[ho, 0]
 
 
@@ -229,14 +214,10 @@ def initial_state(system, x0) -> np.ndarray:
 
 
 def _workspace(system):
-    """Jet tables and buffers for first-order jets in n variables of the H and alpha tapes."""
+    """The H and alpha tapes, first-order jets in n variables, and work arrays for each tape."""
     space = jet_space(system.dim, 1)
-    M = space.size
     ht, at = system.h_tape, system.alpha_tape
-    return (ht.packed(), at.packed(), space.packed(),
-            np.zeros((ht.n_slots, M)), np.zeros((at.n_slots, M)),
-            np.zeros((scratch_rows(ht.n_inputs) + ht.n_inputs, M)),
-            np.zeros((scratch_rows(at.n_inputs) + at.n_inputs, M)))
+    return ht, at, space, tape_work((ht,), space.size), tape_work((at,), space.size)
 
 
 _VERIFIED: set[str] = set()
@@ -244,29 +225,29 @@ _VERIFIED: set[str] = set()
 
 def _verify(name: str, system, ws) -> None:
     """Once per process and kernel, compare a compiled kernel with the system's own evaluation
-    (``system.vector_field``, ``system.hamiltonian``, through ``jets.evaluate``).
+    (``system.vector_field``, ``system.hamiltonian``, through ``rkhp.taylor.interpreter.evaluate``).
 
-    numba checks only the time stamp of the file defining a cached function, not of ``jets.py``
-    whose interpreter it inlines; :mod:`rkhp.integrators.cache` names the cache folder by a hash
-    of the sources, but a user's own NUMBA_CACHE_DIR kept across a source change would still
+    numba checks only the time stamp of the file defining a cached function, not of the
+    interpreter's files that it calls; :mod:`rkhp.taylor.compiler` names the cache folder by a
+    hash of the sources, but a user's own NUMBA_CACHE_DIR kept across a source change would still
     serve stale code. This check turns that into an error, never into wrong numbers.
     """
     if name in _VERIFIED:
         return
-    ht, at, space, Wh, Wa, sh, sa = ws
+    ht, at, space, wh, wa = ws
     x = np.array(system.x0, dtype=np.float64)
     f = np.asarray(system.vector_field(x), dtype=np.float64)
     h = 1e-3
     states = np.empty((2, x.size))
     if name == "field":
         got, want = np.empty(x.size), f
-        _field(x, ht, at, space, Wh, Wa, sh, sa, got)
+        _field(x, ht, at, space, wh, wa, got)
     elif name == "rk":
-        _rk_loop(ht, at, space, np.zeros((1, 1)), np.ones(1), h, 1, x, False, states, Wh, Wa, sh, sa)
+        _rk_loop(ht, at, space, np.zeros((1, 1)), np.ones(1), h, 1, x, 0, states, wh, wa)
         got, want = states[1], x + h * f
     else:
-        _midpoint_loop(ht, at, space, h, 1, x, False, NEWTON_TOLERANCE, NEWTON_MAX_ITERATIONS, states,
-                       np.zeros(1, dtype=np.int64), Wh, Wa, sh, sa)
+        _midpoint_loop(ht, at, space, h, 1, x, 0, NEWTON_TOLERANCE, MIDPOINT_MAX_ITERATIONS,
+                       states, np.zeros(1, dtype=np.int64), wh, wa)
         got = states[1]
         want = x + h * np.asarray(system.vector_field((x + got) / 2), dtype=np.float64)
     scale = max(1.0, float(np.max(np.abs(want))))
@@ -281,14 +262,13 @@ def _compiled(kernel) -> bool:
     return bool(kernel.signatures)
 
 
-def _trajectory(system, method, h, k_done, code, states, newton, started, compile_s, extra=None):
-    status, failed = "ok", None
-    if code:
-        failed = k_done + 1
-        status = f"failed at step {failed} (t = {failed * h:.6g}): {_CAUSES[code]}"
+def _trajectory(system, method, h, k_done, cause, states, newton, started, compile_s, extra=None):
+    failed = cause != Failure.OK
     n = k_done + 1
     return Trajectory(times=h * np.arange(n, dtype=np.float64), states=states[:n].copy(),
-                      newton_iterations=newton[:k_done].copy(), status=status, failed_step=failed,
+                      newton_iterations=newton[:k_done + failed].copy(),
+                      status=failure_status(cause, k_done, h, system.domain) if failed else "ok",
+                      failed_step=k_done if failed else None, cause=cause,
                       compile_seconds=compile_s, run_seconds=time.perf_counter() - started - compile_s,
                       method=method, system=system.name, extra=extra or {})
 
@@ -320,15 +300,16 @@ def integrate_classical(system, tableau, h, n_steps, x0=None) -> Trajectory:
     A = np.ascontiguousarray(tableau.A_float, dtype=np.float64)
     b = np.ascontiguousarray(tableau.b_float, dtype=np.float64)
     x = initial_state(system, x0)
-    ht, at, space, Wh, Wa, sh, sa = _workspace(system)
-    positive = system.domain_code == 1
+    ws = _workspace(system)
+    ht, at, space, wh, wa = ws
+    domain = system.domain_code
     states = np.empty((n_steps + 1, x.size))
     started = time.perf_counter()
-    compile_s = _warm_up(_rk_loop, (ht, at, space, A, b, h, 1, x, positive, np.empty((2, x.size)), Wh, Wa, sh, sa))
-    _verify("rk", system, (ht, at, space, Wh, Wa, sh, sa))
-    k_done, code = _rk_loop(ht, at, space, A, b, h, n_steps, x, positive, states, Wh, Wa, sh, sa)
+    compile_s = _warm_up(_rk_loop, (ht, at, space, A, b, h, 1, x, domain, np.empty((2, x.size)), wh, wa))
+    _verify("rk", system, ws)
+    k_done, cause = _rk_loop(ht, at, space, A, b, h, n_steps, x, domain, states, wh, wa)
     newton = np.zeros(n_steps, dtype=np.int64)
-    return _trajectory(system, f"classical {tableau.name}", h, k_done, code, states, newton, started, compile_s)
+    return _trajectory(system, f"classical {tableau.name}", h, k_done, cause, states, newton, started, compile_s)
 
 
 def integrate_midpoint(system, h, n_steps, x0=None) -> Trajectory:
@@ -336,9 +317,10 @@ def integrate_midpoint(system, h, n_steps, x0=None) -> Trajectory:
 
     Newton on the midpoint m, started at the explicit Euler predictor; the Newton matrix
     ``I - (h/2) Df(m)`` (central differences) is kept while corrections shrink at least 4-fold
-    and recomputed otherwise. A step stops when the correction is below 1e-14 max(1, |m|), or
-    stagnates at round-off level (below 1e-12 max(1, |m|) and not smaller than the previous one);
-    no convergence in 30 iterations, divergence or a non-finite iterate is a failure.
+    and recomputed otherwise. A step stops when the correction is below NEWTON_TOLERANCE
+    max(1, |m|) (`rkhp.integrators.newton`, shared with RKHP and THP), or stagnates at round-off
+    level (below 1e-12 max(1, |m|) and not smaller than the previous one); no convergence in
+    MIDPOINT_MAX_ITERATIONS iterations, divergence or a non-finite iterate is a failure.
 
     Args:
         system: a PoissonSystem; h: step size (> 0); n_steps: number of steps;
@@ -349,30 +331,30 @@ def integrate_midpoint(system, h, n_steps, x0=None) -> Trajectory:
     """
     h, n_steps = check_step(h, n_steps)
     x = initial_state(system, x0)
-    ht, at, space, Wh, Wa, sh, sa = _workspace(system)
-    positive = system.domain_code == 1
+    ws = _workspace(system)
+    ht, at, space, wh, wa = ws
+    domain = system.domain_code
     states = np.empty((n_steps + 1, x.size))
     newton = np.zeros(n_steps, dtype=np.int64)
-    tol, max_it = NEWTON_TOLERANCE, NEWTON_MAX_ITERATIONS
+    tol, max_it = NEWTON_TOLERANCE, MIDPOINT_MAX_ITERATIONS
     started = time.perf_counter()
-    compile_s = _warm_up(_midpoint_loop, (ht, at, space, h, 1, x, positive, tol, max_it, np.empty((2, x.size)),
-                                          np.zeros(1, dtype=np.int64), Wh, Wa, sh, sa))
-    _verify("midpoint", system, (ht, at, space, Wh, Wa, sh, sa))
-    k_done, code = _midpoint_loop(ht, at, space, h, n_steps, x, positive, tol, max_it, states, newton,
-                                  Wh, Wa, sh, sa)
+    compile_s = _warm_up(_midpoint_loop, (ht, at, space, h, 1, x, domain, tol, max_it, np.empty((2, x.size)),
+                                          np.zeros(1, dtype=np.int64), wh, wa))
+    _verify("midpoint", system, ws)
+    k_done, cause = _midpoint_loop(ht, at, space, h, n_steps, x, domain, tol, max_it, states, newton, wh, wa)
     extra = {"newton_tolerance": tol, "newton_max_iterations": max_it}
-    return _trajectory(system, "implicit midpoint", h, k_done, code, states, newton, started, compile_s, extra)
+    return _trajectory(system, "implicit midpoint", h, k_done, cause, states, newton, started, compile_s, extra)
 
 
 def vector_field(system):
     """The compiled Poisson vector field ``x -> pi(x) grad H(x)`` of a system (docs/theory.md §4)."""
     ws = _workspace(system)
-    ht, at, space, Wh, Wa, sh, sa = ws
+    ht, at, space, wh, wa = ws
     _verify("field", system, ws)
 
     def f(x):
         out = np.empty(system.dim)
-        _field(np.ascontiguousarray(x, dtype=np.float64), ht, at, space, Wh, Wa, sh, sa, out)
+        _field(np.ascontiguousarray(x, dtype=np.float64), ht, at, space, wh, wa, out)
         return out
 
     return f
@@ -383,10 +365,8 @@ def hamiltonian_values(system, states) -> np.ndarray:
     states = np.ascontiguousarray(states, dtype=np.float64).reshape(-1, system.dim)
     space = jet_space(0, 0)
     ht = system.h_tape
-    W = np.zeros((ht.n_slots, space.size))
-    scratch = np.zeros((scratch_rows(ht.n_inputs) + ht.n_inputs, space.size))
     out = np.empty(len(states))
-    _hamiltonian_loop(ht.packed(), space.packed(), states, W, scratch, out)
+    _hamiltonian_loop(ht, space, states, tape_work((ht,), space.size), out)
     if "hamiltonian" not in _VERIFIED and len(out):
         want = system.hamiltonian(states[0])
         if not abs(out[0] - want) <= 1e-12 * max(1.0, abs(want)):

@@ -6,23 +6,82 @@ Z_i = h sum_{j<i} a_ij grad g_j is read off the coefficients. psi = h sum_i b_i 
 Jacobian are the degree-0 and degree-1 coefficients. Newton solves alpha(x, psi(x)) = y (Jacobian
 by the same jets) from a predicted start, then chord steps with value-only towers, stopping when
 the predicted next correction is below the tolerance (then psi + Dpsi dx is reused at the new x,
-docs/theory.md §7); a last cheap correction of x at fixed p makes alpha(x, p) = y hold to round-off (so
-the Casimirs are kept); y_next = beta(x, p). Each stage is computed once: the cost is
-polynomial in s (see `rkhp_step`).
+docs/theory.md §7); a last cheap correction of x at fixed p makes alpha(x, p) = y hold to
+round-off (so the Casimirs are kept); y_next = beta(x, p). Each stage is computed once: the cost
+is polynomial in s (see `rkhp_step`).
 
-The tableau, h and the states are data: one compilation serves every system and tableau.
-Failure codes: 0 ok, 1 Newton did not converge, 2 non-finite values, 3 left the domain,
-4 Newton reached non-finite values.
+The tableau, h and the states are data: one compilation serves every system and tableau. The
+compiled data are named: `SystemTapes` (the four tapes), `rkhp.taylor.jets.JetSpace`,
+`StepBuffers` (every work array of the step loop, allocated once by `step_buffers`). A run ends
+with a `rkhp.integrators.failure.Failure`; `state_failure` is the one step validator (finite
+values, the system's domain) of every integrator.
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-from .cache import numba as nb
-from .jets import NJIT, NJIT_NORC, run_tape_into
+from ..systems.core import DOMAINS
+from ..taylor.compiler import NJIT_NORC
+from ..taylor.compiler import numba as nb
+from ..taylor.interpreter import TapeWork, run_tape, tape_work
+from ..taylor.tape import Tape
+from .failure import Failure
 
-OK, NO_CONVERGENCE, NON_FINITE, LEFT_DOMAIN, NEWTON_NON_FINITE = 0, 1, 2, 3, 4
+POSITIVE_ORTHANT = DOMAINS["positive orthant"]
+
+
+class SystemTapes(NamedTuple):
+    """The tapes of a system over the 2n inputs (x, p): f = H o alpha, H, alpha, beta."""
+
+    f: Tape
+    h: Tape
+    alpha: Tape
+    beta: Tape
+
+
+class StepBuffers(NamedTuple):
+    """Every work array of the RKHP step loop (n: dimension, s: stages).
+
+    work: the interpreter's; G (s, n, jet size): gradients of the stage functions; psi, Jpsi,
+    alpha, Jalpha: the tower's results; x, delta, res (n): Newton's iterate, correction and
+    residual; LU (n, n), v (n): the linear solve's; hist (3, n): psi of the three previous steps;
+    memo (2,): how many of them there are, and Newton's measured quadratic constant L; y, y_next
+    (n): the state before and after the step.
+    """
+
+    work: TapeWork
+    G: np.ndarray
+    psi: np.ndarray
+    Jpsi: np.ndarray
+    alpha: np.ndarray
+    Jalpha: np.ndarray
+    x: np.ndarray
+    delta: np.ndarray
+    res: np.ndarray
+    LU: np.ndarray
+    v: np.ndarray
+    hist: np.ndarray
+    memo: np.ndarray
+    y: np.ndarray
+    y_next: np.ndarray
+
+
+def step_buffers(tapes: SystemTapes, n: int, s: int, space) -> StepBuffers:
+    """The work arrays of the step loop for dimension n, s stages and a jet space."""
+    size = space.size
+
+    def vec():
+        return np.zeros(n)
+
+    def mat():
+        return np.zeros((n, n))
+
+    return StepBuffers(tape_work(tapes, size), np.zeros((s, n, size)), vec(), mat(), vec(), mat(),
+                       vec(), vec(), vec(), mat(), vec(), np.zeros((3, n)), np.zeros(2), vec(),
+                       vec())
 
 
 @nb.njit(**NJIT_NORC)
@@ -66,12 +125,13 @@ def _set_x(W, x0, n, D, M):
             W[k, 1 + k] = 1.0
 
 
-@nb.njit(**NJIT_NORC)
-def tower(x0, A, b, h, tapes, space, W, G, scratch, deg, psi, Jpsi, alpha, Jalpha, jacobian):
-    """psi and alpha(x0, psi(x0)) at x0 (see module); with `jacobian`, also Dpsi and the
-    Jacobian of x -> alpha(x, psi(x)) (stage degrees s + 2 - i; without, s + 1 - i)."""
-    ftape, htape, atape = tapes[0], tapes[1], tapes[2]
-    counts, up, expo = space[0], space[5], space[6]
+@nb.njit(inline="always", **NJIT_NORC)
+def tower(x0, A, b, h, tapes, space, buf, jacobian):
+    """psi and alpha(x0, psi(x0)) at x0 into buf.psi, buf.alpha (see module); with `jacobian`,
+    also Dpsi and the Jacobian of x -> alpha(x, psi(x)) (stage degrees s + 2 - i; without,
+    s + 1 - i)."""
+    W, G, psi, Jpsi = buf.work.W, buf.G, buf.psi, buf.Jpsi
+    counts, up, expo = space.counts, space.up, space.expo
     s = b.shape[0]
     n = x0.shape[0]
     extra = np.int64(1) if jacobian else np.int64(0)
@@ -91,9 +151,9 @@ def tower(x0, A, b, h, tapes, space, W, G, scratch, deg, psi, Jpsi, alpha, Jalph
                 if c != 0.0:
                     for m in range(M):
                         W[n + k, m] += c * G[j, k, m]
-        tape = htape if zero_row else ftape
-        run_tape_into(tape, W, D, space, scratch, deg)
-        g = tape[3][0]
+        tape = tapes.h if zero_row else tapes.f
+        run_tape(tape, D, space, buf.work)
+        g = tape.outputs[0]
         for k in range(n):
             for m in range(counts[D - 1]):
                 G[i, k, m] = (expo[m, k] + 1) * W[g, up[m, k]]
@@ -112,13 +172,13 @@ def tower(x0, A, b, h, tapes, space, W, G, scratch, deg, psi, Jpsi, alpha, Jalph
         W[n + k, 0] = psi[k]
         for l in range(n):
             W[n + k, 1 + l] = Jpsi[k, l] if jacobian else 0.0
-    run_tape_into(atape, W, extra, space, scratch, deg)
+    run_tape(tapes.alpha, extra, space, buf.work)
     for k in range(n):
-        a = atape[3][k]
-        alpha[k] = W[a, 0]
+        a = tapes.alpha.outputs[k]
+        buf.alpha[k] = W[a, 0]
         if jacobian:
             for l in range(n):
-                Jalpha[k, l] = W[a, 1 + l]
+                buf.Jalpha[k, l] = W[a, 1 + l]
 
 
 @nb.njit(**NJIT_NORC)
@@ -131,20 +191,21 @@ def _max_abs(v):
     return r
 
 
-@nb.njit(**NJIT_NORC)
-def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
-    """One RKHP step from y into y_next; returns (failure code, Newton iterations).
+@nb.njit(inline="always", **NJIT_NORC)
+def rkhp_step(A, b, h, tapes, space, buf, tol, max_iter):
+    """One RKHP step from buf.y into buf.y_next; returns (Failure, Newton iterations).
 
-    hist[0..2]: psi of the three previous steps, memo[0]: how many of them there are,
-    memo[1]: Newton's quadratic constant L (|dx_{k+1}| ~ L |dx_k|^2) measured on an earlier step
-    (0 when unknown). The start is predicted: psi extrapolated (quadratically) from the previous
-    steps, x from alpha(x, psi_predicted) = y by a cheap Newton step (no tower). The first tower has the
-    Jacobian; it is the last when max(2 L, 1/max(1, |y|)) |dx|^2 is below the tolerance. Later
-    iterations are chord steps with value-only towers (one degree less, about half the cost),
-    stopped when theta/(1 - theta) |dx_k| is (theta = |dx_k|/|dx_{k-1}|); the Jacobian is
-    refreshed when theta > 1/4 (docs/theory.md §7 measured 2 full towers per step instead of 3).
+    buf.hist[0..2]: psi of the three previous steps, buf.memo[0]: how many of them there are,
+    buf.memo[1]: Newton's quadratic constant L (|dx_{k+1}| ~ L |dx_k|^2) measured on an earlier
+    step (0 when unknown). The start is predicted: psi extrapolated (quadratically) from the
+    previous steps, x from alpha(x, psi_predicted) = y by a cheap Newton step (no tower). The first
+    tower has the Jacobian; it is the last when max(2 L, 1/max(1, |y|)) |dx|^2 is below the
+    tolerance. Later iterations are chord steps with value-only towers (one degree less, about
+    half the cost), stopped when theta/(1 - theta) |dx_k| is (theta = |dx_k|/|dx_{k-1}|); the
+    Jacobian is refreshed when theta > 1/4 (docs/theory.md §7 measured 2 full towers per step
+    instead of 3).
     """
-    W, G, scratch, deg, psi, Jpsi, alpha, Jalpha, x, delta, res, LU, v = buf
+    y, x, res, delta, hist, memo = buf.y, buf.x, buf.res, buf.delta, buf.hist, buf.memo
     n = y.shape[0]
     scale = max(1.0, _max_abs(y))
     for k in range(n):
@@ -157,8 +218,7 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
                 res[k] = 2.0 * hist[0, k] - hist[1, k]
             else:
                 res[k] = hist[0, k]
-        _polish(y, x, res, tapes[2], space, W, scratch, deg, Jalpha, alpha, delta, LU, v, scale,
-                np.int64(1), np.bool_(True))
+        _polish(res, tapes.alpha, space, buf, scale, np.int64(1), np.bool_(True))
         if not np.isfinite(_max_abs(x)):
             for k in range(n):
                 x[k] = y[k]
@@ -169,13 +229,13 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
     while it < max_iter:
         it += 1
         # a full tower (Jacobian) first; then value-only towers with that Jacobian (chord)
-        tower(x, A, b, h, tapes, space, W, G, scratch, deg, psi, Jpsi, alpha, Jalpha, full)
+        tower(x, A, b, h, tapes, space, buf, full)
         for k in range(n):
-            res[k] = y[k] - alpha[k]
-        solve_small(Jalpha, res, delta, LU, v)
+            res[k] = y[k] - buf.alpha[k]
+        solve_small(buf.Jalpha, res, delta, buf.LU, buf.v)
         size = _max_abs(delta)
         if not np.isfinite(size):
-            return NEWTON_NON_FINITE, it
+            return Failure.NEWTON_NON_FINITE, it
         for k in range(n):
             x[k] += delta[k]
         if previous < np.inf and previous > 1e3 * tol * scale and size < 0.5 * previous:
@@ -191,9 +251,9 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
         if size <= tol * scale or predicted <= tol * scale:
             converged = True
             for k in range(n):
-                acc = psi[k]
+                acc = buf.psi[k]
                 for l in range(n):
-                    acc += Jpsi[k, l] * delta[l]
+                    acc += buf.Jpsi[k, l] * delta[l]
                 res[k] = acc
             break
         if size > 1e8 * scale:
@@ -202,37 +262,35 @@ def rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo):
         full = np.bool_(previous < np.inf and size > 0.25 * previous)
         previous = size
     if not converged:
-        return NO_CONVERGENCE, it
-    _polish(y, x, res, tapes[2], space, W, scratch, deg, Jalpha, alpha, delta, LU, v, scale,
-            np.int64(1), np.bool_(False))
+        return Failure.NEWTON_NO_CONVERGENCE, it
+    _polish(res, tapes.alpha, space, buf, scale, np.int64(1), np.bool_(False))
     for k in range(n):
         hist[2, k] = hist[1, k]
         hist[1, k] = hist[0, k]
         hist[0, k] = res[k]
     memo[0] = min(memo[0] + 1.0, 3.0)
-    btape = tapes[3]
+    W = buf.work.W
     for k in range(n):
         W[k, 0] = x[k]
         W[n + k, 0] = res[k]
-    run_tape_into(btape, W, np.int64(0), space, scratch, deg)
+    run_tape(tapes.beta, np.int64(0), space, buf.work)
     for k in range(n):
-        y_next[k] = W[btape[3][k], 0]
-    if not np.isfinite(_max_abs(y_next)):
-        return NON_FINITE, it
-    return OK, it
+        buf.y_next[k] = W[tapes.beta.outputs[k], 0]
+    return Failure.OK, it
 
 
-@nb.njit(**NJIT_NORC)
-def _polish(y, x, p, atape, space, W, scratch, deg, J, alpha, delta, LU, v, scale, iterations,
-            exact):
-    """Solve alpha(x, p) = y for x with p fixed by at most `iterations` cheap steps (no tower):
-    with `exact`, Newton steps (J := d_x alpha(x, p) by degree-1 jets); otherwise steps with the
-    given approximate J (the last tower's), from values of alpha only.
+@nb.njit(inline="always", **NJIT_NORC)
+def _polish(p, atape, space, buf, scale, iterations, exact):
+    """Solve alpha(x, p) = y for x = buf.x with p fixed by at most `iterations` cheap steps (no
+    tower): with `exact`, Newton steps (J := d_x alpha(x, p) by degree-1 jets); otherwise steps
+    with the given approximate J = buf.Jalpha (the last tower's), from values of alpha only.
 
     With p fixed, C(beta(x, p)) = C(alpha(x, p)) for every Casimir C, so the final such step keeps
-    the Casimirs to round-off whatever the accuracy of psi (docs/theory.md §4): only alpha's residual
-    matters. Its correction is below the Newton tolerance, so J's O(h) inexactness is harmless.
+    the Casimirs to round-off whatever the accuracy of psi (docs/theory.md §4): only alpha's
+    residual matters. Its correction is below the Newton tolerance, so J's O(h) inexactness is
+    harmless.
     """
+    y, x, J, alpha, delta, W = buf.y, buf.x, buf.Jalpha, buf.alpha, buf.delta, buf.work.W
     n = y.shape[0]
     for _ in range(iterations):
         degree = np.int64(1) if exact else np.int64(0)
@@ -243,60 +301,59 @@ def _polish(y, x, p, atape, space, W, scratch, deg, J, alpha, delta, LU, v, scal
                 for l in range(n):
                     W[k, 1 + l] = 1.0 if k == l else 0.0
                     W[n + k, 1 + l] = 0.0
-        run_tape_into(atape, W, degree, space, scratch, deg)
+        run_tape(atape, degree, space, buf.work)
         for k in range(n):
-            a = atape[3][k]
+            a = atape.outputs[k]
             alpha[k] = y[k] - W[a, 0]
             if exact:
                 for l in range(n):
                     J[k, l] = W[a, 1 + l]
-        solve_small(J, alpha, delta, LU, v)
+        solve_small(J, alpha, delta, buf.LU, buf.v)
         for k in range(n):
             x[k] += delta[k]
         if not _max_abs(delta) > 4e-16 * scale:
             break
 
 
-@nb.njit(**NJIT)
-def make_buffers(n, s, n_slots, space):
-    size = space[0][space[0].shape[0] - 1]
-    return (np.zeros((n_slots, size)), np.zeros((s, n, size)),
-            np.zeros((5 + 2 * n, size)), np.zeros(n_slots, dtype=np.int64), np.zeros(n),
-            np.zeros((n, n)), np.zeros(n), np.zeros((n, n)), np.zeros(n), np.zeros(n),
-            np.zeros(n), np.zeros((n, n)), np.zeros(n))
-
-
-@nb.njit(**NJIT)
-def in_domain(y, domain):
-    if domain == 1:
+@nb.njit(**NJIT_NORC)
+def state_failure(y, domain):
+    """The one step validator of every integrator: Failure.NON_FINITE if a component of y is not
+    finite, Failure.LEFT_DOMAIN if y is outside the domain (code of `rkhp.systems.core.DOMAINS`),
+    else Failure.OK."""
+    for k in range(y.shape[0]):
+        if not np.isfinite(y[k]):
+            return Failure.NON_FINITE
+    if domain == POSITIVE_ORTHANT:
         for k in range(y.shape[0]):
             if not y[k] > 0.0:
-                return False
-    return True
+                return Failure.LEFT_DOMAIN
+    return Failure.OK
 
 
-@nb.njit(**NJIT)
-def rkhp_run(y0, A, b, h, n_steps, tapes, space, n_slots, domain, tol, max_iter, states,
-             iterations, keep_all):
-    """Integrate n_steps; states[k] = y_k (keep_all) or states[0] = the last state.
+@nb.njit(**NJIT_NORC)
+def rkhp_run(y0, A, b, h, n_steps, tapes, space, buf, domain, tol, max_iter, states, iterations,
+             keep_all):
+    """Integrate n_steps from y0; states[k] = y_k (keep_all) or states[0] = the last state.
 
-    Returns (number of completed steps, failure code of the step after them or 0).
+    Returns (number of completed steps, Failure of the step after them or Failure.OK).
     """
     n = y0.shape[0]
-    buf = make_buffers(n, b.shape[0], n_slots, space)
-    hist = np.zeros((3, n))
-    memo = np.zeros(2)
-    y = y0.copy()
-    y_next = np.zeros(n)
-    states[0, :] = y
+    y = buf.y
+    for k in range(n):
+        y[k] = y0[k]
+    buf.memo[0] = 0.0
+    buf.memo[1] = 0.0
+    for k in range(n):
+        states[0, k] = y[k]
     for step in range(n_steps):
-        code, it = rkhp_step(y, A, b, h, tapes, space, buf, tol, max_iter, y_next, hist, memo)
+        cause, it = rkhp_step(A, b, h, tapes, space, buf, tol, max_iter)
         iterations[step] = it
-        if code == OK and not in_domain(y_next, domain):
-            code = LEFT_DOMAIN
-        if code != OK:
-            return step, code
+        if cause == Failure.OK:
+            cause = state_failure(buf.y_next, domain)
+        if cause != Failure.OK:
+            return step, cause
+        row = step + 1 if keep_all else 0
         for k in range(n):
-            y[k] = y_next[k]
-        states[step + 1 if keep_all else 0, :] = y
-    return n_steps, OK
+            y[k] = buf.y_next[k]
+            states[row, k] = y[k]
+    return n_steps, Failure.OK

@@ -15,18 +15,12 @@ import numpy as np
 
 from ..errors import InputError
 from ..executors import run_all
+from .failure import Failure, failure_status
+from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE
 from .trajectory import Trajectory
 
-NEWTON_TOLERANCE = 1e-15
-"""Newton stops when the (predicted) correction is below this, relative to max(1, |y|_inf)."""
-NEWTON_MAX_ITERATIONS = 20
 MAX_PRODUCT_PAIRS = 2_000_000
 """Largest product table the Taylor tower accepts (n variables, degree s + 1)."""
-
-CAUSES = {1: "Newton did not converge (the step h may be too large)",
-          2: "non-finite values",
-          3: "left the domain",
-          4: "Newton did not converge: non-finite iterate (the step h may be too large)"}
 
 
 def resolve_tableau(tableau):
@@ -66,25 +60,17 @@ def start_state(system, x0) -> np.ndarray:
     return system.with_x0(x0).x0
 
 
-def engine_data(system, stages: int, degree: int | None = None):
-    """(tapes, jet space, number of slots) for the compiled engine."""
-    from .jets import jet_space
+def engine_data(system, stages: int):
+    """(tapes, jet space) for the compiled engine: jets in n variables of degree s + 1."""
+    from ..taylor.jets import jet_space
+    from .engine import SystemTapes
 
-    degree = stages + 1 if degree is None else degree
+    degree = stages + 1
     space = jet_space(system.dim, degree)
     if len(space.pa) > MAX_PRODUCT_PAIRS:
         raise InputError(f"{stages} stages need Taylor polynomials of degree {degree} in "
                          f"{system.dim} variables ({len(space.pa)} product terms): too large")
-    tapes = (system.f_tape, system.h_tape, system.alpha_tape, system.beta_tape)
-    n_slots = max(t.n_slots for t in tapes)
-    return tuple(t.packed() for t in tapes), space.packed(), n_slots
-
-
-def failure_status(code: int, step: int, h: float, system) -> str:
-    cause = CAUSES[code]
-    if code == 3:
-        cause += f" ({system.domain})"
-    return f"failed at step {step + 1} (t = {step * h:.6g} -> {(step + 1) * h:.6g}): {cause}"
+    return SystemTapes(system.f_tape, system.h_tape, system.alpha_tape, system.beta_tape), space
 
 
 def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLERANCE,
@@ -94,28 +80,29 @@ def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLER
     Returns a Trajectory with states y_0..y_k, Newton iterations per step, and a status naming
     the failing step, time and cause if a step failed (then only the states before it are kept).
     """
-    from .engine import rkhp_run
+    from .engine import rkhp_run, step_buffers
 
     tableau = resolve_tableau(tableau)
     h, n_steps = check_step(h, n_steps)
     y0 = start_state(system, x0)
     A, b = explicit_arrays(tableau)
-    tapes, space, n_slots = engine_data(system, len(b))
-    args = (A, b, h)
-    rest = (tapes, space, n_slots, system.domain_code, float(tol), int(max_iter))
+    tapes, space = engine_data(system, len(b))
+    buf = step_buffers(tapes, system.dim, len(b), space)
+    rest = (tapes, space, buf, system.domain_code, float(tol), int(max_iter))
     t0 = time.perf_counter()
-    rkhp_run(y0, *args, 0, *rest, np.zeros((1, y0.size)), np.zeros(1, np.int64), True)
+    rkhp_run(y0, A, b, h, 0, *rest, np.zeros((1, y0.size)), np.zeros(1, np.int64), True)
     compile_seconds = time.perf_counter() - t0
     states = np.empty((n_steps + 1, y0.size))
     iterations = np.zeros(max(n_steps, 1), dtype=np.int64)
     t0 = time.perf_counter()
-    done, code = rkhp_run(y0, *args, n_steps, *rest, states, iterations, True)
+    done, cause = rkhp_run(y0, A, b, h, n_steps, *rest, states, iterations, True)
     run_seconds = time.perf_counter() - t0
-    status = "ok" if code == 0 else failure_status(code, done, h, system)
+    failed = cause != Failure.OK
     return Trajectory(
         times=h * np.arange(done + 1), states=states[: done + 1],
-        newton_iterations=iterations[: done + (code != 0)], status=status,
-        failed_step=None if code == 0 else done, compile_seconds=compile_seconds,
+        newton_iterations=iterations[: done + failed], cause=cause,
+        status=failure_status(cause, done, h, system.domain) if failed else "ok",
+        failed_step=done if failed else None, compile_seconds=compile_seconds,
         run_seconds=run_seconds, method=getattr(tableau, "name", "custom"), system=system.name,
         extra={"newton_tolerance": tol, "newton_max_iterations": max_iter,
                "realisation": system.realisation})
@@ -142,27 +129,27 @@ def integrate_ensemble(system, tableau, h, n_steps, x0s, *, tol: float = NEWTON_
     A, b = explicit_arrays(tableau)
     settings = (float(tol), int(max_iter), threads)
     if executor is None:
-        finals, done, codes = _ensemble_chunk(system, A, b, h, n_steps, x0s, *settings)
+        finals, done, causes = _ensemble_chunk(system, A, b, h, n_steps, x0s, *settings)
     else:
         chunks = np.array_split(x0s, max(1, min(len(x0s), executor.slots)))
         parts = run_all(executor, _ensemble_chunk, [(system, A, b, h, n_steps, c, *settings) for c in chunks])
-        finals, done, codes = (np.concatenate([p[k] for p in parts]) for k in range(3))
-    bad = np.flatnonzero(codes)
+        finals, done, causes = (np.concatenate([p[k] for p in parts]) for k in range(3))
+    bad = np.flatnonzero(causes)
     if bad.size:
         i = int(bad[0])
         raise NumericalFailure(f"trajectory {i} of {len(x0s)}: "
-                               + failure_status(int(codes[i]), int(done[i]), h, system))
+                               + failure_status(Failure(causes[i]), int(done[i]), h, system.domain))
     return finals
 
 
 def _ensemble_chunk(system, A, b, h, n_steps, x0s, tol, max_iter, threads):
-    """(final states, steps done, status codes) of the trajectories from ``x0s``, in threads."""
+    """(final states, steps done, Failure codes) of the trajectories from ``x0s``, in threads."""
     import os
     from concurrent.futures import ThreadPoolExecutor
 
-    from .engine import rkhp_run
+    from .engine import rkhp_run, step_buffers
 
-    tapes, space, n_slots = engine_data(system, len(b))
+    tapes, space = engine_data(system, len(b))
     m = len(x0s)
     finals = np.zeros_like(x0s)
     done = np.zeros(m, dtype=np.int64)
@@ -173,8 +160,9 @@ def _ensemble_chunk(system, A, b, h, n_steps, x0s, tol, max_iter, threads):
     def batch(lo, hi):
         last = np.zeros((1, system.dim))
         iterations = np.zeros(max(n_steps, 1), dtype=np.int64)
+        buf = step_buffers(tapes, system.dim, len(b), space)
         for t in range(lo, hi):
-            done[t], codes[t] = rkhp_run(x0s[t], A, b, h, n_steps, tapes, space, n_slots,
+            done[t], codes[t] = rkhp_run(x0s[t], A, b, h, n_steps, tapes, space, buf,
                                          system.domain_code, tol, max_iter, last, iterations, False)
             finals[t] = last[0]
 

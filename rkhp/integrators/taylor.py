@@ -22,20 +22,18 @@ from math import factorial
 import numpy as np
 
 from ..errors import InputError
-from .jets import _monomials, jet_space, run_tape, scratch_rows
-from .rkhp_method import (
-    NEWTON_MAX_ITERATIONS,
-    NEWTON_TOLERANCE,
-    check_step,
-    failure_status,
-    start_state,
-)
+from ..taylor.interpreter import run_tape, tape_work
+from ..taylor.jets import jet_space, monomials
+from .engine import state_failure
+from .failure import Failure, failure_status
+from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE
+from .rkhp_method import check_step, start_state
 from .trajectory import Trajectory
 
 
 @lru_cache(maxsize=256)
 def _index(n_vars: int, degree: int) -> dict[tuple[int, ...], int]:
-    return {m: i for i, m in enumerate(_monomials(n_vars, degree))}
+    return {m: i for i, m in enumerate(monomials(n_vars, degree))}
 
 
 class _Tower:
@@ -52,17 +50,14 @@ class _Tower:
         self.order = order
         self.trees = trees_up_to(order, degenerate) if trees is None else tuple(trees)
         self.margin = margin
-        self.n_slots = max(t.n_slots for t in (system.f_tape, system.h_tape, system.alpha_tape,
-                                               system.beta_tape))
 
     def _run(self, tape, n_vars: int, degree: int, inputs: list[np.ndarray]):
         space = jet_space(n_vars, degree)
-        W = np.zeros((self.n_slots, space.size))
+        work = tape_work((tape,), space.size)
         for i, jet in enumerate(inputs):
-            W[i, : len(jet)] = jet[: space.size]
-        scratch = np.zeros((scratch_rows(self.n), space.size))
-        run_tape(tape.packed(), W, degree, space.packed(), scratch)
-        return W[tape.outputs]
+            work.W[i, : len(jet)] = jet[: space.size]
+        run_tape(tape, np.int64(degree), space, work)
+        return work.W[tape.outputs]
 
     def _x_jet(self, x0, k: int, size: int) -> np.ndarray:
         jet = np.zeros(size)
@@ -132,7 +127,7 @@ def _slot_rows(n: int, q: int, degree: int, r: int) -> np.ndarray:
     of degree <= degree - 1 in their order."""
     big = _index(n + q, degree)
     eps = tuple(1 if j == r else 0 for j in range(q))
-    return np.array([big[a + eps] for a in _monomials(n, degree - 1)], dtype=np.intp)
+    return np.array([big[a + eps] for a in monomials(n, degree - 1)], dtype=np.intp)
 
 
 @lru_cache(maxsize=1024)
@@ -140,7 +135,7 @@ def _coefficient_rows(n: int, ks: tuple[int, ...], degree: int) -> np.ndarray:
     """Rows of the (dx, eps) jet space holding dx^a prod eps_r^k_r, for the monomials a of degree
     <= ``degree``."""
     big = _index(n + len(ks), degree + sum(ks))
-    return np.array([big[a + ks] for a in _monomials(n, degree)], dtype=np.intp)
+    return np.array([big[a + ks] for a in monomials(n, degree)], dtype=np.intp)
 
 
 def _gradient(jet: np.ndarray, n: int, degree: int, k: int) -> np.ndarray:
@@ -150,7 +145,7 @@ def _gradient(jet: np.ndarray, n: int, degree: int, k: int) -> np.ndarray:
 
 
 def thp_step(tower: _Tower, y, h: float, tol: float, max_iter: int):
-    """One THP step: (y_next or None, Newton iterations, failure code)."""
+    """One THP step: (y_next or None, Newton iterations, Failure)."""
     n = tower.n
     x = y.copy()
     scale = max(1.0, float(np.abs(y).max()))
@@ -162,10 +157,10 @@ def thp_step(tower: _Tower, y, h: float, tol: float, max_iter: int):
             try:
                 delta = np.linalg.solve(J, y - a)
             except np.linalg.LinAlgError:
-                return None, it, 4
+                return None, it, Failure.SINGULAR
         size = float(np.abs(delta).max())
         if not np.isfinite(size):
-            return None, it, 4
+            return None, it, Failure.NEWTON_NON_FINITE
         x = x + delta
         predicted = size ** 3 / previous ** 2 if np.isfinite(previous) else np.inf
         if size <= tol * scale or (size < 0.5 * previous and predicted <= tol * scale):
@@ -179,11 +174,12 @@ def thp_step(tower: _Tower, y, h: float, tol: float, max_iter: int):
             out = tower._run(tower.system.beta_tape, n, 0, [np.array([v]) for v in x]
                              + [np.array([v]) for v in p])
             y_next = out[:, 0].copy()
-            return (y_next, it, 0) if np.all(np.isfinite(y_next)) else (None, it, 2)
+            cause = state_failure(y_next, tower.system.domain_code)
+            return (y_next if cause == Failure.OK else None), it, cause
         if size > 1e8 * scale:
             break
         previous = size
-    return None, max_iter, 1
+    return None, max_iter, Failure.NEWTON_NO_CONVERGENCE
 
 
 def integrate_taylor(system, order: int, degenerate: bool, h, n_steps, x0=None, *,
@@ -200,21 +196,19 @@ def integrate_taylor(system, order: int, degenerate: bool, h, n_steps, x0=None, 
     compile_seconds = time.perf_counter() - t0
     states = [y]
     iterations = []
-    status, failed = "ok", None
+    status, failed, cause = "ok", None, Failure.OK
     t0 = time.perf_counter()
     for step in range(n_steps):
-        y_next, it, code = thp_step(tower, states[-1], h, tol, max_iter)
+        y_next, it, cause = thp_step(tower, states[-1], h, tol, max_iter)
         iterations.append(it)
-        if code == 0 and not system.in_domain(y_next):
-            code = 3
-        if code:
-            status, failed = failure_status(code, step, h, system), step
+        if cause != Failure.OK:
+            status, failed = failure_status(cause, step, h, system.domain), step
             break
         states.append(y_next)
     run_seconds = time.perf_counter() - t0
     return Trajectory(times=h * np.arange(len(states)), states=np.array(states),
                       newton_iterations=np.array(iterations, dtype=np.int64), status=status,
-                      failed_step=failed, compile_seconds=compile_seconds,
+                      failed_step=failed, cause=cause, compile_seconds=compile_seconds,
                       run_seconds=run_seconds,
                       method=f"THP{order}" + (" (T_0)" if degenerate else " (T)"),
                       system=system.name, extra={"realisation": system.realisation})

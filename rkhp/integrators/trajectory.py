@@ -2,7 +2,8 @@
 
 A failed run keeps only the states computed before the failure (never numbers past it), and says
 at which step and time it failed and why (paper §5.2: the implicit equation alpha(x, psi(x)) = y
-may have no solution for a large step).
+may have no solution for a large step): `cause` (a `rkhp.integrators.failure.Failure`) for
+programs, `status` for people.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import NumericalFailure
+from .failure import Failure
 
 
 @dataclass(frozen=True)
@@ -23,7 +25,10 @@ class Trajectory:
         states: shape (k+1, n); for a failed run, only the steps before the failure.
         newton_iterations: shape (k,), Newton iterations per step (zeros for explicit peers).
         status: "ok", or a failure message naming the step, the time and the cause.
-        failed_step: the index of the step that failed, or None.
+        failed_step: the 0-based index of the step that failed (step k goes from y_k to y_{k+1};
+            it equals the number of completed steps, and states has failed_step + 1 rows), or
+            None.
+        cause: Failure.OK, or why the run failed (`rkhp.integrators.failure`).
         compile_seconds: time spent compiling (first call of a compiled kernel), apart from run time.
         run_seconds: wall time of the integration itself.
         method: name of the method; system: name of the system.
@@ -35,6 +40,7 @@ class Trajectory:
     newton_iterations: np.ndarray
     status: str = "ok"
     failed_step: int | None = None
+    cause: Failure = Failure.OK
     compile_seconds: float = 0.0
     run_seconds: float = 0.0
     method: str = ""
@@ -43,7 +49,7 @@ class Trajectory:
 
     @property
     def ok(self) -> bool:
-        return self.status == "ok"
+        return self.cause == Failure.OK
 
     @property
     def final_state(self) -> np.ndarray:

@@ -26,6 +26,7 @@ import numpy as np
 from .. import bounds
 from ..errors import InputError
 from ..executors import InProcess, run_all
+from ..integrators.failure import Failure
 from ..methods import condition_class, require_steps, resolve_method, resolve_methods, resolve_system
 from .converge import check_t_final, study_methods
 from .fit import fit_order
@@ -52,7 +53,8 @@ def _fmt(x: float | None) -> str:
 
 @dataclass(frozen=True)
 class SweepRow:
-    """One run of part (a): ``steps`` steps of size ``h`` to T; errors relative to |x(T)|, |H(x0)|."""
+    """One run of part (a): ``steps`` steps of size ``h`` to T; errors relative to |x(T)|, |H(x0)|;
+    ``failure``: how the run ended (`rkhp.integrators.failure`), ``status`` its status line."""
 
     h: float
     steps: int
@@ -60,17 +62,18 @@ class SweepRow:
     newton_max: int
     relative_error: float | None
     relative_energy_error: float | None
+    failure: Failure = Failure.OK
 
     @property
     def ok(self) -> bool:
-        return (self.status == "ok" and self.relative_error is not None and self.relative_error <= 1.0
+        return (self.failure == Failure.OK and self.relative_error is not None and self.relative_error <= 1.0
                 and self.relative_energy_error <= 1.0)
 
     @property
     def cause(self) -> str:
         """Why the run does not count: the failure's cause, or an unbounded error."""
-        if self.status != "ok":
-            return self.status.split("): ", 1)[-1]
+        if self.failure != Failure.OK:
+            return self.failure.text
         return "" if self.ok else "error not bounded (relative error or energy error above 1)"
 
     def to_json(self) -> dict:
@@ -141,7 +144,7 @@ def sweep(method, system, t_final: float, coarsest: int = SWEEP_COARSEST, factor
             _, energy = max_deviations(system, traj.states)
             rows.append(SweepRow(h, n, "ok", n_max, err, energy / H0))
         else:
-            rows.append(SweepRow(h, n, traj.status, n_max, None, None))
+            rows.append(SweepRow(h, n, traj.status, n_max, None, None, traj.cause))
     return SweepResult(method.name, tuple(rows))
 
 
@@ -155,6 +158,7 @@ class LongRun:
     status: str
     seconds: float
     modified: ModifiedWindows | None = None
+    failure: Failure = Failure.OK
 
     @property
     def casimir_max(self) -> float:
@@ -203,7 +207,7 @@ class LongRunResult:
     peer: LongRun
 
     def verdict(self) -> str:
-        kept = [r for r in self.runs if r.status == "ok" and r.casimir_max <= CASIMIR_KEPT]
+        kept = [r for r in self.runs if r.failure == Failure.OK and r.casimir_max <= CASIMIR_KEPT]
         parts = [f"{r.method} Casimir {_fmt(r.casimir_max)}, energy growth x{_fmt(r.energy_growth)}" for r in self.runs]
         peer = self.peer
         head = (f"over {self.steps} steps, {len(kept)} of {len(self.runs)} RKHP methods keep the Casimir "
@@ -221,7 +225,7 @@ def _long_run(method, system, h: float, steps: int, windows: int) -> LongRun:
     casimir, energy = invariant_deviations(system, traj.states)
     modified = _modified_windows(method, system, h, traj.states, windows) if method.kind == "rkhp" and traj.ok else None
     return LongRun(method.name, tuple(window_maxima(casimir, windows)), tuple(window_maxima(energy, windows)),
-                   traj.status, traj.run_seconds, modified)
+                   traj.status, traj.run_seconds, modified, traj.cause)
 
 
 def _modified_windows(method, system, h: float, states, windows: int) -> ModifiedWindows | None:
@@ -263,10 +267,11 @@ class SingularRun:
     status: str
     min_component: float | None
     casimir_error: float | None
+    failure: Failure = Failure.OK
 
     @property
     def kept(self) -> bool:
-        return (self.status == "ok" and self.min_component > 0 and self.casimir_error <= CASIMIR_KEPT)
+        return (self.failure == Failure.OK and self.min_component > 0 and self.casimir_error <= CASIMIR_KEPT)
 
     def to_json(self) -> dict:
         return {"method": self.method, "first_species": self.first_species, "status": self.status,
@@ -289,7 +294,7 @@ class SingularResult:
             worst = max(r.casimir_error for r in self.runs)
             return f"positivity and Casimir (to {_fmt(worst)}) kept by every method from every near-singular start"
         return "; ".join(f"{r.method} from x1 = {r.first_species:g}: "
-                         + (r.status if r.status != "ok" else
+                         + (r.status if r.failure != Failure.OK else
                             f"min component {r.min_component:.3g}, Casimir error {_fmt(r.casimir_error)}")
                          for r in bad) + " (not kept)"
 
@@ -314,7 +319,7 @@ def _singular_run(method, system, t_final: float, steps: int, value: float) -> S
     x0[0] = value
     traj = method.integrate(system, t_final / steps, steps, x0=x0)
     if not traj.ok:
-        return SingularRun(method.name, value, traj.status, None, None)
+        return SingularRun(method.name, value, traj.status, None, None, traj.cause)
     casimir, _ = max_deviations(system, traj.states)
     return SingularRun(method.name, value, "ok", float(traj.states.min()), casimir)
 

@@ -1,4 +1,5 @@
-"""Built-in systems (docs/theory.md §6): the rigid body, Lotka–Volterra (3 species) and the pendulum."""
+"""Built-in systems (docs/theory.md §6): the rigid body, Lotka–Volterra (3 species) and the
+pendulum, each a structure of a registered family (`rkhp.systems.families`)."""
 
 from __future__ import annotations
 
@@ -8,9 +9,9 @@ from collections.abc import Callable
 import numpy as np
 
 from ..errors import InputError
-from . import tape as tp
+from ..taylor import tape as tp
 from .core import PoissonSystem
-from .families import constant, log_canonical, so3
+from .families import SO3, LieAlgebra, family_system
 
 RIGID_BODY_I = (2.0, 1.0, 2.0 / 3.0)
 RIGID_BODY_X0 = (math.cos(1.1), 0.0, math.sin(1.1))
@@ -49,19 +50,23 @@ def rigid_body_exact(inertia, x0) -> Callable | None:
 
 
 def rigid_body(realisation: str = "symmetric") -> PoissonSystem:
-    """Free rigid body on so(3)*, H = sum x_i^2 / (2 I_i), I = (2, 1, 2/3) (HLW, docs/theory.md §6)."""
+    """Free rigid body on so(3)* (pi(x) v = x cross v, closed-form realisation),
+    H = sum x_i^2 / (2 I_i), I = (2, 1, 2/3) (HLW, docs/theory.md §6)."""
     inertia = RIGID_BODY_I
-    return so3(lambda x: sum((0.5 / inertia[i]) * (x[i] * x[i]) for i in range(3)),
-               name="rigid-body", x0=RIGID_BODY_X0, t_final=10.0, realisation=realisation,
-               exact_solution=rigid_body_exact(inertia, RIGID_BODY_X0),
-               description="free rigid body, so(3)*, I = (2, 1, 2/3)")
+    return family_system(
+        "lie-poisson", LieAlgebra(SO3, closed_form=True),
+        lambda x: sum((0.5 / inertia[i]) * (x[i] * x[i]) for i in range(3)),
+        name="rigid-body", x0=RIGID_BODY_X0, t_final=10.0, realisation=realisation,
+        casimirs=(lambda x: 0.5 * float(np.dot(x, x)),), casimir_names=("|x|^2/2",),
+        exact_solution=rigid_body_exact(inertia, RIGID_BODY_X0),
+        description="free rigid body, so(3)*, I = (2, 1, 2/3)")
 
 
 def lotka_volterra(realisation: str = "symmetric") -> PoissonSystem:
     """3-species Lotka–Volterra, log-canonical, H = sum (x_i - log x_i) (docs/theory.md §6)."""
-    return log_canonical(
-        LV_LAMBDA, lambda x: sum(x[i] - tp.log(x[i]) for i in range(3)), name="lotka-volterra",
-        x0=LV_X0, t_final=10.0, realisation=realisation,
+    return family_system(
+        "log-canonical", np.array(LV_LAMBDA), lambda x: sum(x[i] - tp.log(x[i]) for i in range(3)),
+        name="lotka-volterra", x0=LV_X0, t_final=10.0, realisation=realisation,
         casimirs=(lambda x: float(np.log(x[0]) - 2.0 * np.log(x[1]) + np.log(x[2])),),
         casimir_names=("log x1 - 2 log x2 + log x3",),
         description="3-species Lotka-Volterra, log-canonical, "
@@ -70,9 +75,10 @@ def lotka_volterra(realisation: str = "symmetric") -> PoissonSystem:
 
 def pendulum(realisation: str = "symmetric") -> PoissonSystem:
     """Mathematical pendulum, canonical pi = [[0, 1], [-1, 0]], H = p^2/2 - cos q, x = (q, p)."""
-    return constant(((0.0, 1.0), (-1.0, 0.0)), lambda x: 0.5 * (x[1] * x[1]) - tp.cos(x[0]),
-                    name="pendulum", x0=PENDULUM_X0, t_final=10.0, realisation=realisation,
-                    description="pendulum, canonical (constant pi), H = p^2/2 - cos q")
+    return family_system("constant", np.array(((0.0, 1.0), (-1.0, 0.0))),
+                         lambda x: 0.5 * (x[1] * x[1]) - tp.cos(x[0]),
+                         name="pendulum", x0=PENDULUM_X0, t_final=10.0, realisation=realisation,
+                         description="pendulum, canonical (constant pi), H = p^2/2 - cos q")
 
 
 BUILTINS: dict[str, Callable[[str], PoissonSystem]] = {

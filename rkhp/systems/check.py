@@ -2,7 +2,8 @@
 
 On T*M, {F, G} = F_x . G_p - F_p . G_x. With the Jacobians of alpha and beta at (x, p), computed
 exactly by forward-mode automatic differentiation (degree-1 jets in the 2n variables, the same
-compiled interpreter as the integrators), the axioms read
+compiled interpreter as the integrators, `rkhp.taylor.interpreter`) and pi from the system's
+family (`rkhp.systems.families`), the axioms read
 alpha(x, 0) = beta(x, 0) = x, {alpha_i, alpha_j} = pi_ij(alpha), {beta_i, beta_j} = -pi_ij(beta),
 {alpha_i, beta_j} = 0. Degeneracy (paper, eq. (degen)): d_p alpha(x, 0) is antisymmetric.
 Symmetry (docs/theory.md §8): beta(x, p) = alpha(x, -p) to round-off at the samples.
@@ -76,7 +77,7 @@ def check_birealisation(system, samples: int = 100, seed: int = 0,
                         tolerance: float = TOLERANCE) -> BirealisationCheck:
     """Maximum deviation of each axiom over `samples` random points (seeded)."""
     from .. import bounds
-    from ..integrators.jets import evaluate
+    from ..taylor.interpreter import evaluate
 
     bounds.integer(samples, "--samples", 1, bounds.MAX_SAMPLES)
     bounds.seed(seed, "--seed")

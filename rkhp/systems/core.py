@@ -10,8 +10,10 @@ symplectomorphism of T*M fixing the zero section, (x, p) -> (x + s(p), p):
 - further kinds join with :func:`register_realisation` (e.g. issue 7's ``quartic``,
   s(p) = grad K(p) with K(p) even in p, which stays degenerate).
 
-H, alpha and beta are recorded as tapes (`rkhp.systems.tape`) that the compiled engine evaluates
-in Taylor arithmetic; the numpy-level callables below evaluate the same tapes.
+The symmetric bases come from the registry of Poisson families (`rkhp.systems.families`). H,
+alpha and beta are recorded as tapes (`rkhp.taylor.tape`) that the compiled interpreter
+(`rkhp.taylor.interpreter`) evaluates in Taylor arithmetic; the numpy-level callables below
+evaluate the same tapes.
 """
 
 from __future__ import annotations
@@ -22,9 +24,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from . import tape as tp
+from ..taylor import tape as tp
 
-FAMILIES = ("lie-poisson", "log-canonical", "constant", "general")
 DOMAINS = {"R^n": 0, "positive orthant": 1}
 
 
@@ -177,12 +178,12 @@ class PoissonSystem:
         return np.concatenate([x, p])
 
     def hamiltonian(self, x) -> float:
-        from ..integrators.jets import evaluate
+        from ..taylor.interpreter import evaluate
 
         return float(evaluate(self.h_tape, self._xp(x))[0])
 
     def grad_hamiltonian(self, x) -> np.ndarray:
-        from ..integrators.jets import evaluate
+        from ..taylor.interpreter import evaluate
 
         _, jac = evaluate(self.h_tape, self._xp(x), degree=1, n_vars=2 * self.dim)
         return jac[0, : self.dim]
@@ -192,12 +193,12 @@ class PoissonSystem:
         return self.poisson(np.asarray(x, dtype=np.float64)) @ self.grad_hamiltonian(x)
 
     def alpha(self, x, p) -> np.ndarray:
-        from ..integrators.jets import evaluate
+        from ..taylor.interpreter import evaluate
 
         return evaluate(self.alpha_tape, self._xp(x, p))
 
     def beta(self, x, p) -> np.ndarray:
-        from ..integrators.jets import evaluate
+        from ..taylor.interpreter import evaluate
 
         return evaluate(self.beta_tape, self._xp(x, p))
 

@@ -1,30 +1,144 @@
-"""Constructors for the three families of Poisson systems and their birealisations (docs/theory.md §4).
+"""The registry of Poisson families (docs/theory.md §4): one registration adds a family.
 
-- Lie–Poisson: pi_ij(x) = sum_k C_ij^k x_k; K(p) with K(p) x = -pi(x) p; alpha = phi(K(p)) x,
-  beta = phi(-K(p)) x, phi(z) = z / (1 - e^{-z}) (power series with a guard, |K| < 0.9 * 2 pi).
-  On so(3)* the closed form alpha = x + (p x x)/2 + c(|p|^2) p x (p x x) is used instead.
-- Log-canonical: pi_ij = lambda_ij x_i x_j, alpha_i = x_i exp(-(1/2) sum_j lambda_ij x_j p_j).
-- Constant: alpha = x - pi p / 2, beta = x + pi p / 2.
+A :class:`PoissonFamily` is a Poisson structure given by data (the *structure*: structure
+constants, a matrix...), with
+
+- its spec key (the spec-file key that holds the structure) and the reader of that value;
+- pi(x) as a numeric function, as a program over tape values (for the spray realisations
+  ``truncated:K``, `rkhp.systems.spray`) with its degree as a polynomial, and symbolically (sympy,
+  for `rkhp.systems.structure`'s checks) where available;
+- its domain and its default Casimirs;
+- its symmetric base birealisation: ``base(structure, sign)`` is the program (x, p, f) -> alpha
+  (sign +1) or beta (sign -1), a list of n values, written once over any arithmetic that has
+  + - * and numbers (tape Vars, `rkhp.differentials`' exact jets) and the functions of the
+  namespace f (f.exp, f.phimv, f.crb: `rkhp.taylor.tape.functions` for tapes).
+
+Realisations (`rkhp.systems.core`) compose every family's base with a shift. Spec files
+(`rkhp.systems.spec`), the built-ins, `rkhp check` (through the system's pi) and the exact
+elementary differentials (`rkhp.differentials`) all read the families from :data:`FAMILIES`.
+
+The families:
+- ``lie-poisson``: pi_ij(x) = sum_k C_ijk x_k; K(p) with K(p) x = -pi(x) p; alpha = phi(K(p)) x,
+  beta = phi(-K(p)) x, phi(z) = z / (1 - e^{-z}) (a composite tape operation: power series with a
+  guard, |K| < 0.9 * 2 pi). On so(3)* (structure ``LieAlgebra(SO3, closed_form=True)``, the
+  built-in rigid body) the closed form alpha = x + (p x x)/2 + c(|p|^2) p x (p x x) is recorded
+  instead.
+- ``log-canonical``: pi_ij = lambda_ij x_i x_j on the positive orthant,
+  alpha_i = x_i exp(-(1/2) sum_j lambda_ij x_j p_j).
+- ``constant``: alpha = x - pi p / 2, beta = x + pi p / 2.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
+from .. import documents
 from ..errors import InputError
-from . import tape as tp
+from ..taylor import tape as tp
 from .core import PoissonSystem, build_system
 
+#: so(3)*: {x_i, x_j} = -eps_ijk x_k, i.e. pi(x) v = x cross v
+SO3 = np.zeros((3, 3, 3))
+for _i, _j, _k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+    SO3[_i, _j, _k], SO3[_j, _i, _k] = -1.0, 1.0
 
-def _check_antisymmetric(matrix: np.ndarray, what: str) -> None:
+
+@dataclass(frozen=True)
+class PoissonFamily:
+    """A family of Poisson structures (see the module).
+
+    Attributes:
+        name: as in spec files and `PoissonSystem.family`.
+        spec_key: the spec-file key holding the structure.
+        domain: a key of `rkhp.systems.core.DOMAINS`.
+        read: (spec value, n, where) -> structure (InputError naming `where`).
+        check: structure -> n (InputError if it is not a structure of this family).
+        poisson: structure -> (x -> pi(x), float (n, n)).
+        program: structure -> (y -> n x n entries: numbers or functions of y with + - * / ** and
+            the tape functions), pi at the tape level.
+        degree: structure -> the degree of pi as a polynomial in x (None if it is not one).
+        base: (structure, sign) -> program (x, p, f) -> list of n values (alpha: +1, beta: -1).
+        casimirs: structure -> (Casimir functions, their names) by default.
+        symbolic: structure -> pi_ij(x1..xn) as sympy rows, or None.
+    """
+
+    name: str
+    spec_key: str
+    domain: str
+    read: Callable
+    check: Callable
+    poisson: Callable
+    program: Callable
+    degree: Callable
+    base: Callable
+    casimirs: Callable
+    symbolic: Callable | None = None
+
+
+FAMILIES: dict[str, PoissonFamily] = {}
+
+
+def register_family(family: PoissonFamily) -> None:
+    """Add a family to the registry (its name must be new)."""
+    if family.name in FAMILIES:
+        raise ValueError(f"family {family.name!r} is already registered")
+    FAMILIES[family.name] = family
+
+
+def family(name: str) -> PoissonFamily:
+    """The family called `name` (InputError listing the registered ones otherwise)."""
+    if name not in FAMILIES:
+        raise InputError(f"family must be one of {', '.join(FAMILIES)}, got {name!r}")
+    return FAMILIES[name]
+
+
+def family_system(family_name: str, structure, hamiltonian: Callable, *, name: str, x0,
+                  t_final: float, realisation: str = "symmetric", casimirs=None,
+                  casimir_names=(), exact_solution=None, description: str = "") -> PoissonSystem:
+    """The system of a family's structure with Hamiltonian `hamiltonian(x)` (a program over tape
+    Vars), its realisation `realisation` composed on the family's base; without `casimirs`, the
+    family's default ones."""
+    fam = family(family_name)
+    n = fam.check(structure)
+    if casimirs is None:
+        casimirs, casimir_names = fam.casimirs(structure)
+    alpha, beta = fam.base(structure, 1.0), fam.base(structure, -1.0)
+    return build_system(name=name, family=fam.name, dim=n, poisson=fam.poisson(structure),
+                        hamiltonian=hamiltonian,
+                        base_alpha=lambda x, p: alpha(x, p, tp.functions),
+                        base_beta=lambda x, p: beta(x, p, tp.functions),
+                        x0=x0, t_final=t_final, poisson_program=fam.program(structure),
+                        poisson_degree=fam.degree(structure), realisation_name=realisation,
+                        domain=fam.domain, casimirs=casimirs, casimir_names=casimir_names,
+                        exact_solution=exact_solution, description=description)
+
+
+# ----------------------------------------------------------------------------------------------
+# helpers of the families below
+
+
+def check_antisymmetric(matrix: np.ndarray, what: str) -> None:
+    """InputError unless `matrix` is a square, finite, antisymmetric float matrix."""
     if matrix.ndim != 2 or matrix.shape[0] != matrix.shape[1]:
         raise InputError(f"{what} must be a square matrix, got shape {matrix.shape}")
     if not np.all(np.isfinite(matrix)):
         raise InputError(f"{what} has non-finite entries")
     if not np.allclose(matrix, -matrix.T, rtol=0, atol=1e-14 * max(1.0, np.abs(matrix).max())):
         raise InputError(f"{what} is not antisymmetric")
+
+
+def read_matrix(value, n: int, where: str) -> np.ndarray:
+    """An n x n float matrix from a spec value (`rkhp.documents`: types, finite numbers)."""
+    return np.array(documents.matrix(value, where, n))
+
+
+def short(value) -> str:
+    """A spec value as text, cut to 60 characters (for messages)."""
+    text = value if isinstance(value, str) else repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def _combination(k: np.ndarray, term: str) -> str:
@@ -45,43 +159,64 @@ def _linear_kernel(matrix: np.ndarray) -> list[np.ndarray]:
     return [v / np.abs(v).max() for v in null_space(matrix).T]
 
 
-def lie_poisson(structure: np.ndarray, hamiltonian: Callable, *, name: str, x0, t_final: float,
-                realisation: str = "symmetric", casimirs=(), casimir_names=(),
-                exact_solution=None, description: str = "") -> PoissonSystem:
-    """A Lie–Poisson system from structure constants C[i, j, k] ({x_i, x_j} = sum_k C_ijk x_k).
+# ----------------------------------------------------------------------------------------------
+# lie-poisson
 
-    `hamiltonian(x)` is a program over tape Vars. alpha = phi(K(p)) x by the matrix power series.
-    """
-    C = np.asarray(structure, dtype=np.float64)
+
+@dataclass(frozen=True, eq=False)
+class LieAlgebra:
+    """The structure of a Lie–Poisson system: constants C[i, j, k] ({x_i, x_j} = sum_k C_ijk x_k);
+    `closed_form`: record the so(3)* closed form (C must be :data:`SO3`) instead of phi(K) x."""
+
+    constants: np.ndarray
+    closed_form: bool = False
+
+
+def _read_structure_constants(value, n: int, where: str) -> LieAlgebra:
+    """C[i, j, k] from entries [i, j, k, value] (1-based integer indices, finite values;
+    {x_j, x_i} = -{x_i, x_j} is implied)."""
+    C = np.zeros((n, n, n))
+    given: dict[tuple[int, int, int], float] = {}
+    if not isinstance(value, list) or not value:
+        raise InputError(f"{where} must be a non-empty list of [i, j, k, value]")
+    if len(value) > n ** 3:
+        raise InputError(f"{where}: {len(value)} entries; at most n^3 = {n ** 3}")
+    for entry in value:
+        if not (isinstance(entry, list) and len(entry) == 4):
+            raise InputError(f"{where}: entry {short(entry)} is not [i, j, k, value]")
+        i, j, k = entry[:3]
+        if not all(type(q) is int and 1 <= q <= n for q in (i, j, k)):
+            raise InputError(f"{where}: indices in {short(entry)} must be integers from 1 to {n}")
+        v = documents.number(entry[3], f"{where}: value in {short(entry)}")
+        if i == j:
+            raise InputError(f"{where}: {{x_{i}, x_{i}}} = 0 by antisymmetry, got {entry!r}")
+        for key, val in (((i, j, k), v), ((j, i, k), -v)):
+            if key in given and given[key] != val:
+                raise InputError(f"{where}: {entry!r} contradicts an earlier entry")
+            given[key] = val
+            C[key[0] - 1, key[1] - 1, key[2] - 1] = val
+    return LieAlgebra(C)
+
+
+def _check_lie(structure: LieAlgebra) -> int:
+    C = np.asarray(structure.constants, dtype=np.float64)
     n = C.shape[0]
     if C.shape != (n, n, n):
         raise InputError(f"structure constants must have shape (n, n, n), got {C.shape}")
     for k in range(n):
-        _check_antisymmetric(C[:, :, k], f"structure constants C[:, :, {k + 1}]")
+        check_antisymmetric(C[:, :, k], f"structure constants C[:, :, {k + 1}]")
+    if structure.closed_form and not np.array_equal(C, SO3):
+        raise InputError("the closed-form realisation is that of so(3)*")
+    return n
+
+
+def _lie_poisson(structure: LieAlgebra):
+    C = np.asarray(structure.constants, dtype=np.float64)
 
     def poisson(x):
         return np.einsum("ijk,k->ij", C, np.asarray(x, dtype=np.float64))
 
-    def K_of(p, sign):
-        # K(p)_ik = -sum_j C_ijk p_j
-        return [[sum(-sign * C[i, j, k] * p[j] for j in range(n) if C[i, j, k] != 0.0)
-                 for k in range(n)] for i in range(n)]
-
-    def poisson_program(y):
-        return [[_linear(C[i, j], y) for j in range(n)] for i in range(n)]
-
-    def base_alpha(x, p):
-        return x[0].builder.phimv(K_of(p, 1.0), x)
-
-    def base_beta(x, p):
-        return x[0].builder.phimv(K_of(p, -1.0), x)
-
-    return build_system(name=name, family="lie-poisson", dim=n, poisson=poisson,
-                        hamiltonian=hamiltonian, base_alpha=base_alpha, base_beta=base_beta,
-                        x0=x0, t_final=t_final, poisson_program=poisson_program, poisson_degree=1,
-                        realisation_name=realisation, casimirs=casimirs,
-                        casimir_names=casimir_names, exact_solution=exact_solution,
-                        description=description)
+    return poisson
 
 
 def _linear(coefficients, y):
@@ -95,99 +230,153 @@ def so3_matrix(y):
     return [[0.0, -y[2], y[1]], [y[2], 0.0, -y[0]], [-y[1], y[0], 0.0]]
 
 
+def _lie_program(structure: LieAlgebra):
+    C = np.asarray(structure.constants, dtype=np.float64)
+    n = C.shape[0]
+    if structure.closed_form:
+        return so3_matrix
+    return lambda y: [[_linear(C[i, j], y) for j in range(n)] for i in range(n)]
+
+
 def _cross(a, b):
     return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 
 
-def so3_alpha(x, p, sign=1.0):
-    """alpha = x + (p x x)/2 + c(|p|^2) p x (p x x) on so(3)* (beta: sign = -1; docs/theory.md §4)."""
-    px = _cross(p, x)
-    ppx = _cross(p, px)
-    c = tp.crb(p)
-    return [x[i] + (0.5 * sign) * px[i] + c * ppx[i] for i in range(3)]
+def _lie_base(structure: LieAlgebra, sign: float):
+    C = np.asarray(structure.constants, dtype=np.float64)
+    n = C.shape[0]
+
+    def phi_k(x, p, f):
+        # K(p)_ik = -sum_j C_ijk p_j; alpha = phi(K(p)) x, beta = phi(-K(p)) x
+        K = [[sum(-sign * C[i, j, k] * p[j] for j in range(n) if C[i, j, k] != 0.0)
+              for k in range(n)] for i in range(n)]
+        return f.phimv(K, x)
+
+    def so3_closed(x, p, f):
+        # alpha = x + (p x x)/2 + c(|p|^2) p x (p x x) (beta: sign -1; docs/theory.md §4)
+        px = _cross(p, x)
+        ppx = _cross(p, px)
+        c = f.crb(p)
+        return [x[i] + (0.5 * sign) * px[i] + c * ppx[i] for i in range(3)]
+
+    return so3_closed if structure.closed_form else phi_k
 
 
-def so3(hamiltonian: Callable, *, name: str, x0, t_final: float, realisation: str = "symmetric",
-        exact_solution=None, description: str = "") -> PoissonSystem:
-    """A Lie–Poisson system on so(3)* (pi(x) v = x cross v) with the closed-form realisation."""
+def _lie_symbolic(structure: LieAlgebra):
+    from .structure import lie_poisson_matrix
 
-    def poisson(x):
-        x = np.asarray(x, dtype=np.float64)
-        return np.array([[0.0, -x[2], x[1]], [x[2], 0.0, -x[0]], [-x[1], x[0], 0.0]])
-
-    return build_system(
-        name=name, family="lie-poisson", dim=3, poisson=poisson, hamiltonian=hamiltonian,
-        base_alpha=lambda x, p: so3_alpha(x, p, 1.0), base_beta=lambda x, p: so3_alpha(x, p, -1.0),
-        x0=x0, t_final=t_final, poisson_program=so3_matrix, poisson_degree=1,
-        realisation_name=realisation,
-        casimirs=(lambda x: 0.5 * float(np.dot(x, x)),), casimir_names=("|x|^2/2",),
-        exact_solution=exact_solution, description=description)
+    return lie_poisson_matrix(structure.constants)
 
 
-def log_canonical(lam, hamiltonian: Callable, *, name: str, x0, t_final: float,
-                  realisation: str = "symmetric", casimirs=None, casimir_names=(),
-                  exact_solution=None, description: str = "") -> PoissonSystem:
-    """A log-canonical system pi_ij = lambda_ij x_i x_j on the positive orthant.
+register_family(PoissonFamily(
+    name="lie-poisson", spec_key="structure_constants", domain="R^n",
+    read=_read_structure_constants, check=_check_lie, poisson=_lie_poisson, program=_lie_program,
+    degree=lambda structure: 1, base=_lie_base, casimirs=lambda structure: ((), ()),
+    symbolic=_lie_symbolic))
 
-    Without explicit Casimirs, every kernel vector k of lambda gives C = sum_i k_i log x_i.
-    """
-    L = np.asarray(lam, dtype=np.float64)
-    _check_antisymmetric(L, "lambda")
+
+# ----------------------------------------------------------------------------------------------
+# log-canonical
+
+
+def _check_matrix(what: str):
+    def check(structure) -> int:
+        matrix = np.asarray(structure, dtype=np.float64)
+        check_antisymmetric(matrix, what)
+        return matrix.shape[0]
+
+    return check
+
+
+def _log_canonical_base(lam, sign: float):
+    L = np.asarray(lam)
     n = L.shape[0]
+
+    def base(x, p, f):
+        out = []
+        for i in range(n):
+            terms = [(-0.5 * sign * L[i, j]) * (x[j] * p[j]) for j in range(n) if L[i, j] != 0]
+            out.append(x[i] * f.exp(sum(terms[1:], terms[0])) if terms else x[i])
+        return out
+
+    return base
+
+
+def _log_canonical_casimirs(lam):
+    kernel = _linear_kernel(np.asarray(lam, dtype=np.float64))
+    return (tuple((lambda x, k=k: float(np.dot(k, np.log(x)))) for k in kernel),
+            tuple(_combination(k, "log x") for k in kernel))
+
+
+def _log_canonical_symbolic(lam):
+    from .structure import log_canonical_matrix
+
+    return log_canonical_matrix(lam)
+
+
+def _log_canonical_program(lam):
+    L = np.asarray(lam, dtype=np.float64)
+    n = L.shape[0]
+    return lambda y: [[y[i] * y[j] * float(L[i, j]) if L[i, j] else 0.0 for j in range(n)]
+                      for i in range(n)]
+
+
+def _log_canonical_poisson(lam):
+    L = np.asarray(lam, dtype=np.float64)
 
     def poisson(x):
         x = np.asarray(x, dtype=np.float64)
         return L * np.outer(x, x)
 
-    def make(sign):
-        def base(x, p):
-            out = []
-            for i in range(n):
-                terms = [(-0.5 * sign * L[i, j]) * (x[j] * p[j]) for j in range(n) if L[i, j]]
-                out.append(x[i] * tp.exp(sum(terms[1:], terms[0])) if terms else x[i])
-            return out
-
-        return base
-
-    def poisson_program(y):
-        return [[y[i] * y[j] * float(L[i, j]) if L[i, j] else 0.0 for j in range(n)]
-                for i in range(n)]
-
-    if casimirs is None:
-        kernel = _linear_kernel(L)
-        casimirs = tuple((lambda x, k=k: float(np.dot(k, np.log(x)))) for k in kernel)
-        casimir_names = tuple(_combination(k, "log x") for k in kernel)
-    return build_system(name=name, family="log-canonical", dim=n, poisson=poisson,
-                        hamiltonian=hamiltonian, base_alpha=make(1.0), base_beta=make(-1.0),
-                        x0=x0, t_final=t_final, poisson_program=poisson_program,
-                        poisson_degree=2, realisation_name=realisation, domain="positive orthant",
-                        casimirs=casimirs, casimir_names=casimir_names,
-                        exact_solution=exact_solution, description=description)
+    return poisson
 
 
-def constant(pi, hamiltonian: Callable, *, name: str, x0, t_final: float,
-             realisation: str = "symmetric", casimirs=None, casimir_names=(),
-             exact_solution=None, description: str = "") -> PoissonSystem:
-    """A system with a constant Poisson matrix; linear Casimirs k.x from the kernel of pi."""
-    P = np.asarray(pi, dtype=np.float64)
-    _check_antisymmetric(P, "poisson")
+register_family(PoissonFamily(
+    name="log-canonical", spec_key="lambda", domain="positive orthant", read=read_matrix,
+    check=_check_matrix("lambda"), poisson=_log_canonical_poisson, program=_log_canonical_program,
+    degree=lambda lam: 2, base=_log_canonical_base, casimirs=_log_canonical_casimirs,
+    symbolic=_log_canonical_symbolic))
+
+
+# ----------------------------------------------------------------------------------------------
+# constant
+
+
+def _constant_base(pi, sign: float):
+    P = np.asarray(pi)
     n = P.shape[0]
 
-    def make(sign):
-        def base(x, p):
-            return [x[i] + sum((-0.5 * sign * P[i, j]) * p[j] for j in range(n) if P[i, j])
-                    for i in range(n)]
+    def base(x, p, f):
+        return [x[i] + sum((-0.5 * sign * P[i, j]) * p[j] for j in range(n) if P[i, j] != 0)
+                for i in range(n)]
 
-        return base
+    return base
 
-    if casimirs is None:
-        kernel = _linear_kernel(P)
-        casimirs = tuple((lambda x, k=k: float(np.dot(k, x))) for k in kernel)
-        casimir_names = tuple(_combination(k, "x") for k in kernel)
-    return build_system(name=name, family="constant", dim=n, poisson=lambda x: P.copy(),
-                        hamiltonian=hamiltonian, base_alpha=make(1.0), base_beta=make(-1.0),
-                        x0=x0, t_final=t_final,
-                        poisson_program=lambda y: [[float(v) for v in row] for row in P],
-                        poisson_degree=0, realisation_name=realisation, casimirs=casimirs,
-                        casimir_names=casimir_names, exact_solution=exact_solution,
-                        description=description)
+
+def _constant_casimirs(pi):
+    kernel = _linear_kernel(np.asarray(pi, dtype=np.float64))
+    return (tuple((lambda x, k=k: float(np.dot(k, x))) for k in kernel),
+            tuple(_combination(k, "x") for k in kernel))
+
+
+def _constant_poisson(pi):
+    P = np.asarray(pi, dtype=np.float64)
+    return lambda x: P.copy()
+
+
+def _constant_program(pi):
+    P = np.asarray(pi, dtype=np.float64)
+    return lambda y: [[float(v) for v in row] for row in P]
+
+
+def _constant_symbolic(pi):
+    import sympy
+
+    return tuple(tuple(sympy.nsimplify(float(v)) for v in row) for row in np.asarray(pi, dtype=np.float64))
+
+
+register_family(PoissonFamily(
+    name="constant", spec_key="poisson", domain="R^n", read=read_matrix,
+    check=_check_matrix("poisson"), poisson=_constant_poisson, program=_constant_program,
+    degree=lambda pi: 0, base=_constant_base, casimirs=_constant_casimirs,
+    symbolic=_constant_symbolic))

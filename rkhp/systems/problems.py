@@ -271,7 +271,7 @@ def problem_data(name: str) -> ProblemData | None:
 def build(data: ProblemData, realisation: str = "symmetric", general: bool = False
           ) -> PoissonSystem:
     """The system of a problem in its family (or in the general family)."""
-    from .families import lie_poisson, log_canonical
+    from .families import LieAlgebra, family_system
     from .general import general as general_family
     from .program import numeric_function, to_program
     from .structure import _symbols
@@ -286,9 +286,9 @@ def build(data: ProblemData, realisation: str = "symmetric", general: bool = Fal
                               casimir_names=data.casimir_names, where=f"{data.name}: poisson",
                               **common)
     numeric = tuple(numeric_function(c, symbols) for c in casimirs)
-    family = lie_poisson if data.family == "lie-poisson" else log_canonical
-    return family(data.constants, hamiltonian, casimirs=numeric,
-                  casimir_names=data.casimir_names, **common)
+    structure = LieAlgebra(data.constants) if data.family == "lie-poisson" else data.constants
+    return family_system(data.family, structure, hamiltonian, casimirs=numeric,
+                         casimir_names=data.casimir_names, **common)
 
 
 def as_general(name: str, realisation: str = "symmetric") -> PoissonSystem:

@@ -1,9 +1,10 @@
-"""Sympy expressions as programs over tape values (`rkhp.systems.tape`).
+"""Sympy expressions as programs over tape values (`rkhp.taylor.tape`).
 
 The expressions come from the safe reader (`rkhp.expressions`), so they hold only numbers, the
-variables x1..xn, + - * / and powers, and the functions exp, log, sqrt, sin, cos, tan, sinh, cosh
-and tanh. A program takes a list x of n values of any arithmetic with + - * / ** (tape Vars, or the
-series of `rkhp.systems.spray`) and calls the tape functions `tp.exp` etc., which dispatch to that
+variables x1..xn, + - * / and powers, and the functions of the opcode table
+(`rkhp.taylor.ops.FUNCTIONS`), recorded by `rkhp.taylor.tape.RECORDERS`. A program takes a
+list x of n values of any arithmetic with + - * / ** (tape Vars, or the series of
+`rkhp.systems.spray`) and calls the tape functions `tp.exp` etc., which dispatch to that
 arithmetic.
 """
 
@@ -13,7 +14,7 @@ from functools import reduce
 
 import numpy as np
 
-from . import tape as tp
+from ..taylor import tape as tp
 
 
 def expression_program(expr, symbols):
@@ -36,15 +37,8 @@ def expression_program(expr, symbols):
             if isinstance(base, float):
                 return tp.exp(power * float(np.log(base)))
             return base ** power
-        f = type(e).__name__
         (a,) = args
-        if f in ("exp", "log", "sin", "cos"):
-            return getattr(tp, f)(a)
-        if f == "tan":
-            return tp.sin(a) / tp.cos(a)
-        ep, em = tp.exp(a), tp.exp(-a)
-        return {"sinh": 0.5 * (ep - em), "cosh": 0.5 * (ep + em),
-                "tanh": (ep - em) / (ep + em)}[f]
+        return tp.RECORDERS[type(e).__name__](a)
 
     def program(x):
         return conv(expr, x)

@@ -1,6 +1,8 @@
 """Poisson systems from spec files (TOML or JSON).
 
-Keys (README "Spec files"):
+Keys (README "Spec files"): the common keys below, and the spec key of the family (the registry
+`rkhp.systems.families`; and the ``general`` family of `rkhp.systems.general`) holding its
+structure:
 
     name = "my-body"                       # optional (default: the file name)
     family = "lie-poisson"                 # or "log-canonical" or "constant"
@@ -18,7 +20,8 @@ Keys (README "Spec files"):
     casimirs = ["x1^2 + x2^2 + x3^2"]      # optional
 
 Expressions are read by the safe reader `rkhp.expressions` (no code is ever executed) and recorded
-on a tape (`rkhp.systems.tape`) that the compiled engine differentiates.
+on a tape (`rkhp.taylor.tape`) that the compiled engine differentiates; the functions allowed are
+those of the opcode table (`rkhp.taylor.ops.FUNCTIONS`).
 """
 
 from __future__ import annotations
@@ -33,13 +36,25 @@ from ..bounds import MAX_DIMENSION
 from ..documents import load_document
 from ..errors import InputError
 from ..expressions import variable_names
-from .core import FAMILIES, PoissonSystem
-from .families import constant, lie_poisson, log_canonical
+from .core import PoissonSystem
+from .families import FAMILIES, family_system, short
 from .program import numeric_function, to_program
-from .structure import check_structure, lie_poisson_matrix, log_canonical_matrix
+from .structure import check_structure
 
-KEYS = ("name", "family", "structure_constants", "lambda", "poisson", "hamiltonian", "x0",
-        "t_final", "casimirs")
+COMMON_KEYS = ("name", "family", "hamiltonian", "x0", "t_final", "casimirs")
+#: the general family (`rkhp.systems.general`, issue 10) and its spec key, read apart from the
+#: registry until it registers there
+GENERAL, GENERAL_KEY = "general", "poisson"
+
+
+def family_names() -> tuple[str, ...]:
+    """The families a spec file may name."""
+    return (*FAMILIES, GENERAL)
+
+
+def spec_keys() -> tuple[str, ...]:
+    """Every key a spec file may have: the common ones and each family's."""
+    return COMMON_KEYS + tuple(dict.fromkeys([*(f.spec_key for f in FAMILIES.values()), GENERAL_KEY]))
 
 
 def _read(path: Path) -> dict:
@@ -47,15 +62,11 @@ def _read(path: Path) -> dict:
     if not path.exists() and not path.is_symlink():
         raise InputError(f"spec file {path} not found")
     data = load_document(path, "spec file")
-    unknown = sorted(set(data) - set(KEYS))
+    keys = spec_keys()
+    unknown = sorted(set(data) - set(keys))
     if unknown:
-        raise InputError(f"{path}: unknown key(s) {', '.join(unknown)}; allowed: {', '.join(KEYS)}")
+        raise InputError(f"{path}: unknown key(s) {', '.join(unknown)}; allowed: {', '.join(keys)}")
     return data
-
-
-def _short(value) -> str:
-    text = value if isinstance(value, str) else repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def _expression_matrix(value, n: int, where: str) -> tuple:
@@ -75,31 +86,6 @@ def _expression_matrix(value, n: int, where: str) -> tuple:
             out.append(parse_expression(text, n, f"{where} ({i + 1}, {j + 1})")[0])
         entries.append(tuple(out))
     return tuple(entries)
-
-
-def _structure(value, n: int, where: str) -> np.ndarray:
-    """C[i, j, k] from entries [i, j, k, value] (1-based integer indices, finite values)."""
-    C = np.zeros((n, n, n))
-    given: dict[tuple[int, int, int], float] = {}
-    if not isinstance(value, list) or not value:
-        raise InputError(f"{where} must be a non-empty list of [i, j, k, value]")
-    if len(value) > n ** 3:
-        raise InputError(f"{where}: {len(value)} entries; at most n^3 = {n ** 3}")
-    for entry in value:
-        if not (isinstance(entry, list) and len(entry) == 4):
-            raise InputError(f"{where}: entry {_short(entry)} is not [i, j, k, value]")
-        i, j, k = entry[:3]
-        if not all(type(q) is int and 1 <= q <= n for q in (i, j, k)):
-            raise InputError(f"{where}: indices in {_short(entry)} must be integers from 1 to {n}")
-        v = documents.number(entry[3], f"{where}: value in {_short(entry)}")
-        if i == j:
-            raise InputError(f"{where}: {{x_{i}, x_{i}}} = 0 by antisymmetry, got {entry!r}")
-        for key, val in (((i, j, k), v), ((j, i, k), -v)):
-            if key in given and given[key] != val:
-                raise InputError(f"{where}: {entry!r} contradicts an earlier entry")
-            given[key] = val
-            C[key[0] - 1, key[1] - 1, key[2] - 1] = val
-    return C
 
 
 def parse_expression(text, n: int, where: str):
@@ -129,7 +115,7 @@ def check_finite_at(exprs, symbols, x0, where: str) -> None:
         bad = [v for v in got if not (isinstance(v, int | float) and math.isfinite(v))]
         if bad:
             what = "its gradient" if got[0] is not bad[0] else "its value"
-            raise InputError(f"{where}: {label} {_short(str(expr))} is not finite at x0 = {point}: "
+            raise InputError(f"{where}: {label} {short(str(expr))} is not finite at x0 = {point}: "
                              f"{what} is {bad[0]}")
 
 
@@ -141,18 +127,6 @@ def check_start(system, where: str = "x0") -> None:
     if "expressions" in system.extra:
         symbols, expressions = system.extra["expressions"]
         check_finite_at(expressions, symbols, system.x0, where)
-
-
-def poisson_expressions(family: str, data) -> tuple[tuple, ...]:
-    """pi(x) of a lie-poisson, log-canonical or constant family's data as sympy expressions (for
-    `rkhp.systems.structure.check_structure`)."""
-    import sympy
-
-    if family == "lie-poisson":
-        return lie_poisson_matrix(data)
-    if family == "log-canonical":
-        return log_canonical_matrix(data)
-    return tuple(tuple(sympy.nsimplify(float(v)) for v in row) for row in np.asarray(data))
 
 
 def load_spec(path, realisation: str = "symmetric") -> PoissonSystem:
@@ -167,27 +141,24 @@ def load_spec(path, realisation: str = "symmetric") -> PoissonSystem:
     data = _read(path)
     where = str(path)
     family = data.get("family")
-    if family not in FAMILIES:
-        raise InputError(f"{where}: family must be one of {', '.join(FAMILIES)}, got {_short(family)}")
+    if family not in family_names():
+        raise InputError(f"{where}: family must be one of {', '.join(family_names())}, got {short(family)}")
     if "x0" not in data:
         raise InputError(f"{where}: missing key x0")
     x0 = np.array(documents.number_list(data["x0"], f"{where}: x0", max_size=MAX_DIMENSION))
     n = x0.size
     name = documents.string(data.get("name", path.stem), f"{where}: name")
     t_final = documents.number(data.get("t_final", 10.0), f"{where}: t_final", 0.0, low_open=True)
-    needed = {"lie-poisson": "structure_constants", "log-canonical": "lambda",
-              "constant": "poisson", "general": "poisson"}[family]
-    for key in ("structure_constants", "lambda", "poisson"):
+    needed = GENERAL_KEY if family == GENERAL else FAMILIES[family].spec_key
+    for key in set(spec_keys()) - set(COMMON_KEYS):
         if key != needed and key in data:
             raise InputError(f"{where}: key {key} does not belong to family {family}")
     if needed not in data:
         raise InputError(f"{where}: family {family} needs key {needed}")
     if "hamiltonian" not in data:
         raise InputError(f"{where}: missing key hamiltonian")
-    if family == "lie-poisson":
-        matrix = _structure(data[needed], n, f"{where}: structure_constants")
-    elif family != "general":
-        matrix = np.array(documents.matrix(data[needed], f"{where}: {needed}", n))
+    if family != GENERAL:
+        structure = FAMILIES[family].read(data[needed], n, f"{where}: {needed}")
     h_expr, symbols = parse_expression(data["hamiltonian"], n, f"{where}: hamiltonian")
     exprs = []
     if "casimirs" in data:
@@ -195,29 +166,26 @@ def load_spec(path, realisation: str = "symmetric") -> PoissonSystem:
             raise InputError(f"{where}: casimirs must be a list of expressions")
         exprs = [parse_expression(c, n, f"{where}: casimirs[{i + 1}]")[0]
                  for i, c in enumerate(data["casimirs"])]
-    if family == "general":
+    if family == GENERAL:
         matrix = _expression_matrix(data[needed], n, f"{where}: poisson")
     H = to_program(h_expr, symbols)
     casimirs = tuple(numeric_function(e, symbols) for e in exprs)
     names = tuple(str(e) for e in exprs)
     common = dict(name=name, t_final=t_final, realisation=realisation, x0=x0,
                   description=f"from {path.name}: H = {H.expression}")
-    if family == "general":
+    if family == GENERAL:
         from .general import general
 
         system = general(matrix, H, casimirs=exprs, where=f"{where}: poisson", **common)
-    elif family == "lie-poisson":
-        system = lie_poisson(matrix, H, casimirs=casimirs, casimir_names=names, **common)
-    elif family == "log-canonical":
-        system = log_canonical(matrix, H, casimirs=casimirs or None, casimir_names=names, **common)
     else:
-        system = constant(matrix, H, casimirs=casimirs or None, casimir_names=names, **common)
+        system = family_system(family, structure, H, casimirs=casimirs or None, casimir_names=names,
+                               **common)
     if not system.in_domain(x0):
         raise InputError(f"{where}: x0 = {x0.tolist()} is outside the domain ({system.domain})")
     expressions = [("hamiltonian", h_expr)] + [(f"casimir {i + 1}", e) for i, e in enumerate(exprs)]
     check_finite_at(expressions, symbols, x0, where)
     system.extra["expressions"] = (symbols, expressions)
-    if family != "general":  # the general family checks its structure and Casimirs itself
-        check_structure(poisson_expressions(family, matrix), casimirs=exprs, x0=x0,
+    if family != GENERAL:  # the general family checks its structure and Casimirs itself
+        check_structure(FAMILIES[family].symbolic(structure), casimirs=exprs, x0=x0,
                         where=f"{where}: the {family} structure")
     return system

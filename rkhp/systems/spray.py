@@ -32,7 +32,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import tape as tp
+from ..taylor import tape as tp
 
 #: largest truncation degree K of ``truncated:K`` (the tape grows like K^3)
 MAX_TRUNCATION = 12
@@ -128,7 +128,7 @@ class Series:
 
     ``coef[m][q]`` is coefficient m at node q; coefficient 0 is the same at every node (all
     series start from x). Supports + - * / and ** with series and numbers, and the methods
-    exp, log, sin, cos, sqrt (called by the tape functions `rkhp.systems.tape.exp` etc.).
+    exp, log, sin, cos, sqrt (called by the tape functions `rkhp.taylor.tape.exp` etc.).
     """
 
     __slots__ = ("graph", "op", "args", "param", "coef")
