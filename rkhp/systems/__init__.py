@@ -1,8 +1,9 @@
 """Poisson systems and their birealisations (docs/theory.md §4, paper §2).
 
 `get_system(name_or_path, realisation="symmetric")` returns a :class:`PoissonSystem`;
-`builtin_systems()` lists the built-in names. Constructors for the three families are in
-`rkhp.systems.families`; spec files in `rkhp.systems.spec`.
+`builtin_systems()` lists the built-in names. The registry of Poisson families (structure, base
+birealisation, spec key) is `rkhp.systems.families`; realisations are in `rkhp.systems.core`;
+spec files in `rkhp.systems.spec`.
 """
 
 from .builtins import builtin_systems, get_system

@@ -20,9 +20,13 @@ order q keeps it.
 
 from __future__ import annotations
 
+from fractions import Fraction
+
 from .core import register_realisation
 
-SIXTH = 1.0 / 6.0
+SIXTH = Fraction(1, 6)
+"""Exact, so that the exact elementary differentials (`rkhp.differentials`) read 1/6; a tape
+Var reads it as the float 1/6."""
 
 
 def quartic_directions(n: int) -> list[tuple[float, ...]]:
