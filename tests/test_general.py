@@ -20,7 +20,6 @@ from rkhp_cli.main import rkhp
 
 from rkhp.errors import InputError
 from rkhp.systems import get_system
-from rkhp.systems import tape as tp
 from rkhp.systems.families import so3_matrix
 from rkhp.systems.spray import (
     MAX_TRUNCATION,
@@ -29,6 +28,7 @@ from rkhp.systems.spray import (
     truncated_order,
     truncated_realisation,
 )
+from rkhp.taylor import tape as tp
 from rkhp.taylor.interpreter import evaluate
 
 RIGID_BODY_GENERAL = """

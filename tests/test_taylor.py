@@ -77,6 +77,30 @@ def test_subprograms_are_recorded_apart_and_not_run_by_the_main_loop():
     assert values[0] == 13.0 and values[1] == 0.0  # the sub-program runs only inside a composite
 
 
+def test_a_subprogram_runs_on_jets_as_a_composite_kernel_runs_it():
+    """run_rows evaluates a sub-program's rows on its own slots, as often as asked: X(y, p) =
+    cos(y) p at two points, as degree-2 jets in (y, p), against the derivatives by hand."""
+    from rkhp.taylor.rows import run_rows, subprogram_at
+
+    builder = tp.TapeBuilder(2)
+    x, p = builder.inputs()
+    sub = builder.subprogram(2, lambda v: [tp.cos(v[0]) * v[1]])
+    tape = builder.finish([x])
+    lo, hi, first_in, n_in, first_out, n_out, _ = subprogram_at(np.array(sub.operands()), 0)
+    assert (lo, hi, n_in, n_out) == (sub.lo, sub.hi, 2, 1)
+    space = jet_space(2, 2)
+    work = tape_work((tape,), space.size)
+    for y0, p0 in ((0.3, 2.0), (1.1, -0.5)):
+        work.W[sub.inputs[0], :] = [y0, 1.0, 0.0, 0.0, 0.0, 0.0]
+        work.W[sub.inputs[1], :] = [p0, 0.0, 1.0, 0.0, 0.0, 0.0]
+        work.deg[list(sub.inputs)] = 1
+        run_rows(tape, lo, hi, work.W, 2, space, work.S, work.deg)
+        # cos(y0 + u) (p0 + v) to degree 2 in (u, v): monomials 1, u, v, u^2, uv, v^2
+        c, s = math.cos(y0), math.sin(y0)
+        expected = [c * p0, -s * p0, c, -c * p0 / 2, -s, 0.0]
+        assert np.allclose(work.W[sub.outputs[0]], expected, rtol=1e-15, atol=1e-15)
+
+
 def test_subprogram_rules():
     builder = tp.TapeBuilder(1)
     (x,) = builder.inputs()
