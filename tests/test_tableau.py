@@ -15,7 +15,7 @@ from rkhp.errors import InputError
 from rkhp.tableau import GivenDecimal, Tableau, parse_entry
 from rkhp.tablefiles import builtin_names, load_file, load_tableau, save_tableau
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "tableaux"
+PUBLISHED = Path(__file__).resolve().parent / "data" / "published"
 
 # The built-ins the issue lists (issue 3, item 3), plus the two optional ones.
 REQUIRED = ["euler", "paper-two-stage", "paper-three-stage", "paper-implicit", "midpoint", "heun",
@@ -134,16 +134,15 @@ def test_sixty_digit_text_format(tmp_path):
     assert u.A == t.A and u.b == t.b and u.c_given is not None
 
 
-@pytest.mark.skipif(not SHARED.is_dir(), reason="the shared coefficient files are not present")
 @pytest.mark.parametrize("fname, name", [("rk108.txt", "feagin10"), ("rk1210.txt", "feagin12"),
                                          ("rk1412.txt", "feagin14"), ("rk108curtis.txt", "curtis10"),
                                          ("rk129hiroshi.txt", "ono12")])
 def test_builtins_hold_the_published_digits(fname, name):
-    published = load_file(SHARED / fname)
+    published = load_file(PUBLISHED / fname)
     builtin = load_tableau(name)
     assert published.A == builtin.A and published.b == builtin.b
     mismatch = published.c_mismatch()
-    if fname == "rk1412.txt":  # the shared README: c[13] differs from its row sum by 1.6e-10
+    if fname == "rk1412.txt":  # tests/data/published/README.md: c[13] differs from its row sum by 1.6e-10
         assert [i for i, _ in mismatch] == [13] and abs(mismatch[0][1]) == pytest.approx(1.55e-10, rel=0.01)
     else:
         assert mismatch == []
