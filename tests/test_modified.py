@@ -77,7 +77,7 @@ def test_the_exact_flow_is_its_own_modified_hamiltonian(cls, solve):
 
 
 def test_principal_error_terms_of_the_paper_three_stage_method():
-    """Degenerate order 4 (paper §5.3): no correction below h^4, and the h^4 term is
+    """Degenerate order 4 (paper §5.2): no correction below h^4, and the h^4 term is
     sum over T_0 of order 5 of (a(t) - e(t))/sigma(t) F(t) (first-order backward error analysis)."""
     a = method_character(load_tableau("paper-three-stage"), 6)
     series = modified_hamiltonian(a, 6, "degenerate")

@@ -95,6 +95,14 @@ def test_every_listed_builtin_exists_with_a_reference():
         assert t.reference and t.name == name
 
 
+@pytest.mark.parametrize("name", ["euler", "paper-two-stage", "paper-three-stage", "paper-implicit"])
+def test_the_papers_methods_cite_its_section_5_2(name):
+    # the paper's methods are in Section 5 ("Numerical methods"), subsection 2 ("Runge-Kutta
+    # approach to Hamiltonian Poisson integrators"); 5.1 is the Taylor approach, there is no 5.3
+    reference = load_tableau(name).reference
+    assert "Section 5.2" in reference and "Section 5.3" not in reference
+
+
 def test_aliases_and_case():
     assert load_tableau("RK4") is load_tableau("classical")
     assert load_tableau("rk1412").name == "feagin14"

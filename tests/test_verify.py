@@ -19,7 +19,7 @@ HW = "Hairer & Wanner, Solving ODEs II (1996)"
 
 # General (classical) orders from the literature; the reference is in each tables/*.toml too.
 LITERATURE = [
-    ("euler", 1, "paper §5.3: Euler is a first-order RKHP method"),
+    ("euler", 1, "paper §5.2: Euler is a first-order RKHP method"),
     ("midpoint", 2, f"Runge (1895); {HNW} §II.1"),
     ("heun", 2, f"Heun (1900); {HNW} §II.1"),
     ("ralston", 2, "Ralston (1962), Math. Comp. 16"),
@@ -41,7 +41,7 @@ LITERATURE = [
 ]
 
 # Degenerate orders (over T_0) that follow from the literature:
-# - the paper (§5.3): Euler 2, two stages 3, three stages 4, one implicit stage 3;
+# - the paper (§5.2): Euler 2, two stages 3, three stages 4, one implicit stage 3;
 # - the bushy trees b[b^k] (k >= 2) lie in T_0 and their conditions are the quadrature
 #   conditions sum b_i c_i^k = 1/(k+1); so a method whose quadrature order equals its classical
 #   order p has degenerate order p: Gauss (quadrature order 2s), Radau IIA (2s-1), Lobatto (2s-2),
