@@ -17,7 +17,7 @@ CHILD = r"""
 import json, sys, time
 name, precision, repeats = sys.argv[1], sys.argv[2], int(sys.argv[3])
 precision = None if precision == "default" else (int(precision) if precision.isdigit() else precision)
-from rkhp.verify import verify
+from rkhp.verification import verify
 times = []
 for _ in range(repeats):
     t0 = time.perf_counter()

@@ -6,6 +6,7 @@ import click
 
 from rkhp.bounds import BYTES_PER_CONDITION, BYTES_PER_PRINTED_TREE, check_tree_memory
 from rkhp.conditions import order_conditions
+from rkhp.exact_text import fraction_text
 from rkhp.trees import MAX_COUNT_ORDER, MAX_ENUMERATION_ORDER, check_order, count_trees, trees_up_to
 
 from .options import console, emit_json, format_option, integer
@@ -110,8 +111,7 @@ def conditions(order, degenerate, symmetric, exact_order, fmt):
 
 def _condition_json(c) -> dict:
     """One condition; a combined (symmetric) condition also lists its trees and weights."""
-    rhs = c.rhs
-    rhs_text = f"{rhs.numerator}/{rhs.denominator}" if rhs.denominator != 1 else str(rhs.numerator)
+    rhs_text = fraction_text(c.rhs)
     if c.is_single:
         t = c.tree
         return {"tree": str(t), "order": t.order, "sigma": t.sigma, "gamma": t.gamma,

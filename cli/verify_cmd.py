@@ -25,7 +25,7 @@ def verify(tableau, max_order, precision, show, fmt):
     """Verify the order of a tableau over T (general) and T_0 (degenerate), exactly or at a
     stated tolerance, with the failing trees and the principal error (paper §5)."""
     from rkhp.tablefiles import load_tableau
-    from rkhp.verify import verify as run_verify
+    from rkhp.verification import verify as run_verify
 
     tab = load_tableau(tableau)
     with progress(fmt != "json") as bar:
@@ -128,7 +128,7 @@ def _exact_cell(text: str) -> str:
 def tables(precision, fmt):
     """List the built-in tableaux with stages, kind, verified and claimed orders."""
     from rkhp.tablefiles import builtin_names, load_tableau
-    from rkhp.verify import verify as run_verify
+    from rkhp.verification import verify as run_verify
 
     names = builtin_names()
     rows = []

@@ -23,7 +23,7 @@ _LAZY = {
     "resolve_method": "rkhp.methods",
     "Tableau": "rkhp.tableau",
     "load_tableau": "rkhp.tablefiles",
-    "verify": "rkhp.verify",
+    "verify": "rkhp.verification",
     "get_system": "rkhp.systems",
 }
 

@@ -61,19 +61,6 @@ def graft_linear(x: Mapping[Tree, object], y: Mapping[Tree, object]) -> Combinat
     return {t: c for t, c in out.items() if c}
 
 
-def graft_power(n: int) -> Combination:
-    """b^{↷n} = b ↷ (b ↷ (... ↷ b)): the coefficient of t^n/n! in exp^↷(t b) (paper §3)."""
-    check_order(n)
-    x: Combination = {LEAF: 1}
-    for _ in range(n - 1):
-        out: Counter = Counter()
-        for t, c in x.items():
-            for u, m in graft(LEAF, t).items():
-                out[u] += c * m
-        x = dict(out)
-    return x
-
-
 def hamilton_jacobi_expansion(order: int, degenerate: bool = False) -> dict[int, Combination]:
     """exp^↷(t b) truncated at t^order: {n: coefficients of t^n/n!} (paper §3, eq. HJ).
 

@@ -13,8 +13,11 @@ from __future__ import annotations
 import math
 import os
 import re
+import stat
+from pathlib import Path
 
 from .errors import InputError
+from .trees import count_trees
 
 # ----------------------------------------------------------------------------- limits
 
@@ -234,8 +237,6 @@ BYTES_PER_CONDITION = 4000
 def check_tree_memory(order: int, degenerate: bool = False, what: str = "the enumeration",
                       per_tree: float = BYTES_PER_TREE) -> None:
     """The memory check of work on every tree of order <= `order` (of T, or T_0), `per_tree` bytes each."""
-    from .trees import count_trees
-
     total = sum(count_trees(n, degenerate) for n in range(1, order + 1))
     check_memory(float(total) * per_tree, f"{what} ({total} trees up to order {order})")
 
@@ -247,8 +248,6 @@ def check_output_path(path, suffixes: tuple[str, ...] = (), what: str = "output 
     """A file the command will write, checked before the work starts: a known suffix, an existing
     writable folder, and no folder, device or pipe already at that name. Returns a Path.
     `what` names the file in messages (an option such as --plot)."""
-    from pathlib import Path
-
     path = Path(path)
     if not str(path).strip():
         raise InputError(f"{what}: empty file name")
@@ -264,8 +263,6 @@ def check_output_path(path, suffixes: tuple[str, ...] = (), what: str = "output 
     if path.is_dir():
         raise InputError(f"{what} {path}: is a folder")
     if path.exists() or path.is_symlink():
-        import stat
-
         try:
             mode = path.stat().st_mode
         except OSError as exc:

@@ -32,8 +32,12 @@ from fractions import Fraction
 
 import numpy as np
 
+from .algebra import compose
 from .conditions import check_class
+from .differentials import JetRing, RandomRealisations, elementary_differentials, monomial_basis
 from .errors import InputError, NumericalFailure
+from .modified import MAX_FIELD_DEGREE, _field_of, _read_character, canonical_basis, canonical_coefficients, check_seed
+from .modular import FieldEmbeddings, Inconsistent, rref_mod, solve_over_primes, to_residue
 from .trees import Tree, check_order, trees_of_order, trees_up_to
 
 #: Largest order of a composition series.
@@ -90,9 +94,6 @@ class CompositionSeries:
 def composition_series(characters, order: int, cls: str = "symmetric", names=None, seed: int = 0) -> CompositionSeries:
     """The composition of steps with the given characters (each a mapping tree -> exact a(t) on T),
     applied in the order given (module docstring)."""
-    from .modified import MAX_FIELD_DEGREE, _field_of, _read_character, canonical_basis, check_seed
-    from .modular import FieldEmbeddings
-
     check_seed(seed)
     check_class(cls)
     check_order(order, MAX_ORDER, what="order of the composition")
@@ -124,9 +125,6 @@ def composition_series(characters, order: int, cls: str = "symmetric", names=Non
 
 def _butcher(chars, order: int, cls: str) -> dict:
     """c(t) = (a_1 * ... * a_k)(t)/sigma(t) in the canonical form of the class."""
-    from .algebra import compose
-    from .modified import canonical_coefficients
-
     product = chars[0]
     for a in chars[1:]:
         product = compose(product, a, order)
@@ -141,8 +139,6 @@ def _butcher(chars, order: int, cls: str) -> dict:
 
 
 def _groupoid(chars, order, cls, basis, embeddings, seed):
-    from .modular import Inconsistent
-
     top = order
     while top >= 1:
         try:
@@ -162,8 +158,6 @@ def _restart(chars, order, cls, basis, embeddings, seed):
 
 
 def _solve(compute, basis, embeddings, seed):
-    from .modular import solve_over_primes
-
     keys = [t for level in basis for t in level]
     try:
         coords, primes, last = solve_over_primes(compute, keys, embeddings, seed, MAX_PRIMES)
@@ -189,8 +183,6 @@ class _Jets:
     """Truncated polynomials in (w_1..w_n, h), total degree N, modulo p, one column per instance."""
 
     def __init__(self, n: int, N: int, ncols: int, p: int):
-        from .differentials import JetRing, monomial_basis
-
         self.n, self.N, self.ncols, self.p = n, N, ncols, p
         self.basis = monomial_basis(n + 1, N)
         self.ring = JetRing(self.basis, p)
@@ -282,8 +274,6 @@ def _instances(order, cls, basis, p, roots, rng, linear: bool):
 
     F_H over the class's trees to degree order + 1 - |t|, H to degree ``order``: gradients of the
     generating functions are then exact to total degree ``order`` in (x, h)."""
-    from .differentials import RandomRealisations, monomial_basis
-
     n = DIMENSION
     d = len(roots)
     batch = -(-len(basis[-1]) // n) + EXTRA_INSTANCES
@@ -297,8 +287,6 @@ def _instances(order, cls, basis, p, roots, rng, linear: bool):
 
 def _weights(emb, a, t, p, roots, batch) -> np.ndarray:
     """a(t)/sigma(t) per column: the images of a(t) under each root, repeated over its batch."""
-    from .modular import to_residue
-
     images = np.repeat(np.array(emb.images(a[t], p, roots), dtype=np.int64), batch)
     return images * to_residue(Fraction(1, t.sigma), p) % p
 
@@ -316,8 +304,6 @@ def _graded(J, bx, jet, j: int) -> np.ndarray:
 def _solve_levels(levels, V_of, rhs, d, batch, p):
     """Per basis level, the coefficients solving V c = rhs per embedding block; an int (the order)
     when inconsistent."""
-    from .modular import rref_mod
-
     out = {}
     for level in levels:
         if not level:
@@ -338,8 +324,6 @@ def _solve_levels(levels, V_of, rhs, d, batch, p):
 
 
 def _groupoid_modulo(chars, order, cls, basis, emb, p, roots, rng):
-    from .differentials import JetRing
-
     n, d, batch, ncols, real, bx, H, FH = _instances(order, cls, basis, p, roots, rng, linear=cls != "degenerate")
     J = _Jets(n, order, ncols, p)
     xring = JetRing(bx, p)
@@ -403,8 +387,6 @@ def _fixed_point(J, update, start: list[np.ndarray]) -> list[np.ndarray]:
 
 
 def _restart_modulo(chars, order, cls, basis, emb, p, roots, rng):
-    from .differentials import elementary_differentials
-
     n, d, batch, ncols, real, bx, H, FH = _instances(order, cls, basis, p, roots, rng, linear=True)
     J = _Jets(n, order, ncols, p)
     all_trees = trees_up_to(order)
@@ -459,8 +441,6 @@ def _padded(J, jet) -> np.ndarray:
 
 def _inverse_matrices(M: np.ndarray, p: int) -> np.ndarray:
     """The inverse modulo p of each matrix M[:, :, k]."""
-    from .modular import rref_mod
-
     n = M.shape[0]
     out = np.zeros_like(M)
     for k in range(M.shape[2]):

@@ -17,6 +17,8 @@ from dataclasses import dataclass
 from fractions import Fraction
 
 from .errors import InputError
+from .exact_text import combination_text, fraction_latex, fraction_text
+from .relations import symmetric_condition_rows
 from .trees import Tree, check_order, trees_of_order
 
 #: Condition classes: all trees T, the degenerate subset T_0, symmetric birealisations.
@@ -58,16 +60,16 @@ class OrderCondition:
     def text(self) -> str:
         """Plain-text Butcher form, e.g. ``sum_i b_i c_i^2 = 1/3``."""
         if self.is_single:
-            return f"{butcher_form(self.tree)} = {_fraction_text(self.rhs)}"
+            return f"{butcher_form(self.tree)} = {fraction_text(self.rhs)}"
         terms = [(w * t.gamma, butcher_form(t)) for w, t in zip(self.weights, self.trees)]
-        return f"{_combination(terms, _fraction_text, ' ')} = {_fraction_text(self.rhs)}"
+        return f"{combination_text(terms)} = {fraction_text(self.rhs)}"
 
     def latex(self) -> str:
         """LaTeX Butcher form, e.g. ``\\sum_{i,j=1}^s b_i a_{ij} c_j^2 = \\frac{1}{12}``."""
         if self.is_single:
-            return f"{latex_form(self.tree)} = {_fraction_latex(self.rhs)}"
+            return f"{latex_form(self.tree)} = {fraction_latex(self.rhs)}"
         terms = [(w * t.gamma, latex_form(t)) for w, t in zip(self.weights, self.trees)]
-        return f"{_combination(terms, _fraction_latex, ' ')} = {_fraction_latex(self.rhs)}"
+        return f"{combination_text(terms, fraction_latex)} = {fraction_latex(self.rhs)}"
 
 
 def check_class(cls: str) -> str:
@@ -86,9 +88,7 @@ def conditions_of_order(n: int, cls: str = "general") -> tuple[OrderCondition, .
     """The order conditions of order exactly n in the class (paper Thm 5.1–5.2; docs/theory.md §8)."""
     check_class(cls)
     if cls == "symmetric":
-        from .relations import symmetric_order_conditions
-
-        return tuple(symmetric_order_conditions(n))
+        return symmetric_order_conditions(n)
     one = Fraction(1)
     return tuple(OrderCondition(n, (t,), (one,)) for t in condition_trees(n, cls))
 
@@ -100,13 +100,9 @@ def order_conditions(order: int, cls: str = "general", exact_order: bool = False
     return tuple(c for n in orders for c in conditions_of_order(n, cls))
 
 
-def count_conditions(n: int, cls: str = "general") -> int:
-    """Number of conditions of order exactly n in the class."""
-    if cls == "symmetric":
-        return len(conditions_of_order(n, cls))
-    from .trees import count_trees
-
-    return count_trees(n, degenerate=check_class(cls) == "degenerate")
+def symmetric_order_conditions(n: int) -> tuple[OrderCondition, ...]:
+    """The symmetric order conditions of order n (the shipped rows of `rkhp.relations`)."""
+    return tuple(OrderCondition(n, trees, weights) for trees, weights in symmetric_condition_rows(n))
 
 
 # ----------------------------------------------------------------------------- Butcher form
@@ -166,23 +162,3 @@ def latex_form(t: Tree) -> str:
     return "\\sum_{" + ",".join(names) + "=1}^s " + " ".join(parts)
 
 
-def _fraction_text(q: Fraction) -> str:
-    return str(q.numerator) if q.denominator == 1 else f"{q.numerator}/{q.denominator}"
-
-
-def _fraction_latex(q: Fraction) -> str:
-    if q.denominator == 1:
-        return str(q.numerator)
-    sign = "-" if q < 0 else ""
-    return f"{sign}\\frac{{{abs(q.numerator)}}}{{{q.denominator}}}"
-
-
-def _combination(terms, fmt, sep: str) -> str:
-    """Render sum_k coef_k * expr_k with signs, e.g. ``4 sum_i b_i c_i^3 - 12 sum_{i,j} ...``."""
-    out = []
-    for k, (coef, expr) in enumerate(terms):
-        sign = "-" if coef < 0 else "+"
-        mag = abs(coef)
-        body = expr if mag == 1 else f"{fmt(mag)}{sep}{expr}"
-        out.append(("- " if sign == "-" else "") + body if k == 0 else f" {sign} {body}")
-    return "".join(out)

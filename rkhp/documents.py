@@ -22,6 +22,7 @@ from __future__ import annotations
 import json
 import math
 import stat
+import tomllib
 from pathlib import Path
 
 from . import bounds
@@ -147,8 +148,6 @@ def parse_document(text: str, where: str, kind: str) -> dict:
             data = json.loads(text, object_pairs_hook=_unique_keys, parse_constant=_json_constant,
                               parse_int=_json_int, parse_float=_json_float)
         else:
-            import tomllib
-
             data = tomllib.loads(text)
     except InputError as exc:
         raise InputError(f"{where}: {exc}") from None

@@ -18,10 +18,20 @@ imported only when a scheduler is used.
 
 from __future__ import annotations
 
+import json
+import multiprocessing
 import os
+import pickle
 import re
+import signal
+import subprocess
+import sys
+import tempfile
+import time
 from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import closing, contextmanager
+from pathlib import Path
 from typing import Any, Protocol
 
 from .errors import InputError
@@ -156,14 +166,10 @@ class InProcess:
 
 def _ignore_sigint() -> None:
     """Pool workers leave Ctrl-C to the parent, which cancels and reports."""
-    import signal
-
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _call_pickled(payload: bytes):
-    import pickle
-
     fn, args = pickle.loads(payload)
     return fn(*args)
 
@@ -174,9 +180,6 @@ class LocalProcesses:
     kind = "processes"
 
     def __init__(self, workers: int):
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
         self.slots = workers
         self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
                                          initializer=_ignore_sigint)
@@ -187,8 +190,6 @@ class LocalProcesses:
         return self._pool.submit(_call_pickled, cloudpickle.dumps((fn, args)))
 
     def as_completed(self, tasks):
-        from concurrent.futures import as_completed
-
         return as_completed(list(tasks))
 
     def cancel(self, tasks) -> None:
@@ -224,8 +225,6 @@ class DaskCluster:
     def slots(self) -> int:
         """The workers' threads now (asked of the scheduler at most every SLOTS_SECONDS, so that
         workers joining or leaving during a run change how many tasks are kept submitted)."""
-        import time
-
         asked, count = self._slots
         if time.monotonic() - asked > SLOTS_SECONDS:
             count = max(1, sum(self._client.nthreads().values()))
@@ -321,13 +320,6 @@ def loopback_cluster(workers: int = 2, threads: int = 1, start_seconds: float = 
     of ``threads`` threads each, started with ``dask scheduler`` / ``dask worker`` and bound to the
     loopback address only; all stopped afterwards. For the tests and benchmarks/distributed.py:
     a real cluster is started the same way on its machines (docs/distributed.md)."""
-    import json
-    import subprocess
-    import sys
-    import tempfile
-    import time
-    from pathlib import Path
-
     dask = [sys.executable, "-m", "dask"]
     quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
     procs: list = []

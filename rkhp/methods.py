@@ -27,6 +27,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+from .conditions import conditions_of_order
 from .errors import InputError
 
 DEFAULT_METHODS = ("euler", "paper-two-stage", "paper-three-stage", "rk4")
@@ -126,7 +127,7 @@ def _orders(tableau) -> dict[str, int]:
     """Order per condition class of a tableau by the verify engine (cached by entries)."""
     key = (tableau.name, str(tableau.A), str(tableau.b))
     if key not in _ORDERS:
-        from .verify import verify
+        from .verification import verify
 
         orders = verify(tableau, classes=("general", "degenerate", "symmetric")).orders
         # each class's conditions follow from the previous class's (T_0 is part of T; the symmetric
@@ -148,8 +149,6 @@ def taylor_orders(order: int, degenerate: bool) -> dict[str, int]:
     symmetric class a combination whose weights sum to 0 holds for r = -1 too (so that odd N
     gains an order: docs/methods.md).
     """
-    from .conditions import conditions_of_order
-
     def r(t) -> int:
         return 0 if t.order <= order and (not degenerate or t.in_t0) else -1
 

@@ -42,7 +42,10 @@ from functools import lru_cache
 import numpy as np
 
 from .conditions import check_class
+from .differentials import RandomRealisations, monomial_basis
 from .errors import CheckFailed, InputError, NumericalFailure
+from .modular import FieldEmbeddings, Inconsistent, rref_fraction, rref_mod, solve_over_primes, to_residue
+from .relations import shipped_order
 from .trees import LEAF, Tree, check_order, format_tree, trees_of_order, trees_up_to
 
 #: Largest order of a modified or modifying Hamiltonian (the symmetric relations ship to order 8).
@@ -197,8 +200,6 @@ def check_seed(seed) -> int:
 
 
 def _series(kind: str, character: Mapping, order: int, cls: str, seed: int) -> HamiltonianSeries:
-    from .modular import FieldEmbeddings
-
     check_seed(seed)
     check_class(cls)
     check_order(order, MAX_ORDER, what="order of the modified Hamiltonian")
@@ -226,8 +227,6 @@ def _series(kind: str, character: Mapping, order: int, cls: str, seed: int) -> H
 
 def _solve(problem: _Problem):
     """Coordinates of every basis coefficient, over primes until a further prime confirms."""
-    from .modular import Inconsistent, solve_over_primes
-
     keys = [t for level in problem.basis for t in level]
     try:
         coordinates, primes, last = solve_over_primes(
@@ -255,9 +254,6 @@ def _batch(problem: _Problem) -> int:
 def _solve_modulo(problem: _Problem, p: int, roots, rng):
     """Residues of the coordinates of every basis coefficient modulo p, or the first order whose
     term is outside the span of the F(t) (an int)."""
-    from .differentials import monomial_basis
-    from .modular import rref_mod
-
     d = len(roots)
     batch = _batch(problem)
     ncols = d * batch
@@ -316,8 +312,6 @@ def _solve_modulo(problem: _Problem, p: int, roots, rng):
 
 def _target_part(FH, target, n, cls, residues, p) -> np.ndarray:
     """[sum_t h^|t| target(t)/sigma(t) F_H(t)]_(h^n) at the base points."""
-    from .modular import to_residue
-
     total = 0
     for t in trees_of_order(n, degenerate=cls != "general"):
         total = (total + residues(target, t) * to_residue(Fraction(1, t.sigma), p) % p * FH[t][0]) % p
@@ -330,9 +324,6 @@ def _inner_part(family, inner, H_terms, k, n, cls, residues, bx, p) -> np.ndarra
     K is a jet in (x, h), h of weight 1 in the total degree (docs/theory.md §11): F_K(u) is then
     computed exactly to total degree k + 1 - |u| by the same recursion as F_H.
     """
-    from .differentials import monomial_basis
-    from .modular import to_residue
-
     bxh = monomial_basis(n + 1, k)
     ncols = H_terms[0].shape[1]
     K = np.zeros((bxh.sizes[k], ncols), dtype=np.int64)
@@ -351,8 +342,6 @@ def _inner_part(family, inner, H_terms, k, n, cls, residues, bx, p) -> np.ndarra
 @lru_cache(maxsize=64)
 def _graded_rows(n: int, k: int, j: int) -> np.ndarray:
     """Rows of the (x, h) basis of degree k holding x^e h^j, for the x-monomials e of degree <= k - j."""
-    from .differentials import monomial_basis
-
     bx = monomial_basis(n, k)
     bxh = monomial_basis(n + 1, k)
     return np.array([bxh.index[tuple(int(v) for v in bx.exponents[i]) + (j,)] for i in range(bx.sizes[k - j])],
@@ -361,8 +350,6 @@ def _graded_rows(n: int, k: int, j: int) -> np.ndarray:
 
 def _check_independent(FH, problem: _Problem, batch: int, p: int) -> None:
     """The generic instances carry no relation among the basis trees (the canonical form is a basis)."""
-    from .modular import rref_mod
-
     for level in problem.basis:
         if len(level) > 1:
             V = np.array([FH[t][0][:batch] for t in level], dtype=np.int64).T
@@ -386,8 +373,6 @@ _FAMILY_TEXT = {
 def _family(cls: str, n: int, N: int, ncols: int, rng, p: int):
     """jets(trees, max_order, K, basis): F(t) jets of K on random instances of the class
     (:class:`rkhp.differentials.RandomRealisations`)."""
-    from .differentials import RandomRealisations
-
     return RandomRealisations.of_class(cls, n, N, ncols, rng, p).jets
 
 
@@ -397,9 +382,6 @@ def _family(cls: str, n: int, N: int, ncols: int, rng, p: int):
 @lru_cache(maxsize=16)
 def _symmetric_reduction(n: int):
     """The shipped relations of order n in reduced echelon form: (rows, leading tree of each)."""
-    from .modular import rref_fraction
-    from .relations import shipped_order
-
     o = shipped_order(n)
     if not o.relations:
         return (), ()

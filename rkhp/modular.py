@@ -11,7 +11,7 @@ prime. Nothing here uses floating point.
 from __future__ import annotations
 
 from fractions import Fraction
-from math import isqrt
+from math import gcd, isqrt
 
 import numpy as np
 
@@ -234,8 +234,6 @@ def reconstruct_coordinates(residues: list[tuple[int, ...]], primes: list[int]) 
 
 
 def _gcd(a: int, b: int) -> int:
-    from math import gcd
-
     return gcd(a, b)
 
 

@@ -27,8 +27,11 @@ from dataclasses import dataclass, field
 from fractions import Fraction
 from functools import lru_cache
 from math import gcd, lcm
+from pathlib import Path
 
+from .bounds import seed as check_seed
 from .errors import InputError, NumericalFailure
+from .exact_text import combination_text, fraction_text
 from .executors import InProcess
 from .trees import Tree, check_order, format_tree, parse_tree, trees_of_order
 
@@ -88,13 +91,6 @@ def symmetric_condition_rows(n: int) -> list[tuple[tuple[Tree, ...], tuple[Fract
     return list(shipped_order(n).conditions)
 
 
-def symmetric_order_conditions(n: int):
-    """The symmetric order conditions of order n as :class:`rkhp.conditions.OrderCondition`."""
-    from .conditions import OrderCondition
-
-    return tuple(OrderCondition(n, trees, weights) for trees, weights in symmetric_condition_rows(n))
-
-
 def shipped_order(n: int) -> OrderRelations:
     """The shipped relations of order n; InputError above the shipped order."""
     check_order(n, what="relation order")
@@ -107,8 +103,6 @@ def shipped_order(n: int) -> OrderRelations:
 @lru_cache(maxsize=1)
 def shipped_relations() -> RelationData:
     """The relations shipped in ``rkhp/data/symmetric_relations.json``, validated."""
-    from pathlib import Path
-
     path = Path(__file__).with_name("data") / DATA_FILE
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
@@ -147,8 +141,6 @@ def relations_for(max_order: int, regenerate: bool = False, seed: int = 0, progr
     """Shipped relations up to max_order, or freshly derived ones when ``regenerate`` (on
     ``executor``, see :func:`derive_relations`)."""
     if regenerate:
-        from .bounds import seed as check_seed
-
         check_seed(seed)
         return derive_relations(max_order, seed, progress=progress, executor=executor)
     check_order(max_order, what="relation order")
@@ -420,22 +412,7 @@ def _in_row_space(rows, basis, p):
 
 
 def _terms(trees, coefficients, symbol: str) -> str:
-    out = []
-    for c, t in zip(coefficients, trees):
-        if c == 0:
-            continue
-        mag = abs(c)
-        body = f"{symbol}({format_tree(t)})" if mag == 1 else f"{_q(mag)} {symbol}({format_tree(t)})"
-        if not out:
-            out.append(("-" if c < 0 else "") + body)
-        else:
-            out.append((" - " if c < 0 else " + ") + body)
-    return "".join(out) or "0"
-
-
-def _q(x: Fraction) -> str:
-    x = Fraction(x)
-    return str(x.numerator) if x.denominator == 1 else f"{x.numerator}/{x.denominator}"
+    return combination_text((c, f"{symbol}({format_tree(t)})") for c, t in zip(coefficients, trees))
 
 
 def _relation_text(trees, coefficients) -> str:
@@ -459,9 +436,9 @@ def _order_json(o: OrderRelations) -> dict:
         "t0_count": len(o.trees),
         "relations_count": len(o.relations),
         "conditions_count": len(o.conditions),
-        "relations": [{"coefficients": [_q(c) for c in r], "text": _relation_text(o.trees, r)}
+        "relations": [{"coefficients": [fraction_text(c) for c in r], "text": _relation_text(o.trees, r)}
                       for r in o.relations],
-        "conditions": [{"trees": [str(t) for t in ts], "weights": [_q(w) for w in ws],
+        "conditions": [{"trees": [str(t) for t in ts], "weights": [fraction_text(w) for w in ws],
                         "text": condition_text(ts, ws)} for ts, ws in o.conditions],
         "checks": o.checks,
     }

@@ -25,6 +25,8 @@ import mpmath
 
 from .bounds import MAX_DECIMAL_DIGITS, MAX_DECIMAL_EXPONENT
 from .errors import InputError
+from .exact_text import fraction_latex
+from .expressions import ENTRY_LIMITS, parse_expression
 
 #: Decimals with at most this many significant digits are read as exact decimals.
 EXACT_DECIMAL_DIGITS = 15
@@ -121,8 +123,6 @@ def _parse_text(text: str, where: str):
         return Fraction(num, den)
     if s.lower().lstrip("+-") in ("nan", "inf", "infinity"):
         raise InputError(f"{where}: non-finite value {text!r}")
-    from .expressions import ENTRY_LIMITS, parse_expression
-
     expr = parse_expression(s, (), where=where, limits=ENTRY_LIMITS)
     return _exact_expression(expr, where, text)
 
@@ -405,10 +405,7 @@ def entry_decimal(x, digits: int = 12) -> str:
 def entry_latex(x) -> str:
     """LaTeX of an entry: ``\\frac{1}{2}``, ``-\\frac{\\sqrt{3}}{6}``, or the given digits."""
     if isinstance(x, Fraction):
-        if x.denominator == 1:
-            return str(x.numerator)
-        sign = "-" if x < 0 else ""
-        return f"{sign}\\frac{{{abs(x.numerator)}}}{{{x.denominator}}}"
+        return fraction_latex(x)
     if isinstance(x, mpmath.mpf):
         return entry_text(x)
     import sympy

@@ -23,8 +23,12 @@ from __future__ import annotations
 import difflib
 import json
 import re
+import tomllib
 from functools import lru_cache
+from importlib.resources import files
 from pathlib import Path
+
+import tomli_w
 
 from .bounds import MAX_CLAIMED_ORDER, MAX_STAGES
 from .documents import parse_document, read_text
@@ -40,16 +44,12 @@ _FILE_SUFFIXES = (".toml", ".json", ".txt")
 
 
 def _tables_dir():
-    from importlib.resources import files
-
     return files("rkhp.tables")
 
 
 @lru_cache(maxsize=1)
 def _registry() -> dict[str, tuple[str, tuple[str, ...]]]:
     """name -> (file name, aliases) for every built-in table, read once."""
-    import tomllib
-
     out = {}
     for entry in sorted(_tables_dir().iterdir(), key=lambda p: p.name):
         if not entry.name.endswith(".toml"):
@@ -83,8 +83,6 @@ def _alias_map() -> dict[str, str]:
 
 @lru_cache(maxsize=64)
 def _load_builtin(name: str) -> Tableau:
-    import tomllib
-
     filename = _registry()[name][0]
     text = (_tables_dir() / filename).read_text(encoding="utf-8")
     return tableau_from_mapping(tomllib.loads(text), f"tables/{filename}", filename[:-5])
@@ -245,8 +243,6 @@ def save_tableau(tableau: Tableau, path) -> None:
     if suffix == ".json":
         text = json.dumps(data, indent=2, ensure_ascii=False) + "\n"
     elif suffix == ".toml":
-        import tomli_w
-
         text = tomli_w.dumps(data, multiline_strings=False)
     else:
         raise InputError(f"{path}: cannot write a tableau as {suffix or 'a file without extension'}"

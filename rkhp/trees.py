@@ -107,10 +107,6 @@ class Tree(tuple):
         return factorial(self.order) // (self.sigma * self.gamma)
 
     @property
-    def is_leaf(self) -> bool:
-        return self.order == 1
-
-    @property
     def in_t0(self) -> bool:
         """Whether t is in T_0: no vertex has a leaf as its only child (paper, Thm. superconvergence)."""
         return in_t0(self)

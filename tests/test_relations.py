@@ -19,7 +19,6 @@ from rkhp.relations import (
     relation_space,
     shipped_relations,
     symmetric_condition_rows,
-    symmetric_order_conditions,
 )
 from rkhp.trees import LEAF, from_children, parse_tree, trees_of_order
 
@@ -246,7 +245,7 @@ def test_conditions_annihilate_exactly_the_relations():
 
 
 def test_symmetric_order_conditions_for_the_conditions_module():
-    from rkhp.conditions import OrderCondition, order_conditions
+    from rkhp.conditions import OrderCondition, order_conditions, symmetric_order_conditions
 
     (c,) = symmetric_order_conditions(4)
     assert isinstance(c, OrderCondition)

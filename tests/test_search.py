@@ -25,7 +25,7 @@ from rkhp.search.prove import prove_impossible
 from rkhp.search.recognise import recognise_number
 from rkhp.search.system import ResidualSystem
 from rkhp.tablefiles import builtin_names, load_tableau
-from rkhp.verify import verify
+from rkhp.verification import verify
 
 ROOT = Path(__file__).resolve().parent.parent
 ISSUE_KEYS = ["stages", "degenerate", "implicit", "order", "found", "tableau", "residual",

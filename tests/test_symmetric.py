@@ -23,7 +23,7 @@ from rkhp.studies.converge import converge
 from rkhp.systems import builtin_systems, get_system
 from rkhp.systems.check import check_birealisation
 from rkhp.tablefiles import load_tableau
-from rkhp.verify import verify
+from rkhp.verification import verify
 
 # ----------------------------------------------------------------------------- quartic realisation
 

@@ -3,9 +3,7 @@ degree, the value path against the jet path, the tape's sub-programs, and the la
 
 from __future__ import annotations
 
-import ast
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -122,27 +120,6 @@ def test_composite_operand_list_starts_with_its_subprograms():
     assert code == PHIMV and k == 1 and out == z.slot
     assert tape.args[a: a + b].tolist() == sub.operands() + [tape.ops[tape.main, 1], x.slot]
     assert tape.scratch_rows == 5 + 3  # the base rows and phimv's 2n + 1
-
-
-def _imports(path: Path) -> set[str]:
-    names = set()
-    package = ".".join(path.relative_to(Path(tp.__file__).parents[2]).with_suffix("").parts[:-1])
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.ImportFrom):
-            base = package.rsplit(".", node.level - 1)[0] if node.level else ""
-            names.add(f"{base}.{node.module}" if node.level and node.module else node.module or base)
-        elif isinstance(node, ast.Import):
-            names.update(alias.name for alias in node.names)
-    return names
-
-
-@pytest.mark.parametrize("package,forbidden", [("taylor", ("rkhp.systems", "rkhp.integrators", "rkhp.studies")),
-                                               ("systems", ("rkhp.integrators", "rkhp.studies"))])
-def test_layers_point_one_way(package, forbidden):
-    """rkhp.taylor is below rkhp.systems, which is below rkhp.integrators (no import upward)."""
-    for path in sorted((Path(tp.__file__).parents[1] / package).glob("*.py")):
-        bad = [m for m in _imports(path) if m and m.startswith(forbidden)]
-        assert not bad, (path.name, bad)
 
 
 def test_value_path_matches_jets_on_a_system_tape():

@@ -12,7 +12,7 @@ from rkhp.errors import InputError
 from rkhp.tableau import Tableau
 from rkhp.tablefiles import load_tableau
 from rkhp.trees import count_trees
-from rkhp.verify import verify
+from rkhp.verification import verify
 
 HNW = "Hairer, Norsett & Wanner, Solving ODEs I (1993)"
 HW = "Hairer & Wanner, Solving ODEs II (1996)"

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..modified import NotATreeSeries, modified_hamiltonian
+
 
 @dataclass
 class ModifiedEnergy:
@@ -57,8 +59,6 @@ def energy_errors(system, series, h: float, states, advance=None) -> dict:
 def method_series(character, order: int, cls: str, seed: int = 0):
     """The modified Hamiltonian of a character to ``order``, or to the largest order below at
     which it is a tree series (rkhp.modified.NotATreeSeries stops it there)."""
-    from ..modified import NotATreeSeries, modified_hamiltonian
-
     try:
         return modified_hamiltonian(character, order, cls, seed)
     except NotATreeSeries as exc:

@@ -2,18 +2,21 @@
 
 `integrate(system, tableau, h, n_steps, x0=None)` runs the compiled loop of
 `rkhp.integrators.engine` and returns a :class:`Trajectory`; `integrate_ensemble` runs many
-initial conditions at once (numba `prange`). Compile time (first call in a process: compiling, or
-loading numba's cache) is measured apart from run time.
+initial conditions at once (threads over the compiled loop, which releases the GIL). Compile
+time (first call in a process: compiling, or loading numba's cache) is measured apart from run
+time.
 """
 
 from __future__ import annotations
 
 import math
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, NumericalFailure
 from ..executors import run_all
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE
@@ -116,8 +119,6 @@ def integrate_ensemble(system, tableau, h, n_steps, x0s, *, tol: float = NEWTON_
     `executor` (rkhp.executors), the starts are cut into one chunk per slot and each chunk runs so
     on a worker (same final states: each trajectory is computed on its own). NumericalFailure
     naming the first failing trajectory if any fails."""
-    from ..errors import NumericalFailure
-
     tableau = resolve_tableau(tableau)
     h, n_steps = check_step(h, n_steps)
     x0s = np.ascontiguousarray(x0s, dtype=np.float64)
@@ -144,9 +145,6 @@ def integrate_ensemble(system, tableau, h, n_steps, x0s, *, tol: float = NEWTON_
 
 def _ensemble_chunk(system, A, b, h, n_steps, x0s, tol, max_iter, threads):
     """(final states, steps done, Failure codes) of the trajectories from ``x0s``, in threads."""
-    import os
-    from concurrent.futures import ThreadPoolExecutor
-
     from .engine import rkhp_run, step_buffers
 
     tapes, space = engine_data(system, len(b))

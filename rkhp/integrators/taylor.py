@@ -24,6 +24,7 @@ import numpy as np
 from ..errors import InputError
 from ..taylor.interpreter import run_tape, tape_work
 from ..taylor.jets import jet_space, monomials
+from ..trees import trees_up_to
 from .engine import state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE
@@ -43,8 +44,6 @@ class _Tower:
         """``trees``: the trees to evaluate, closed under taking subtrees and sorted by order
         (default: all of T or T_0 up to ``order``); ``margin``: the jet degree beyond N - |t|
         (2: psi and its Jacobian; 0: values only, as for a modified Hamiltonian)."""
-        from ..trees import trees_up_to
-
         self.system = system
         self.n = system.dim
         self.order = order

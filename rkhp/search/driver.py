@@ -4,23 +4,27 @@
 the order conditions of a class (paper, Theorems 5.1–5.2: "general" over T, "degenerate" over
 T_0; docs/theory.md §8 for "symmetric") up to ``order``; without an order it raises N until the restarts
 fail and reports the evidence against the first order not reached. Every reported tableau has
-been verified by :func:`rkhp.verify.verify`, exactly when a closed form was recognised, else at D
+been verified by :func:`rkhp.verification.verify`, exactly when a closed form was recognised, else at D
 digits after Newton polishing; ``decided_by`` says which.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .. import bounds
+from ..conditions import check_class
 from ..errors import InputError
 from .multistart import Problem, Restarts, run_restarts
 from .optimise import KnownMethod, known_methods, minimise_error, refine_optimum
 from .polish import polish
 from .prove import Proof, prove_impossible
+from .recognise import closed_form, recognise_point
 from .system import MAX_SEARCH_ORDER, check_problem
 
 #: Digits of the polished solutions unless asked otherwise, and the accepted range.
@@ -65,7 +69,7 @@ class Found:
 
     Attributes:
         tableau: rkhp.tableau.Tableau (exact entries when a closed form verified, else D digits).
-        verification: rkhp.verify.Verification of that tableau.
+        verification: rkhp.verification.Verification of that tableau.
         residual: max |order-condition residual| of the polished solution (0 when exact).
         restart: index of the restart it came from (None for an optimum).
     """
@@ -151,9 +155,7 @@ class SearchResult:
         """The reported tableau as a file would hold it: named by its content (its class, order,
         stages and a hash of its entries), claiming its verified order in every class (verified
         again without an order limit), with the command line that reproduces it."""
-        import dataclasses
-
-        from ..verify import verify
+        from ..verification import verify
 
         found = self.found
         orders = verify(found.tableau, precision=found.verification.precision
@@ -243,9 +245,7 @@ def verified(problem: Problem, x_float, polished, digits: int, closed: bool, nam
     """Verify a polished solution: exactly when its entries (or, with ``closed``, those of a
     nearby member of its family, see :func:`closed_form`) have closed forms that satisfy the
     conditions, else at D digits. None if the verification disagrees with the search."""
-    from ..verify import verify
-    from .recognise import closed_form, recognise_point
-
+    from ..verification import verify
     exact = recognise_point(problem.system(), polished)
     if exact is None and closed:
         exact, _ = closed_form(problem.system(), x_float, digits)
@@ -270,8 +270,6 @@ def method_name(problem: Problem) -> str:
 def content_name(tableau, base: str) -> str:
     """``base-<8 hex digits>``: the digits hash the entries of A and b, so that two files hold the
     same name only when they hold the same tableau."""
-    import hashlib
-
     from ..tableau import entry_text
 
     text = ";".join(",".join(entry_text(x) for x in row) for row in tableau.A)
@@ -284,8 +282,6 @@ def search(stages: int, order: int | None = None, cls: str = "general", implicit
     """Search tableaux (see the module docstring). ``on_progress(order, done, total)``; the
     restarts run on ``executor`` (:mod:`rkhp.executors`; default: in this process), with the same
     result whatever the executor."""
-    from ..conditions import check_class
-
     check_problem(stages, order)
     check_class(cls)
     options.check()

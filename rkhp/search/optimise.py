@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .polish import to_mp
 from .system import ResidualSystem
 
 
@@ -80,8 +81,6 @@ def _lagrangian_gradient(system: ResidualSystem, x, lam):
 def refine_optimum(system: ResidualSystem, x0, digits: int, max_iterations: int = 30) -> Refined:
     """Newton on the KKT system from a float64 optimum, until |KKT residual| < 10^-digits."""
     import mpmath
-
-    from .polish import to_mp
 
     with mpmath.workdps(2 * digits + 20):
         x = to_mp(x0)

@@ -10,6 +10,7 @@ computed by sympy (grevlex) in a child process, stopped at the time limit.
 
 from __future__ import annotations
 
+import multiprocessing
 import time
 from dataclasses import dataclass
 
@@ -81,8 +82,6 @@ def _groebner_worker(polys, symbols, conn) -> None:
 
 def prove_impossible(system: ResidualSystem, time_limit: float = 60.0) -> Proof:
     """Try to prove that the system has no solution (Groebner basis [1]) within ``time_limit`` s."""
-    import multiprocessing
-
     t0 = time.perf_counter()
     polys, symbols = condition_polynomials(system)
     method = "Groebner basis over QQ (sympy, grevlex): basis [1] means no complex solution"

@@ -18,6 +18,7 @@ from fractions import Fraction
 
 import numpy as np
 
+from ..conditions import condition_trees, order_conditions
 from ..errors import InputError
 from ..trees import Tree
 
@@ -73,8 +74,6 @@ class ResidualSystem:
     def build(cls_, stages: int, order: int, cls: str = "general", implicit: bool = False,
               with_error: bool = False) -> ResidualSystem:
         """Set up the system; ``with_error`` adds the trees of order N+1 for the principal error."""
-        from ..conditions import condition_trees, order_conditions
-
         check_problem(stages, order)
         conds = tuple(order_conditions(order, cls))
         error_trees = tuple(condition_trees(order + 1, cls)) if with_error else ()

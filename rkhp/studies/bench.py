@@ -23,7 +23,9 @@ import numpy as np
 from .. import bounds
 from ..errors import InputError
 from ..executors import InProcess, run_all
+from ..integrators import integrate_ensemble
 from ..methods import DEFAULT_METHODS, SCIPY_METHODS, Method, check_distinct, resolve_method, resolve_system
+from .converge import check_t_final
 from .reference import Reference, dop853_reference, reference
 
 TARGETS = (1e-4, 1e-6, 1e-8, 1e-10)
@@ -220,8 +222,6 @@ def _ensemble_errors(ensemble_states, refs) -> float | None:
 def _ensemble_method_curve(method: Method, system, refs, floor, starts, steps, t_final, repeats,
                            executor=None) -> BenchCurve:
     if method.kind == "rkhp":
-        from ..integrators import integrate_ensemble
-
         def run(n):
             return np.asarray(_final_states(integrate_ensemble(system, method.tableau, t_final / n, n, starts,
                                                                executor=executor)))
@@ -286,8 +286,6 @@ def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=
     RKHP point spreads its K trajectories over the workers (the time per trajectory is then the
     workers' throughput). The errors do not depend on the executor; ``on_curve(done, total)``.
     """
-    from .converge import check_t_final
-
     system = resolve_system(system)
     t_final = check_t_final(system.t_final if t_final is None else t_final)
     bounds.integer(repeats, "repeats", 1, bounds.MAX_REPEATS)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..bounds import check_output_path
 from ..errors import InputError
 
 FORMATS = ("png", "svg", "pdf")
@@ -15,8 +16,6 @@ FORMATS = ("png", "svg", "pdf")
 
 def check_plot_path(path) -> Path:
     """The plot path, after checking its extension and that it can be written (`rkhp.bounds`)."""
-    from ..bounds import check_output_path
-
     return check_output_path(path, tuple("." + f for f in FORMATS), "plot file")
 
 

@@ -27,7 +27,9 @@ from .. import bounds
 from ..errors import InputError
 from ..executors import InProcess, run_all
 from ..integrators.failure import Failure
+from ..integrators.modified_energy import ModifiedEnergy, method_series
 from ..methods import condition_class, require_steps, resolve_method, resolve_methods, resolve_system
+from ..modified import MAX_ORDER, method_character
 from .converge import check_t_final, study_methods
 from .fit import fit_order
 from .invariants import invariant_deviations, max_deviations, window_maxima
@@ -230,9 +232,6 @@ def _long_run(method, system, h: float, steps: int, windows: int) -> LongRun:
 
 def _modified_windows(method, system, h: float, states, windows: int) -> ModifiedWindows | None:
     """H~_N's error per window (None for a tableau given in decimals: no exact series)."""
-    from ..integrators.modified_energy import ModifiedEnergy, method_series
-    from ..modified import MAX_ORDER, method_character
-
     cls = condition_class(system)
     order = min(MAX_ORDER, method.expected_order(cls) + 2)
     if not method.tableau.is_exact:

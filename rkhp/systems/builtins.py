@@ -3,8 +3,10 @@ pendulum, each a structure of a registered family (`rkhp.systems.families`)."""
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -12,6 +14,8 @@ from ..errors import InputError
 from ..taylor import tape as tp
 from .core import PoissonSystem
 from .families import SO3, LieAlgebra, family_system
+from .problems import PROBLEMS, build, problem_data
+from .spec import load_spec
 
 RIGID_BODY_I = (2.0, 1.0, 2.0 / 3.0)
 RIGID_BODY_X0 = (math.cos(1.1), 0.0, math.sin(1.1))
@@ -91,8 +95,6 @@ BUILTINS: dict[str, Callable[[str], PoissonSystem]] = {
 def builtin_systems() -> tuple[str, ...]:
     """Names of the built-in systems: docs/theory.md §6's three, then the reference problems of
     `rkhp.systems.problems` (``toda`` and ``volterra-lattice`` also as ``NAME:SIZE``)."""
-    from .problems import PROBLEMS, problem_data
-
     # the general-family problems join the list with the exact spray realisation (issue 10, E);
     # until then they are built with --realisation truncated:K
     return tuple(BUILTINS) + tuple(p for p in PROBLEMS if problem_data(p).family != "general")
@@ -101,10 +103,6 @@ def builtin_systems() -> tuple[str, ...]:
 def get_system(name_or_path, realisation: str = "symmetric") -> PoissonSystem:
     """A built-in system by name (``toda:12``: with its size), or a system from a spec file
     (.toml or .json)."""
-    from pathlib import Path
-
-    from .problems import build, problem_data
-
     key = str(name_or_path)
     if key in BUILTINS:
         return BUILTINS[key](realisation)
@@ -113,11 +111,7 @@ def get_system(name_or_path, realisation: str = "symmetric") -> PoissonSystem:
         return build(data, realisation)
     path = Path(key)
     if path.suffix.lower() in (".toml", ".json"):
-        from .spec import load_spec
-
         return load_spec(path, realisation)
-    import difflib
-
     names = builtin_systems()
     close = difflib.get_close_matches(key, names, n=2)
     hint = f"; did you mean {' or '.join(close)}?" if close else ""

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import bounds
+
 TOLERANCE = 1e-12
 
 
@@ -76,7 +78,6 @@ def _bracket(J: np.ndarray, K: np.ndarray, n: int) -> np.ndarray:
 def check_birealisation(system, samples: int = 100, seed: int = 0,
                         tolerance: float = TOLERANCE) -> BirealisationCheck:
     """Maximum deviation of each axiom over `samples` random points (seeded)."""
-    from .. import bounds
     from ..taylor.interpreter import evaluate
 
     bounds.integer(samples, "--samples", 1, bounds.MAX_SAMPLES)

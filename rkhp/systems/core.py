@@ -19,12 +19,13 @@ evaluate the same tapes.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..errors import InputError
 from ..taylor import tape as tp
+from .spray import MAX_TRUNCATION, truncated_order, truncated_realisation
 
 DOMAINS = {"R^n": 0, "positive orthant": 1}
 
@@ -74,18 +75,12 @@ register_realisation("shifted", _q_shift, False,
                      "alpha(x + Q p, p), Q = 1/2 on the diagonal and 1/4 off it (docs/theory.md §4)")
 
 
-#: modules that register further realisations when imported (e.g. issue 7's quartic kind)
-REALISATION_MODULES = ("rkhp.systems.quartic",)
-
-
 TRUNCATED = "truncated:"
 
 
 def truncated(name: str) -> Realisation:
     """The kind ``truncated:K``: the spray realisation's series to degree K in p (symmetric,
     degenerate; docs/theory.md §9); InputError unless 1 <= K <= MAX_TRUNCATION."""
-    from .spray import MAX_TRUNCATION
-
     text = name[len(TRUNCATED):]
     if not (text.isascii() and text.isdigit() and len(text) <= 3 and 1 <= int(text) <= MAX_TRUNCATION):
         raise InputError(f"realisation {name[:40]!r}: K in truncated:K must be an integer from 1 to "
@@ -100,15 +95,6 @@ def realisation(name: str) -> Realisation:
     """The realisation kind called `name` (InputError listing the known kinds otherwise)."""
     if isinstance(name, str) and name.startswith(TRUNCATED):
         return truncated(name)
-    if name not in REALISATIONS:
-        import importlib
-
-        for module in REALISATION_MODULES:
-            try:
-                importlib.import_module(module)
-            except ModuleNotFoundError as exc:
-                if exc.name != module:
-                    raise
     if name not in REALISATIONS:
         raise InputError(f"unknown realisation {name!r}; choose one of {', '.join(REALISATIONS)}, "
                          f"{TRUNCATED}K")
@@ -157,8 +143,6 @@ class PoissonSystem:
         K = realisation(self.realisation).truncation
         if K is None:
             return None
-        from .spray import truncated_order
-
         return truncated_order(K, self.poisson_degree)
 
     @property
@@ -213,8 +197,6 @@ class PoissonSystem:
 
     def with_x0(self, x0) -> PoissonSystem:
         """The same system started elsewhere (checked: size and domain; no exact solution)."""
-        from dataclasses import replace
-
         x0 = np.asarray(x0, dtype=np.float64).reshape(-1)
         if x0.shape != (self.dim,):
             raise InputError(f"x0 has {x0.size} components; {self.name} has dimension {self.dim}")
@@ -241,8 +223,6 @@ def build_system(*, name: str, family: str, dim: int, poisson: Callable, hamilto
     """
     kind = realisation(realisation_name)
     if kind.truncation is not None:
-        from .spray import truncated_realisation
-
         base_alpha, base_beta = truncated_realisation(poisson_program, kind.truncation)
 
     def shifted(x, p):

@@ -39,6 +39,7 @@ from .. import documents
 from ..errors import InputError
 from ..taylor import tape as tp
 from .core import PoissonSystem, build_system
+from .structure import lie_poisson_matrix, log_canonical_matrix
 
 #: so(3)*: {x_i, x_j} = -eps_ijk x_k, i.e. pi(x) v = x cross v
 SO3 = np.zeros((3, 3, 3))
@@ -263,8 +264,6 @@ def _lie_base(structure: LieAlgebra, sign: float):
 
 
 def _lie_symbolic(structure: LieAlgebra):
-    from .structure import lie_poisson_matrix
-
     return lie_poisson_matrix(structure.constants)
 
 
@@ -309,8 +308,6 @@ def _log_canonical_casimirs(lam):
 
 
 def _log_canonical_symbolic(lam):
-    from .structure import log_canonical_matrix
-
     return log_canonical_matrix(lam)
 
 

@@ -15,7 +15,7 @@ import numpy as np
 from ..errors import InputError
 from .core import PoissonSystem, build_system
 from .program import matrix_program, numeric_function
-from .structure import StructureCheck, check_finite_at, check_structure
+from .structure import StructureCheck, _symbols, check_finite_at, check_structure
 
 
 def poisson_degree(entries, symbols) -> int | None:
@@ -64,8 +64,6 @@ def general(entries, hamiltonian: Callable, *, name: str, x0, t_final: float,
     is checked unless `checked` (the result of an earlier :func:`check_structure`) is given;
     InputError (one line) if it is not a Poisson matrix or is singular at x0.
     """
-    from .structure import _symbols
-
     rows = tuple(tuple(row) for row in entries)
     n = len(rows)
     symbols = _symbols(n)

@@ -29,8 +29,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..bounds import MAX_DIMENSION
 from ..errors import InputError
+from ..expressions import parse_expression, variable_names
 from .core import PoissonSystem
+from .families import LieAlgebra, family_system
+from .general import general as general_family
+from .program import numeric_function, to_program
+from .structure import _symbols, lie_poisson_matrix, log_canonical_matrix
 
 
 @dataclass(frozen=True)
@@ -57,8 +63,6 @@ class ProblemData:
 
 
 def _read(texts, n: int, where: str):
-    from ..expressions import parse_expression, variable_names
-
     return tuple(parse_expression(t, variable_names(n), where=where) for t in texts)
 
 
@@ -158,8 +162,6 @@ def heavy_top() -> ProblemData:
 
 
 def _linear_text(C) -> tuple:
-    from .structure import lie_poisson_matrix
-
     return _matrix_text(lie_poisson_matrix(C))
 
 
@@ -215,8 +217,6 @@ def volterra_lattice(n: int = 5) -> ProblemData:
 
 
 def _log_text(L) -> tuple:
-    from .structure import log_canonical_matrix
-
     return _matrix_text(log_canonical_matrix(L))
 
 
@@ -261,8 +261,6 @@ def problem_data(name: str) -> ProblemData | None:
         raise InputError(f"{base} has no size parameter (got {name!r})")
     if not (size.isascii() and size.isdigit()):
         raise InputError(f"{name[:40]!r}: the size after ':' must be an integer")
-    from ..bounds import MAX_DIMENSION
-
     if len(size) > 6 or int(size) > MAX_DIMENSION:
         raise InputError(f"{name[:40]!r}: the size is at most {MAX_DIMENSION}")
     return make(int(size))
@@ -271,11 +269,6 @@ def problem_data(name: str) -> ProblemData | None:
 def build(data: ProblemData, realisation: str = "symmetric", general: bool = False
           ) -> PoissonSystem:
     """The system of a problem in its family (or in the general family)."""
-    from .families import LieAlgebra, family_system
-    from .general import general as general_family
-    from .program import numeric_function, to_program
-    from .structure import _symbols
-
     entries, H, casimirs = expressions(data)
     symbols = _symbols(data.dim)
     common = dict(name=data.name, x0=data.x0, t_final=data.t_final, realisation=realisation,

@@ -35,9 +35,11 @@ from .. import documents
 from ..bounds import MAX_DIMENSION
 from ..documents import load_document
 from ..errors import InputError
+from ..expressions import parse_expression as read
 from ..expressions import variable_names
 from .core import PoissonSystem
 from .families import FAMILIES, family_system, short
+from .general import general
 from .program import numeric_function, to_program
 from .structure import check_structure
 
@@ -91,8 +93,6 @@ def _expression_matrix(value, n: int, where: str) -> tuple:
 def parse_expression(text, n: int, where: str):
     """A sympy expression in x1..xn read by the safe reader (`rkhp.expressions`), with its
     symbols (InputError naming unknown symbols, bad syntax or anything outside the grammar)."""
-    from ..expressions import parse_expression as read
-
     names = variable_names(n)
     expr = read(text, names, where=where)
     import sympy
@@ -174,8 +174,6 @@ def load_spec(path, realisation: str = "symmetric") -> PoissonSystem:
     common = dict(name=name, t_final=t_final, realisation=realisation, x0=x0,
                   description=f"from {path.name}: H = {H.expression}")
     if family == GENERAL:
-        from .general import general
-
         system = general(matrix, H, casimirs=exprs, where=f"{where}: poisson", **common)
     else:
         system = family_system(family, structure, H, casimirs=casimirs or None, casimir_names=names,

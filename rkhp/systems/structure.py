@@ -37,6 +37,7 @@ from itertools import combinations
 import numpy as np
 
 from ..errors import InputError
+from ..expressions import variable_names
 
 #: a numeric residual passes when |r| <= TOLERANCE * (sum of |terms|)
 TOLERANCE = 1e-9
@@ -186,8 +187,6 @@ def _numeric_zero(expr, n: int, seed: int = 0) -> bool:
 
 def _symbols(n: int):
     import sympy
-
-    from ..expressions import variable_names
 
     return tuple(sympy.Symbol(name, real=True) for name in variable_names(n))
 

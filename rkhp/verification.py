@@ -33,6 +33,7 @@ from .bounds import BYTES_PER_TREE, check_tree_memory
 from .conditions import CLASSES, OrderCondition, check_class, conditions_of_order
 from .errors import InputError
 from .tableau import Tableau
+from .tablefiles import load_tableau
 from .trees import MAX_ENUMERATION_ORDER, Tree, check_order
 from .weights import ExactArithmetic, NoNumberField, arithmetic_for, tree_plan, weights_by_order
 
@@ -375,8 +376,6 @@ def verify(tableau, max_order: int | None = None, precision=None, classes=None,
     after each order (progress). Rational entries with long denominators that miss an order by
     less than the digits they pin down get :attr:`Verification.approximate` (docs/verify.md).
     """
-    from .tablefiles import load_tableau
-
     tableau = load_tableau(tableau)
     precision = parse_precision(precision)
     note = ""
