@@ -12,6 +12,7 @@ from .options import (
     SEED,
     STEPS,
     T_FINAL,
+    compile_notice,
     console,
     emit_json,
     executor_options,
@@ -62,6 +63,12 @@ def _setup(system_name, realisation, x0, methods, t_final, plot):
     return system, resolve_methods(_names(methods))
 
 
+def _kinds(methods) -> tuple[str, ...]:
+    """The kinds of compiled kernels a study of `methods` runs (rkhp.integrators.kernels): the
+    methods' own, and the loop of H over trajectories."""
+    return (*dict.fromkeys(m.kind for m in methods), "invariants")
+
+
 def _vector(x) -> str:
     return "(" + ", ".join(f"{v:.6g}" for v in x) + ")"
 
@@ -100,6 +107,7 @@ def converge(system, methods, x0, realisation, t_final, steps, refinements, plot
 
     counts = step_counts(steps, refinements)
     sys_, resolved = _setup(system, realisation, x0, methods, t_final, plot)
+    compile_notice(_kinds(resolved), fmt != "json")
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("converge", total=len(resolved) * len(counts))
         study = run(sys_, resolved, counts, t_final, executor=executor,
@@ -199,9 +207,9 @@ def bench(system, methods, x0, realisation, peers, t_final, steps, tolerances, r
     step_list = steps or B.DEFAULT_STEPS
     tol_list = tolerances or B.DEFAULT_TOLERANCES
     peer_list = peers or ()
-    for p in peer_list:
-        B.resolve_peer(p)
+    peer_methods = [B.resolve_peer(p) for p in peer_list]
     sys_, resolved = _setup(system, realisation, x0, methods, t_final, plot)
+    compile_notice(_kinds((*resolved, *peer_methods)), fmt != "json")
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("bench", total=len(resolved) + len(peer_list))
         study = B.bench(sys_, resolved, peer_list, step_list, tol_list, t_final, repeats, ensemble, seed,
@@ -274,6 +282,7 @@ def stress(system, methods, x0, realisation, t_final, long_steps, long_h, sweep_
     if len(ro) < 3:
         raise click.BadParameter("a fit needs at least 3 step sizes", param_hint="--round-off-steps")
     sys_, resolved = _setup(system, realisation, x0, methods, t_final, plot)
+    compile_notice((*_kinds(resolved), "classical"), fmt != "json")  # part (b)'s peer: classical RK4
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("stress", total=4)
         study = S.stress(sys_, resolved, t_final, long_steps, long_h, sweep_coarsest, ro,

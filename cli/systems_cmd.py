@@ -12,6 +12,7 @@ from .options import (
     SEED,
     STEPS,
     T_FINAL,
+    compile_notice,
     console,
     emit_json,
     format_option,
@@ -76,7 +77,9 @@ def check(system, realisation, samples, seed, fmt):
     from rkhp.systems import get_system
     from rkhp.systems.check import check_birealisation
 
-    result = check_birealisation(get_system(system, realisation), samples=samples, seed=seed)
+    poisson = get_system(system, realisation)
+    compile_notice((), fmt != "json")
+    result = check_birealisation(poisson, samples=samples, seed=seed)
     if fmt == "json":
         emit_json(result.to_json())
     else:
@@ -160,6 +163,7 @@ def integrate(system, method, steps, h, t_final, x0, modified_order, realisation
         from .modified_cmd import modified_series
 
         series = modified_series(poisson, chosen, modified_order, fmt != "json")
+    compile_notice((chosen.kind,), fmt != "json")
     trajectory = chosen.integrate(poisson, step, n)
     report = integration_report(poisson, trajectory, chosen.name, step, n)
     if series is not None and trajectory.ok:

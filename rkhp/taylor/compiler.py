@@ -46,4 +46,22 @@ explicit setting inherit the caller's."""
 NJIT_NRT = dict(NJIT, _nrt=True)
 """Functions that allocate and are called from NJIT_NORC kernels (e.g. crb_coef's closed form)."""
 
-__all__ = ["numba", "cache_dir", "NJIT", "NJIT_NORC", "NJIT_NRT"]
+
+
+def is_cached(kernel) -> bool:
+    """Whether numba's disk cache holds a fresh compiled version of ``kernel`` (a dispatcher
+    compiled with ``cache=True``): its index file exists, is of this numba version and matches the
+    stamp of the source file (numba recompiles otherwise). Reads numba's cache index the way
+    numba does on a call (``FunctionCache``'s index file), so a call after True loads, not compiles.
+    """
+    cache = getattr(kernel, "_cache", None)
+    index = getattr(getattr(cache, "_cache_file", None), "_load_index", None)
+    if index is None:  # not a caching dispatcher (or numba's internals moved): nothing to announce
+        return True
+    try:
+        return bool(index())
+    except Exception:  # an index numba cannot read (truncated, foreign pickle): numba recompiles
+        return False
+
+
+__all__ = ["numba", "cache_dir", "is_cached", "NJIT", "NJIT_NORC", "NJIT_NRT"]

@@ -1,0 +1,74 @@
+"""The compiled kernels each kind of run starts, and whether they must be compiled first.
+
+numba compiles a kernel on its first call and keeps it in its disk cache
+(:mod:`rkhp.taylor.compiler`: one folder per version of the compiled sources), so the first run on
+a machine, or after an upgrade, spends tens of seconds compiling before its first step.
+:func:`cold_start` tells, before a run, which of the kernels it needs are not in the cache yet
+and about how long compiling them takes, so that a front end can say so (the CLI prints one
+line on a terminal; docs/methods.md). Nothing is compiled here.
+
+A kernel named below is an entry point called from Python; the kernels it calls are compiled
+with it (and cached with it). Kinds are those of :mod:`rkhp.methods` plus ``tape`` (the tape
+interpreter, which every run uses to evaluate H) and ``invariants`` (the compiled loop of H over a
+trajectory used by the studies).
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import NamedTuple
+
+
+class Kernel(NamedTuple):
+    """An entry kernel: module, function name, and its cold compile time in seconds of one core.
+
+    ``seconds`` was measured on this project's reference machine (numba 0.68, one core of an AMD
+    EPYC, CPU time of a fresh process with an empty cache, kernels compiled in the order below,
+    so each figure leaves out what the kernels before it had already compiled)."""
+
+    module: str
+    name: str
+    seconds: float
+
+
+TAPE = Kernel("rkhp.taylor.interpreter", "run_tape", 14.0)
+
+KERNELS: dict[str, tuple[Kernel, ...]] = {
+    "tape": (TAPE,),
+    "invariants": (Kernel("rkhp.integrators.classical", "_hamiltonian_loop", 2.0),),
+    "rkhp": (Kernel("rkhp.integrators.engine", "rkhp_run", 9.0),),
+    "taylor": (),  # THP runs the tape interpreter from Python
+    "classical": (Kernel("rkhp.integrators.classical", "_rk_loop", 9.0),),
+    "implicit-midpoint": (Kernel("rkhp.integrators.classical", "_midpoint_loop", 12.0),),
+    "scipy": (Kernel("rkhp.integrators.classical", "_field", 2.0),),  # bench's peers: the compiled field
+}
+"""Entry kernels per kind (the tape interpreter is added to every run)."""
+
+
+class ColdStart(NamedTuple):
+    """The kernels of a run missing from numba's cache and the estimated compile time."""
+
+    kernels: tuple[str, ...]
+    seconds: float
+
+    def __bool__(self) -> bool:
+        return bool(self.kernels)
+
+
+def _dispatcher(kernel: Kernel):
+    return getattr(importlib.import_module(kernel.module), kernel.name)
+
+
+def cold_start(kinds) -> ColdStart:
+    """Which entry kernels of ``kinds`` (keys of :data:`KERNELS`; a run's methods' kinds, plus
+    "invariants" for a study) numba's cache lacks, and their summed compile seconds."""
+    from ..taylor.compiler import is_cached
+
+    wanted = [TAPE]
+    for kind in kinds:
+        wanted += [k for k in KERNELS[kind] if k not in wanted]
+    cold = [k for k in wanted if not is_cached(_dispatcher(k))]
+    return ColdStart(tuple(f"{k.module}.{k.name}" for k in cold), sum(k.seconds for k in cold))
+
+
+__all__ = ["Kernel", "KERNELS", "ColdStart", "cold_start"]

@@ -1,0 +1,119 @@
+"""The first run on a machine says that it compiles (issue 15): one line on stderr when stderr is a
+terminal, nothing in JSON mode or through a pipe (the rules of the progress bars).
+
+numba keeps compiled kernels in its disk cache; an empty NUMBA_CACHE_DIR is a machine that has
+never run rkhp, and numba writing index files there after a run is numba's own record of a compile.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pty
+import select
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from rkhp.integrators.kernels import cold_start
+from rkhp.methods import resolve_method, resolve_system
+
+NOTICE = b"compiling the integrator kernels once for this machine, ~"
+
+
+def _fresh_cache(tmp_path) -> dict:
+    """The environment of a machine whose numba cache is empty."""
+    return dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"))
+
+
+def _stderr_on_a_terminal(args, env, until: bytes | None = None, timeout: float = 60, stdout=None) -> bytes:
+    """Run `args` with stderr on a pseudo-terminal; return what it wrote there. With `until`, stop
+    the process (its whole session) as soon as that text has appeared."""
+    master, slave = pty.openpty()
+    proc = subprocess.Popen(args, stdin=subprocess.DEVNULL, stdout=stdout or subprocess.DEVNULL, stderr=slave,
+                            env=env, start_new_session=True)
+    os.close(slave)
+    seen, deadline = b"", time.monotonic() + timeout
+    try:
+        while time.monotonic() < deadline:
+            ready, _, _ = select.select([master], [], [], 0.2)
+            if ready:
+                try:
+                    chunk = os.read(master, 4096)
+                except OSError:  # the terminal closed: the process ended
+                    break
+                if not chunk:
+                    break
+                seen += chunk
+                if until is not None and until in seen:
+                    break
+            elif proc.poll() is not None:
+                break
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        os.close(master)
+    return seen
+
+
+def _notice_script(enabled: bool) -> list[str]:
+    return [sys.executable, "-c", f"from rkhp_cli.options import compile_notice; compile_notice(('rkhp',), {enabled})"]
+
+
+def test_a_run_leaves_its_kernels_in_the_cache():
+    resolve_method("rk4").integrate(resolve_system("rigid-body"), 0.1, 1)  # compiles, or loads the cache
+    assert not cold_start(["rkhp"])
+
+
+def test_an_empty_cache_lacks_the_kernels_of_each_kind(tmp_path):
+    script = ("import json; from rkhp.integrators.kernels import cold_start; "
+              "print(json.dumps({k: cold_start([k]) for k in ('rkhp', 'classical', 'taylor')}))")
+    proc = subprocess.run([sys.executable, "-c", script], env=_fresh_cache(tmp_path), capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    cold = json.loads(proc.stdout)
+    tape = "rkhp.taylor.interpreter.run_tape"
+    assert cold["rkhp"][0] == [tape, "rkhp.integrators.engine.rkhp_run"]
+    assert cold["classical"][0] == [tape, "rkhp.integrators.classical._rk_loop"]
+    assert cold["taylor"][0] == [tape]
+    assert cold["taylor"][1] < cold["rkhp"][1]
+    assert not list(tmp_path.rglob("*.nbi"))  # nothing compiled
+
+
+def test_the_notice_follows_the_progress_rules(tmp_path):
+    env = _fresh_cache(tmp_path)
+    shown = _stderr_on_a_terminal(_notice_script(True), env)
+    assert NOTICE in shown and b" s" in shown.split(NOTICE)[1] and shown.count(b"\n") == 1
+    assert _stderr_on_a_terminal(_notice_script(False), env) == b""  # JSON mode
+    piped = subprocess.run(_notice_script(True), env=env, capture_output=True, timeout=120)
+    assert piped.returncode == 0 and piped.stderr == b""  # stderr not a terminal
+
+
+@pytest.mark.parametrize("args, seconds", [
+    (["integrate", "rigid-body", "--method", "rk4", "--steps", "100"], 23),  # run_tape 14 + rkhp_run 9
+    (["converge", "rigid-body", "--method", "classical:rk4"], 25),  # run_tape 14 + _rk_loop 9 + H loop 2
+    (["check", "rigid-body"], 14),  # run_tape
+])
+def test_commands_say_so_before_compiling(tmp_path, args, seconds):
+    shown = _stderr_on_a_terminal([sys.executable, "-m", "rkhp", *args], _fresh_cache(tmp_path), until=b" s\r\n")
+    assert NOTICE + f"{seconds} s".encode() in shown
+
+
+@pytest.mark.slow
+def test_a_cold_json_run_is_quiet_and_then_warm(tmp_path):
+    env = _fresh_cache(tmp_path)
+    out = tmp_path / "out.json"
+    args = [sys.executable, "-m", "rkhp", "integrate", "rigid-body", "--method", "rk4", "--steps", "100",
+            "--format", "json"]
+    with open(out, "wb") as stdout:
+        shown = _stderr_on_a_terminal(args, env, timeout=600, stdout=stdout)
+    assert shown == b""
+    doc = json.loads(out.read_text())
+    assert doc["status"] == "ok" and doc["compile_seconds"] > 2  # it did compile
+    assert any((tmp_path / "numba-cache").rglob("engine.rkhp_run-*.nbi"))
+    # the same machine again: in the cache, so no notice even on a terminal
+    assert NOTICE not in _stderr_on_a_terminal(args[:-2], env, timeout=600)
