@@ -125,8 +125,14 @@ def _exact_cell(text: str) -> str:
               help="Precision of the verification (default: each table's own default, slower "
                    "for the 60-digit ones).")
 @format_option("table", "json")
-def tables(precision, fmt):
+@click.argument("name", required=False, metavar="")
+def tables(precision, fmt, name):
     """List the built-in tableaux with stages, kind, verified and claimed orders."""
+    if name is not None:  # one tableau is `rkhp show`'s (issue 15: `rkhp tables rk4` said only "extra argument")
+        from rkhp.errors import InputError
+
+        shown = name if len(name) <= 40 and name.isprintable() else "NAME"
+        raise InputError(f"rkhp tables lists every built-in tableau and takes no name; to see one: rkhp show {shown}")
     from rkhp.tablefiles import builtin_names, load_tableau
     from rkhp.verification import verify as run_verify
 

@@ -58,6 +58,8 @@ def test_show_a_file_and_bad_input(run_cli, tmp_path):
     assert rc == 0 and "2/3 │ 2/3" in out and "claimed orders: general 2" in out
     rc, out, err = run_cli("show", "rk5x")
     assert rc == 2 and out == "" and err.count("\n") == 1
+    rc, out, err = run_cli("tables", "rk4")  # one tableau is shown by `rkhp show`
+    assert rc == 2 and out == "" and err.count("\n") == 1 and "rkhp show rk4" in err
 
 
 def _compile(tmp_path, tex: str) -> None:
