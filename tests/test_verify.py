@@ -267,6 +267,28 @@ def test_rk58_rational_approximations_reach_order_5_at_their_precision(run_cli):
     assert rc == 0 and "look like rational approximations" in out
 
 
+def _nodepys_own(name: str):
+    if name == "sdirk34":
+        return pytest.importorskip("nodepy.runge_kutta_method").loadRKM("SDIRK34")
+    return pytest.importorskip("nodepy.low_storage_rk").load_low_storage("RK58[3R]C")
+
+
+@pytest.mark.parametrize("name", ["sdirk34", "rk58-3r-c"])
+def test_the_copied_nodepy_tableaux_are_nodepys(name):
+    # tests/data holds nodepy's coefficients so that the tests above run without nodepy; where the
+    # bench extra installs it, the copies are compared with nodepy's own entries, exactly
+    import sympy
+
+    from rkhp.tableau import as_sympy
+
+    theirs = _nodepys_own(name)
+    ours = load_tableau(str(DATA / f"nodepy-{name}.toml"))
+    assert ours.stages == len(theirs.b)
+    pairs = [*zip([x for row in ours.A for x in row], [x for row in theirs.A for x in row]), *zip(ours.b, theirs.b)]
+    for mine, their in pairs:
+        assert sympy.simplify(as_sympy(mine) - sympy.S(their)) == 0, (mine, their)
+
+
 def test_entries_beyond_a_reachable_number_field_are_verified_at_digits(run_cli, tmp_path):
     # cos(pi/97)^2 + sin(pi/97)^2 = 1: Euler's weight written in a field of huge degree
     path = tmp_path / "big.toml"
