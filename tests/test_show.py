@@ -81,7 +81,9 @@ def test_latex_documents_are_complete(run_cli):
 @pytest.mark.skipif(shutil.which("pdflatex") is None, reason="pdflatex is not installed")
 @pytest.mark.parametrize("args", [("show", "rk4"), ("show", "gauss2"),
                                   ("conditions", "--order", "5", "--degenerate"),
-                                  ("trees", "--order", "5", "--count")])
+                                  ("trees", "--order", "5", "--count"), ("trees", "--order", "4"),
+                                  ("conditions", "--order", "6", "--symmetric"),
+                                  ("modified", "--method", "paper-three-stage", "--order", "5", "--symmetric")])
 def test_latex_compiles_with_pdflatex(run_cli, tmp_path, args):
     rc, out, err = run_cli(*args, "--format", "latex")
     assert rc == 0, err
