@@ -5,10 +5,9 @@ from __future__ import annotations
 
 import click
 
+from .modified_cmd import character_of
 from .options import SEED, console, emit_json, format_option, integer, progress
 from .trees_cmd import _class_of
-
-EXACT = "exact"
 
 
 @click.command()
@@ -24,11 +23,8 @@ def compose(methods, order, degenerate, symmetric, seed, fmt):
     """Compose RKHP steps of size h (tableau names or files, or thpN, applied left to right; `exact`
     is the exact flow) and compare the generating function of the composition with the Butcher products
     of the methods' characters. Exact, on generic systems modulo primes (docs/modified.md)."""
-    from rkhp.algebra import exact_flow_character
     from rkhp.composition import MAX_ORDER, composition_series
     from rkhp.errors import InputError
-    from rkhp.methods import resolve_method
-    from rkhp.modified import method_character
     from rkhp.trees import check_order
 
     cls = _class_of(degenerate, symmetric)
@@ -38,12 +34,7 @@ def compose(methods, order, degenerate, symmetric, seed, fmt):
         raise InputError(f"give two or more methods separated by commas, got {methods!r}")
     if len(names) > 8:
         raise InputError(f"at most 8 steps, got {len(names)}")
-    characters = []
-    for name in names:
-        if name == EXACT:
-            characters.append(exact_flow_character(order))
-        else:
-            characters.append(method_character(resolve_method(name), order))
+    characters = [character_of(name, order)[1] for name in names]
     with progress(fmt != "json") as bar:
         bar.add_task("composing on generic systems modulo primes", total=None)
         series = composition_series(characters, order, cls, names, seed)

@@ -8,11 +8,26 @@ import click
 from .options import SEED, console, emit_json, format_option, integer, progress
 from .trees_cmd import _class_of
 
+EXACT = "exact"
+"""The method name of the exact flow in `modified` and `compose` (character e(t) = 1/gamma(t))."""
+
+
+def character_of(name: str, order: int):
+    """(name, character a(t) on T up to `order`) of a method name of docs/methods.md, or of `exact`."""
+    from rkhp.algebra import exact_flow_character
+    from rkhp.methods import resolve_method
+    from rkhp.modified import method_character
+
+    if name == EXACT:
+        return EXACT, exact_flow_character(order)
+    chosen = resolve_method(name)
+    return chosen.name, method_character(chosen, order)
+
 
 @click.command()
 @click.option("--method", "-m", "method", required=True, metavar="METHOD",
               help="An RKHP method: a built-in tableau or a tableau file with exact entries, or thpN / thpN-t0 "
-                   "(docs/methods.md).")
+                   "(docs/methods.md); `exact` is the exact flow (H~ = H).")
 @click.option("--order", "-n", "order", type=integer(None, name="N"), required=True,
               help="Largest tree order N: the series up to h^(N-1) (at most 8).")
 @click.option("--degenerate", is_flag=True, help="Degenerate birealisations: trees of T_0.")
@@ -28,25 +43,23 @@ def modified(method, order, degenerate, symmetric, modifying, seed, fmt):
     radicals), found order by order on generic systems modulo primes; c(t) = beta(t)/sigma(t) in the
     canonical basis of the class (docs/modified.md). Exits 1 at the first order whose term is not a
     combination of the F(t) of the class."""
-    from rkhp.methods import resolve_method
-    from rkhp.modified import MAX_ORDER, method_character, modified_hamiltonian, modifying_hamiltonian
+    from rkhp.modified import MAX_ORDER, modified_hamiltonian, modifying_hamiltonian
     from rkhp.trees import check_order
 
     cls = _class_of(degenerate, symmetric)
     check_order(order, MAX_ORDER, what="order of the modified Hamiltonian")
-    chosen = resolve_method(method)
-    character = method_character(chosen, order)
+    name, character = character_of(method, order)
     solve = modifying_hamiltonian if modifying else modified_hamiltonian
     with progress(fmt != "json") as bar:
         bar.add_task(f"solving order by order to order {order}", total=None)
         series = solve(character, order, cls, seed=seed)
-    doc = series_json(series, chosen.name)
+    doc = series_json(series, name)
     if fmt == "json":
         emit_json(doc)
     elif fmt == "latex":
-        _latex(series, chosen.name)
+        _latex(series, name)
     else:
-        _render(series, chosen.name)
+        _render(series, name)
 
 
 def series_json(series, method: str) -> dict:

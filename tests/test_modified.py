@@ -194,6 +194,14 @@ def test_cli_json_keys_and_values(run_cli):
     assert all(set(d) == {"tree", "order", "coefficient"} for d in doc["terms"])
 
 
+@pytest.mark.parametrize("cls", [(), ("--degenerate",), ("--symmetric",)])
+def test_cli_exact_flow_gives_h_itself(run_cli, cls):
+    # the exact flow's character e(t) = 1/gamma(t) (paper eq. (e)): H~ = H, every higher term zero
+    code, out, err = run_cli("modified", "--method", "exact", "--order", "6", *cls, "--format", "json")
+    assert code == 0, err
+    assert json.loads(out)["terms"] == [{"tree": "b", "order": 1, "coefficient": "1"}]
+
+
 def test_cli_errors_are_one_line(run_cli):
     code, out, err = run_cli("modified", "--method", "euler", "--order", "4")
     assert code == 1 and out == "" and len(err.strip().splitlines()) == 1 and "order 3" in err
