@@ -6,7 +6,7 @@ birealisation, spec key) is `rkhp.systems.families`; realisations are in `rkhp.s
 spec files in `rkhp.systems.spec`.
 """
 
-from . import quartic  # noqa: F401  (registers the quartic realisation in REALISATIONS)
+from . import general, quartic  # noqa: F401  (register the general family and the quartic realisation)
 from .builtins import builtin_systems, get_system
 from .core import REALISATIONS, PoissonSystem, register_realisation, shift_matrix
 

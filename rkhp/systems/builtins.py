@@ -95,9 +95,7 @@ BUILTINS: dict[str, Callable[[str], PoissonSystem]] = {
 def builtin_systems() -> tuple[str, ...]:
     """Names of the built-in systems: docs/theory.md §6's three, then the reference problems of
     `rkhp.systems.problems` (``toda`` and ``volterra-lattice`` also as ``NAME:SIZE``)."""
-    # the general-family problems join the list with the exact spray realisation (issue 10, E);
-    # until then they are built with --realisation truncated:K
-    return tuple(BUILTINS) + tuple(p for p in PROBLEMS if problem_data(p).family != "general")
+    return tuple(BUILTINS) + tuple(PROBLEMS)
 
 
 def get_system(name_or_path, realisation: str = "symmetric") -> PoissonSystem:

@@ -26,6 +26,9 @@ The families:
 - ``log-canonical``: pi_ij = lambda_ij x_i x_j on the positive orthant,
   alpha_i = x_i exp(-(1/2) sum_j lambda_ij x_j p_j).
 - ``constant``: alpha = x - pi p / 2, beta = x + pi p / 2.
+- ``general``: any pi(x) as expressions: the Poisson-spray realisation, one composite tape
+  operation (docs/theory.md §9.3); registered by `rkhp.systems.general` (importing
+  `rkhp.systems` registers it).
 """
 
 from __future__ import annotations

@@ -1,30 +1,79 @@
 """The ``general`` family: any Poisson matrix pi(x) given as expressions (docs/theory.md §9).
 
-The structure is checked on construction (`rkhp.systems.structure`: antisymmetry, the Jacobi
-identity, the declared Casimirs, finiteness at x0). Its birealisation is the Poisson-spray
-realisation (Weinstein; Crainic–Mărcuț): exactly (``symmetric``), or its series truncated at
-degree K in p (``truncated:K``, `rkhp.systems.spray`).
+The structure (:class:`PoissonMatrix`) is checked on construction (`rkhp.systems.structure`:
+antisymmetry, the Jacobi identity, the declared Casimirs, finiteness at x0). Its birealisation is
+the Poisson-spray realisation (Weinstein; Crainic–Mărcuț), symmetric: evaluated to round-off in
+the engine's Taylor arithmetic by the composite operation `rkhp.taylor.tape.spray` (Gauss
+collocation with the average constraint, `rkhp.taylor.composites.spray`; docs/theory.md §9.3), or
+its series truncated at degree K in p (``truncated:K``, `rkhp.systems.spray`).
+
+The family's functions below are registered in the registry `rkhp.systems.families` when this
+module is imported (spec key ``poisson``, a matrix of expression strings; importing
+`rkhp.systems` imports it); :func:`general` builds a system.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import InputError
-from .core import PoissonSystem, build_system
+from ..expressions import parse_expression, variable_names
+from .core import PoissonSystem
+from .families import PoissonFamily, family_system, register_family, short
 from .program import matrix_program, numeric_function
-from .structure import StructureCheck, _symbols, check_finite_at, check_structure
+from .structure import StructureCheck, check_finite_at, check_structure, symbols_of
 
 
-def poisson_degree(entries, symbols) -> int | None:
-    """The largest total degree of the entries as polynomials in the symbols (0 for a constant
+@dataclass(frozen=True, eq=False)
+class PoissonMatrix:
+    """The structure of a general system: pi_ij(x) = {x_i, x_j} as sympy expressions in the
+    real symbols x1..xn (rows)."""
+
+    entries: tuple
+
+    @property
+    def dim(self) -> int:
+        return len(self.entries)
+
+
+def read_poisson_matrix(value, n: int, where: str) -> PoissonMatrix:
+    """An n x n matrix of expressions (strings, or numbers) read by the safe reader."""
+    if not (isinstance(value, list) and len(value) == n
+            and all(isinstance(row, list) and len(row) == n for row in value)):
+        raise InputError(f"{where} must be a {n} x {n} matrix (the size of x0) of expression "
+                         f"strings")
+    entries = []
+    for i, row in enumerate(value):
+        out = []
+        for j, entry in enumerate(row):
+            if isinstance(entry, bool) or not isinstance(entry, str | int | float):
+                raise InputError(f"{where}: entry ({i + 1}, {j + 1}) must be an expression string "
+                                 f"or a number, got {short(entry)}")
+            text = entry if isinstance(entry, str) else repr(entry)
+            out.append(parse_expression(text, variable_names(n), where=f"{where} ({i + 1}, {j + 1})"))
+        entries.append(tuple(out))
+    return PoissonMatrix(tuple(entries))
+
+
+def check_shape(structure: PoissonMatrix) -> int:
+    """n (InputError unless the entries form a non-empty square matrix)."""
+    rows = structure.entries
+    if not rows or any(len(r) != len(rows) for r in rows):
+        raise InputError("poisson must be a square matrix of expressions")
+    return len(rows)
+
+
+def poisson_degree(structure: PoissonMatrix) -> int | None:
+    """The largest total degree of the entries as polynomials in x1..xn (0 for a constant
     matrix), or None when an entry is not a polynomial."""
     import sympy
 
+    symbols = symbols_of(structure.dim)
     degree = 0
-    for row in entries:
+    for row in structure.entries:
         for e in row:
             if e == 0:
                 continue
@@ -34,11 +83,12 @@ def poisson_degree(entries, symbols) -> int | None:
     return degree
 
 
-def _numeric_matrix(entries, symbols) -> Callable:
+def numeric_poisson(structure: PoissonMatrix) -> Callable:
+    """x -> pi(x) as a float (n, n) array."""
     import sympy
 
-    n = len(entries)
-    f = sympy.lambdify(symbols, [e for row in entries for e in row], "numpy")
+    n = structure.dim
+    f = sympy.lambdify(symbols_of(n), [e for row in structure.entries for e in row], "numpy")
 
     def poisson(x):
         values = f(*np.asarray(x, dtype=np.float64))
@@ -47,42 +97,51 @@ def _numeric_matrix(entries, symbols) -> Callable:
     return poisson
 
 
-def _exact_realisation(poisson_program, n):
-    raise InputError("the exact spray realisation of the general family is not available yet; "
-                     "use --realisation truncated:K (K = 1..12)")
+def poisson_program(structure: PoissonMatrix):
+    """y -> the n x n entries over tape values (numbers where constant)."""
+    return matrix_program(structure.entries, symbols_of(structure.dim))
 
 
-def general(entries, hamiltonian: Callable, *, name: str, x0, t_final: float,
+def spray_base(structure: PoissonMatrix, sign: float):
+    """The symmetric base: alpha (sign +1) or beta (sign -1) of the Poisson-spray realisation,
+    one composite operation f.spray (`rkhp.taylor.tape.spray`) giving both."""
+    program = poisson_program(structure)
+    n = structure.dim
+
+    def base(x, p, f):
+        pair = f.spray(program, x, p)
+        return pair[:n] if sign > 0 else pair[n:]
+
+    return base
+
+
+register_family(PoissonFamily(
+    name="general", spec_key="poisson", domain="R^n", read=read_poisson_matrix, check=check_shape,
+    poisson=numeric_poisson, program=poisson_program, degree=poisson_degree, base=spray_base,
+    casimirs=lambda structure: ((), ()), symbolic=lambda structure: structure.entries))
+
+
+def general(structure: PoissonMatrix, hamiltonian: Callable, *, name: str, x0, t_final: float,
             realisation: str = "symmetric", casimirs=(), casimir_names=(),
-            exact_solution=None, description: str = "", domain: str = "R^n",
-            where: str = "poisson", checked: StructureCheck | None = None,
-            seed: int = 0) -> PoissonSystem:
-    """A system xdot = pi(x) grad H(x) with pi given as an n x n matrix of sympy expressions in
-    the real symbols x1..xn and `hamiltonian(x)` a program over tape values.
+            exact_solution=None, description: str = "", where: str = "poisson",
+            checked: StructureCheck | None = None, seed: int = 0) -> PoissonSystem:
+    """A system xdot = pi(x) grad H(x) of the general family, `hamiltonian(x)` a program over
+    tape values.
 
     `casimirs` are sympy expressions (checked to Poisson-commute with every x_i). The structure
     is checked unless `checked` (the result of an earlier :func:`check_structure`) is given;
-    InputError (one line) if it is not a Poisson matrix or is singular at x0.
+    InputError (one line, naming `where`) if it is not a Poisson matrix or is singular at x0.
     """
-    rows = tuple(tuple(row) for row in entries)
-    n = len(rows)
-    symbols = _symbols(n)
     x0 = np.asarray(x0, dtype=np.float64)
+    rows = structure.entries
     check_finite_at(rows, x0, where)
     if checked is None:
         checked = check_structure(rows, casimirs=casimirs, x0=x0, seed=seed, where=where)
-    numeric_casimirs = tuple(numeric_function(c, symbols) for c in casimirs)
-    names = tuple(casimir_names) or tuple(str(c) for c in casimirs)
-    program = matrix_program(rows, symbols)
-    system = build_system(
-        name=name, family="general", dim=n, poisson=_numeric_matrix(rows, symbols),
-        hamiltonian=hamiltonian,
-        base_alpha=lambda x, p: _exact_realisation(program, n),
-        base_beta=lambda x, p: _exact_realisation(program, n),
-        x0=x0, t_final=t_final, poisson_program=program,
-        poisson_degree=poisson_degree(rows, symbols), realisation_name=realisation,
-        domain=domain, casimirs=numeric_casimirs, casimir_names=names,
+    symbols = symbols_of(structure.dim)
+    system = family_system(
+        "general", structure, hamiltonian, name=name, x0=x0, t_final=t_final,
+        realisation=realisation, casimirs=tuple(numeric_function(c, symbols) for c in casimirs),
+        casimir_names=tuple(casimir_names) or tuple(str(c) for c in casimirs),
         exact_solution=exact_solution, description=description)
-    system.extra["structure"] = rows
     system.extra["structure_check"] = checked
     return system

@@ -34,9 +34,10 @@ from ..errors import InputError
 from ..expressions import parse_expression, variable_names
 from .core import PoissonSystem
 from .families import LieAlgebra, family_system
+from .general import PoissonMatrix
 from .general import general as general_family
 from .program import numeric_function, to_program
-from .structure import _symbols, lie_poisson_matrix, log_canonical_matrix
+from .structure import lie_poisson_matrix, log_canonical_matrix, symbols_of
 
 
 @dataclass(frozen=True)
@@ -270,12 +271,12 @@ def build(data: ProblemData, realisation: str = "symmetric", general: bool = Fal
           ) -> PoissonSystem:
     """The system of a problem in its family (or in the general family)."""
     entries, H, casimirs = expressions(data)
-    symbols = _symbols(data.dim)
+    symbols = symbols_of(data.dim)
     common = dict(name=data.name, x0=data.x0, t_final=data.t_final, realisation=realisation,
                   description=data.description)
     hamiltonian = to_program(H, symbols)
     if general or data.family == "general":
-        return general_family(entries, hamiltonian, casimirs=casimirs,
+        return general_family(PoissonMatrix(entries), hamiltonian, casimirs=casimirs,
                               casimir_names=data.casimir_names, where=f"{data.name}: poisson",
                               **common)
     numeric = tuple(numeric_function(c, symbols) for c in casimirs)

@@ -1,8 +1,7 @@
 """Poisson systems from spec files (TOML or JSON).
 
-Keys (README "Spec files"): the common keys below, and the spec key of the family (the registry
-`rkhp.systems.families`; and the ``general`` family of `rkhp.systems.general`) holding its
-structure:
+Keys (docs/spec-files.md): the common keys below, and the spec key of the family (the registry
+`rkhp.systems.families`) holding its structure:
 
     name = "my-body"                       # optional (default: the file name)
     family = "lie-poisson"                 # or "log-canonical" or "constant"
@@ -44,19 +43,16 @@ from .program import numeric_function, to_program
 from .structure import check_structure
 
 COMMON_KEYS = ("name", "family", "hamiltonian", "x0", "t_final", "casimirs")
-#: the general family (`rkhp.systems.general`, issue 10) and its spec key, read apart from the
-#: registry until it registers there
-GENERAL, GENERAL_KEY = "general", "poisson"
 
 
 def family_names() -> tuple[str, ...]:
     """The families a spec file may name."""
-    return (*FAMILIES, GENERAL)
+    return tuple(FAMILIES)
 
 
 def spec_keys() -> tuple[str, ...]:
     """Every key a spec file may have: the common ones and each family's."""
-    return COMMON_KEYS + tuple(dict.fromkeys([*(f.spec_key for f in FAMILIES.values()), GENERAL_KEY]))
+    return COMMON_KEYS + tuple(dict.fromkeys(f.spec_key for f in FAMILIES.values()))
 
 
 def _read(path: Path) -> dict:
@@ -69,25 +65,6 @@ def _read(path: Path) -> dict:
     if unknown:
         raise InputError(f"{path}: unknown key(s) {', '.join(unknown)}; allowed: {', '.join(keys)}")
     return data
-
-
-def _expression_matrix(value, n: int, where: str) -> tuple:
-    """An n x n matrix of expressions (strings, or numbers) read by the safe reader."""
-    if not (isinstance(value, list) and len(value) == n
-            and all(isinstance(row, list) and len(row) == n for row in value)):
-        raise InputError(f"{where} must be a {n} x {n} matrix (the size of x0) of expression "
-                         f"strings")
-    entries = []
-    for i, row in enumerate(value):
-        out = []
-        for j, entry in enumerate(row):
-            if isinstance(entry, bool) or not isinstance(entry, str | int | float):
-                raise InputError(f"{where}: entry ({i + 1}, {j + 1}) must be an expression string "
-                                 f"or a number, got {entry!r}")
-            text = entry if isinstance(entry, str) else repr(entry)
-            out.append(parse_expression(text, n, f"{where} ({i + 1}, {j + 1})")[0])
-        entries.append(tuple(out))
-    return tuple(entries)
 
 
 def parse_expression(text, n: int, where: str):
@@ -149,7 +126,7 @@ def load_spec(path, realisation: str = "symmetric") -> PoissonSystem:
     n = x0.size
     name = documents.string(data.get("name", path.stem), f"{where}: name")
     t_final = documents.number(data.get("t_final", 10.0), f"{where}: t_final", 0.0, low_open=True)
-    needed = GENERAL_KEY if family == GENERAL else FAMILIES[family].spec_key
+    needed = FAMILIES[family].spec_key
     for key in set(spec_keys()) - set(COMMON_KEYS):
         if key != needed and key in data:
             raise InputError(f"{where}: key {key} does not belong to family {family}")
@@ -157,8 +134,7 @@ def load_spec(path, realisation: str = "symmetric") -> PoissonSystem:
         raise InputError(f"{where}: family {family} needs key {needed}")
     if "hamiltonian" not in data:
         raise InputError(f"{where}: missing key hamiltonian")
-    if family != GENERAL:
-        structure = FAMILIES[family].read(data[needed], n, f"{where}: {needed}")
+    structure = FAMILIES[family].read(data[needed], n, f"{where}: {needed}")
     h_expr, symbols = parse_expression(data["hamiltonian"], n, f"{where}: hamiltonian")
     exprs = []
     if "casimirs" in data:
@@ -166,15 +142,14 @@ def load_spec(path, realisation: str = "symmetric") -> PoissonSystem:
             raise InputError(f"{where}: casimirs must be a list of expressions")
         exprs = [parse_expression(c, n, f"{where}: casimirs[{i + 1}]")[0]
                  for i, c in enumerate(data["casimirs"])]
-    if family == GENERAL:
-        matrix = _expression_matrix(data[needed], n, f"{where}: poisson")
     H = to_program(h_expr, symbols)
     casimirs = tuple(numeric_function(e, symbols) for e in exprs)
     names = tuple(str(e) for e in exprs)
     common = dict(name=name, t_final=t_final, realisation=realisation, x0=x0,
                   description=f"from {path.name}: H = {H.expression}")
-    if family == GENERAL:
-        system = general(matrix, H, casimirs=exprs, where=f"{where}: poisson", **common)
+    if family == "general":
+        # the structure and the declared Casimirs are checked (docs/theory.md §9)
+        system = general(structure, H, casimirs=exprs, where=f"{where}: poisson", **common)
     else:
         system = family_system(family, structure, H, casimirs=casimirs or None, casimir_names=names,
                                **common)
@@ -183,7 +158,7 @@ def load_spec(path, realisation: str = "symmetric") -> PoissonSystem:
     expressions = [("hamiltonian", h_expr)] + [(f"casimir {i + 1}", e) for i, e in enumerate(exprs)]
     check_finite_at(expressions, symbols, x0, where)
     system.extra["expressions"] = (symbols, expressions)
-    if family != GENERAL:  # the general family checks its structure and Casimirs itself
+    if family != "general":  # the general family checks its structure and Casimirs itself
         check_structure(FAMILIES[family].symbolic(structure), casimirs=exprs, x0=x0,
                         where=f"{where}: the {family} structure")
     return system

@@ -14,7 +14,8 @@ pi(Y(s, eps)) p, and int_0^1 Y_m ds = 0 for m >= 1. Hence
 
 a_m homogeneous of degree m in p (a_1 = -pi(x) p / 2). F_{m-1} is a polynomial of degree m - 1 in
 s, so it is represented by its values at the K Gauss–Legendre nodes of [0, 1] (exact for degree
-<= K - 1), and the integrals are exact quadratures on those values (:func:`spray_quadrature`).
+<= K - 1), and the integrals are exact quadratures on those values
+(`rkhp.taylor.collocation`).
 At each node the eps-coefficients of pi(Y) are computed order by order by the standard
 Taylor-mode recurrences (products, quotients, exp, log, sin, cos, real powers) on tape values,
 so the whole series is recorded on the tape at record time (:class:`Series`).
@@ -26,55 +27,13 @@ x + sum_m Y_m(1) exactly in exact arithmetic (tests check it).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from functools import lru_cache
 from typing import NamedTuple
 
-import numpy as np
-
 from ..taylor import tape as tp
+from ..taylor.collocation import collocation
 
 #: largest truncation degree K of ``truncated:K`` (the tape grows like K^3)
 MAX_TRUNCATION = 12
-
-
-@dataclass(frozen=True)
-class SprayQuadrature:
-    """Tables on the Q Gauss–Legendre nodes c of [0, 1], with l_j the Lagrange basis on them.
-
-    Attributes:
-        nodes: c (Q,).
-        A: A[i, j] = int_0^{c_i} l_j (the Gauss collocation matrix), (Q, Q).
-        b: b[j] = int_0^1 l_j (Gauss weights).
-        w: w[j] = int_0^1 (1 - s) l_j(s) ds (the weights of the average constraint).
-    """
-
-    nodes: np.ndarray
-    A: np.ndarray
-    b: np.ndarray
-    w: np.ndarray
-
-
-@lru_cache(maxsize=32)
-def spray_quadrature(q: int) -> SprayQuadrature:
-    """The tables for `q` nodes, computed with mpmath at 40 digits (then rounded)."""
-    import mpmath
-
-    with mpmath.workdps(40):
-        guess = (np.polynomial.legendre.leggauss(q)[0] + 1.0) / 2.0
-        # roots of the shifted Legendre polynomial P_q(2s - 1), polished by Newton in mpmath
-        nodes = [mpmath.findroot(lambda s: mpmath.legendre(q, 2 * s - 1), mpmath.mpf(g))
-                 for g in guess]
-        vander = mpmath.matrix([[c**k for k in range(q)] for c in nodes])
-        inverse = vander**-1  # column j: monomial coefficients of l_j
-        A = [[sum(inverse[k, j] * nodes[i] ** (k + 1) / (k + 1) for k in range(q))
-              for j in range(q)] for i in range(q)]
-        b = [sum(inverse[k, j] / (k + 1) for k in range(q)) for j in range(q)]
-        # int_0^1 (1 - s) s^k ds = 1/((k + 1)(k + 2))
-        w = [sum(inverse[k, j] / ((k + 1) * (k + 2)) for k in range(q)) for j in range(q)]
-        return SprayQuadrature(np.array([float(c) for c in nodes]),
-                               np.array([[float(v) for v in row] for row in A]),
-                               np.array([float(v) for v in b]), np.array([float(v) for v in w]))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -312,7 +271,7 @@ def spray_series(poisson, x, p, K: int) -> SpraySeries:
     entries, each a number or a function of the series y) at tape values x, p (module
     docstring)."""
     n = len(x)
-    quad = spray_quadrature(K)
+    quad = collocation(K)
     graph = _Graph(K)
     y = [Series(graph, "input") for _ in range(n)]
     for i in range(n):

@@ -177,7 +177,7 @@ def _numeric_zero(expr, n: int, seed: int = 0) -> bool:
     to 1 + the size of its value; used for antisymmetry only)."""
     import sympy
 
-    f = sympy.lambdify(_symbols(n), expr, "numpy")
+    f = sympy.lambdify(symbols_of(n), expr, "numpy")
     rng = np.random.default_rng(seed)
     with np.errstate(all="ignore"):
         values = [complex(f(*x)) for x in rng.normal(size=(POINTS, n))]
@@ -185,7 +185,8 @@ def _numeric_zero(expr, n: int, seed: int = 0) -> bool:
     return bool(values) and all(abs(v) <= TOLERANCE for v in values)
 
 
-def _symbols(n: int):
+def symbols_of(n: int):
+    """The real sympy symbols x1..xn."""
     import sympy
 
     return tuple(sympy.Symbol(name, real=True) for name in variable_names(n))
@@ -305,7 +306,7 @@ def check_structure(matrix, *, casimirs=(), x0=None, seed: int = 0, where: str =
     """
     rows = _entries(matrix, where)
     n = len(rows)
-    symbols = _symbols(n)
+    symbols = symbols_of(n)
     budget = _Budget(symbolic_seconds)
     check_antisymmetric(rows, where, budget)
     x0 = np.zeros(n) if x0 is None else np.asarray(x0, dtype=np.float64)
@@ -377,7 +378,7 @@ def check_finite_at(matrix, x0, where: str = "poisson") -> np.ndarray:
     rows = _entries(matrix, where)
     n = len(rows)
     x0 = np.asarray(x0, dtype=np.float64)
-    f = sympy.lambdify(_symbols(n), [e for row in rows for e in row], "numpy")
+    f = sympy.lambdify(symbols_of(n), [e for row in rows for e in row], "numpy")
     with np.errstate(all="ignore"):
         values = [complex(np.asarray(v, dtype=np.complex128)) for v in f(*x0)]
     for q, v in enumerate(values):
@@ -394,7 +395,7 @@ def lie_poisson_matrix(structure) -> tuple[tuple, ...]:
     import sympy
 
     C = np.asarray(structure, dtype=np.float64)
-    x = _symbols(C.shape[0])
+    x = symbols_of(C.shape[0])
     return tuple(tuple(sympy.Add(*[sympy.nsimplify(C[i, j, k]) * x[k] for k in range(len(x))
                                    if C[i, j, k] != 0.0]) for j in range(len(x)))
                  for i in range(len(x)))
@@ -405,6 +406,6 @@ def log_canonical_matrix(lam) -> tuple[tuple, ...]:
     import sympy
 
     L = np.asarray(lam, dtype=np.float64)
-    x = _symbols(L.shape[0])
+    x = symbols_of(L.shape[0])
     return tuple(tuple(sympy.nsimplify(L[i, j]) * x[i] * x[j] for j in range(len(x)))
                  for i in range(len(x)))

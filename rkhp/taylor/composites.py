@@ -21,11 +21,13 @@ import math
 
 import numpy as np
 
-from .compiler import NJIT_NORC
+from .collocation import TABLE_A, TABLE_B, TABLE_E, TABLE_P, TABLE_W
+from .compiler import NJIT_NORC, NJIT_NRT
 from .compiler import numba as nb
 from .elementary import PHI_COEF, TWO_PI
 from .jets import jet_mul
-from .ops import SCRATCH_BASE
+from .ops import SCRATCH_BASE, SPRAY_MAX_NODES
+from .rows import run_rows, subprogram_at
 
 
 @nb.njit(**NJIT_NORC)
@@ -77,3 +79,413 @@ def phimv(tape, r, W, D, space, S, deg):
             for m in range(M):
                 S[v + i, m] = S[kv + i, m]
                 W[out + i, m] += c * S[v + i, m]
+
+
+#: the spray kernel's target: the truncation error of the collocation, relative to
+#: max(1, |x|), is at most this (one unit of round-off)
+SPRAY_TARGET = 2.0**-53
+#: Q nodes are used when the alpha of Q - 1 nodes agrees with theirs to this, relative to
+#: max(1, |x|) (a few units of round-off: the solves themselves are accurate to about that)
+SPRAY_AGREEMENT = 8.0 * 2.0**-52
+#: value-level Newton sweeps at most; one that does not reach the round-off level by then, or
+#: that stops contracting above it, gives NaN results (a numerical failure, never a wrong value)
+SPRAY_MAX_SWEEPS = 50
+
+
+@nb.njit(**NJIT_NORC)
+def _spray_field(tape, sub, W, D, space, S, deg, y_row, p_slots, n):
+    """X = pi(y) p by the sub-program at degree D: y from the scratch rows S[y_row + k] (with
+    y_row < 0: already in the sub-program's input slots, degree 0), p from the slots listed at
+    args[p_slots:]."""
+    lo, hi, in0 = sub[0], sub[1], sub[2]
+    args = tape.args
+    M = space.counts[D]
+    for k in range(n):
+        yk = args[in0 + k]
+        if y_row >= 0:
+            for m in range(M):
+                W[yk, m] = S[y_row + k, m]
+        deg[yk] = D
+        pk = args[in0 + n + k]
+        ps = args[p_slots + k]
+        for m in range(M):
+            W[pk, m] = W[ps, m]
+        deg[pk] = min(D, deg[ps])
+    run_rows(tape, lo, hi, W, D, space, S, deg)
+
+
+@nb.njit(**NJIT_NORC)
+def spray(tape, r, W, D, space, S, deg):
+    """alpha and beta of the Poisson-spray realisation (docs/theory.md §9.3) at degree D.
+
+    Operands: the sub-program X(y, p) = pi(y) p (inputs y then p, outputs X), then x (k slots),
+    then p (k slots); results alpha (k slots), then beta (k slots).
+
+    Q-node Gauss collocation of y' = X(y) on [0, 1] with the average constraint: the stage values
+    solve Y_i = x + sum_j (A_ij - w_j) X(Y_j), then alpha = x - sum_j w_j X(Y_j) and
+    beta = x + sum_j (b_j - w_j) X(Y_j) (`rkhp.taylor.collocation`; `_spray_stages` solves for
+    the stage values). NaN results when the stages cannot be solved (no Q <= SPRAY_MAX_NODES is
+    accurate enough, or the iteration does not converge): a numerical failure, never a wrong value.
+
+    Scratch rows from SCRATCH_BASE: the stage values Y (SPRAY_MAX_NODES * k rows), then their
+    X (as many).
+    """
+    ops, args = tape.ops, tape.args
+    out, start, n = ops[r, 1], ops[r, 2], ops[r, 4]
+    lo, hi, in0, n_in, out0, n_out, pos = subprogram_at(args, start)
+    sub = (lo, hi, in0, out0)
+    x_slots, p_slots = pos, pos + n
+    M = space.counts[D]
+    Ys = SCRATCH_BASE
+    Xs = SCRATCH_BASE + SPRAY_MAX_NODES * n
+    q = _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs)
+    for k in range(n):
+        xs = args[x_slots + k]
+        for m in range(M):
+            a = W[xs, m]
+            b = W[xs, m]
+            if q > 0:
+                for j in range(q):
+                    v = S[Xs + j * n + k, m]
+                    a -= TABLE_W[q, j] * v
+                    b += (TABLE_B[q, j] - TABLE_W[q, j]) * v
+            else:
+                a = np.nan
+                b = np.nan
+            W[out + k, m] = a
+            W[out + n + k, m] = b
+        deg[out + k] = D
+        deg[out + n + k] = D
+
+
+@nb.njit(**NJIT_NORC)
+def _jacobian(tape, sub, W, space, S, deg, y_row, p_slots, n, J, base):
+    """J := d_y X(y, p) and base := X(y, p) at the values y = S[y_row + k, 0] and p's values:
+    by forward mode (one evaluation at degree 1) when the jet space has n variables, else by
+    finite differences."""
+    args = tape.args
+    in0, out0 = sub[2], sub[3]
+    if space.n_vars >= n and space.degree >= 1:
+        M1 = space.counts[1]
+        for k in range(n):
+            yk = args[in0 + k]
+            pk = args[in0 + n + k]
+            for m in range(M1):
+                W[yk, m] = 0.0
+                W[pk, m] = 0.0
+            W[yk, 0] = S[y_row + k, 0]
+            W[yk, 1 + k] = 1.0
+            W[pk, 0] = W[args[p_slots + k], 0]
+            deg[yk] = 1
+            deg[pk] = 0
+        run_rows(tape, sub[0], sub[1], W, np.int64(1), space, S, deg)
+        for i in range(n):
+            base[i] = W[args[out0 + i], 0]
+            for k in range(n):
+                J[i, k] = W[args[out0 + i], 1 + k]
+        return
+    zero = np.int64(0)
+    for k in range(n):
+        W[args[in0 + k], 0] = S[y_row + k, 0]
+    _spray_field(tape, sub, W, zero, space, S, deg, np.int64(-1), p_slots, n)
+    for i in range(n):
+        base[i] = W[args[out0 + i], 0]
+    for k in range(n):
+        yk = S[y_row + k, 0]
+        step = 1.4901161193847656e-08 * max(1.0, abs(yk))
+        for j in range(n):
+            W[args[in0 + j], 0] = S[y_row + j, 0]
+        W[args[in0 + k], 0] = yk + step
+        _spray_field(tape, sub, W, zero, space, S, deg, np.int64(-1), p_slots, n)
+        for i in range(n):
+            J[i, k] = (W[args[out0 + i], 0] - base[i]) / step
+
+
+@nb.njit(**NJIT_NRT)
+def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
+    """The stage values of `spray` (rows Ys) and their X (rows Xs) up to degree D; returns Q,
+    or 0 when they cannot be solved. Allocates the Jacobians and the Newton matrices.
+
+    1. Q, at the values (`_value_stages`): with Q0 the smallest with
+       E_Q0 theta^(2 Q0) <= SPRAY_TARGET for theta an estimate of |J|_2, J = d_y X(x)
+       (`rkhp.taylor.collocation.average_error_constant`; exact for linear X), Q is the first
+       Q >= Q0 whose alpha agrees with that of Q - 1 nodes to SPRAY_AGREEMENT max(1, |x|) (the
+       truncation error of Q nodes is then smaller by about theta^2 / (16 Q^2)): theta alone
+       misses the non-linearity of X (where J is small but d^2 X is not).
+    2. Degrees 1..D, one at a time (D >= 1): with the exact value-level matrix
+       N = I - [(A - w)_ij J(Y_j)] (J at each stage value), the degree-d coefficients solve one
+       linear system once the lower ones are known: evaluate X on the stages at degree d, solve
+       N dY_d = (x + (A - w) X(Y) - Y)_d, and correct X's degree-d coefficients by J(Y_j) dY_d
+       (exact at degree d). One evaluation per stage and degree, at that degree (two with
+       finite-difference Jacobians).
+    """
+    args = tape.args
+    out0 = sub[3]
+    counts = space.counts
+    work = np.empty(n)
+    J = np.empty((n, n))
+    X0 = np.empty(n)
+    for k in range(n):
+        S[Ys + k, 0] = W[args[x_slots + k], 0]
+    _jacobian(tape, sub, W, space, S, deg, np.int64(Ys), p_slots, n, J, X0)
+    theta = _spectral_norm(J)
+    q = 1
+    while q < SPRAY_MAX_NODES and not (TABLE_E[q] * theta ** (2 * q) <= SPRAY_TARGET):
+        q += 1
+    q = max(1, q - 1)
+    scale = 1.0
+    for k in range(n):
+        scale = max(scale, abs(W[args[x_slots + k], 0]))
+    alpha = np.empty(n)
+    if not _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J, X0,
+                         theta, scale, alpha, False):
+        return 0
+    while True:
+        if q + 1 > SPRAY_MAX_NODES:
+            return 0
+        previous = alpha.copy()
+        if not _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q + 1,
+                             J, X0, theta, scale, alpha, True):
+            return 0
+        q += 1
+        gap = 0.0
+        for k in range(n):
+            gap = max(gap, abs(alpha[k] - previous[k]))
+        if gap <= SPRAY_AGREEMENT * scale:
+            break
+    if D == 0:
+        return q
+    # 2. degrees 1..D with the exact value-level matrix
+    qn = q * n
+    AW = _collocation_matrix(q)
+    Js = np.empty((q, n, n))
+    LU = np.empty((qn, qn))
+    perm = np.empty(qn, dtype=np.int64)
+    rvec = np.empty(qn)
+    tmp = np.empty(qn)
+    for j in range(q):
+        _jacobian(tape, sub, W, space, S, deg, np.int64(Ys + j * n), p_slots, n, Js[j], work)
+    if not _newton_matrix(AW, Js, q, n, LU, perm):
+        return 0
+    for i in range(q):
+        for k in range(n):
+            xs = args[x_slots + k]
+            for m in range(1, counts[D]):
+                S[Ys + i * n + k, m] = W[xs, m]
+    # with finite-difference Jacobians (a jet space of fewer than n variables) each degree
+    # takes a second pass, which removes their O(1e-8) error
+    passes = 1 if space.n_vars >= n else 2
+    for step in range(passes * D):
+        d = 1 + step // passes
+        for j in range(q):
+            _spray_field(tape, sub, W, np.int64(d), space, S, deg, np.int64(Ys + j * n),
+                         p_slots, n)
+            for k in range(n):
+                o = args[out0 + k]
+                for m in range(counts[d]):
+                    S[Xs + j * n + k, m] = W[o, m]
+        for m in range(counts[d - 1], counts[d]):
+            _newton_step(W, S, args, x_slots, AW, q, n, Ys, Xs, np.int64(m), LU, perm, rvec,
+                         tmp)
+            for j in range(q):
+                for i in range(n):
+                    acc = 0.0
+                    for k in range(n):
+                        acc += Js[j, i, k] * rvec[j * n + k]
+                    S[Xs + j * n + i, m] += acc
+    return q
+
+
+@nb.njit(**NJIT_NRT)
+def _collocation_matrix(q):
+    """(A - w)_ij for q nodes (`rkhp.taylor.collocation`)."""
+    AW = np.empty((q, q))
+    for i in range(q):
+        for j in range(q):
+            AW[i, j] = TABLE_A[q, i, j] - TABLE_W[q, j]
+    return AW
+
+
+@nb.njit(**NJIT_NRT)
+def _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J, X0, theta,
+                  scale, alpha, warm):
+    """The stage values with q nodes at the values (rows Ys, column 0; their X in Xs) by Newton
+    with the matrix I - (A - w) (x) J (J at the stage values when the first corrections contract
+    slowly: far from x it matters) until the update is at the round-off level; alpha := the
+    resulting alpha's values. The start is the spray series to degree 2 at the nodes,
+    Y(s) = x + (s - 1/2) X(x) + (s^2/2 - s/2 + 1/12) J X(x) (docs/theory.md §9.1), or with
+    `warm` the (q - 1)-node solution's collocation polynomial at the q nodes (its X in the rows
+    Xs). alpha comes from X at the last stage values but one, so the last update need only be
+    below 4 eps max(1, |x|) / theta (alpha moves by about theta |dY| / 2). False if it does not
+    converge (or q nodes exceed SPRAY_MAX_NODES)."""
+    if q > SPRAY_MAX_NODES:
+        return False
+    args = tape.args
+    out0 = sub[3]
+    zero = np.int64(0)
+    qn = q * n
+    AW = _collocation_matrix(q)
+    Js = np.empty((q, n, n))
+    for j in range(q):
+        Js[j] = J
+    LU = np.empty((qn, qn))
+    perm = np.empty(qn, dtype=np.int64)
+    rvec = np.empty(qn)
+    tmp = np.empty(qn)
+    work = np.empty(n)
+    if not _newton_matrix(AW, Js, q, n, LU, perm):
+        return False
+    eps = 2.220446049250313e-16
+    tol = min(4.0 * eps * scale / max(theta, 1e-3), 1e-13 * scale)
+    for i in range(q):
+        c = TABLE_A[q, i, :q].sum()
+        for k in range(n):
+            acc = W[args[x_slots + k], 0]
+            if warm:
+                for j in range(q - 1):
+                    acc += (TABLE_P[q - 1, i, j] - TABLE_W[q - 1, j]) * S[Xs + j * n + k, 0]
+            else:
+                jx = 0.0
+                for l in range(n):
+                    jx += J[k, l] * X0[l]
+                acc += (c - 0.5) * X0[k] + (0.5 * c * c - 0.5 * c + 1.0 / 12.0) * jx
+            S[Ys + i * n + k, 0] = acc
+    previous = np.inf
+    for sweep in range(SPRAY_MAX_SWEEPS):
+        for j in range(q):
+            _spray_field(tape, sub, W, zero, space, S, deg, np.int64(Ys + j * n), p_slots, n)
+            for k in range(n):
+                S[Xs + j * n + k, 0] = W[args[out0 + k], 0]
+        update = _newton_step(W, S, args, x_slots, AW, q, n, Ys, Xs, zero, LU, perm, rvec, tmp)
+        if not update < np.inf:
+            return False
+        converged = update <= tol
+        # stagnation at the round-off level is convergence; above it, divergence
+        if not converged and sweep >= 3 and update > 0.5 * previous:
+            if not update <= 64.0 * 4.0 * eps * scale:
+                return False
+            converged = True
+        if converged:
+            for k in range(n):
+                acc = W[args[x_slots + k], 0]
+                for j in range(q):
+                    acc -= TABLE_W[q, j] * S[Xs + j * n + k, 0]
+                alpha[k] = acc
+            return True
+        if sweep == 1 and update > 0.05 * previous:
+            for j in range(q):
+                _jacobian(tape, sub, W, space, S, deg, np.int64(Ys + j * n), p_slots, n, Js[j],
+                          work)
+            if not _newton_matrix(AW, Js, q, n, LU, perm):
+                return False
+        previous = update
+    return False
+
+
+@nb.njit(**NJIT_NORC)
+def _newton_matrix(AW, Js, q, n, LU, perm):
+    """LU := I - [(A - w)_ij J_j] (blocks i, j of size n), factorised; False if singular."""
+    for i in range(q):
+        for k in range(n):
+            for j in range(q):
+                for l in range(n):
+                    LU[i * n + k, j * n + l] = (1.0 if (i == j and k == l) else 0.0) \
+                        - AW[i, j] * Js[j, k, l]
+    return _lu(LU, perm)
+
+
+@nb.njit(**NJIT_NORC)
+def _newton_step(W, S, args, x_slots, AW, q, n, Ys, Xs, m, LU, perm, rvec, tmp):
+    """One Newton correction of the stage values' coefficient m: rvec := N^-1 (x + (A - w) X
+    - Y)_m, added to the rows Ys; returns its largest magnitude (NaN-safe)."""
+    for i in range(q):
+        for k in range(n):
+            acc = W[args[x_slots + k], m] - S[Ys + i * n + k, m]
+            for j in range(q):
+                acc += AW[i, j] * S[Xs + j * n + k, m]
+            rvec[i * n + k] = acc
+    _lu_solve(LU, perm, rvec, tmp)
+    update = 0.0
+    for a in range(q * n):
+        S[Ys + a, m] += rvec[a]
+        d = abs(rvec[a])
+        if not d <= update:  # also catches NaN
+            update = d
+    return update
+
+
+@nb.njit(**NJIT_NRT)
+def _spectral_norm(J):
+    """An estimate of the largest singular value of J (power iteration on J^T J from the
+    all-ones vector, 8 steps, 5% added), inf for a non-finite J."""
+    n = J.shape[0]
+    for i in range(n):
+        for k in range(n):
+            if not abs(J[i, k]) < np.inf:
+                return np.inf
+    v = np.ones(n) / math.sqrt(n)
+    u = np.empty(n)
+    sigma = 0.0
+    for _ in range(8):
+        for i in range(n):
+            acc = 0.0
+            for k in range(n):
+                acc += J[i, k] * v[k]
+            u[i] = acc
+        norm = 0.0
+        for k in range(n):
+            acc = 0.0
+            for i in range(n):
+                acc += J[i, k] * u[i]
+            v[k] = acc
+            norm += acc * acc
+        norm = math.sqrt(norm)
+        if norm == 0.0:
+            return 0.0
+        sigma = math.sqrt(norm)
+        for k in range(n):
+            v[k] /= norm
+    return 1.05 * sigma
+
+
+@nb.njit(**NJIT_NORC)
+def _lu(A, perm):
+    """LU factorisation with partial pivoting in place (perm: the row order); False if singular."""
+    n = A.shape[0]
+    for i in range(n):
+        perm[i] = i
+    for c in range(n):
+        piv = c
+        for i in range(c + 1, n):
+            if abs(A[i, c]) > abs(A[piv, c]):
+                piv = i
+        if not abs(A[piv, c]) > 0.0:
+            return False
+        if piv != c:
+            for j in range(n):
+                A[c, j], A[piv, j] = A[piv, j], A[c, j]
+            perm[c], perm[piv] = perm[piv], perm[c]
+        for i in range(c + 1, n):
+            f = A[i, c] / A[c, c]
+            A[i, c] = f
+            for j in range(c + 1, n):
+                A[i, j] -= f * A[c, j]
+    return True
+
+
+@nb.njit(**NJIT_NORC)
+def _lu_solve(LU, perm, b, tmp):
+    """b := A^-1 b from the factors of `_lu` (tmp: a work vector as long as b)."""
+    n = LU.shape[0]
+    for i in range(n):
+        acc = b[perm[i]]
+        for j in range(i):
+            acc -= LU[i, j] * tmp[j]
+        tmp[i] = acc
+    for i in range(n - 1, -1, -1):
+        acc = tmp[i]
+        for j in range(i + 1, n):
+            acc -= LU[i, j] * tmp[j]
+        tmp[i] = acc / LU[i, i]
+    for i in range(n):
+        b[i] = tmp[i]

@@ -20,9 +20,9 @@ import numpy as np
 
 from .compiler import NJIT_NORC
 from .compiler import numba as nb
-from .composites import phimv
+from .composites import phimv, spray
 from .jets import jet_space
-from .ops import FIRST_COMPOSITE, PHIMV
+from .ops import FIRST_COMPOSITE, PHIMV, SPRAY
 from .rows import rows
 
 
@@ -80,6 +80,8 @@ def _composite(tape, r, W, D, space, S, deg):
     code = tape.ops[r, 0]
     if code == PHIMV:
         phimv(tape, r, W, D, space, S, deg)
+    elif code == SPRAY:
+        spray(tape, r, W, D, space, S, deg)
 
 
 def evaluate(tape, inputs: np.ndarray, degree: int = 0, n_vars: int = 0):

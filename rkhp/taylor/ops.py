@@ -33,10 +33,14 @@ from dataclasses import dataclass
 
 ARITHMETIC, FUNCTION, COMPOSITE = "arithmetic", "function", "composite"
 
+#: collocation nodes of the spray kernel at most (`rkhp.taylor.collocation`,
+#: `rkhp.taylor.composites.spray`)
+SPRAY_MAX_NODES = 12
+
 CONST, ADD, SUB, MUL, NEG, MULC, ADDC, DIV = 0, 1, 2, 3, 4, 5, 6, 7
 EXP, LOG, SIN, COS, SQRT, POWI, POWR, CRB = 8, 9, 10, 11, 12, 13, 14, 15
 FIRST_COMPOSITE = 64
-PHIMV = 64
+PHIMV, SPRAY = 64, 65
 
 #: The one scratch layout of an evaluation (rows of the scratch array S, each a jet):
 #: jet_compose's argument, accumulator and product rows; a temporary row (DIV's reciprocal,
@@ -87,6 +91,10 @@ OPS: tuple[Op, ...] = (
     Op("crb", CRB, FUNCTION, -1),
     # phi(K) x, K (n x n) and x listed in args: scratch rows v = K^k x, K v and one product
     Op("phimv", PHIMV, COMPOSITE, -1, scratch=lambda n: 2 * n + 1),
+    # the Poisson-spray realisation (alpha, beta) of pi (docs/theory.md §9.3): a sub-program
+    # X(y, p) = pi(y) p, then x and p; scratch rows: the stage values and their X, for up to
+    # SPRAY_MAX_NODES collocation nodes (`rkhp.taylor.collocation`)
+    Op("spray", SPRAY, COMPOSITE, -1, scratch=lambda n: 2 * SPRAY_MAX_NODES * n),
 )
 
 BY_CODE: dict[int, Op] = {op.code: op for op in OPS}

@@ -53,6 +53,7 @@ from .ops import (
     POWI,
     POWR,
     SCRATCH_BASE,
+    SPRAY,
     SUB,
 )
 
@@ -325,8 +326,29 @@ def phimv(K: list[list], x: list) -> list[Var]:
     return builder.composite(PHIMV, [v for row in K for v in row] + list(x), n, k=n)
 
 
+def spray(poisson, x: list, p: list) -> list[Var]:
+    """alpha and beta of the Poisson-spray realisation of pi (docs/theory.md §9.3), 2n Vars:
+    a composite operation whose sub-program is X(y, p) = pi(y) p (`poisson(y)`: the n x n
+    entries of pi, numbers or values computed from y) and whose operands are x, then p."""
+    builder = next(v.builder for v in [*x, *p] if isinstance(v, Var))
+    n = len(x)
+
+    def field(inputs):
+        y, q = inputs[:n], inputs[n:]
+        P = poisson(y)
+        out = []
+        for i in range(n):
+            terms = [P[i][j] * q[j] for j in range(n)
+                     if isinstance(P[i][j], Var) or float(P[i][j]) != 0.0]
+            out.append(sum(terms[1:], terms[0]) if terms else 0.0)
+        return out
+
+    sub = builder.subprogram(2 * n, field)
+    return builder.composite(SPRAY, list(x) + list(p), 2 * n, k=n, subprograms=(sub,))
+
+
 #: the functions a family's base program calls on tape Vars (`rkhp.systems.families`)
-functions = SimpleNamespace(**_PRIMITIVE, crb=crb, phimv=phimv)
+functions = SimpleNamespace(**_PRIMITIVE, crb=crb, phimv=phimv, spray=spray)
 
 
 def record(n: int, program) -> Tape:
