@@ -54,7 +54,8 @@ def systems(fmt):
     if fmt == "json":
         emit_json(rows)
         return
-    table = compact_table("Built-in Poisson systems (realisations: symmetric, shifted, quartic)")
+    table = compact_table("Built-in Poisson systems (realisations: symmetric, shifted, quartic, "
+                          "truncated:K)")
     for col in ("name", "family", "n", "domain", "x0", "t_final", "Casimirs", "exact"):
         table.add_column(col, no_wrap=col in ("name", "family"))
     for r in rows:

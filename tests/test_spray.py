@@ -1,0 +1,173 @@
+"""The exact Poisson-spray realisation of the general family (issue 10, part E).
+
+Values from outside the code: the closed forms of docs/theory.md §4 (so(3)*: the rigid body's
+c(|p|^2) realisation; se(3)*: phi(K(p)) x) which the spray realisation reduces to for linear pi,
+the error constant of collocation averages derived with mpmath (docs/theory.md §9.3), the
+birealisation axioms, and Casimirs of the Nambu system.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import mpmath
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from rkhp_cli.main import rkhp
+
+from rkhp.integrators import integrate
+from rkhp.systems import get_system
+from rkhp.systems.check import check_birealisation
+from rkhp.systems.problems import as_general
+from rkhp.taylor.collocation import average_error_constant, collocation
+
+RIGID_BODY_GENERAL = """
+name = "rigid-body-general"
+family = "general"
+poisson = [["0", "-x3", "x2"], ["x3", "0", "-x1"], ["-x2", "x1", "0"]]
+hamiltonian = "x1^2/4 + x2^2/2 + 3*x3^2/4"
+x0 = [0.45359612142557731, 0.0, 0.89120736006143542]
+casimirs = ["(x1^2 + x2^2 + x3^2)/2"]
+"""
+
+
+@pytest.fixture(scope="module")
+def rigid_body_general(tmp_path_factory):
+    path = tmp_path_factory.mktemp("spec") / "rb.toml"
+    path.write_text(RIGID_BODY_GENERAL)
+    return get_system(path)
+
+
+def _mp_tables(q):
+    """Gauss collocation tables on [0, 1] and the average weights, in mpmath (independent of
+    rkhp.taylor.collocation): nodes from the shifted Legendre polynomial, integrals of the
+    Lagrange basis through its monomial coefficients."""
+    nodes = sorted(mpmath.findroot(lambda s: mpmath.legendre(q, 2 * s - 1), mpmath.mpf(g))
+                   for g in (np.polynomial.legendre.leggauss(q)[0] + 1) / 2)
+    inverse = mpmath.matrix([[c**k for k in range(q)] for c in nodes]) ** -1
+    A = [[sum(inverse[k, j] * c ** (k + 1) / (k + 1) for k in range(q)) for j in range(q)]
+         for c in nodes]
+    w = [sum(inverse[k, j] / ((k + 1) * (k + 2)) for k in range(q)) for j in range(q)]
+    return A, w
+
+
+def test_average_error_constant():
+    """For y' = lambda y, alpha = lambda / (e^lambda - 1) x; with Q Gauss nodes the average
+    constraint gives alpha with the error (-1)^Q E_Q lambda^(2Q), E_Q = (Q!)^2 / ((2Q)!^2 (2Q+1))
+    (mpmath at 60 digits); the float64 tables agree with mpmath's."""
+    with mpmath.workdps(60):
+        lam = mpmath.mpf("1e-3")
+        for q in range(1, 7):
+            A, w = _mp_tables(q)
+            t = collocation(q)
+            assert np.allclose(t.A, np.array([[float(v) for v in row] for row in A]), atol=1e-15)
+            assert np.allclose(t.w, [float(v) for v in w], atol=1e-15)
+            M = mpmath.matrix([[(1 if i == j else 0) - lam * (A[i][j] - w[j]) for j in range(q)]
+                               for i in range(q)])
+            Y = M**-1 * mpmath.matrix([1] * q)
+            alpha = 1 - lam * sum(w[j] * Y[j] for j in range(q))
+            error = (alpha - lam / (mpmath.e**lam - 1)) / lam ** (2 * q)
+            assert float(error) == pytest.approx((-1) ** q * average_error_constant(q), rel=1e-2)
+
+
+def test_rigid_body_spray_is_the_closed_form(rigid_body_general):
+    """so(3)*: the spray realisation is the closed form of docs/theory.md §4 (to round-off, for
+    |p| up to 2), and it is symmetric."""
+    builtin = get_system("rigid-body")
+    rng = np.random.default_rng(0)
+    for r in (1e-9, 1e-3, 0.1, 0.5, 1.0, 2.0):
+        for _ in range(3):
+            x, d = rng.normal(size=3), rng.normal(size=3)
+            p = r * d / np.linalg.norm(d)
+            a, b = rigid_body_general.alpha(x, p), rigid_body_general.beta(x, p)
+            assert np.allclose(a, builtin.alpha(x, p), rtol=0, atol=2e-15)
+            assert np.allclose(b, builtin.beta(x, p), rtol=0, atol=2e-15)
+            assert np.allclose(b, rigid_body_general.alpha(x, -p), rtol=0, atol=5e-16)
+
+
+def test_rigid_body_trajectory_matches_the_builtin(rigid_body_general):
+    """Acceptance: 100 steps of paper-three-stage at h = 0.1 agree to <= 1e-12."""
+    a = integrate(get_system("rigid-body"), "paper-three-stage", 0.1, 100)
+    b = integrate(rigid_body_general, "paper-three-stage", 0.1, 100)
+    assert a.ok and b.ok
+    assert np.abs(a.states - b.states).max() <= 1e-12
+
+
+def test_heavy_top_spray_is_phi_of_K():
+    """se(3)*: the general family's spray realisation equals the Lie–Poisson family's
+    phi(K(p)) x, and their trajectories agree."""
+    closed, spray = get_system("heavy-top"), as_general("heavy-top")
+    assert spray.family == "general" and closed.family == "lie-poisson"
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        x, p = rng.normal(size=6), 0.4 * rng.normal(size=6) / math.sqrt(6)
+        assert np.allclose(spray.alpha(x, p), closed.alpha(x, p), rtol=0, atol=5e-15)
+        assert np.allclose(spray.beta(x, p), closed.beta(x, p), rtol=0, atol=5e-15)
+    a = integrate(closed, "paper-three-stage", 0.1, 50)
+    b = integrate(spray, "paper-three-stage", 0.1, 50)
+    assert np.abs(a.states - b.states).max() <= 1e-12
+
+
+def test_truncated_series_converge_to_the_spray():
+    """truncated:K -> the exact realisation as K grows, by about |p|^(K+1) (nambu)."""
+    exact = get_system("nambu")
+    x, d = np.array(exact.x0), np.array([0.3, -0.5, 0.2])
+    gaps = []
+    for K in (2, 4, 6, 8):
+        trunc = get_system("nambu", f"truncated:{K}")
+        gaps.append(np.abs(trunc.alpha(x, 0.1 * d) - exact.alpha(x, 0.1 * d)).max())
+    assert gaps[-1] < 1e-12
+    assert all(b < 0.1 * a for a, b in zip(gaps, gaps[1:]))
+
+
+def test_failure_is_nan_never_a_wrong_value():
+    """Where the collocation cannot reach round-off (|p| far too large), alpha is NaN and the
+    integration reports a numerical failure (exit 1)."""
+    s = get_system("nambu")
+    assert np.all(np.isnan(s.alpha(s.x0, [1.2, 2.0, -3.2])))
+    traj = integrate(s, "paper-three-stage", 4.0, 3)
+    assert not traj.ok and "non-finite" in traj.status
+    res = CliRunner().invoke(rkhp, ["integrate", "nambu", "--method", "paper-three-stage",
+                                    "--h", "4", "--t-final", "12"])
+    assert res.exit_code == 1 and res.output.count("\n") >= 1
+
+
+@pytest.mark.parametrize("name", ["charged-particle", "point-vortices", "nambu"])
+def test_check_on_general_builtins(name):
+    """Acceptance: each axiom to <= 1e-12 (relative) at |p| <= 0.5; symmetric."""
+    result = check_birealisation(get_system(name), samples=30, seed=2)
+    assert result.ok and result.symmetric and result.degenerate
+    assert max(result.deviations.values()) <= 1e-12
+
+
+def test_check_json_on_a_general_spec(tmp_path):
+    path = tmp_path / "rb.toml"
+    path.write_text(RIGID_BODY_GENERAL)
+    res = CliRunner().invoke(rkhp, ["check", str(path), "--samples", "10", "--format", "json"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.output)
+    assert doc["ok"] and doc["symmetric"] and doc["realisation"] == "symmetric"
+
+
+@pytest.mark.slow
+def test_nambu_casimir_over_1e5_steps():
+    """Acceptance: the Casimir of nambu stays within 1e-12 over 10^5 steps (h = 0.1)."""
+    s = get_system("nambu")
+    traj = integrate(s, "paper-three-stage", 0.1, 100_000)
+    assert traj.ok
+    C = np.array([s.casimir_values(x)[0] for x in traj.states])
+    assert np.abs(C - C[0]).max() <= 1e-12
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["charged-particle", "nambu"])
+def test_converge_confirms_the_expected_orders(name):
+    """Acceptance: `rkhp converge` confirms euler, paper-two-stage, paper-three-stage, rk4."""
+    res = CliRunner().invoke(rkhp, ["converge", name, "--format", "json"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(res.output)
+    assert {m["method"]: m["verdict"] for m in doc["methods"]} == {
+        "euler": "confirmed", "paper-two-stage": "confirmed", "paper-three-stage": "confirmed",
+        "rk4": "confirmed"}
