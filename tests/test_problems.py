@@ -19,7 +19,6 @@ from rkhp.systems import builtin_systems, get_system
 from rkhp.systems.problems import PROBLEMS, expressions, problem_data
 from rkhp.systems.structure import check_structure
 
-
 #: GeometricProblems.jl v0.8.2, src/point_vortices.jl and src/lotka_volterra_4d.jl:
 #: `reference_solution` at t = dt * nt = 10 from the default q0
 PUBLISHED = {
