@@ -15,8 +15,8 @@ from rkhp.errors import InputError
 from rkhp.systems import builtin_systems, get_system
 from rkhp.systems.check import check_birealisation
 
-BUILTINS = ("rigid-body", "lotka-volterra", "pendulum", "heavy-top", "toda", "volterra-lattice",
-            "lotka-volterra-4d")
+BUILTINS = ("rigid-body", "lotka-volterra", "pendulum", "charged-particle", "point-vortices",
+            "nambu", "heavy-top", "toda", "volterra-lattice", "lotka-volterra-4d")
 SPEC_RIGID_BODY = """
 name = "rigid-body-spec"
 family = "lie-poisson"
