@@ -35,7 +35,7 @@ ARITHMETIC, FUNCTION, COMPOSITE = "arithmetic", "function", "composite"
 
 #: collocation nodes of the spray kernel at most (`rkhp.taylor.collocation`,
 #: `rkhp.taylor.composites.spray`)
-SPRAY_MAX_NODES = 12
+SPRAY_MAX_NODES = 24
 
 CONST, ADD, SUB, MUL, NEG, MULC, ADDC, DIV = 0, 1, 2, 3, 4, 5, 6, 7
 EXP, LOG, SIN, COS, SQRT, POWI, POWR, CRB = 8, 9, 10, 11, 12, 13, 14, 15
