@@ -1,5 +1,5 @@
-"""The Taylor machinery (rkhp.taylor): every elementary function's jets against sympy at every
-degree, the value path against the jet path, the tape's sub-programs, and the layers."""
+"""The Taylor machinery (rkhp.taylor): every elementary opcode's jets against sympy at every
+degree, the value path against the jet path, the tape's sub-programs."""
 
 from __future__ import annotations
 
@@ -11,55 +11,114 @@ import sympy
 
 from rkhp.taylor import tape as tp
 from rkhp.taylor.interpreter import evaluate, run_tape, tape_work
-from rkhp.taylor.jets import jet_space
-from rkhp.taylor.ops import ARITHMETIC, DIV, FUNCTION, OPS, PHIMV
+from rkhp.taylor.jets import jet_space, monomials
+from rkhp.taylor.ops import BY_NAME, COMPOSITE, DERIVED, FUNCTION, OPS, PHIMV
 
-U0 = 0.7
 DEGREES = range(0, 7)
-S = sympy.Symbol("u", positive=True)
+X, Y = sympy.symbols("x y", real=True)
+W = sympy.Symbol("w", positive=True)
+#: the inner functions every operation is composed with: polynomials in (x, y), positive near 0
+INNER = (sympy.Rational(7, 10) + sympy.Rational(3, 10) * X - Y / 5 + X * Y / 10 + X ** 2 / 20,
+         sympy.Rational(6, 5) - X / 4 + Y ** 2 / 2)
 
-#: FUNCTION ops that mathematical text does not call by name: how to record them, what they are
-SPECIAL = {
-    "powi": (lambda u: u ** -3, S ** -3),
-    "powr": (lambda u: u ** 1.5, S ** sympy.Rational(3, 2)),
-    "crb": (lambda u: tp.crb([u]), (1 - S / 2 * sympy.cot(S / 2)) / S ** 2),  # c(|p|^2), p = (u)
+
+def _inner(x, y):
+    """INNER on tape values (the same polynomials, their coefficients rounded to float64)."""
+    return 0.7 + 0.3 * x - 0.2 * y + 0.1 * (x * y) + 0.05 * (x * x), 1.2 - 0.25 * x + 0.5 * (y * y)
+
+
+G, H = INNER
+#: every elementary opcode (ARITHMETIC and FUNCTION kinds of the opcode table): how to record it
+#: on the inner values g, h, and the composed function it computes (sympy)
+CASES = {
+    "const": (lambda g, h: g.builder.const(0.25), sympy.Rational(1, 4)),
+    "add": (lambda g, h: g + h, G + H),
+    "sub": (lambda g, h: g - h, G - H),
+    "mul": (lambda g, h: g * h, G * H),
+    "neg": (lambda g, h: -g, -G),
+    "mulc": (lambda g, h: 2.5 * g, sympy.Rational(5, 2) * G),
+    "addc": (lambda g, h: g + 1.5, G + sympy.Rational(3, 2)),
+    "div": (lambda g, h: g / h, G / H),
+    "powi": (lambda g, h: g ** -3, G ** -3),
+    "powr": (lambda g, h: g ** 1.5, G ** sympy.Rational(3, 2)),
+    # c(|p|^2), p = (g, h) (docs/theory.md §4): c(w) composed with w = g^2 + h^2 (see _coefficients)
+    "crb": (lambda g, h: tp.crb([g, h]), ((1 - sympy.sqrt(W) / 2 * sympy.cot(sympy.sqrt(W) / 2)) / W,
+                                          G ** 2 + H ** 2)),
+    **{op.name: (lambda g, h, f=tp.RECORDERS[op.sympy]: f(g), getattr(sympy, op.sympy)(G))
+       for op in OPS if op.kind == FUNCTION and op.sympy},
+    # recorded as compositions of the table's functions (rkhp.taylor.ops.DERIVED)
+    **{d.name: (lambda g, h, f=tp.RECORDERS[d.sympy]: f(g), getattr(sympy, d.sympy)(G)) for d in DERIVED},
 }
-CASES = {op.name: (tp.RECORDERS[op.sympy], getattr(sympy, op.sympy)(S)) if op.sympy else SPECIAL[op.name]
-         for op in OPS if op.kind == FUNCTION}
-CASES["div"] = (lambda u: 2.0 / u, 2 / S)
-CASES.update({name: (tp.RECORDERS[name], getattr(sympy, name)(S)) for name in ("tan", "sinh", "cosh", "tanh")})
+#: the other branches of the same opcodes: POWI with k >= 0 (repeated products), and CRB's closed
+#: form (20 <= |p|^2 < (2 pi)^2; its power series below)
+BRANCHES = {"powi+": (lambda g, h: g ** 3, G ** 3), "powi0": (lambda g, h: g ** 0 + h, 1 + H),
+            "crb-far": (lambda g, h: tp.crb([5.0 * g, 4.0 * h]),
+                        (CASES["crb"][1][0], 25 * G ** 2 + 16 * H ** 2))}
 
 
-def _jet(record, D):
-    builder = tp.TapeBuilder(1)
-    (u,) = builder.inputs()
-    tape = builder.finish([record(u)])
-    space = jet_space(1, D)
+def _record(record):
+    builder = tp.TapeBuilder(2)
+    x, y = builder.inputs()
+    return builder.finish([record(*_inner(x, y))])
+
+
+def _jet(tape, D):
+    """The jet at (0, 0) of the tape's output in (x, y) truncated at degree D."""
+    space = jet_space(2, D)
     work = tape_work((tape,), space.size)
-    work.W[0, 0] = U0
     if D:
-        work.W[0, 1] = 1.0
+        work.W[0, 1] = work.W[1, 2] = 1.0  # x = 0 + dx, y = 0 + dy
     run_tape(tape, D, space, work)
     return work.W[tape.outputs[0]].copy()
 
 
-def test_every_function_op_is_covered():
-    assert {op.name for op in OPS if op.kind == FUNCTION} <= set(CASES)
-    assert {op.code for op in OPS if op.kind == ARITHMETIC} >= {DIV}
+def _taylor_coefficients(expr, D):
+    """{(a, b): d^a_x d^b_y F(0, 0) / (a! b!)} for a + b <= D, by sympy at 30 digits. F is `expr`,
+    or for a pair (f(w), u(x, y)) the composition f(u): then sympy takes the derivatives of f at
+    u(0, 0) and composes its Taylor polynomial with u exactly (differentiating the composed
+    closed form of c(|p|^2) takes minutes)."""
+    if isinstance(expr, tuple):
+        f, u = expr
+        u0 = u.subs({X: 0, Y: 0})
+        series = sum(sympy.diff(f, W, q).subs(W, u0).evalf(30) / math.factorial(q) * (u - u0) ** q
+                     for q in range(D + 1))
+        poly = sympy.Poly(sympy.expand(series), X, Y)
+        return {(a, b): float(poly.coeff_monomial(X ** a * Y ** b))
+                for a in range(D + 1) for b in range(D + 1 - a)}
+    out = {}
+    dx = expr
+    for a in range(D + 1):
+        dxy = dx
+        for b in range(D + 1 - a):
+            value = dxy.subs({X: 0, Y: 0}).evalf(30)
+            out[a, b] = float(value) / (math.factorial(a) * math.factorial(b))
+            dxy = sympy.diff(dxy, Y)
+        dx = sympy.diff(dx, X)
+    return out
 
 
-@pytest.mark.parametrize("name", sorted(CASES))
-def test_jets_of_every_function_against_sympy(name):
-    """The degree-D jet of g(u0 + v) holds g^(q)(u0)/q! for q <= D (sympy, 30 digits), and its
-    value is the degree-0 path's to the last bit."""
-    record, expr = CASES[name]
-    value = _jet(record, 0)[0]
+def test_every_elementary_opcode_is_covered():
+    """Every ARITHMETIC and FUNCTION row of the opcode table is exercised by its case."""
+    elementary = {op.name for op in OPS if op.kind != COMPOSITE}
+    assert elementary <= set(CASES)
+    for name in elementary:
+        assert BY_NAME[name].code in _record(CASES[name][0]).ops[:, 0], name
+
+
+@pytest.mark.parametrize("name", sorted(CASES) + sorted(BRANCHES))
+def test_every_opcode_at_every_degree_against_sympy(name):
+    """f(g(x, y), h(x, y)) as a jet at degree D = 0..6 holds the Taylor coefficients of the
+    composed function (sympy's derivatives, 30 digits) of every monomial of degree <= D, and its
+    value is the degree-0 path's (the value-only interpreter) to the last bit."""
+    record, expr = {**CASES, **BRANCHES}[name]
+    tape = _record(record)
+    value = _jet(tape, 0)[0]
+    exact = _taylor_coefficients(expr, DEGREES[-1])
     for D in DEGREES:
-        jet = _jet(record, D)
+        jet = _jet(tape, D)
         assert jet[0] == value, (name, D)
-        for q in range(D + 1):
-            exact = float(sympy.diff(expr, S, q).subs(S, sympy.Rational(7, 10)).evalf(30)) / math.factorial(q)
-            assert jet[q] == pytest.approx(exact, rel=1e-12, abs=1e-14), (name, D, q)
+        for m, (a, b) in enumerate(monomials(2, D)):
+            assert jet[m] == pytest.approx(exact[a, b], rel=1e-12, abs=1e-13), (name, D, (a, b))
 
 
 def test_subprograms_are_recorded_apart_and_not_run_by_the_main_loop():
