@@ -87,7 +87,8 @@ class Series:
 
     ``coef[m][q]`` is coefficient m at node q; coefficient 0 is the same at every node (all
     series start from x). Supports + - * / and ** with series and numbers, and the methods
-    exp, log, sin, cos, sqrt (called by the tape functions `rkhp.taylor.tape.exp` etc.).
+    exp, log, sin, cos, sqrt (called by the tape functions `rkhp.taylor.tape.exp` etc.), and
+    :meth:`apply` for the other functions of the opcode table.
     """
 
     __slots__ = ("graph", "op", "args", "param", "coef")
@@ -179,6 +180,12 @@ class Series:
     def cos(self):
         return self.sin().param
 
+    def apply(self, op):
+        """f(self) for a FUNCTION op of the opcode table known here only by its derivative
+        (`rkhp.taylor.ops.Op.derivative`): w = f(u) has w' = f'(u) u', so
+        w_m = (1/m) sum_{k=1}^m k u_k d_{m-k} with d = f'(u), itself a series."""
+        return Series(self.graph, "chain", (self, op.derivative(tp.functions, self)), op)
+
     # -- evaluation of coefficient m (every lower coefficient of every node is known)
     def _value(self, m: int, q: int):
         op, args = self.op, self.args
@@ -224,6 +231,11 @@ class Series:
             sign = 1.0 if op == "sin" else -1.0
             return _scale(sign / m, _sum(_scale(k, _mul(u[k][q], other[m - k][q]))
                                          for k in range(1, m + 1)))
+        if op == "chain":
+            if m == 0:
+                return _apply(getattr(tp.functions, self.param.name), self.param.value, u[0][q])
+            d = args[1].coef
+            return _scale(1.0 / m, _sum(_scale(k, _mul(u[k][q], d[m - k][q])) for k in range(1, m + 1)))
         if op == "pow":
             r = self.param
             if m == 0:

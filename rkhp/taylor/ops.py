@@ -21,8 +21,9 @@ to bound constant sizes. Three kinds:
 names; `rkhp.systems.spec` records them): the FUNCTION ops with a sympy name, and derived functions
 recorded as compositions of them (tan = sin/cos, ...).
 
-Adding an elementary function: a code constant, one :data:`OPS` row with its sympy name and float
-function, and its Taylor recurrence in `rkhp.taylor.elementary.taylor_coefficients`.
+Adding an elementary function: a code constant, one :data:`OPS` row with its sympy name, float
+function and derivative, and its Taylor recurrence in `rkhp.taylor.elementary.taylor_coefficients`
+(docs/engine.md "Adding an elementary function").
 """
 
 from __future__ import annotations
@@ -61,6 +62,10 @@ class Op:
         sympy: the sympy function it implements (None: not callable from mathematical text).
         value: the float function (`math`), for the expression reader's size bounds.
         scratch: COMPOSITE ops: scratch rows the kernel needs given the row's k.
+        derivative: FUNCTION ops without a recurrence of their own in the series arithmetic of
+            the truncated spray realisation (`rkhp.systems.spray`): f'(u) written with + - * /
+            and the table's functions (`derivative(f, u)`, f the namespace of functions), from
+            which that arithmetic applies the function by the chain rule.
     """
 
     name: str
@@ -70,6 +75,7 @@ class Op:
     sympy: str | None = None
     value: Callable[[float], float] | None = None
     scratch: Callable[[int], int] | None = None
+    derivative: Callable | None = None
 
 
 OPS: tuple[Op, ...] = (

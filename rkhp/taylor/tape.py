@@ -266,16 +266,20 @@ class TapeBuilder:
 
 def _unary(code: int):
     """The recorder of a FUNCTION op; on a value of another arithmetic (e.g. the series of
-    `rkhp.systems.spray`) it calls that value's method of the same name."""
-    name = BY_CODE[code].name
+    `rkhp.systems.spray`) it calls that value's method of the same name, or else its
+    ``apply(op)`` with the op's row (for functions that arithmetic knows by their derivative)."""
+    row = BY_CODE[code]
+    name = row.name
 
     def op(v):
         if isinstance(v, Var):
             return v.builder.emit(code, v)
         method = getattr(v, name, None)
-        if method is None:
-            raise TypeError("tape functions take tape values")
-        return method()
+        if method is not None:
+            return method()
+        if row.derivative is not None and hasattr(v, "apply"):
+            return v.apply(row)
+        raise TypeError("tape functions take tape values")
 
     op.__name__ = name
     return op
