@@ -151,27 +151,47 @@ def _elementary_differentials(X, y, x):
     return F
 
 
-def test_series_terms_are_the_b_series_of_docs_theory():
-    """a_m (degree m in p) = sum over trees with m vertices of c(t)/sigma(t) F(t)[X_p](x), on a
-    non-linear Nambu structure (pi v = grad C x v, C = x1^2/2 + x2^4/4 + x1 x3 + x3^3/3)."""
+def _nambu():
+    """pi v = grad C x v, C = x1^2/2 + x2^4/4 + x1 x3 + x3^3/3 (non-linear Nambu structure)."""
     y = sympy.symbols("y1:4", real=True)
     C = y[0] ** 2 / 2 + y[1] ** 4 / 4 + y[0] * y[2] + y[2] ** 3 / 3
     g = [sympy.diff(C, v) for v in y]
     pi = [[sum(sympy.LeviCivita(i, j, k) * g[j] for j in range(3)) for k in range(3)]
           for i in range(3)]
-    x, p = np.array([0.3, -0.7, 0.5]), np.array([0.2, 0.1, -0.3])
-    X = [sum(pi[i][k] * p[k] for k in range(3)) for i in range(3)]
-    F = _elementary_differentials(X, y, x)
 
     def program(Y):
         gY = [Y[0] + Y[2], Y[1] ** 3, Y[0] + Y[2] * Y[2]]
         return [[0.0, -gY[2], gY[1]], [gY[2], 0.0, -gY[0]], [-gY[1], gY[0], 0.0]]
 
+    return y, pi, program, np.array([0.3, -0.7, 0.5]), np.array([0.2, 0.1, -0.3])
+
+
+def _arctangent():
+    """pi = a(y) J in the plane, a = 2 + atan(y1 y2): atan is known to the series only by its
+    derivative (`Series.apply`, the chain rule)."""
+    y = sympy.symbols("y1:3", real=True)
+    a = 2 + sympy.atan(y[0] * y[1])
+
+    def program(Y):
+        aY = 2.0 + tp.functions.atan(Y[0] * Y[1])
+        return [[0.0, aY], [-aY, 0.0]]
+
+    return y, [[0, a], [-a, 0]], program, np.array([0.6, -0.9]), np.array([0.3, 0.2])
+
+
+@pytest.mark.parametrize("structure", [_nambu, _arctangent], ids=["nambu", "atan"])
+def test_series_terms_are_the_b_series_of_docs_theory(structure):
+    """a_m (degree m in p) = sum over trees with m vertices of c(t)/sigma(t) F(t)[X_p](x)."""
+    y, pi, program, x, p = structure()
+    n = len(y)
+    X = [sum(pi[i][k] * p[k] for k in range(n)) for i in range(n)]
+    F = _elementary_differentials(X, y, x)
+
     def terms(xv, pv):
         series = spray_series(program, xv, pv, 4)
         return [v for m in range(4) for v in series.start[m] + series.end[m]]
 
-    values = _tape_values(3, terms, x, p).reshape(4, 2, 3)
+    values = _tape_values(n, terms, x, p).reshape(4, 2, n)
     for m in range(1, 5):
         expected = sum(coef * F[t] for t, coef in ALPHA_TREES[m])
         a_m, end_m = values[m - 1]

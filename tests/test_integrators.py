@@ -200,13 +200,16 @@ def test_taylor_arithmetic_against_sympy():
 
     import sympy
 
+    from rkhp.expressions import FUNCTIONS
     from rkhp.systems.spec import parse_expression, to_program
     from rkhp.taylor.interpreter import run_tape, tape_work
     from rkhp.taylor.jets import jet_space, monomials
     from rkhp.taylor.tape import record
 
     text = ("exp(x1) * sin(x2) / (1 + x1^2) + sqrt(x2 + 2) * cos(x1 * x2) + log(x1 + 3) "
-            "- x2^(-3) + (x1 + 2)^1.5 + tan(x1 / 3) + cosh(x2) * tanh(x1)")
+            "- x2^(-3) + (x1 + 2)^1.5 + tan(x1 / 3) + cosh(x2) * tanh(x1) + sinh(x1 - x2) "
+            "+ atan(x1 * x2 - 1)")
+    assert all(f"{name}(" in text for name in FUNCTIONS)
     expr, symbols = parse_expression(text, 2, "test")
     tape = record(2, lambda x, p: [to_program(expr, symbols)(x)])
     x0 = (0.3, 0.7)

@@ -2,7 +2,7 @@
 
 `taylor_coefficients(code, u0, u0_lo, f, k, D, coef)` writes coef[q] = g^(q)(u0) / q!, q = 0..D,
 for the univariate function g of a FUNCTION op (`rkhp.taylor.ops`): exp, log, sin, cos, sqrt,
-u^f (POWR), u^k for k < 0 (POWI), the reciprocal 1/u (for DIV) and c(u) (CRB). The interpreter
+atan, u^f (POWR), u^k for k < 0 (POWI), the reciprocal 1/u (for DIV) and c(u) (CRB). The interpreter
 (`rkhp.taylor.rows`) composes these with the jet of u at degree D >= 1, and at degree 0 takes the
 value coef[0]: the value-only path and the jet path are the same arithmetic by construction.
 Adding an elementary function is one `rkhp.taylor.ops.OPS` row plus one branch here.
@@ -19,7 +19,7 @@ import numpy as np
 
 from .compiler import NJIT, NJIT_NORC, NJIT_NRT
 from .compiler import numba as nb
-from .ops import COS, CRB, DIV, EXP, LOG, POWI, POWR, SIN, SQRT
+from .ops import ATAN, COS, CRB, DIV, EXP, LOG, POWI, POWR, SIN, SQRT
 
 
 def _bernoulli_tables():
@@ -77,6 +77,16 @@ def taylor_coefficients(code, u0, u0_lo, f, k, D, coef):
         _pow_coef(u0, -1.0, D, coef)
     elif code == CRB:
         crb_coef(u0, u0_lo, D, coef)
+    elif code == ATAN:
+        # atan'(u0 + v) = r(v) = 1 / (a + 2 u0 v + v^2), a = 1 + u0^2: a r_0 = 1, and
+        # a r_k + 2 u0 r_{k-1} + r_{k-2} = 0; coef[q] = r_{q-1} / q
+        coef[0] = math.atan(u0)
+        a = 1.0 + u0 * u0
+        r1 = r2 = 0.0  # r_{k-1}, r_{k-2}
+        for q in range(1, D + 1):
+            r = ((1.0 if q == 1 else 0.0) - 2.0 * u0 * r1 - r2) / a
+            coef[q] = r / q
+            r2, r1 = r1, r
 
 
 @nb.njit(**NJIT_NORC)

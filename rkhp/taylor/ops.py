@@ -40,6 +40,7 @@ SPRAY_MAX_NODES = 24
 
 CONST, ADD, SUB, MUL, NEG, MULC, ADDC, DIV = 0, 1, 2, 3, 4, 5, 6, 7
 EXP, LOG, SIN, COS, SQRT, POWI, POWR, CRB = 8, 9, 10, 11, 12, 13, 14, 15
+ATAN = 16
 FIRST_COMPOSITE = 64
 PHIMV, SPRAY = 64, 65
 
@@ -95,6 +96,7 @@ OPS: tuple[Op, ...] = (
     Op("powi", POWI, FUNCTION, 1),
     Op("powr", POWR, FUNCTION, 1),
     Op("crb", CRB, FUNCTION, -1),
+    Op("atan", ATAN, FUNCTION, 1, "atan", math.atan, derivative=lambda f, u: 1.0 / (1.0 + u * u)),
     # phi(K) x, K (n x n) and x listed in args: scratch rows v = K^k x, K v and one product
     Op("phimv", PHIMV, COMPOSITE, -1, scratch=lambda n: 2 * n + 1),
     # the Poisson-spray realisation (alpha, beta) of pi (docs/theory.md §9.3): a sub-program
