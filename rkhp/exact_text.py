@@ -1,5 +1,6 @@
 """Exact rationals and their linear combinations as text: the one formatter of order conditions
-(`rkhp.conditions`), relations (`rkhp.relations`), tableau entries (`rkhp.tableau`) and the CLI.
+(`rkhp.conditions`), relations (`rkhp.relations`), tableau entries (`rkhp.tableau`), Casimir names
+(`rkhp.systems.families`) and the CLI.
 """
 
 from __future__ import annotations

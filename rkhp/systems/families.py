@@ -33,6 +33,7 @@ The families:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -40,6 +41,7 @@ import numpy as np
 
 from .. import documents
 from ..errors import InputError
+from ..exact_text import combination_text
 from ..taylor import tape as tp
 from .core import PoissonSystem, build_system
 from .structure import lie_poisson_matrix, log_canonical_matrix
@@ -146,15 +148,13 @@ def short(value) -> str:
 
 
 def _combination(k: np.ndarray, term: str) -> str:
-    """'k1 TERM1 - k2 TERM2 ...' with the coefficients rounded for display."""
-    text = ""
-    for i, c in enumerate(k):
-        if abs(c) < 1e-12:
-            continue
-        sign = "-" if c < 0 else "+"
-        mag = "" if abs(abs(c) - 1) < 1e-12 else f"{abs(c):.6g} "
-        text += f" {sign} {mag}{term}{i + 1}" if text else f"{'-' if c < 0 else ''}{mag}{term}{i + 1}"
-    return text
+    """'k1 TERM1 - k2 TERM2 ...' with the coefficients rounded for display (within 1e-12 of 0
+    or of +-1: left out, or written without a coefficient)."""
+    def snapped(c: float) -> float:
+        return 0.0 if abs(c) < 1e-12 else math.copysign(1.0, c) if abs(abs(c) - 1) < 1e-12 else c
+
+    return combination_text(((snapped(c), f"{term}{i + 1}") for i, c in enumerate(k)),
+                            lambda c: f"{c:.6g}")
 
 
 def _linear_kernel(matrix: np.ndarray) -> list[np.ndarray]:
