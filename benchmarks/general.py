@@ -5,7 +5,7 @@ figures; run: python benchmarks/general.py).
    (docs/theory.md §4) and with the rigid body written as a general spec (the spray realisation,
    docs/theory.md §9.3), measured in the same run, alternately; the goal is <= 5x.
 2. Where the time goes: one evaluation of alpha on the jets the step uses (degree D = 0..4 in
-   3 variables), closed form against spray, and the step's spray calls by degree.
+   3 variables), closed form against spray.
 3. Growth with n on the periodic Toda lattice (n = 6, 12, 24): us/step of the closed form
    (Lie–Poisson, phi(K) x) and of the spray realisation.
 

@@ -51,3 +51,17 @@ def oscillator():
         return out
 
     return series
+
+
+@pytest.fixture(scope="session")
+def rigid_body_spec(tmp_path_factory):
+    """The rigid body (docs/theory.md §6) written as a spec file of the general family: the
+    matrix of so(3)* as expressions, the built-in's H, x0 and Casimir."""
+    path = tmp_path_factory.mktemp("spec") / "rigid-body-general.toml"
+    path.write_text('name = "rigid-body-general"\n'
+                    'family = "general"\n'
+                    'poisson = [["0", "-x3", "x2"], ["x3", "0", "-x1"], ["-x2", "x1", "0"]]\n'
+                    'hamiltonian = "x1^2/4 + x2^2/2 + 3*x3^2/4"\n'
+                    'x0 = [0.45359612142557731, 0.0, 0.89120736006143542]\n'
+                    'casimirs = ["(x1^2 + x2^2 + x3^2)/2"]\n')
+    return path

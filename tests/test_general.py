@@ -31,15 +31,6 @@ from rkhp.taylor import tape as tp
 from rkhp.taylor.collocation import collocation
 from rkhp.taylor.interpreter import evaluate
 
-RIGID_BODY_GENERAL = """
-name = "rigid-body-general"
-family = "general"
-poisson = [["0", "-x3", "x2"], ["x3", "0", "-x1"], ["-x2", "x1", "0"]]
-hamiltonian = "x1^2/4 + x2^2/2 + 3*x3^2/4"
-x0 = [0.45359612142557731, 0.0, 0.89120736006143542]
-casimirs = ["(x1^2 + x2^2 + x3^2)/2"]
-"""
-
 
 def _tape_values(n, program, x, p):
     return evaluate(tp.record(n, program), np.concatenate([x, p]))
@@ -216,10 +207,9 @@ def test_bad_truncation(name):
         get_system("rigid-body", name)
 
 
-def test_general_spec_rigid_body_matches_builtin(tmp_path):
+def test_general_spec_rigid_body_matches_builtin(rigid_body_spec):
     """The rigid body written as a general spec has the same truncated realisation."""
-    path = tmp_path / "rb.toml"
-    path.write_text(RIGID_BODY_GENERAL)
+    path = rigid_body_spec
     rng = np.random.default_rng(3)
     for K in (1, 4):
         spec, builtin = get_system(path, f"truncated:{K}"), get_system("rigid-body", f"truncated:{K}")
@@ -231,9 +221,8 @@ def test_general_spec_rigid_body_matches_builtin(tmp_path):
             assert np.allclose(spec.poisson(x), builtin.poisson(x))
 
 
-def test_general_spec_runs_and_keeps_its_casimir(tmp_path):
-    path = tmp_path / "rb.toml"
-    path.write_text(RIGID_BODY_GENERAL)
+def test_general_spec_runs_and_keeps_its_casimir(rigid_body_spec):
+    path = rigid_body_spec
     res = CliRunner().invoke(rkhp, ["integrate", str(path), "--method", "paper-three-stage",
                                     "--steps", "20", "--realisation", "truncated:4",
                                     "--format", "json"])
@@ -293,7 +282,6 @@ def test_truncated_two_discriminates_linear_from_quadratic_pi():
     assert expected == 2 and verdict == "confirmed" and abs(observed - 2) < 0.1
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("K", range(1, 7))
 def test_converge_rigid_body_truncated(K):
     """`rkhp converge rigid-body --realisation truncated:K`: every default method confirmed."""

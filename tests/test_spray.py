@@ -23,21 +23,10 @@ from rkhp.systems.check import check_birealisation
 from rkhp.systems.problems import as_general
 from rkhp.taylor.collocation import average_error_constant, collocation
 
-RIGID_BODY_GENERAL = """
-name = "rigid-body-general"
-family = "general"
-poisson = [["0", "-x3", "x2"], ["x3", "0", "-x1"], ["-x2", "x1", "0"]]
-hamiltonian = "x1^2/4 + x2^2/2 + 3*x3^2/4"
-x0 = [0.45359612142557731, 0.0, 0.89120736006143542]
-casimirs = ["(x1^2 + x2^2 + x3^2)/2"]
-"""
-
 
 @pytest.fixture(scope="module")
-def rigid_body_general(tmp_path_factory):
-    path = tmp_path_factory.mktemp("spec") / "rb.toml"
-    path.write_text(RIGID_BODY_GENERAL)
-    return get_system(path)
+def rigid_body_general(rigid_body_spec):
+    return get_system(rigid_body_spec)
 
 
 def _mp_tables(q):
@@ -142,10 +131,8 @@ def test_check_on_general_builtins(name):
     assert max(result.deviations.values()) <= 1e-12
 
 
-def test_check_json_on_a_general_spec(tmp_path):
-    path = tmp_path / "rb.toml"
-    path.write_text(RIGID_BODY_GENERAL)
-    res = CliRunner().invoke(rkhp, ["check", str(path), "--samples", "10", "--format", "json"])
+def test_check_json_on_a_general_spec(rigid_body_spec):
+    res = CliRunner().invoke(rkhp, ["check", str(rigid_body_spec), "--samples", "10", "--format", "json"])
     assert res.exit_code == 0, res.output
     doc = json.loads(res.output)
     assert doc["ok"] and doc["symmetric"] and doc["realisation"] == "symmetric"
@@ -161,7 +148,6 @@ def test_nambu_casimir_over_1e5_steps():
     assert np.abs(C - C[0]).max() <= 1e-12
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("name", ["charged-particle", "nambu"])
 def test_converge_confirms_the_expected_orders(name):
     """Acceptance: `rkhp converge` confirms euler, paper-two-stage, paper-three-stage, rk4."""
