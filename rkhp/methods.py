@@ -96,7 +96,9 @@ class Method:
             return taylor_orders(self.order, self.degenerate)[condition_class]
         if self.kind == "scipy":
             raise InputError(f"{self.name} is adaptive: it has no order in h")
-        return _orders(self.tableau)[condition_class if self.kind == "rkhp" else "general"]
+        from .verification import class_orders
+
+        return class_orders(self.tableau)[condition_class if self.kind == "rkhp" else "general"]
 
 
     def realisation_bound(self, system) -> int | None:
@@ -118,26 +120,6 @@ def condition_class(system) -> str:
     if system.symmetric:
         return "symmetric"
     return "degenerate" if system.degenerate else "general"
-
-
-_ORDERS: dict[tuple, dict[str, int]] = {}
-
-
-def _orders(tableau) -> dict[str, int]:
-    """Order per condition class of a tableau by the verify engine (cached by entries)."""
-    key = (tableau.name, str(tableau.A), str(tableau.b))
-    if key not in _ORDERS:
-        from .verification import verify
-
-        orders = verify(tableau, classes=("general", "degenerate", "symmetric")).orders
-        # each class's conditions follow from the previous class's (T_0 is part of T; the symmetric
-        # conditions combine T_0 residuals), so its order is at least theirs: this matters where a
-        # class is checked to a lower order (the symmetric relations ship up to order 8)
-        general = int(orders["general"])
-        degenerate = max(general, int(orders["degenerate"]))
-        _ORDERS[key] = {"general": general, "degenerate": degenerate,
-                        "symmetric": max(degenerate, int(orders["symmetric"]))}
-    return _ORDERS[key]
 
 
 def taylor_orders(order: int, degenerate: bool) -> dict[str, int]:

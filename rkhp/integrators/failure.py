@@ -1,6 +1,6 @@
 """One failure vocabulary for every integrator: how a run ends, and the status line that says so.
 
-The RKHP engine, the THP integrator and the classical peers (explicit Runge–Kutta, implicit
+The RKHP engine (explicit and implicit tableaux), the THP integrator and the classical peers (explicit Runge–Kutta, implicit
 midpoint) return a :class:`Failure` per run (compiled kernels return the member; numba passes
 IntEnum members through unchanged); the Trajectory keeps it as ``cause`` next to the human
 ``status`` line built by :func:`failure_status`.
@@ -25,6 +25,7 @@ class Failure(IntEnum):
     NEWTON_NON_FINITE = 4
     NEWTON_DIVERGED = 5
     SINGULAR = 6
+    STAGES_NO_CONVERGENCE = 7
 
     @property
     def text(self) -> str:
@@ -40,6 +41,7 @@ _TEXT = {
     Failure.NEWTON_NON_FINITE: "Newton did not converge: non-finite iterate (the step h may be too large)",
     Failure.NEWTON_DIVERGED: "Newton diverged (the step h may be too large)",
     Failure.SINGULAR: "singular Newton matrix",
+    Failure.STAGES_NO_CONVERGENCE: "the implicit stages did not converge (the step h may be too large)",
 }
 
 

@@ -17,3 +17,5 @@ round-off level, so the tighter tolerance never makes it fail.
 """
 NEWTON_MAX_ITERATIONS = 20
 """Newton iterations after which an RKHP or THP step is declared failed."""
+STAGE_MAX_SWEEPS = 100
+"""Sweeps of one implicit tower after which the step is declared failed (STAGES_NO_CONVERGENCE)."""

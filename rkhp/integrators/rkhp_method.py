@@ -1,4 +1,5 @@
-"""RKHP integration of a Poisson system with an explicit tableau (paper §5.2): the Python API.
+"""RKHP integration of a Poisson system with any tableau, explicit or implicit (paper §5.2;
+docs/theory.md §10): the Python API.
 
 `integrate(system, tableau, h, n_steps, x0=None)` runs the compiled loop of
 `rkhp.integrators.engine` and returns a :class:`Trajectory`; `integrate_ensemble` runs many
@@ -19,11 +20,12 @@ import numpy as np
 from ..errors import InputError, NumericalFailure
 from ..executors import run_all
 from .failure import Failure, failure_status
-from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE
+from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE, STAGE_MAX_SWEEPS
 from .trajectory import Trajectory
 
 MAX_PRODUCT_PAIRS = 2_000_000
-"""Largest product table the Taylor tower accepts (n variables, degree s + 1)."""
+"""Largest product table the Taylor tower accepts (n variables, degree s + 1 for an explicit
+tableau, `implicit_degree` for an implicit one)."""
 
 
 def resolve_tableau(tableau):
@@ -35,14 +37,46 @@ def resolve_tableau(tableau):
     return tableau
 
 
-def explicit_arrays(tableau) -> tuple[np.ndarray, np.ndarray]:
-    """The float64 (A, b) of an explicit tableau; InputError for an implicit one."""
+def tableau_arrays(tableau) -> tuple[np.ndarray, np.ndarray]:
+    """The float64 (A, b) of a tableau."""
     A = np.ascontiguousarray(tableau.A_float, dtype=np.float64)
     b = np.ascontiguousarray(tableau.b_float, dtype=np.float64)
-    if np.any(np.triu(A) != 0.0):
-        raise InputError(f"method {getattr(tableau, 'name', '?')!r} is not explicit; the RKHP "
-                         "engine integrates with explicit tableaux")
     return A, b
+
+
+def is_implicit(A: np.ndarray) -> bool:
+    """Whether a stage depends on itself or a later one (an entry on or above the diagonal)."""
+    return bool(np.any(np.triu(A) != 0.0))
+
+
+def stage_solve(tableau, A, degree=None, max_sweeps=STAGE_MAX_SWEEPS):
+    """The StageSolve of a tableau: explicit (degree 0) or implicit with stage functions that are
+    jets of degree `degree` (default: `implicit_degree`)."""
+    from .engine import StageSolve
+
+    if not is_implicit(A):
+        return StageSolve(0, int(max_sweeps))
+    if degree is None:
+        from ..verification import class_orders
+
+        degree = implicit_degree(max(class_orders(tableau).values()))
+    if int(degree) != degree or degree < 1:
+        raise InputError(f"the stage degree must be a positive integer, got {degree!r}")
+    return StageSolve(int(degree), int(max_sweeps))
+
+
+def implicit_degree(order: int) -> int:
+    """Jet degree D of the stage functions of an implicit method of order N (its highest over the
+    condition classes): D = N + 1, at least 2 (the Newton Jacobian needs degree-1 coefficients of
+    the gradients).
+
+    Truncating the stage functions g_j at degree D leaves the degree-k coefficients of their
+    gradients wrong by O(h^(D - k)) (one degree and one power of h per gradient, from the missing
+    degree-D coefficients of Z), so psi = h sum_i b_i grad g_i(x) is wrong by O(h^(D + 1)) and the
+    global error by O(h^D): D = N + 1 keeps it one order below the method's (measured in
+    docs/implicit.md; docs/theory.md §10).
+    """
+    return max(order + 1, 2)
 
 
 def check_step(h, n_steps) -> tuple[float, int]:
@@ -63,57 +97,65 @@ def start_state(system, x0) -> np.ndarray:
     return system.with_x0(x0).x0
 
 
-def engine_data(system, stages: int):
-    """(tapes, jet space) for the compiled engine: jets in n variables of degree s + 1."""
+def engine_data(system, stages: int, stage):
+    """(tapes, jet space) for the compiled engine: jets in n variables of degree s + 1 (explicit)
+    or the stage degree (implicit)."""
     from ..taylor.jets import jet_space
     from .engine import SystemTapes
 
-    degree = stages + 1
+    degree = stage.degree if stage.degree > 0 else stages + 1
     space = jet_space(system.dim, degree)
     if len(space.pa) > MAX_PRODUCT_PAIRS:
-        raise InputError(f"{stages} stages need Taylor polynomials of degree {degree} in "
+        raise InputError(f"the method needs Taylor polynomials of degree {degree} in "
                          f"{system.dim} variables ({len(space.pa)} product terms): too large")
     return SystemTapes(system.f_tape, system.h_tape, system.alpha_tape, system.beta_tape), space
 
 
 def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLERANCE,
-              max_iter: int = NEWTON_MAX_ITERATIONS) -> Trajectory:
-    """Integrate `system` with the RKHP method of an explicit `tableau` (paper §5.2).
+              max_iter: int = NEWTON_MAX_ITERATIONS, stage_degree: int | None = None) -> Trajectory:
+    """Integrate `system` with the RKHP method of `tableau`, explicit or implicit (paper §5.2;
+    docs/theory.md §5, §10).
 
-    Returns a Trajectory with states y_0..y_k, Newton iterations per step, and a status naming
-    the failing step, time and cause if a step failed (then only the states before it are kept).
+    For an implicit tableau the stage functions are jets of degree `stage_degree` (default
+    `implicit_degree` of the tableau's order), solved as accurately as Newton solves x (`tol`).
+    Returns a Trajectory with states y_0..y_k, Newton iterations and stage sweeps per step, and a
+    status naming the failing step, time and cause if a step failed (then only the states before
+    it are kept).
     """
     from .engine import rkhp_run, step_buffers
 
     tableau = resolve_tableau(tableau)
     h, n_steps = check_step(h, n_steps)
     y0 = start_state(system, x0)
-    A, b = explicit_arrays(tableau)
-    tapes, space = engine_data(system, len(b))
+    A, b = tableau_arrays(tableau)
+    stage = stage_solve(tableau, A, stage_degree)
+    tapes, space = engine_data(system, len(b), stage)
     buf = step_buffers(tapes, system.dim, len(b), space)
-    rest = (tapes, space, buf, system.domain_code, float(tol), int(max_iter))
+    rest = (tapes, space, buf, system.domain_code, float(tol), int(max_iter), stage)
     t0 = time.perf_counter()
-    rkhp_run(y0, A, b, h, 0, *rest, np.zeros((1, y0.size)), np.zeros(1, np.int64), True)
+    rkhp_run(y0, A, b, h, 0, *rest, np.zeros((1, y0.size)), np.zeros(1, np.int64),
+             np.zeros(1, np.int64), True)
     compile_seconds = time.perf_counter() - t0
     states = np.empty((n_steps + 1, y0.size))
     iterations = np.zeros(max(n_steps, 1), dtype=np.int64)
+    sweeps = np.zeros(max(n_steps, 1), dtype=np.int64)
     t0 = time.perf_counter()
-    done, cause = rkhp_run(y0, A, b, h, n_steps, *rest, states, iterations, True)
+    done, cause = rkhp_run(y0, A, b, h, n_steps, *rest, states, iterations, sweeps, True)
     run_seconds = time.perf_counter() - t0
     failed = cause != Failure.OK
     return Trajectory(
         times=h * np.arange(done + 1), states=states[: done + 1],
-        newton_iterations=iterations[: done + failed], cause=cause,
-        status=failure_status(cause, done, h, system.domain) if failed else "ok",
+        newton_iterations=iterations[: done + failed], stage_sweeps=sweeps[: done + failed],
+        cause=cause, status=failure_status(cause, done, h, system.domain) if failed else "ok",
         failed_step=done if failed else None, compile_seconds=compile_seconds,
         run_seconds=run_seconds, method=getattr(tableau, "name", "custom"), system=system.name,
         extra={"newton_tolerance": tol, "newton_max_iterations": max_iter,
-               "realisation": system.realisation})
+               "realisation": system.realisation, "stage_degree": stage.degree})
 
 
 def integrate_ensemble(system, tableau, h, n_steps, x0s, *, tol: float = NEWTON_TOLERANCE,
                        max_iter: int = NEWTON_MAX_ITERATIONS, threads: int | None = None,
-                       executor=None) -> np.ndarray:
+                       executor=None, stage_degree: int | None = None) -> np.ndarray:
     """Final states of many trajectories at once (shape (m, n)), in `threads` threads (default:
     the CPUs available) running the compiled loop without the GIL (the "vmap"); with an
     `executor` (rkhp.executors), the starts are cut into one chunk per slot and each chunk runs so
@@ -127,8 +169,8 @@ def integrate_ensemble(system, tableau, h, n_steps, x0s, *, tol: float = NEWTON_
     for i, x in enumerate(x0s):
         if not system.in_domain(x):
             raise InputError(f"initial condition {i} = {x.tolist()} is outside the domain")
-    A, b = explicit_arrays(tableau)
-    settings = (float(tol), int(max_iter), threads)
+    A, b = tableau_arrays(tableau)
+    settings = (float(tol), int(max_iter), stage_solve(tableau, A, stage_degree), threads)
     if executor is None:
         finals, done, causes = _ensemble_chunk(system, A, b, h, n_steps, x0s, *settings)
     else:
@@ -143,11 +185,11 @@ def integrate_ensemble(system, tableau, h, n_steps, x0s, *, tol: float = NEWTON_
     return finals
 
 
-def _ensemble_chunk(system, A, b, h, n_steps, x0s, tol, max_iter, threads):
+def _ensemble_chunk(system, A, b, h, n_steps, x0s, tol, max_iter, stage, threads):
     """(final states, steps done, Failure codes) of the trajectories from ``x0s``, in threads."""
     from .engine import rkhp_run, step_buffers
 
-    tapes, space = engine_data(system, len(b))
+    tapes, space = engine_data(system, len(b), stage)
     m = len(x0s)
     finals = np.zeros_like(x0s)
     done = np.zeros(m, dtype=np.int64)
@@ -158,10 +200,12 @@ def _ensemble_chunk(system, A, b, h, n_steps, x0s, tol, max_iter, threads):
     def batch(lo, hi):
         last = np.zeros((1, system.dim))
         iterations = np.zeros(max(n_steps, 1), dtype=np.int64)
+        sweeps = np.zeros(max(n_steps, 1), dtype=np.int64)
         buf = step_buffers(tapes, system.dim, len(b), space)
         for t in range(lo, hi):
             done[t], codes[t] = rkhp_run(x0s[t], A, b, h, n_steps, tapes, space, buf,
-                                         system.domain_code, tol, max_iter, last, iterations, False)
+                                         system.domain_code, tol, max_iter, stage, last,
+                                         iterations, sweeps, False)
             finals[t] = last[0]
 
     with ThreadPoolExecutor(max_workers=len(bounds) - 1) as pool:

@@ -24,6 +24,8 @@ class Trajectory:
         times: shape (k+1,).
         states: shape (k+1, n); for a failed run, only the steps before the failure.
         newton_iterations: shape (k,), Newton iterations per step (zeros for explicit peers).
+        stage_sweeps: shape (k,), sweeps of the implicit stages per step (RKHP with an implicit
+            tableau; zeros otherwise, empty for the other integrators).
         status: "ok", or a failure message naming the step, the time and the cause.
         failed_step: the 0-based index of the step that failed (step k goes from y_k to y_{k+1};
             it equals the number of completed steps, and states has failed_step + 1 rows), or
@@ -38,6 +40,7 @@ class Trajectory:
     times: np.ndarray
     states: np.ndarray
     newton_iterations: np.ndarray
+    stage_sweeps: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     status: str = "ok"
     failed_step: int | None = None
     cause: Failure = Failure.OK
