@@ -1,9 +1,9 @@
 """One failure vocabulary for every integrator: how a run ends, and the status line that says so.
 
-The RKHP engine (explicit and implicit tableaux), the THP integrator and the classical peers (explicit Runge–Kutta, implicit
-midpoint) return a :class:`Failure` per run (compiled kernels return the member; numba passes
-IntEnum members through unchanged); the Trajectory keeps it as ``cause`` next to the human
-``status`` line built by :func:`failure_status`.
+The RKHP engine (explicit and implicit tableaux), the THP integrator and the classical peers
+(explicit Runge–Kutta, implicit midpoint) return a :class:`Failure` per run (compiled kernels
+return the member; numba passes IntEnum members through unchanged); the Trajectory keeps it as
+``cause`` next to the human ``status`` line built by :func:`failure_status`.
 
 Step numbering (``Trajectory.failed_step`` and the status line): steps are numbered from 0 like
 the states, step k going from y_k (t = k h) to y_{k+1}; the failing step's index equals the number
