@@ -81,9 +81,6 @@ def phimv(tape, r, W, D, space, S, deg):
                 W[out + i, m] += c * S[v + i, m]
 
 
-#: the spray kernel's target: the truncation error of the collocation, relative to
-#: max(1, |x|), is at most this (one unit of round-off)
-SPRAY_TARGET = 2.0**-53
 #: Q nodes are used when the alpha of Q - 1 nodes agrees with theirs to this, relative to
 #: max(1, |x|) (a few units of round-off: the solves themselves are accurate to about that)
 SPRAY_AGREEMENT = 8.0 * 2.0**-52
@@ -207,10 +204,12 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
     or 0 when they cannot be solved. Allocates the Jacobians and the Newton matrices.
 
     1. Q, at the values (`_value_stages`): with Q0 the smallest with
-       E_Q0 theta^(2 Q0) <= SPRAY_TARGET for theta an estimate of |J|_2, J = d_y X(x)
-       (`rkhp.taylor.collocation.average_error_constant`; exact for linear X), Q is the first
-       Q >= Q0 whose alpha agrees with that of Q - 1 nodes to SPRAY_AGREEMENT max(1, |x|) (the
-       truncation error of Q nodes is then smaller by about theta^2 / (16 Q^2)): theta alone
+       E_Q0 theta^(2 Q0) <= 8 SPRAY_AGREEMENT for theta an estimate of |J|_2, J = d_y X(x)
+       (`rkhp.taylor.collocation.average_error_constant`: the gap between Q0 and Q0 + 1 nodes
+       predicted for linear X, pessimistic by (1.05)^(2 Q0) and more, so that the first check
+       usually passes and a solve whose check fails is skipped), Q is the first Q > Q0 whose
+       alpha agrees with that of Q - 1 nodes to SPRAY_AGREEMENT max(1, |x|) (the truncation
+       error of Q nodes is then smaller by about theta^2 / (16 Q^2)): theta alone
        misses the non-linearity of X (where J is small but d^2 X is not).
     2. Degrees 1..D, one at a time (D >= 1): with the exact value-level matrix
        N = I - [(A - w)_ij J(Y_j)] (J at each stage value), the degree-d coefficients solve one
@@ -230,9 +229,9 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
     _jacobian(tape, sub, W, space, S, deg, np.int64(Ys), p_slots, n, J, X0)
     theta = _spectral_norm(J)
     q = 1
-    while q < SPRAY_MAX_NODES and not (TABLE_E[q] * theta ** (2 * q) <= SPRAY_TARGET):
+    while q < SPRAY_MAX_NODES - 1 and not (TABLE_E[q] * theta ** (2 * q)
+                                           <= 8.0 * SPRAY_AGREEMENT):
         q += 1
-    q = max(1, q - 1)
     scale = 1.0
     for k in range(n):
         scale = max(scale, abs(W[args[x_slots + k], 0]))
