@@ -236,15 +236,22 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
     for k in range(n):
         scale = max(scale, abs(W[args[x_slots + k], 0]))
     alpha = np.empty(n)
+    # the Newton matrix of the last value-level solve (its Jacobians, factors and row order)
+    Jv = np.empty((q, n, n))
+    LUv = np.empty((q * n, q * n))
+    permv = np.empty(q * n, dtype=np.int64)
     if not _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J, X0,
-                         theta, scale, alpha, False):
+                         theta, scale, alpha, False, Jv, LUv, permv):
         return 0
     while True:
         if q + 1 > SPRAY_MAX_NODES:
             return 0
         previous = alpha.copy()
+        Jv = np.empty((q + 1, n, n))
+        LUv = np.empty(((q + 1) * n, (q + 1) * n))
+        permv = np.empty((q + 1) * n, dtype=np.int64)
         if not _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q + 1,
-                             J, X0, theta, scale, alpha, True):
+                             J, X0, theta, scale, alpha, True, Jv, LUv, permv):
             return 0
         q += 1
         gap = 0.0
@@ -258,14 +265,16 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
     qn = q * n
     AW = _collocation_matrix(q)
     Js = np.empty((q, n, n))
-    LU = np.empty((qn, qn))
-    perm = np.empty(qn, dtype=np.int64)
     rvec = np.empty(qn)
     tmp = np.empty(qn)
     for j in range(q):
         _jacobian(tape, sub, W, space, S, deg, np.int64(Ys + j * n), p_slots, n, Js[j], work)
-    if not _newton_matrix(AW, Js, q, n, LU, perm):
-        return 0
+    # the last value-level matrix is the exact one when its Jacobians are these (for X linear
+    # in y they are, bitwise): then its factors serve, else factorise
+    LU, perm = LUv, permv
+    if not np.array_equal(Js, Jv):
+        if not _newton_matrix(AW, Js, q, n, LU, perm):
+            return 0
     for i in range(q):
         for k in range(n):
             xs = args[x_slots + k]
@@ -307,7 +316,7 @@ def _collocation_matrix(q):
 
 @nb.njit(**NJIT_NRT)
 def _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J, X0, theta,
-                  scale, alpha, warm):
+                  scale, alpha, warm, Js, LU, perm):
     """The stage values with q nodes at the values (rows Ys, column 0; their X in Xs) by Newton
     with the matrix I - (A - w) (x) J (J at the stage values when the first corrections contract
     slowly: far from x it matters) until the update is at the round-off level; alpha := the
@@ -316,7 +325,8 @@ def _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J
     `warm` the (q - 1)-node solution's collocation polynomial at the q nodes (its X in the rows
     Xs). alpha comes from X at the last stage values but one, so the last update need only be
     below 4 eps max(1, |x|) / theta (alpha moves by about theta |dY| / 2). False if it does not
-    converge (or q nodes exceed SPRAY_MAX_NODES)."""
+    converge (or q nodes exceed SPRAY_MAX_NODES). Js (q, n, n), LU (qn, qn), perm (qn): the
+    Newton matrix's Jacobians, factors and row order, left as last used."""
     if q > SPRAY_MAX_NODES:
         return False
     args = tape.args
@@ -324,11 +334,8 @@ def _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J
     zero = np.int64(0)
     qn = q * n
     AW = _collocation_matrix(q)
-    Js = np.empty((q, n, n))
     for j in range(q):
         Js[j] = J
-    LU = np.empty((qn, qn))
-    perm = np.empty(qn, dtype=np.int64)
     rvec = np.empty(qn)
     tmp = np.empty(qn)
     work = np.empty(n)
