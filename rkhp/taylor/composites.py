@@ -87,6 +87,9 @@ SPRAY_AGREEMENT = 8.0 * 2.0**-52
 #: value-level Newton sweeps at most; one that does not reach the round-off level by then, or
 #: that stops contracting above it, gives NaN results (a numerical failure, never a wrong value)
 SPRAY_MAX_SWEEPS = 50
+#: (A - w)_ij for q nodes at [q, :q, :q] (`rkhp.taylor.collocation`): the stage equations'
+#: matrix
+TABLE_AW = TABLE_A - TABLE_W[:, None, :]
 
 
 @nb.njit(**NJIT_NORC)
@@ -224,10 +227,13 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
     work = np.empty(n)
     J = np.empty((n, n))
     X0 = np.empty(n)
+    # the linear solves' work vectors, long enough for every number of nodes
+    rvec = np.empty(SPRAY_MAX_NODES * n)
+    tmp = np.empty(SPRAY_MAX_NODES * n)
     for k in range(n):
         S[Ys + k, 0] = W[args[x_slots + k], 0]
     _jacobian(tape, sub, W, space, S, deg, np.int64(Ys), p_slots, n, J, X0)
-    theta = _spectral_norm(J)
+    theta = _spectral_norm(J, rvec, tmp)
     q = 1
     while q < SPRAY_MAX_NODES - 1 and not (TABLE_E[q] * theta ** (2 * q)
                                            <= 8.0 * SPRAY_AGREEMENT):
@@ -241,7 +247,7 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
     LUv = np.empty((q * n, q * n))
     permv = np.empty(q * n, dtype=np.int64)
     if not _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J, X0,
-                         theta, scale, alpha, False, Jv, LUv, permv):
+                         theta, scale, alpha, False, Jv, LUv, permv, rvec, tmp, work):
         return 0
     while True:
         if q + 1 > SPRAY_MAX_NODES:
@@ -251,7 +257,8 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
         LUv = np.empty(((q + 1) * n, (q + 1) * n))
         permv = np.empty((q + 1) * n, dtype=np.int64)
         if not _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q + 1,
-                             J, X0, theta, scale, alpha, True, Jv, LUv, permv):
+                             J, X0, theta, scale, alpha, True, Jv, LUv, permv, rvec, tmp,
+                             work):
             return 0
         q += 1
         gap = 0.0
@@ -262,11 +269,8 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
     if D == 0:
         return q
     # 2. degrees 1..D with the exact value-level matrix
-    qn = q * n
-    AW = _collocation_matrix(q)
+    AW = TABLE_AW[q]
     Js = np.empty((q, n, n))
-    rvec = np.empty(qn)
-    tmp = np.empty(qn)
     for j in range(q):
         _jacobian(tape, sub, W, space, S, deg, np.int64(Ys + j * n), p_slots, n, Js[j], work)
     # the last value-level matrix is the exact one when its Jacobians are these (for X linear
@@ -305,18 +309,8 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
 
 
 @nb.njit(**NJIT_NRT)
-def _collocation_matrix(q):
-    """(A - w)_ij for q nodes (`rkhp.taylor.collocation`)."""
-    AW = np.empty((q, q))
-    for i in range(q):
-        for j in range(q):
-            AW[i, j] = TABLE_A[q, i, j] - TABLE_W[q, j]
-    return AW
-
-
-@nb.njit(**NJIT_NRT)
 def _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J, X0, theta,
-                  scale, alpha, warm, Js, LU, perm):
+                  scale, alpha, warm, Js, LU, perm, rvec, tmp, work):
     """The stage values with q nodes at the values (rows Ys, column 0; their X in Xs) by Newton
     with the matrix I - (A - w) (x) J (J at the stage values when the first corrections contract
     slowly: far from x it matters) until the update is at the round-off level; alpha := the
@@ -326,19 +320,16 @@ def _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J
     Xs). alpha comes from X at the last stage values but one, so the last update need only be
     below 4 eps max(1, |x|) / theta (alpha moves by about theta |dY| / 2). False if it does not
     converge (or q nodes exceed SPRAY_MAX_NODES). Js (q, n, n), LU (qn, qn), perm (qn): the
-    Newton matrix's Jacobians, factors and row order, left as last used."""
+    Newton matrix's Jacobians, factors and row order, left as last used; rvec, tmp (at least
+    qn), work (n): work vectors."""
     if q > SPRAY_MAX_NODES:
         return False
     args = tape.args
     out0 = sub[3]
     zero = np.int64(0)
-    qn = q * n
-    AW = _collocation_matrix(q)
+    AW = TABLE_AW[q]
     for j in range(q):
         Js[j] = J
-    rvec = np.empty(qn)
-    tmp = np.empty(qn)
-    work = np.empty(n)
     if not _newton_matrix(AW, Js, q, n, LU, perm):
         return False
     eps = 2.220446049250313e-16
@@ -420,17 +411,18 @@ def _newton_step(W, S, args, x_slots, AW, q, n, Ys, Xs, m, LU, perm, rvec, tmp):
     return update
 
 
-@nb.njit(**NJIT_NRT)
-def _spectral_norm(J):
+@nb.njit(**NJIT_NORC)
+def _spectral_norm(J, v, u):
     """An estimate of the largest singular value of J (power iteration on J^T J from the
-    all-ones vector, 8 steps, 5% added), inf for a non-finite J."""
+    all-ones vector, 8 steps, 5% added), inf for a non-finite J; v, u: work vectors (at least
+    as long as J's side)."""
     n = J.shape[0]
     for i in range(n):
         for k in range(n):
             if not abs(J[i, k]) < np.inf:
                 return np.inf
-    v = np.ones(n) / math.sqrt(n)
-    u = np.empty(n)
+    for k in range(n):
+        v[k] = 1.0 / math.sqrt(n)
     sigma = 0.0
     for _ in range(8):
         for i in range(n):
