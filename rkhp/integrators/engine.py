@@ -34,6 +34,8 @@ from ..taylor.tape import Tape
 from .failure import Failure
 
 POSITIVE_ORTHANT = DOMAINS["positive orthant"]
+THETA_MAX = 0.5
+"""Largest measured contraction of the implicit stages' sweeps that `_tail_factor` trusts."""
 
 
 class SystemTapes(NamedTuple):
@@ -51,8 +53,9 @@ class StepBuffers(NamedTuple):
     work: the interpreter's; G (s, n, jet size): gradients of the stage functions; psi, Jpsi,
     alpha, Jalpha: the tower's results; x, delta, res (n): Newton's iterate, correction and
     residual; LU (n, n), v (n): the linear solve's; hist (3, n): psi of the three previous steps;
-    memo (4,): how many of them there are, Newton's measured quadratic constant L, and the
-    implicit stages' weight rate and effect factor (`_stage_measure`); y, y_next (n): the state
+    memo (6,): how many of them there are, Newton's measured quadratic constant L, the
+    implicit stages' weight rate and effect factor (`_stage_measure`), the measure of their last
+    sweep and its tail factor (`implicit_tower`); y, y_next (n): the state
     before and after the step; Gx (n): the point where G is expanded (implicit stages); changes
     (jet degree + 1,): per degree k of G, the weighted change of its coefficients at their last
     sweep (`_stage`, `implicit_tower`).
@@ -100,7 +103,7 @@ def step_buffers(tapes: SystemTapes, n: int, s: int, space) -> StepBuffers:
         return np.zeros((n, n))
 
     return StepBuffers(tape_work(tapes, size), np.zeros((s, n, size)), vec(), mat(), vec(), mat(),
-                       vec(), vec(), vec(), mat(), vec(), np.zeros((3, n)), np.zeros(4), vec(),
+                       vec(), vec(), vec(), mat(), vec(), np.zeros((3, n)), np.zeros(6), vec(),
                        vec(), vec(), np.zeros(space.degree + 1))
 
 
@@ -322,6 +325,20 @@ def _value_degree(changes, factor, D, bound):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
+def _tail_factor(effect, previous):
+    """theta / (1 - theta), theta = effect / previous the measured contraction of the stages'
+    measure over the last sweep of this step, when theta <= THETA_MAX; else 1 (no contraction
+    measured: `previous` is inf at the first sweep of a step):
+    the changes of the sweeps still to come are at most theta^j effect (j = 1, 2, ...), so their
+    sum is the effect times this factor (the a-posteriori rule of simplified Newton iterations,
+    Hairer & Wanner, Solving ODEs II, IV.8)."""
+    theta = effect / previous
+    if previous < np.inf and theta <= THETA_MAX:
+        return theta / (1.0 - theta)
+    return 1.0
+
+
+@nb.njit(inline="always", **NJIT_NORC)
 def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, scale):
     """The implicit tower (docs/theory.md §10, docs/implicit.md): psi and alpha(x0, psi) (with
     `jacobian`, their Jacobians) as `tower`, the stage polynomials G (degree D - 1,
@@ -336,8 +353,10 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     The effect of the stages' remaining error on the step is estimated by
     e = factor sum_k w_k |change of the degree-k coefficients at their last sweep|
     (`_stage_measure`, computed at the first tower of each step): the changes that the next
-    sweeps would still bring to psi. The stages have converged when e is at most Newton's
-    tolerance `tol` times `scale`.
+    sweeps would still bring to psi. From the second sweep of a step on, e is multiplied by the
+    tail factor theta / (1 - theta) of the measured contraction theta of e over the last sweep
+    (`_tail_factor`; also in `_value_degree`'s choice). The stages have converged when that is at
+    most Newton's tolerance `tol` times `scale`.
 
     Returns (Failure, sweeps, converged): STAGES_NO_CONVERGENCE for a non-finite sweep or more
     than stage.max_sweeps sweeps in one tower.
@@ -360,9 +379,11 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
                     G[j, k, m] = 0.0
     if first:
         _stage_measure(x0, A, b, h, tapes, space, buf)
+        memo[4] = np.inf
+        memo[5] = 1.0
     rate, factor = memo[2], memo[3]
     bound = tol * scale
-    top = D if jacobian else _value_degree(changes, factor, D, bound)
+    top = D if jacobian else _value_degree(changes, factor * memo[5], D, bound)
     settle = first and memo[0] == 0.0
     sweeps = 0
     converged = False
@@ -377,7 +398,9 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
             effect += factor * changes[k]
         if not np.isfinite(effect):
             return Failure.STAGES_NO_CONVERGENCE, sweeps, False
-        converged = effect <= bound
+        memo[5] = _tail_factor(effect, memo[4])
+        memo[4] = effect
+        converged = effect * memo[5] <= bound
         if converged or not settle:
             break
         if sweeps >= stage.max_sweeps:
