@@ -355,8 +355,10 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     (`_stage_measure`, computed at the first tower of each step): the changes that the next
     sweeps would still bring to psi. From the second sweep of a step on, e is multiplied by the
     tail factor theta / (1 - theta) of the measured contraction theta of e over the last sweep
-    (`_tail_factor`; also in `_value_degree`'s choice). The stages have converged when that is at
-    most Newton's tolerance `tol` times `scale`.
+    (`_tail_factor`; also in `_value_degree`'s choice), except while settling from G = 0 (the first
+    changes are the polynomials themselves, not a contraction: measured, the tail factor then stops
+    D = 10 too early). The stages have converged when that is at most Newton's tolerance `tol`
+    times `scale`.
 
     Returns (Failure, sweeps, converged): STAGES_NO_CONVERGENCE for a non-finite sweep or more
     than stage.max_sweeps sweeps in one tower.
@@ -398,7 +400,7 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
             effect += factor * changes[k]
         if not np.isfinite(effect):
             return Failure.STAGES_NO_CONVERGENCE, sweeps, False
-        memo[5] = _tail_factor(effect, memo[4])
+        memo[5] = 1.0 if settle else _tail_factor(effect, memo[4])
         memo[4] = effect
         converged = effect * memo[5] <= bound
         if converged or not settle:
