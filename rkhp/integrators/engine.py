@@ -81,7 +81,8 @@ class StepBuffers(NamedTuple):
 
 
 class StageSolve(NamedTuple):
-    """How the towers compute the stages (passed to compiled code as it is).
+    """How the towers compute the stages (passed to compiled code as it is for an implicit
+    tableau; the compiled loop takes None for an explicit one, `rkhp_method.compiled_stage`).
 
     degree 0: an explicit tableau, each stage once at its exact degree (`tower`); degree D >= 1:
     an implicit tableau, every stage function a jet of degree D solved by sweeps
@@ -338,7 +339,7 @@ def _tail_factor(effect, previous):
     return 1.0
 
 
-@nb.njit(inline="always", **NJIT_NORC)
+@nb.njit(**NJIT_NORC)
 def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, scale):
     """The implicit tower (docs/theory.md §10, docs/implicit.md): psi and alpha(x0, psi) (with
     `jacobian`, their Jacobians) as `tower`, the stage polynomials G (degree D - 1,
@@ -362,6 +363,10 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
 
     Returns (Failure, sweeps, converged): STAGES_NO_CONVERGENCE for a non-finite sweep or more
     than stage.max_sweeps sweeps in one tower.
+
+    Not inlined (unlike `tower`): numba's inlining copies a callee's whole inlined subtree at every
+    site, and the loop of explicit tableaux, where this call sits in a pruned branch, would pay
+    for it (docs/engine.md "Compile time").
     """
     s = b.shape[0]
     n = x0.shape[0]
@@ -424,10 +429,10 @@ def _max_abs(v):
 @nb.njit(inline="always", **NJIT_NORC)
 def rkhp_step(A, b, h, tapes, space, buf, tol, max_iter, stage):
     """One RKHP step from buf.y into buf.y_next; returns (Failure, Newton iterations, stage
-    sweeps). `stage` (StageSolve) says how the towers compute the stages: explicit (`tower`) or
-    implicit (`implicit_tower`: one sweep per tower, so the iterations go on after Newton's test
-    holds until the stages have converged too, at most max_iter + stage.max_sweeps of them;
-    STAGES_NO_CONVERGENCE when Newton's test held but the stages did not settle).
+    sweeps). `stage` says how the towers compute the stages: None, explicit (`tower`), or a
+    StageSolve, implicit (`implicit_tower`: one sweep per tower, so the iterations go on after
+    Newton's test holds until the stages have converged too, at most max_iter + stage.max_sweeps
+    of them; STAGES_NO_CONVERGENCE when Newton's test held but the stages did not settle).
 
     buf.hist[0..2]: psi of the three previous steps, buf.memo[0]: how many of them there are,
     buf.memo[1]: Newton's quadratic constant L (|dx_{k+1}| ~ L |dx_k|^2) measured on an earlier
@@ -460,22 +465,23 @@ def rkhp_step(A, b, h, tapes, space, buf, tol, max_iter, stage):
     converged = False
     full = np.bool_(True)
     it = 0
-    implicit = stage.degree > 0
-    limit = max_iter + stage.max_sweeps if implicit else max_iter
+    # stage is None for an explicit tableau: numba prunes the implicit branches, so the loop of
+    # explicit tableaux is compiled without them (`rkhp_method.compiled_stage`)
+    limit = max_iter if stage is None else max_iter + stage.max_sweeps
     sweeps = 0
-    stages_done = not implicit
+    stages_done = stage is None
     newton_done = False
     while it < limit:
         it += 1
         # a full tower (Jacobian) first; then value-only towers with that Jacobian (chord)
-        if implicit:
+        if stage is None:
+            tower(x, A, b, h, tapes, space, buf, full)
+        else:
             cause, done, stages_done = implicit_tower(
                 x, A, b, h, tapes, space, buf, full, stage, np.bool_(it == 1), tol, scale)
             sweeps += done
             if cause != Failure.OK:
                 return cause, it, sweeps
-        else:
-            tower(x, A, b, h, tapes, space, buf, full)
         for k in range(n):
             res[k] = y[k] - buf.alpha[k]
         solve_small(buf.Jalpha, res, delta, buf.LU, buf.v)

@@ -65,6 +65,13 @@ def stage_solve(tableau, A, degree=None, max_sweeps=STAGE_MAX_SWEEPS):
     return StageSolve(int(degree), int(max_sweeps))
 
 
+def compiled_stage(stage):
+    """What the compiled loop takes for `stage`: None for an explicit tableau, so that numba
+    compiles the loop of explicit tableaux without the implicit tower (docs/engine.md "Compile
+    time"), the StageSolve itself for an implicit one."""
+    return stage if stage.degree > 0 else None
+
+
 def implicit_degree(order: int) -> int:
     """Jet degree D of the stage functions of an implicit method of order N (its highest over the
     condition classes): D = N + 1, at least 2 (the Newton Jacobian needs degree-1 coefficients of
@@ -131,7 +138,7 @@ def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLER
     stage = stage_solve(tableau, A, stage_degree)
     tapes, space = engine_data(system, len(b), stage)
     buf = step_buffers(tapes, system.dim, len(b), space)
-    rest = (tapes, space, buf, system.domain_code, float(tol), int(max_iter), stage)
+    rest = (tapes, space, buf, system.domain_code, float(tol), int(max_iter), compiled_stage(stage))
     t0 = time.perf_counter()
     rkhp_run(y0, A, b, h, 0, *rest, np.zeros((1, y0.size)), np.zeros(1, np.int64),
              np.zeros(1, np.int64), True)
@@ -204,7 +211,7 @@ def _ensemble_chunk(system, A, b, h, n_steps, x0s, tol, max_iter, stage, threads
         buf = step_buffers(tapes, system.dim, len(b), space)
         for t in range(lo, hi):
             done[t], codes[t] = rkhp_run(x0s[t], A, b, h, n_steps, tapes, space, buf,
-                                         system.domain_code, tol, max_iter, stage, last,
+                                         system.domain_code, tol, max_iter, compiled_stage(stage), last,
                                          iterations, sweeps, False)
             finals[t] = last[0]
 

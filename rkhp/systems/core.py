@@ -236,12 +236,14 @@ def build_system(*, name: str, family: str, dim: int, poisson: Callable, hamilto
         return base_beta(shifted(x, p), p)
 
     x0 = np.asarray(x0, dtype=np.float64)
+    h_tape, f_tape, alpha_tape, beta_tape = tp.common_class(
+        (tp.record(dim, lambda x, p: [hamiltonian(x)]),
+         tp.record(dim, lambda x, p: [hamiltonian(alpha(x, p))]),
+         tp.record(dim, alpha), tp.record(dim, beta)))
     return PoissonSystem(
         name=name, dim=dim, family=family, realisation=kind.name, degenerate=kind.degenerate,
         poisson=poisson, x0=x0, t_final=float(t_final),
-        h_tape=tp.record(dim, lambda x, p: [hamiltonian(x)]),
-        f_tape=tp.record(dim, lambda x, p: [hamiltonian(alpha(x, p))]),
-        alpha_tape=tp.record(dim, alpha), beta_tape=tp.record(dim, beta),
+        h_tape=h_tape, f_tape=f_tape, alpha_tape=alpha_tape, beta_tape=beta_tape,
         domain=domain, casimirs=tuple(casimirs), casimir_names=tuple(casimir_names),
         exact_solution=exact_solution, description=description, poisson_degree=poisson_degree,
     )

@@ -30,6 +30,7 @@ def cache_dir() -> Path:
 
 
 import numba  # noqa: E402
+from numba.extending import overload  # noqa: E402
 
 if not os.environ.get("NUMBA_CACHE_DIR"):
     numba.config.CACHE_DIR = str(cache_dir())
@@ -64,4 +65,4 @@ def is_cached(kernel) -> bool:
         return False
 
 
-__all__ = ["numba", "cache_dir", "is_cached", "NJIT", "NJIT_NORC", "NJIT_NRT"]
+__all__ = ["numba", "overload", "cache_dir", "is_cached", "NJIT", "NJIT_NORC", "NJIT_NRT"]

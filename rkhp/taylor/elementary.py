@@ -40,7 +40,7 @@ CRB_SERIES_LIMIT = 20.0  # series for |u| < 20 (ratio < 1/2 per term), closed fo
 TWO_PI = 2.0 * math.pi
 
 
-@nb.njit(inline="always", **NJIT_NORC)
+@nb.njit(**NJIT_NORC)
 def taylor_coefficients(code, u0, u0_lo, f, k, D, coef):
     """coef[0..D]: the Taylor coefficients at u0 of the function of `code` (see the module);
     u0_lo: the low part of u0 as a double-double (CRB only), f and k: the row's parameters."""

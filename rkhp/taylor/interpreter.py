@@ -18,7 +18,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .compiler import NJIT_NORC
+from .compiler import NJIT_NORC, overload
 from .compiler import numba as nb
 from .composites import phimv, spray
 from .jets import jet_space
@@ -74,14 +74,42 @@ def run_tape(tape, D, space, work):
             r = hi
 
 
-@nb.njit(**NJIT_NORC)
+#: the kernel of each composite code (`rkhp.taylor.composites`)
+COMPOSITE_KERNELS = {PHIMV: phimv, SPRAY: spray}
+
+
 def _composite(tape, r, W, D, space, S, deg):
-    """The one dispatch of composite codes to their kernels (`rkhp.taylor.composites`)."""
-    code = tape.ops[r, 0]
-    if code == PHIMV:
-        phimv(tape, r, W, D, space, S, deg)
-    elif code == SPRAY:
-        spray(tape, r, W, D, space, S, deg)
+    """Run the composite row r of `tape` by its kernel (compiled code only: see below)."""
+    raise NotImplementedError("compiled code only")
+
+
+@overload(_composite, jit_options=dict(_nrt=False, error_model="numpy"))
+def _composite_kernels(tape, r, W, D, space, S, deg):
+    """The one dispatch of composite codes to their kernels, compiled for the tape's class with
+    the kernels of its composite codes only (`rkhp.taylor.tape.Tape`): none for a plain tape,
+    so that a system without composite operations never compiles them."""
+    codes = tape.instance_class.composites
+    if not codes:
+        def no_kernel(tape, r, W, D, space, S, deg):
+            pass
+
+        return no_kernel
+    if len(codes) == 1:
+        kernel = COMPOSITE_KERNELS[codes[0]]
+
+        def one_kernel(tape, r, W, D, space, S, deg):
+            kernel(tape, r, W, D, space, S, deg)
+
+        return one_kernel
+
+    def every_kernel(tape, r, W, D, space, S, deg):
+        code = tape.ops[r, 0]
+        if code == PHIMV:
+            phimv(tape, r, W, D, space, S, deg)
+        elif code == SPRAY:
+            spray(tape, r, W, D, space, S, deg)
+
+    return every_kernel
 
 
 def evaluate(tape, inputs: np.ndarray, degree: int = 0, n_vars: int = 0):

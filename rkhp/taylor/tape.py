@@ -59,7 +59,13 @@ from .ops import (
 
 
 class Tape(NamedTuple):
-    """A recorded program (see the module docstring); passed to compiled code as it is."""
+    """A recorded program (see the module docstring); passed to compiled code as it is.
+
+    The class of a tape names the composite operations it may hold (`composites`): `Tape`
+    itself none, `tape_class(codes)` those codes. numba compiles the interpreter once per class,
+    with the kernels of its composite operations only, so that a system without them never
+    compiles them (`rkhp.taylor.interpreter`; docs/engine.md "Compile time").
+    """
 
     ops: np.ndarray
     fpar: np.ndarray
@@ -69,6 +75,39 @@ class Tape(NamedTuple):
     n_slots: int
     main: int
     scratch_rows: int
+
+    composites = ()
+
+
+def _composite_class(name: str, codes: tuple[int, ...]) -> type:
+    cls = type(name, (Tape,), {"__slots__": (), "composites": codes, "__module__": __name__,
+                               "__qualname__": name,
+                               "__doc__": f"A tape that may hold the composite codes {codes}."})
+    globals()[name] = cls  # a module attribute, so that numba's cache can name the class
+    return cls
+
+
+_COMPOSITE_CODES = tuple(op.code for op in OPS if op.kind == COMPOSITE)
+#: composite codes -> the tape class holding them: none, each one alone, or all of them
+TAPE_CLASSES: dict[tuple[int, ...], type] = {
+    (): Tape,
+    **{(op.code,): _composite_class(f"Tape_{op.name}", (op.code,))
+       for op in OPS if op.kind == COMPOSITE},
+    _COMPOSITE_CODES: _composite_class("Tape_composite", _COMPOSITE_CODES),
+}
+
+
+def tape_class(codes) -> type:
+    """The tape class for a set of composite codes (all composite kernels for several)."""
+    key = tuple(sorted(set(codes)))
+    return TAPE_CLASSES.get(key, TAPE_CLASSES[_COMPOSITE_CODES])
+
+
+def common_class(tapes) -> tuple[Tape, ...]:
+    """The tapes as instances of one class, the one whose composite codes cover all of theirs
+    (the tapes of one system then share one compiled interpreter)."""
+    cls = tape_class(c for t in tapes for c in t.composites)
+    return tuple(t if type(t) is cls else cls(*t) for t in tapes)
 
 
 class Var:
@@ -259,7 +298,8 @@ class TapeBuilder:
     def finish(self, outputs) -> Tape:
         slots = [self.lift(v).slot for v in outputs]
         rows = np.array(self._sub_rows + self._main.rows, dtype=np.int64).reshape(-1, 5)
-        return Tape(rows, np.array(self._sub_fpar + self._main.fpar, dtype=np.float64),
+        cls = tape_class(code for code, *_ in self._main.rows if BY_CODE[code].kind == COMPOSITE)
+        return cls(rows, np.array(self._sub_fpar + self._main.fpar, dtype=np.float64),
                     np.array(self.args + [0], dtype=np.int64), np.array(slots, dtype=np.int64),
                     self.n_inputs, self.n_slots, len(self._sub_rows), self._scratch)
 
