@@ -24,19 +24,21 @@ class Kernel(NamedTuple):
 
     ``seconds`` was measured on this project's reference machine (numba 0.68, one core of an AMD
     EPYC, CPU time of a fresh process with an empty cache, kernels compiled in the order below,
-    so each figure leaves out what the kernels before it had already compiled)."""
+    so each figure leaves out what the kernels before it had already compiled); ``run_tape`` and
+    ``rkhp_run`` re-measured after the lazy compilation of composite kernels and of the implicit
+    tower (the rigid body, load about 2.5; docs/engine.md "Compile time")."""
 
     module: str
     name: str
     seconds: float
 
 
-TAPE = Kernel("rkhp.taylor.interpreter", "run_tape", 14.0)
+TAPE = Kernel("rkhp.taylor.interpreter", "run_tape", 7.0)
 
 KERNELS: dict[str, tuple[Kernel, ...]] = {
     "tape": (TAPE,),
     "invariants": (Kernel("rkhp.integrators.classical", "_hamiltonian_loop", 2.0),),
-    "rkhp": (Kernel("rkhp.integrators.engine", "rkhp_run", 9.0),),
+    "rkhp": (Kernel("rkhp.integrators.engine", "rkhp_run", 10.0),),
     "taylor": (),  # THP runs the tape interpreter from Python
     "classical": (Kernel("rkhp.integrators.classical", "_rk_loop", 9.0),),
     "implicit-midpoint": (Kernel("rkhp.integrators.classical", "_midpoint_loop", 12.0),),

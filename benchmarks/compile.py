@@ -1,0 +1,138 @@
+"""Cold and warm `rkhp converge rigid-body`, and the cost of a step, before and after (issue 11).
+
+Run: python benchmarks/compile.py [--before COMMIT] [--also COMMIT] [--rounds N] [--step-runs N]
+
+Each version is a copy of rkhp (the library, its CLI and its tableau files) in a temporary folder:
+the version to compare with from `git archive COMMIT` (default d63087d, the engine before issue 11's
+compile work), this checkout's working tree as "after". Both run in fresh processes of this
+Python with PYTHONPATH set to their copy, so that the same interpreter and numba are measured:
+
+- cold: `python -m rkhp converge rigid-body --format json` with an empty numba cache
+  (NUMBA_CACHE_DIR set to a new folder), the whole process: wall and CPU (user + system) seconds;
+- warm: the same command again, on the cache the cold run filled;
+- us/step: the rigid body at h = 0.05, 1000 steps, with the paper's three-stage method, RK4
+  (4 stages) and Butcher's six-stage `butcher5`, warm: CPU seconds of the process around each
+  run (the fairer figure on a loaded machine), the minimum over the repeats.
+
+Versions alternate within a round and the minimum over the rounds (and over the step processes
+of a round) is printed, so that a burst of load on a shared machine does not fall on one version
+only; the load average is printed too.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+BEFORE = "d63087d"
+COMMAND = ["converge", "rigid-body", "--format", "json"]
+STEP_METHODS = (("paper-three-stage", 3), ("rk4", 4), ("butcher5", 6))
+
+STEP_CODE = """
+import json, sys, time
+from rkhp.integrators import integrate
+from rkhp.systems import get_system
+system, out = get_system("rigid-body"), {}
+for method in sys.argv[1:]:
+    integrate(system, method, 0.05, 2)
+    best = float("inf")
+    for _ in range(%d):
+        start = time.process_time()
+        integrate(system, method, 0.05, 1000)
+        best = min(best, time.process_time() - start)
+    out[method] = best / 1000 * 1e6
+print(json.dumps(out))
+"""
+
+
+def assemble(dest: Path, commit: str | None) -> Path:
+    """A runnable copy of rkhp in `dest`: rkhp/, rkhp_cli/ (from cli/) and rkhp/tables/, from a
+    commit or (None) from the working tree."""
+    dest.mkdir(parents=True)
+    if commit:
+        archive = subprocess.run(["git", "-C", str(ROOT), "archive", commit, "rkhp", "cli", "tables"],
+                                 capture_output=True, check=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(dest)], input=archive, check=True)
+    else:
+        for name in ("rkhp", "cli", "tables"):
+            shutil.copytree(ROOT / name, dest / name, ignore=shutil.ignore_patterns("__pycache__"))
+    (dest / "cli").rename(dest / "rkhp_cli")
+    (dest / "tables").rename(dest / "rkhp" / "tables")
+    return dest
+
+
+def run(tree: Path, args: list[str], cache: Path) -> tuple[float, float, str]:
+    """(wall seconds, CPU seconds of the process, stdout) of `python ARGS` on a version."""
+    env = dict(os.environ, PYTHONPATH=str(tree), NUMBA_CACHE_DIR=str(cache))
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    proc = subprocess.run([sys.executable, *args], env=env, capture_output=True, text=True, cwd=tree)
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if proc.returncode != 0:
+        raise RuntimeError(f"{args} failed in {tree}:\n{proc.stderr[-2000:]}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu, proc.stdout
+
+
+def measure(tree: Path, work: Path, repeats: int, step_runs: int) -> dict:
+    """Cold and warm converge, and us/step (the minimum of `step_runs` processes), of one version
+    (one round)."""
+    cache = Path(tempfile.mkdtemp(prefix="numba-", dir=work))
+    cold = run(tree, ["-m", "rkhp", *COMMAND], cache)
+    warm = run(tree, ["-m", "rkhp", *COMMAND], cache)
+    methods = [m for m, _ in STEP_METHODS]
+    runs = [json.loads(run(tree, ["-c", STEP_CODE % repeats, *methods], cache)[2])
+            for _ in range(step_runs)]
+    shutil.rmtree(cache)
+    return {"cold": cold[:2], "warm": warm[:2],
+            "us_per_step": {m: min(r[m] for r in runs) for m in methods}}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--before", default=BEFORE, help=f"the commit to compare with ({BEFORE})")
+    parser.add_argument("--also", action="append", default=[], metavar="COMMIT",
+                        help="a further commit to measure (repeatable)")
+    parser.add_argument("--rounds", type=int, default=2, help="rounds (minimum taken; default 2)")
+    parser.add_argument("--repeats", type=int, default=5, help="runs per step timing (default 5)")
+    parser.add_argument("--step-runs", type=int, default=3,
+                        help="processes per round for the step timings (default 3)")
+    options = parser.parse_args()
+    work = Path(tempfile.mkdtemp(prefix="rkhp-compile-"))
+    try:
+        versions = {f"before ({options.before})": assemble(work / "before", options.before)}
+        for k, commit in enumerate(options.also):
+            versions[commit] = assemble(work / f"also{k}", commit)
+        versions["after (this tree)"] = assemble(work / "after", None)
+        results: dict[str, list[dict]] = {name: [] for name in versions}
+        loads = [os.getloadavg()[0]]
+        for _ in range(options.rounds):
+            for name, tree in versions.items():
+                results[name].append(measure(tree, work, options.repeats, options.step_runs))
+                loads.append(os.getloadavg()[0])
+        print(f"machine: {os.cpu_count()} CPUs, load average {min(loads):.1f} to {max(loads):.1f} "
+              f"during the runs; `rkhp {' '.join(COMMAND)}`, minima over {options.rounds} rounds")
+        print(f"{'version':24s} {'cold wall':>10s} {'cold CPU':>9s} {'warm wall':>10s} {'warm CPU':>9s}  "
+              + "  ".join(f"{f'{s} stages':>9s}" for _, s in STEP_METHODS) + " (us/step)")
+        for name, rounds in results.items():
+            cold = [min(r["cold"][k] for r in rounds) for k in (0, 1)]
+            warm = [min(r["warm"][k] for r in rounds) for k in (0, 1)]
+            steps = [min(r["us_per_step"][m] for r in rounds) for m, _ in STEP_METHODS]
+            print(f"{name:24s} {cold[0]:9.1f}s {cold[1]:8.1f}s {warm[0]:9.2f}s {warm[1]:8.2f}s  "
+                  + "  ".join(f"{v:9.2f}" for v in steps))
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
