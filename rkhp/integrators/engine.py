@@ -35,6 +35,9 @@ from .failure import Failure
 
 POSITIVE_ORTHANT = DOMAINS["positive orthant"]
 THETA_MAX = 0.5
+ROUND_OFF_SHARE = 0.1
+"""A sweep whose stages' measure is below this share of the tolerance has converged, contracting
+or not (its changes are round-off)."""
 """Largest measured contraction of the implicit stages' sweeps that `_tail_factor` trusts."""
 
 
@@ -333,10 +336,14 @@ def _tail_factor(effect, previous):
     the changes of the sweeps still to come are at most theta^j effect (j = 1, 2, ...), so their
     sum is the effect times this factor (the a-posteriori rule of simplified Newton iterations,
     Hairer & Wanner, Solving ODEs II, IV.8)."""
+    if previous == np.inf:
+        return 1.0
     theta = effect / previous
-    if previous < np.inf and theta <= THETA_MAX:
+    if theta <= THETA_MAX:
         return theta / (1.0 - theta)
-    return 1.0
+    if theta < 1.0:
+        return max(1.0, theta / (1.0 - theta))
+    return np.inf
 
 
 @nb.njit(**NJIT_NORC)
@@ -405,9 +412,12 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
             effect += factor * changes[k]
         if not np.isfinite(effect):
             return Failure.STAGES_NO_CONVERGENCE, sweeps, False
-        memo[5] = 1.0 if settle else _tail_factor(effect, memo[4])
+        tail = _tail_factor(effect, memo[4])
+        memo[5] = max(1.0, tail) if settle else tail
         memo[4] = effect
-        converged = effect * memo[5] <= bound
+        # a sweep that did not contract proves nothing, unless its changes are already far below
+        # the tolerance (round-off: the measure then no longer decreases)
+        converged = effect * memo[5] <= bound or effect <= ROUND_OFF_SHARE * bound
         if converged or not settle:
             break
         if sweeps >= stage.max_sweeps:
