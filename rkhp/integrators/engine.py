@@ -35,10 +35,15 @@ from .failure import Failure
 
 POSITIVE_ORTHANT = DOMAINS["positive orthant"]
 THETA_MAX = 0.5
+"""Largest measured contraction of the implicit stages' sweeps that `_tail_factor` trusts."""
 ROUND_OFF_SHARE = 0.1
 """A sweep whose stages' measure is below this share of the tolerance has converged, contracting
 or not (its changes are round-off)."""
-"""Largest measured contraction of the implicit stages' sweeps that `_tail_factor` trusts."""
+STALE_SHARE = 0.5
+"""Share of the tolerance that the degrees a value-only sweep leaves out may keep (`_value_degree`)."""
+SHIFT_MARGIN = 10.0
+"""Safety factor on the linear estimate of how a Taylor shift moves the degrees of G that
+value-only sweeps leave out (`_stale_factor`)."""
 
 
 class SystemTapes(NamedTuple):
@@ -109,7 +114,7 @@ def step_buffers(tapes: SystemTapes, n: int, s: int, space) -> StepBuffers:
         return np.zeros((n, n))
 
     return StepBuffers(tape_work(tapes, size), np.zeros((s, n, size)), vec(), mat(), vec(), mat(),
-                       vec(), vec(), vec(), mat(), vec(), np.zeros((3, n)), np.zeros(6), vec(),
+                       vec(), vec(), vec(), mat(), vec(), np.zeros((3, n)), np.zeros(7), vec(),
                        vec(), vec(), np.zeros(space.degree + 1), np.zeros((s, size)))
 
 
@@ -357,14 +362,32 @@ def _stage_weights(A, b, rate, space, weights):
 
 @nb.njit(inline="always", **NJIT_NORC)
 def _value_degree(changes, factor, D, bound):
-    """Jet degree of a value-only sweep: 1 + the highest degree k of G whose weighted change at
-    its last sweep, times the effect factor, exceeds bound / D (at least 1: psi needs the
-    degree-0 coefficients); the degrees above keep their last change in the measure."""
+    """Jet degree of a value-only sweep: the lowest t >= 1 (psi needs the degree-0 coefficients)
+    such that the degrees k = t..D - 1 of G, not swept, keep a measure (their weighted last
+    changes times the effect factor, counted once) of at most STALE_SHARE * bound."""
     top = np.int64(1)
-    for k in range(D):
-        if not factor * changes[k] * D <= bound:  # also catches NaN
+    kept = 0.0
+    for k in range(D - 1, 0, -1):
+        kept += factor * changes[k]
+        if not kept <= STALE_SHARE * bound:  # also catches NaN
             top = k + 1
+            break
     return top
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _stale_factor(since, before):
+    """1 + SHIFT_MARGIN since / before: how much the last changes of the degrees of G that
+    value-only sweeps have left out understate their error after Taylor shifts by `since` in all
+    (max-norm) since their last sweep, which followed shifts by `before`. Truncating the shift
+    moves the stage polynomials' fixed point off the shifted polynomials linearly in the shift,
+    and that last sweep's changes measured the move of the shifts before it; inf when they had
+    none to measure (the first tower of a run, from G = 0)."""
+    if since == 0.0:
+        return 1.0
+    if before == 0.0:
+        return np.inf
+    return 1.0 + SHIFT_MARGIN * since / before
 
 
 @nb.njit(inline="always", **NJIT_NORC)
@@ -395,17 +418,18 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     G = 0 at the first step of a run.
 
     One sweep per tower, or, at the first tower of a run, sweeps until the stages have converged.
-    A tower with `jacobian` sweeps every degree; a value-only tower only the degrees of G whose
-    last change still mattered (`_value_degree`): the others keep their values re-expanded at x0.
-    The effect of the stages' remaining error on the step is estimated by
-    e = factor sum_k w_k |change of the degree-k coefficients at their last sweep|
-    (`_stage_measure`, computed at the first tower of each step): the changes that the next
-    sweeps would still bring to psi. From the second sweep of a step on, e is multiplied by the
-    tail factor theta / (1 - theta) of the measured contraction theta of e over the last sweep
-    (`_tail_factor`; also in `_value_degree`'s choice), except while settling from G = 0 (the first
-    changes are the polynomials themselves, not a contraction: measured, the tail factor then stops
-    D = 10 too early). The stages have converged when that is at most Newton's tolerance `tol`
-    times `scale`.
+    A tower with `jacobian` sweeps every degree; a value-only tower only the degrees of G below
+    `_value_degree`: the others keep their values re-expanded at x0. The effect of the stages'
+    remaining error on the step is estimated by e = factor sum_{k, i} w |change of a degree-k
+    coefficient of G[i] at its last sweep| (largest over the coefficients; `_stage_measure` and
+    `_stage_weights`, computed at the first tower of each step): the changes that the next sweeps
+    would still bring to psi. The part of the degrees swept now is multiplied by the tail factor
+    theta / (1 - theta) of its measured contraction theta over their previous sweep in this step
+    (`_tail_factor`; none at the first sweep of a step, at least 1 while settling from G = 0: the
+    first changes are the polynomials themselves, not a contraction, and measured, the tail factor
+    then stops D = 10 too early); the part of the degrees left out counts once, times
+    `_stale_factor` for the Taylor shifts since their last sweep. The stages have converged when
+    that is at most Newton's tolerance `tol` times `scale`.
 
     Returns (Failure, sweeps, converged): STAGES_NO_CONVERGENCE for a non-finite sweep or more
     than stage.max_sweeps sweeps in one tower.
@@ -418,10 +442,12 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     n = x0.shape[0]
     D = np.int64(stage.degree)
     G, changes, memo = buf.G, buf.changes, buf.memo
+    shift = 0.0
     if memo[0] > 0.0 or not first:
         for k in range(n):
             buf.delta[k] = x0[k] - buf.Gx[k]
             buf.Gx[k] = x0[k]
+        shift = _max_abs(buf.delta)
         _shift(G, buf.delta, D - 1, space)
     else:
         for k in range(n):
@@ -433,30 +459,43 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     if first:
         _stage_measure(x0, A, b, h, tapes, space, buf)
         memo[4] = np.inf
-        memo[5] = 1.0
     factor = memo[3]
     bound = tol * scale
-    top = D if jacobian else _value_degree(changes, factor * memo[5], D, bound)
+    since = memo[6] + shift
+    stale = factor * _stale_factor(since, memo[5])
+    top = D if jacobian else _value_degree(changes, stale, D, bound)
+    memo[5], memo[6] = (since, 0.0) if top == D else (memo[5], since)
     settle = first and memo[0] == 0.0
     sweeps = 0
     converged = False
     while True:
         sweeps += 1
+        # the measure of the degrees swept now at their last sweep (inf: none yet in this step)
+        previous = memo[4]
+        if previous < np.inf:
+            previous = 0.0
+            for k in range(top):
+                previous += factor * changes[k]
         for k in range(top):
             changes[k] = 0.0
         for i in range(s):
             _stage(i, x0, A, h, top, s, tapes, space, buf)
-        effect = 0.0
-        for k in range(D):
-            effect += factor * changes[k]
+        swept = 0.0
+        for k in range(top):
+            swept += factor * changes[k]
+        kept = 0.0
+        for k in range(top, D):
+            kept += stale * changes[k]
+        effect = swept + kept
         if not np.isfinite(effect):
             return Failure.STAGES_NO_CONVERGENCE, sweeps, False
-        tail = _tail_factor(effect, memo[4])
-        memo[5] = max(1.0, tail) if settle else tail
+        tail = _tail_factor(swept, previous)
+        if settle:
+            tail = max(1.0, tail)
         memo[4] = effect
         # a sweep that did not contract proves nothing, unless its changes are already far below
         # the tolerance (round-off: the measure then no longer decreases)
-        converged = effect * memo[5] <= bound or effect <= ROUND_OFF_SHARE * bound
+        converged = swept * tail + kept <= bound or effect <= ROUND_OFF_SHARE * bound
         if converged or not settle:
             break
         if sweeps >= stage.max_sweeps:
