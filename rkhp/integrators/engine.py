@@ -67,7 +67,9 @@ class StepBuffers(NamedTuple):
     before and after the step; Gx (n): the point where G is expanded (implicit stages); changes
     (jet degree + 1,): per degree k of G, the weighted change of its coefficients at their last
     sweep (`_stage`, `implicit_tower`); weights (s, jet size): the weight of a change of each
-    coefficient of G[i] in that measure (`_stage_weights`).
+    coefficient of G[i] in that measure (`_stage_weights`); defect (s, n, jet size): what the
+    first sweep of a step is predicted to add to G, and defects (jet degree + 1,): its measure
+    per degree (`_predict`).
     """
 
     work: TapeWork
@@ -88,6 +90,8 @@ class StepBuffers(NamedTuple):
     Gx: np.ndarray
     changes: np.ndarray
     weights: np.ndarray
+    defect: np.ndarray
+    defects: np.ndarray
 
 
 class StageSolve(NamedTuple):
@@ -115,7 +119,8 @@ def step_buffers(tapes: SystemTapes, n: int, s: int, space) -> StepBuffers:
 
     return StepBuffers(tape_work(tapes, size), np.zeros((s, n, size)), vec(), mat(), vec(), mat(),
                        vec(), vec(), vec(), mat(), vec(), np.zeros((3, n)), np.zeros(7), vec(),
-                       vec(), vec(), np.zeros(space.degree + 1), np.zeros((s, size)))
+                       vec(), vec(), np.zeros(space.degree + 1), np.zeros((s, size)),
+                       np.zeros((s, n, size)), np.zeros(space.degree + 1))
 
 
 @nb.njit(**NJIT_NORC)
@@ -361,17 +366,24 @@ def _stage_weights(A, b, rate, space, weights):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _value_degree(changes, factor, D, bound):
-    """Jet degree of a value-only sweep: the lowest t >= 1 (psi needs the degree-0 coefficients)
-    such that the degrees k = t..D - 1 of G, not swept, keep a measure (their weighted last
-    changes times the effect factor, counted once) of at most STALE_SHARE * bound."""
-    top = np.int64(1)
+def _kept(changes, defects, factor, stale, top, D):
+    """The measure of the degrees top..D - 1 of G that a value-only sweep leaves out: their last
+    changes, plus (stale - 1) times those and the step's predicted defect (`_stale_factor`),
+    times the effect factor."""
     kept = 0.0
-    for k in range(D - 1, 0, -1):
-        kept += factor * changes[k]
-        if not kept <= STALE_SHARE * bound:  # also catches NaN
-            top = k + 1
-            break
+    for k in range(top, D):
+        kept += factor * (changes[k] + (stale - 1.0) * (changes[k] + defects[k]))
+    return kept
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _value_degree(changes, defects, factor, stale, D, bound):
+    """Jet degree of a value-only sweep: the lowest t >= 1 (psi needs the degree-0 coefficients)
+    such that the degrees t..D - 1 of G, not swept, keep a measure (`_kept`) of at most
+    STALE_SHARE * bound."""
+    top = np.int64(D)
+    while top > 1 and _kept(changes, defects, factor, stale, top - 1, D) <= STALE_SHARE * bound:
+        top -= 1
     return top
 
 
@@ -406,6 +418,44 @@ def _tail_factor(effect, previous):
     if theta < 1.0:
         return max(1.0, theta / (1.0 - theta))
     return np.inf
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _predict(G, defect, top, space, before):
+    """Before the first sweep of a step: with `before`, G += defect (G still expanded at the
+    previous step's point: the Taylor shift follows); otherwise defect -= G (G now shifted: the
+    sweep's changes are added back by `_learn`), on the coefficients of degree < top."""
+    M = space.counts[top - 1]
+    for j in range(G.shape[0]):
+        for k in range(G.shape[1]):
+            for m in range(M):
+                if before:
+                    G[j, k, m] += defect[j, k, m]
+                else:
+                    defect[j, k, m] -= G[j, k, m]
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _learn(G, defect, weights, top, space, defects):
+    """After the first sweep of a step: defect += G, so that it becomes the prediction plus what
+    the sweep still changed (the predicted defect of the next step: the stage polynomials move
+    smoothly along the solution, and so does what their Taylor shift misses); defects[k] := its
+    measure at degree k (as `_stage`'s changes, with buf.weights)."""
+    counts = space.counts
+    for d in range(top):
+        defects[d] = 0.0
+    for j in range(G.shape[0]):
+        lo = 0
+        for d in range(top):
+            largest = 0.0
+            for k in range(G.shape[1]):
+                for m in range(lo, counts[d]):
+                    defect[j, k, m] += G[j, k, m]
+                    c = weights[j, m] * abs(defect[j, k, m])
+                    if not c <= largest:  # also catches NaN
+                        largest = c
+            defects[d] += largest
+            lo = counts[d]
 
 
 @nb.njit(**NJIT_NORC)
@@ -443,12 +493,19 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     D = np.int64(stage.degree)
     G, changes, memo = buf.G, buf.changes, buf.memo
     shift = 0.0
-    if memo[0] > 0.0 or not first:
+    settle = first and memo[0] == 0.0
+    # the first tower of a step starts from the shifted polynomials plus the predicted defect
+    predict = first and not settle
+    if not settle:
+        if predict:
+            _predict(G, buf.defect, D, space, np.bool_(True))
         for k in range(n):
             buf.delta[k] = x0[k] - buf.Gx[k]
             buf.Gx[k] = x0[k]
         shift = _max_abs(buf.delta)
         _shift(G, buf.delta, D - 1, space)
+        if predict:
+            _predict(G, buf.defect, D, space, np.bool_(False))
     else:
         for k in range(n):
             buf.Gx[k] = x0[k]
@@ -456,16 +513,18 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
             for k in range(n):
                 for m in range(G.shape[2]):
                     G[j, k, m] = 0.0
+                    buf.defect[j, k, m] = 0.0
+        for k in range(D + 1):
+            buf.defects[k] = 0.0
     if first:
         _stage_measure(x0, A, b, h, tapes, space, buf)
         memo[4] = np.inf
     factor = memo[3]
     bound = tol * scale
     since = memo[6] + shift
-    stale = factor * _stale_factor(since, memo[5])
-    top = D if jacobian else _value_degree(changes, stale, D, bound)
+    stale = _stale_factor(since, memo[5])
+    top = D if jacobian else _value_degree(changes, buf.defects, factor, stale, D, bound)
     memo[5], memo[6] = (since, 0.0) if top == D else (memo[5], since)
-    settle = first and memo[0] == 0.0
     sweeps = 0
     converged = False
     while True:
@@ -483,9 +542,9 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
         swept = 0.0
         for k in range(top):
             swept += factor * changes[k]
-        kept = 0.0
-        for k in range(top, D):
-            kept += stale * changes[k]
+        if predict:
+            _learn(G, buf.defect, buf.weights, D, space, buf.defects)
+        kept = _kept(changes, buf.defects, factor, stale, top, D)
         effect = swept + kept
         if not np.isfinite(effect):
             return Failure.STAGES_NO_CONVERGENCE, sweeps, False
