@@ -378,11 +378,11 @@ def _kept(changes, defects, factor, stale, top, D):
 
 @nb.njit(inline="always", **NJIT_NORC)
 def _value_degree(changes, defects, factor, stale, D, bound):
-    """Jet degree of a value-only sweep: the lowest t >= 1 (psi needs the degree-0 coefficients)
-    such that the degrees t..D - 1 of G, not swept, keep a measure (`_kept`) of at most
-    STALE_SHARE * bound."""
+    """Jet degree of a value-only sweep: the lowest t >= 0 such that the degrees t..D - 1 of G,
+    not swept, keep a measure (`_kept`) of at most STALE_SHARE * bound (0: no sweep, psi from the
+    polynomials re-expanded at x0)."""
     top = np.int64(D)
-    while top > 1 and _kept(changes, defects, factor, stale, top - 1, D) <= STALE_SHARE * bound:
+    while top > 0 and _kept(changes, defects, factor, stale, top - 1, D) <= STALE_SHARE * bound:
         top -= 1
     return top
 
@@ -527,7 +527,9 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     memo[5], memo[6] = (since, 0.0) if top == D else (memo[5], since)
     sweeps = 0
     converged = False
-    while True:
+    if top == 0:
+        converged = _kept(changes, buf.defects, factor, stale, top, D) <= bound
+    while top > 0:
         sweeps += 1
         # the measure of the degrees swept now at their last sweep (inf: none yet in this step)
         previous = memo[4]
