@@ -165,12 +165,12 @@ def _set_x(W, x0, n, D, M):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _stage(i, x0, A, h, D, j_end, tapes, space, buf):
+def _stage(i, x0, A, h, D, j_end, tapes, space, buf, rate):
     """Stage i at x0: g_i = f(x0 + dx, Z_i), Z_i = h sum_{j < j_end} a_ij G[j], in jets of degree
     D (G[j] read up to degree D); G[i] := grad g_i up to degree D - 1 (its higher coefficients
-    are left as they are). buf.changes[k] (k < D) is increased by the largest w |change| among
-    the degree-k coefficients of G[i], w = buf.weights[i] of the coefficient (the implicit
-    tower's convergence measure, `_stage_weights`; unused by the explicit tower)."""
+    are left as they are). buf.changes[k] (k < D) is increased by rate^k times the largest
+    w |change| among the degree-k coefficients of G[i], w = buf.weights[i] of the coefficient (the
+    implicit tower's convergence measure, `_stage_weights`; unused by the explicit tower)."""
     W, G = buf.work.W, buf.G
     counts, up, expo = space.counts, space.up, space.expo
     n = x0.shape[0]
@@ -193,6 +193,7 @@ def _stage(i, x0, A, h, D, j_end, tapes, space, buf):
     g = tape.outputs[0]
     changes, weights = buf.changes, buf.weights
     lo = 0
+    power = 1.0
     for d in range(D):
         largest = 0.0
         for k in range(n):
@@ -202,8 +203,9 @@ def _stage(i, x0, A, h, D, j_end, tapes, space, buf):
                 if not c <= largest:  # also catches NaN
                     largest = c
                 G[i, k, m] = new
-        changes[d] += largest
+        changes[d] += power * largest
         lo = counts[d]
+        power *= rate
 
 
 @nb.njit(inline="always", **NJIT_NORC)
@@ -246,7 +248,7 @@ def tower(x0, A, b, h, tapes, space, buf, jacobian):
     s = b.shape[0]
     extra = np.int64(1) if jacobian else np.int64(0)
     for i in range(s):
-        _stage(i, x0, A, h, s + extra - i, i, tapes, space, buf)
+        _stage(i, x0, A, h, s + extra - i, i, tapes, space, buf, 1.0)
     _psi_alpha(x0, b, h, tapes, space, buf, jacobian)
 
 
@@ -287,9 +289,8 @@ def _set_p(W, x0, n):
 @nb.njit(inline="always", **NJIT_NORC)
 def _stage_measure(x0, A, b, h, tapes, space, buf):
     """The scales of the implicit stages' convergence measure at x0 (docs/implicit.md): the rate
-    h |c|_1 into buf.memo[2], the effect factor into buf.memo[3] and the weights of the
-    coefficients' changes into buf.weights (`_stage_weights`), from J = d_p alpha(x0, 0) and
-    c = d_p f(x0, 0) (the tapes at degree 1 in p, x fixed).
+    h |c|_1 of `_stage_weights` into buf.memo[2] and the effect factor into buf.memo[3], from
+    J = d_p alpha(x0, 0) and c = d_p f(x0, 0) (the tapes at degree 1 in p, x fixed).
 
     A change of psi = h sum_i b_i G_i(0) by dpsi moves y_next = beta(x, psi) with x
     (alpha(x, psi) = y) by about (d_p beta - d_p alpha) dpsi = pi dpsi, pi = J^T - J: the effect
@@ -316,14 +317,14 @@ def _stage_measure(x0, A, b, h, tapes, space, buf):
         bsum += abs(b[i])
     buf.memo[2] = h * c
     buf.memo[3] = pi * h * bsum
-    _stage_weights(A, b, buf.memo[2], space, buf.weights)
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _stage_weights(A, b, rate, space, weights):
-    """weights[j, m] = m! rate^|m| (|b|^T |A|^|m|)_j / sum_i |b_i| (the effect factor has the sum)
-    for the coefficients m of G[j] (rate = h |c|_1, m! = prod_v m_v!, |A| and |b| entrywise;
-    docs/implicit.md).
+def _stage_weights(A, b, space, weights):
+    """weights[j, m] = m! (|b|^T |A|^|m|)_j / sum_i |b_i| for the coefficients m of G[j]
+    (m! = prod_v m_v!, |A| and |b| entrywise; docs/implicit.md): with the effect factor (which
+    has the sum) and rate^|m|, rate = h |c|_1 (`_stage_measure`, each step), the weight of a
+    change of that coefficient in the stages' measure (`_stage`).
 
     A change dG of the stage gradients changes Z_i by h sum_j a_ij dG_j and g_i by about c . dZ_i
     (c = d_p f(x0, 0)). Counted in derivatives (a coefficient times m!), the order-|m| derivatives
@@ -332,9 +333,9 @@ def _stage_weights(A, b, rate, space, weights):
     same Gauss-Seidel sweep) by at most h |c|_1 |a_ij| times its size, and reaches psi's
     coefficients (order 0) after k such passes, times h |b_i| at the end: a change of coefficient
     m of G[j] moves psi by at most h m! (h |c|_1)^|m| (|b|^T |A|^|m|)_j times it (the sweeps at
-    the same degree shrink it further, by O(h)). (Bounded by the coarser |m|! rho^|m| sum_i |b_i|,
-    rho = h |c|_1 max_i sum_j |a_ij|, which the measure used before: 2.37 sweeps per gauss2 step on
-    the rigid body at h = 0.1 instead of about 2.)
+    the same degree shrink it further, by O(h)). This is at most |m|! rho^|m| sum_i |b_i|,
+    rho = h |c|_1 max_i sum_j |a_ij|, the cruder bound that keeps only the largest row of A and
+    the worst monomial of the degree.
     """
     s = b.shape[0]
     counts, expo = space.counts, space.expo
@@ -342,7 +343,7 @@ def _stage_weights(A, b, rate, space, weights):
     bsum = 0.0
     for j in range(s):
         bsum += abs(b[j])
-    # rate^d (|b|^T |A|^d)_j / bsum at the first monomial of each degree d ...
+    # (|b|^T |A|^d)_j / bsum at the first monomial of each degree d ...
     for j in range(s):
         weights[j, 0] = abs(b[j]) / bsum
     for d in range(1, top + 1):
@@ -351,7 +352,7 @@ def _stage_weights(A, b, rate, space, weights):
             acc = 0.0
             for i in range(s):
                 acc += weights[i, below] * abs(A[i, j])
-            weights[j, here] = rate * acc
+            weights[j, here] = acc
     # ... then times m! on every monomial of the degree (the first one last)
     for d in range(top, -1, -1):
         lo = counts[d - 1] if d >= 1 else 0
@@ -389,12 +390,13 @@ def _value_degree(changes, defects, factor, stale, D, bound):
 
 @nb.njit(inline="always", **NJIT_NORC)
 def _stale_factor(since, before):
-    """1 + SHIFT_MARGIN since / before: how much the last changes of the degrees of G that
-    value-only sweeps have left out understate their error after Taylor shifts by `since` in all
-    (max-norm) since their last sweep, which followed shifts by `before`. Truncating the shift
-    moves the stage polynomials' fixed point off the shifted polynomials linearly in the shift,
-    and that last sweep's changes measured the move of the shifts before it; inf when they had
-    none to measure (the first tower of a run, from G = 0)."""
+    """1 + SHIFT_MARGIN since / before: by how much the degrees of G that value-only sweeps have
+    left out may have moved off their fixed point, relative to their last changes and the step's
+    predicted defect (`_kept`), after Taylor shifts by `since` in all (max-norm) since their last
+    sweep, which followed shifts by `before`. Truncating the shift moves the stage polynomials'
+    fixed point off the shifted polynomials linearly in the shift, and that last sweep (with the
+    defect predicted for it) measured the move of the shifts before it; inf when they had none
+    to measure (the first tower of a run, from G = 0)."""
     if since == 0.0:
         return 1.0
     if before == 0.0:
@@ -436,16 +438,17 @@ def _predict(G, defect, top, space, before):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _learn(G, defect, weights, top, space, defects):
+def _learn(G, defect, weights, rate, top, space, defects):
     """After the first sweep of a step: defect += G, so that it becomes the prediction plus what
     the sweep still changed (the predicted defect of the next step: the stage polynomials move
     smoothly along the solution, and so does what their Taylor shift misses); defects[k] := its
-    measure at degree k (as `_stage`'s changes, with buf.weights)."""
+    measure at degree k (as `_stage`'s changes)."""
     counts = space.counts
     for d in range(top):
         defects[d] = 0.0
     for j in range(G.shape[0]):
         lo = 0
+        power = 1.0
         for d in range(top):
             largest = 0.0
             for k in range(G.shape[1]):
@@ -454,8 +457,9 @@ def _learn(G, defect, weights, top, space, defects):
                     c = weights[j, m] * abs(defect[j, k, m])
                     if not c <= largest:  # also catches NaN
                         largest = c
-            defects[d] += largest
+            defects[d] += power * largest
             lo = counts[d]
+            power *= rate
 
 
 @nb.njit(**NJIT_NORC)
@@ -468,8 +472,11 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     G = 0 at the first step of a run.
 
     One sweep per tower, or, at the first tower of a run, sweeps until the stages have converged.
-    A tower with `jacobian` sweeps every degree; a value-only tower only the degrees of G below
-    `_value_degree`: the others keep their values re-expanded at x0. The effect of the stages'
+    The first tower of a later step starts from the polynomials plus the defect that the first
+    sweep of the previous step added to them (`_predict`, `_learn`: what the Taylor shift misses
+    moves smoothly along the solution). A tower with `jacobian` sweeps every degree; a value-only
+    tower only the degrees of G below `_value_degree`, none if it is 0: the others keep their
+    values re-expanded at x0. The effect of the stages'
     remaining error on the step is estimated by e = factor sum_{k, i} w |change of a degree-k
     coefficient of G[i] at its last sweep| (largest over the coefficients; `_stage_measure` and
     `_stage_weights`, computed at the first tower of each step): the changes that the next sweeps
@@ -516,6 +523,7 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
                     buf.defect[j, k, m] = 0.0
         for k in range(D + 1):
             buf.defects[k] = 0.0
+        _stage_weights(A, b, space, buf.weights)
     if first:
         _stage_measure(x0, A, b, h, tapes, space, buf)
         memo[4] = np.inf
@@ -540,12 +548,12 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
         for k in range(top):
             changes[k] = 0.0
         for i in range(s):
-            _stage(i, x0, A, h, top, s, tapes, space, buf)
+            _stage(i, x0, A, h, top, s, tapes, space, buf, memo[2])
         swept = 0.0
         for k in range(top):
             swept += factor * changes[k]
         if predict:
-            _learn(G, buf.defect, buf.weights, D, space, buf.defects)
+            _learn(G, buf.defect, buf.weights, memo[2], D, space, buf.defects)
         kept = _kept(changes, buf.defects, factor, stale, top, D)
         effect = swept + kept
         if not np.isfinite(effect):
