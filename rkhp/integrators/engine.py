@@ -39,6 +39,9 @@ THETA_MAX = 0.5
 ROUND_OFF_SHARE = 0.1
 """A sweep whose stages' measure is below this share of the tolerance has converged, contracting
 or not (its changes are round-off)."""
+TRUST_SHARE = 0.5
+"""A step starts from the defect predicted by the previous step when the sweeps of that step after
+its first changed the stages by at most this share of the first (`implicit_tower`)."""
 STALE_SHARE = 0.5
 """Share of the tolerance that the degrees a value-only sweep leaves out may keep (`_value_degree`)."""
 SHIFT_MARGIN = 10.0
@@ -61,15 +64,16 @@ class StepBuffers(NamedTuple):
     work: the interpreter's; G (s, n, jet size): gradients of the stage functions; psi, Jpsi,
     alpha, Jalpha: the tower's results; x, delta, res (n): Newton's iterate, correction and
     residual; LU (n, n), v (n): the linear solve's; hist (3, n): psi of the three previous steps;
-    memo (6,): how many of them there are, Newton's measured quadratic constant L, the
-    implicit stages' rate h |c|_1 and effect factor (`_stage_measure`), the measure of their last
-    sweep and its tail factor (`implicit_tower`); y, y_next (n): the state
-    before and after the step; Gx (n): the point where G is expanded (implicit stages); changes
-    (jet degree + 1,): per degree k of G, the weighted change of its coefficients at their last
-    sweep (`_stage`, `implicit_tower`); weights (s, jet size): the weight of a change of each
-    coefficient of G[i] in that measure (`_stage_weights`); defect (s, n, jet size): what the
-    first sweep of a step is predicted to add to G, and defects (jet degree + 1,): its measure
-    per degree (`_predict`).
+    memo (9,): how many of them there are, Newton's measured quadratic constant L, the
+    implicit stages' rate h |c|_1 and effect factor (`_stage_measure`), then (`implicit_tower`)
+    inf at the start of a step, the Taylor shifts before the last sweep of every degree and since,
+    the measure of the sweeps of this step after the first and that of the first; y, y_next (n):
+    the state before and after the step; Gx (n): the point where G is expanded (implicit
+    stages); changes (jet degree + 1,): per degree k of G, the weighted change of its
+    coefficients at their last sweep (`_stage`, `implicit_tower`); weights (s, jet size): the
+    weight of a change of each coefficient of G[i] in that measure (`_stage_weights`); defect
+    (s, n, jet size): what the first sweep of a step is predicted to add to G, and defects (jet
+    degree + 1,): its measure per degree (`_predict`, `_learn`).
     """
 
     work: TapeWork
@@ -118,7 +122,7 @@ def step_buffers(tapes: SystemTapes, n: int, s: int, space) -> StepBuffers:
         return np.zeros((n, n))
 
     return StepBuffers(tape_work(tapes, size), np.zeros((s, n, size)), vec(), mat(), vec(), mat(),
-                       vec(), vec(), vec(), mat(), vec(), np.zeros((3, n)), np.zeros(7), vec(),
+                       vec(), vec(), vec(), mat(), vec(), np.zeros((3, n)), np.zeros(9), vec(),
                        vec(), vec(), np.zeros(space.degree + 1), np.zeros((s, size)),
                        np.zeros((s, n, size)), np.zeros(space.degree + 1))
 
@@ -423,26 +427,29 @@ def _tail_factor(effect, previous):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _predict(G, defect, top, space, before):
-    """Before the first sweep of a step: with `before`, G += defect (G still expanded at the
-    previous step's point: the Taylor shift follows); otherwise defect -= G (G now shifted: the
-    sweep's changes are added back by `_learn`), on the coefficients of degree < top."""
+def _predict(G, defect, top, space, before, keep):
+    """Before the first sweep of a step, on the coefficients of degree < top: with `before`,
+    G += defect (G still expanded at the previous step's point: the Taylor shift follows);
+    otherwise defect := (defect if `keep` else 0) - G (G now shifted: the sweep's changes are
+    added back by `_learn`)."""
     M = space.counts[top - 1]
     for j in range(G.shape[0]):
         for k in range(G.shape[1]):
             for m in range(M):
                 if before:
                     G[j, k, m] += defect[j, k, m]
-                else:
+                elif keep:
                     defect[j, k, m] -= G[j, k, m]
+                else:
+                    defect[j, k, m] = -G[j, k, m]
 
 
 @nb.njit(inline="always", **NJIT_NORC)
 def _learn(G, defect, weights, rate, top, space, defects):
-    """After the first sweep of a step: defect += G, so that it becomes the prediction plus what
-    the sweep still changed (the predicted defect of the next step: the stage polynomials move
-    smoothly along the solution, and so does what their Taylor shift misses); defects[k] := its
-    measure at degree k (as `_stage`'s changes)."""
+    """After the first sweep of a step: defect += G, so that it becomes the prediction (if the
+    step used one) plus what the sweep still changed: the predicted defect of the next step (the
+    stage polynomials move smoothly along the solution, and so does what their Taylor shift
+    misses); defects[k] := its measure at degree k (as `_stage`'s changes)."""
     counts = space.counts
     for d in range(top):
         defects[d] = 0.0
@@ -501,18 +508,21 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     G, changes, memo = buf.G, buf.changes, buf.memo
     shift = 0.0
     settle = first and memo[0] == 0.0
-    # the first tower of a step starts from the shifted polynomials plus the predicted defect
-    predict = first and not settle
+    # the first tower of a later step learns the defect, and starts from the shifted polynomials
+    # plus the one learnt at the previous step if the sweeps after its first changed the stages
+    # much less than that first (the defect it learnt was most of what the step needed)
+    learn = first and not settle
+    predict = learn and memo[7] <= TRUST_SHARE * memo[8]
     if not settle:
         if predict:
-            _predict(G, buf.defect, D, space, np.bool_(True))
+            _predict(G, buf.defect, D, space, np.bool_(True), predict)
         for k in range(n):
             buf.delta[k] = x0[k] - buf.Gx[k]
             buf.Gx[k] = x0[k]
         shift = _max_abs(buf.delta)
         _shift(G, buf.delta, D - 1, space)
-        if predict:
-            _predict(G, buf.defect, D, space, np.bool_(False))
+        if learn:
+            _predict(G, buf.defect, D, space, np.bool_(False), predict)
     else:
         for k in range(n):
             buf.Gx[k] = x0[k]
@@ -523,6 +533,8 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
                     buf.defect[j, k, m] = 0.0
         for k in range(D + 1):
             buf.defects[k] = 0.0
+        memo[7] = 0.0
+        memo[8] = 0.0
         _stage_weights(A, b, space, buf.weights)
     if first:
         _stage_measure(x0, A, b, h, tapes, space, buf)
@@ -552,8 +564,12 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
         swept = 0.0
         for k in range(top):
             swept += factor * changes[k]
-        if predict:
+        if learn:
             _learn(G, buf.defect, buf.weights, memo[2], D, space, buf.defects)
+            memo[7] = 0.0
+            memo[8] = swept
+        else:
+            memo[7] += swept
         kept = _kept(changes, buf.defects, factor, stale, top, D)
         effect = swept + kept
         if not np.isfinite(effect):
