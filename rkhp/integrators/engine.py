@@ -30,6 +30,7 @@ from ..systems.core import DOMAINS
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
 from ..taylor.interpreter import TapeWork, run_tape, tape_work
+from ..taylor.ops import COMPOSE_ARG
 from ..taylor.tape import Tape
 from .failure import Failure
 
@@ -216,10 +217,9 @@ def _stage(i, x0, A, h, D, j_end, tapes, space, buf, rate):
 def _psi_alpha(x0, b, h, tapes, space, buf, jacobian):
     """psi = h sum_i b_i G[i](0) and alpha(x0, psi) into buf.psi, buf.alpha; with `jacobian`,
     also Dpsi (degree-1 coefficients) and the Jacobian of x -> alpha(x, psi(x))."""
-    W, G, psi, Jpsi = buf.work.W, buf.G, buf.psi, buf.Jpsi
+    G, psi, Jpsi = buf.G, buf.psi, buf.Jpsi
     s = b.shape[0]
     n = x0.shape[0]
-    extra = np.int64(1) if jacobian else np.int64(0)
     for k in range(n):
         psi[k] = 0.0
         for i in range(s):
@@ -230,6 +230,16 @@ def _psi_alpha(x0, b, h, tapes, space, buf, jacobian):
                 for i in range(s):
                     acc += h * b[i] * G[i, k, 1 + l]
                 Jpsi[k, l] = acc
+    _alpha(x0, tapes, space, buf, jacobian)
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _alpha(x0, tapes, space, buf, jacobian):
+    """alpha(x0, buf.psi) into buf.alpha; with `jacobian`, also the Jacobian of
+    x -> alpha(x, psi(x)) from Dpsi = buf.Jpsi into buf.Jalpha."""
+    W, psi, Jpsi = buf.work.W, buf.psi, buf.Jpsi
+    n = x0.shape[0]
+    extra = np.int64(1) if jacobian else np.int64(0)
     _set_x(W, x0, n, extra, n + 1)
     for k in range(n):
         W[n + k, 0] = psi[k]
@@ -469,6 +479,27 @@ def _learn(G, defect, weights, rate, top, space, defects):
             power *= rate
 
 
+@nb.njit(inline="always", **NJIT_NORC)
+def _psi_at(b, h, space, buf, top):
+    """psi = h sum_i b_i G[i](delta), delta = buf.delta, into buf.psi: the degree-0 coefficients
+    of the polynomials G (degree < top) re-expanded at dx = delta, without re-expanding them
+    (the monomials' values at delta in the scratch row COMPOSE_ARG of the interpreter's S)."""
+    G, psi, delta, up, S = buf.G, buf.psi, buf.delta, space.up, buf.work.S
+    M = space.counts[top - 1]
+    S[COMPOSE_ARG, 0] = 1.0
+    for m in range(space.counts[top - 2] if top >= 2 else 0):
+        for v in range(delta.shape[0]):
+            S[COMPOSE_ARG, up[m, v]] = S[COMPOSE_ARG, m] * delta[v]
+    for k in range(G.shape[1]):
+        acc = 0.0
+        for i in range(G.shape[0]):
+            part = 0.0
+            for m in range(M):
+                part += G[i, k, m] * S[COMPOSE_ARG, m]
+            acc += h * b[i] * part
+        psi[k] = acc
+
+
 @nb.njit(**NJIT_NORC)
 def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, scale):
     """The implicit tower (docs/theory.md §10, docs/implicit.md): psi and alpha(x0, psi) (with
@@ -482,8 +513,8 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     The first tower of a later step starts from the polynomials plus the defect that the first
     sweep of the previous step added to them (`_predict`, `_learn`: what the Taylor shift misses
     moves smoothly along the solution). A tower with `jacobian` sweeps every degree; a value-only
-    tower only the degrees of G below `_value_degree`, none if it is 0: the others keep their
-    values re-expanded at x0. The effect of the stages'
+    tower only the degrees of G below `_value_degree`: the others keep their values re-expanded
+    at x0; if it is 0, no sweep and no re-expansion (`_psi_at`). The effect of the stages'
     remaining error on the step is estimated by e = factor sum_{k, i} w |change of a degree-k
     coefficient of G[i] at its last sweep| (largest over the coefficients; `_stage_measure` and
     `_stage_weights`, computed at the first tower of each step): the changes that the next sweeps
@@ -506,24 +537,25 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     n = x0.shape[0]
     D = np.int64(stage.degree)
     G, changes, memo = buf.G, buf.changes, buf.memo
-    shift = 0.0
     settle = first and memo[0] == 0.0
     # the first tower of a later step learns the defect, and starts from the shifted polynomials
     # plus the one learnt at the previous step if the sweeps after its first changed the stages
     # much less than that first (the defect it learnt was most of what the step needed)
     learn = first and not settle
     predict = learn and memo[7] <= TRUST_SHARE * memo[8]
-    if not settle:
-        if predict:
-            _predict(G, buf.defect, D, space, np.bool_(True), predict)
-        for k in range(n):
-            buf.delta[k] = x0[k] - buf.Gx[k]
-            buf.Gx[k] = x0[k]
-        shift = _max_abs(buf.delta)
-        _shift(G, buf.delta, D - 1, space)
-        if learn:
-            _predict(G, buf.defect, D, space, np.bool_(False), predict)
-    else:
+    if first:
+        _stage_measure(x0, A, b, h, tapes, space, buf)
+        memo[4] = np.inf
+    factor = memo[3]
+    bound = tol * scale
+    for k in range(n):
+        buf.delta[k] = x0[k] - buf.Gx[k]
+    shift = 0.0 if settle else _max_abs(buf.delta)
+    since = memo[6] + shift
+    stale = _stale_factor(since, memo[5])
+    top = D if jacobian else _value_degree(changes, buf.defects, factor, stale, D, bound)
+    memo[5], memo[6] = (since, 0.0) if top == D else (memo[5], since)
+    if settle:
         for k in range(n):
             buf.Gx[k] = x0[k]
         for j in range(s):
@@ -536,19 +568,22 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
         memo[7] = 0.0
         memo[8] = 0.0
         _stage_weights(A, b, space, buf.weights)
-    if first:
-        _stage_measure(x0, A, b, h, tapes, space, buf)
-        memo[4] = np.inf
-    factor = memo[3]
-    bound = tol * scale
-    since = memo[6] + shift
-    stale = _stale_factor(since, memo[5])
-    top = D if jacobian else _value_degree(changes, buf.defects, factor, stale, D, bound)
-    memo[5], memo[6] = (since, 0.0) if top == D else (memo[5], since)
+    elif top > 0:
+        if predict:
+            _predict(G, buf.defect, D, space, np.bool_(True), predict)
+        for k in range(n):
+            buf.Gx[k] = x0[k]
+        _shift(G, buf.delta, D - 1, space)
+        if learn:
+            _predict(G, buf.defect, D, space, np.bool_(False), predict)
     sweeps = 0
     converged = False
     if top == 0:
+        # no sweep: G stays expanded at buf.Gx, psi is its value at x0
         converged = _kept(changes, buf.defects, factor, stale, top, D) <= bound
+        _psi_at(b, h, space, buf, D)
+        _alpha(x0, tapes, space, buf, jacobian)
+        return Failure.OK, sweeps, converged
     while top > 0:
         sweeps += 1
         # the measure of the degrees swept now at their last sweep (inf: none yet in this step)
