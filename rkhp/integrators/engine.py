@@ -40,9 +40,9 @@ THETA_MAX = 0.5
 ROUND_OFF_SHARE = 0.1
 """A sweep whose stages' measure is below this share of the tolerance has converged, contracting
 or not (its changes are round-off)."""
-TRUST_SHARE = 0.5
-"""A step starts from the defect predicted by the previous step when the sweeps of that step after
-its first changed the stages by at most this share of the first (`implicit_tower`)."""
+TRUST_SWEEPS = 2
+"""A step starts from the defect predicted by the previous step when that step made at most this
+many sweeps (`implicit_tower`)."""
 STALE_SHARE = 0.5
 """Share of the tolerance that the degrees a value-only sweep leaves out may keep (`_value_degree`)."""
 SHIFT_MARGIN = 10.0
@@ -65,10 +65,10 @@ class StepBuffers(NamedTuple):
     work: the interpreter's; G (s, n, jet size): gradients of the stage functions; psi, Jpsi,
     alpha, Jalpha: the tower's results; x, delta, res (n): Newton's iterate, correction and
     residual; LU (n, n), v (n): the linear solve's; hist (3, n): psi of the three previous steps;
-    memo (9,): how many of them there are, Newton's measured quadratic constant L, the
+    memo (8,): how many of them there are, Newton's measured quadratic constant L, the
     implicit stages' rate h |c|_1 and effect factor (`_stage_measure`), then (`implicit_tower`)
     inf at the start of a step, the Taylor shifts before the last sweep of every degree and since,
-    the measure of the sweeps of this step after the first and that of the first; y, y_next (n):
+    the number of sweeps of this step (from its first tower on); y, y_next (n):
     the state before and after the step; Gx (n): the point where G is expanded (implicit
     stages); changes (jet degree + 1,): per degree k of G, the weighted change of its
     coefficients at their last sweep (`_stage`, `implicit_tower`); weights (s, jet size): the
@@ -123,7 +123,7 @@ def step_buffers(tapes: SystemTapes, n: int, s: int, space) -> StepBuffers:
         return np.zeros((n, n))
 
     return StepBuffers(tape_work(tapes, size), np.zeros((s, n, size)), vec(), mat(), vec(), mat(),
-                       vec(), vec(), vec(), mat(), vec(), np.zeros((3, n)), np.zeros(9), vec(),
+                       vec(), vec(), vec(), mat(), vec(), np.zeros((3, n)), np.zeros(8), vec(),
                        vec(), vec(), np.zeros(space.degree + 1), np.zeros((s, size)),
                        np.zeros((s, n, size)), np.zeros(space.degree + 1))
 
@@ -539,10 +539,10 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     G, changes, memo = buf.G, buf.changes, buf.memo
     settle = first and memo[0] == 0.0
     # the first tower of a later step learns the defect, and starts from the shifted polynomials
-    # plus the one learnt at the previous step if the sweeps after its first changed the stages
-    # much less than that first (the defect it learnt was most of what the step needed)
+    # plus the one learnt at the previous step if that step converged in at most TRUST_SWEEPS
+    # sweeps (the defect it learnt was most of what it needed)
     learn = first and not settle
-    predict = learn and memo[7] <= TRUST_SHARE * memo[8]
+    predict = learn and memo[7] <= TRUST_SWEEPS
     if first:
         _stage_measure(x0, A, b, h, tapes, space, buf)
         memo[4] = np.inf
@@ -566,7 +566,6 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
         for k in range(D + 1):
             buf.defects[k] = 0.0
         memo[7] = 0.0
-        memo[8] = 0.0
         _stage_weights(A, b, space, buf.weights)
     elif top > 0:
         if predict:
@@ -601,10 +600,9 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
             swept += factor * changes[k]
         if learn:
             _learn(G, buf.defect, buf.weights, memo[2], D, space, buf.defects)
-            memo[7] = 0.0
-            memo[8] = swept
+            memo[7] = 1.0
         else:
-            memo[7] += swept
+            memo[7] += 1.0
         kept = _kept(changes, buf.defects, factor, stale, top, D)
         effect = swept + kept
         if not np.isfinite(effect):
