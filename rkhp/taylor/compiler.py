@@ -29,11 +29,50 @@ def cache_dir() -> Path:
     return base / "rkhp" / "numba" / digest.hexdigest()[:16]
 
 
+import copy  # noqa: E402
+
 import numba  # noqa: E402
+from numba.core import inline_closurecall  # noqa: E402
 from numba.extending import overload  # noqa: E402
 
 if not os.environ.get("NUMBA_CACHE_DIR"):
     numba.config.CACHE_DIR = str(cache_dir())
+
+
+class _OneMemo:
+    """`copy.deepcopy` with one memo for everything copied while inlining one call site."""
+
+    def __init__(self):
+        self.memo: dict = {}
+
+    def deepcopy(self, x, memo=None):
+        return copy.deepcopy(x, self.memo if memo is None else memo)
+
+
+def _inline_with_one_memo(inline_ir):
+    """numba's inliner (`InlineWorker.inline_ir`, every `inline="always"` call site) deep-copies
+    the callee's IR block by block, each block with a memo of its own, so each block copies the
+    callee's whole variable scope again: the copy is quadratic in the size of the inlined function
+    (numba issue #8989), and was a quarter of the engine's cold compile (docs/engine.md "Compile
+    time"). With one memo per call site the blocks share one copy of the scope, as the blocks of
+    the callee share one scope: the same IR, and the same machine code (results unchanged
+    bitwise). The module's `copy` is swapped for the call only (numba compiles under its global
+    compiler lock, one function at a time)."""
+
+    def inline_ir_one_memo(self, *args, **kwargs):
+        inline_closurecall.copy = _OneMemo()
+        try:
+            return inline_ir(self, *args, **kwargs)
+        finally:
+            inline_closurecall.copy = copy
+
+    inline_ir_one_memo.one_memo = True
+    return inline_ir_one_memo
+
+
+_worker = inline_closurecall.InlineWorker
+if getattr(inline_closurecall, "copy", None) is copy and not hasattr(_worker.inline_ir, "one_memo"):
+    _worker.inline_ir = _inline_with_one_memo(_worker.inline_ir)
 
 NJIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 """Every compiled function: cached on disk, no GIL, IEEE arithmetic, numpy's error model.
