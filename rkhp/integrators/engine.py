@@ -29,6 +29,7 @@ import numpy as np
 from ..systems.core import DOMAINS
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
+from ..taylor.composites import _lu, _lu_solve
 from ..taylor.interpreter import TapeWork, run_tape, tape_work
 from ..taylor.ops import COMPOSE_ARG
 from ..taylor.tape import Tape
@@ -64,13 +65,13 @@ class StepBuffers(NamedTuple):
 
     work: the interpreter's; G (s, n, jet size): gradients of the stage functions; psi, Jpsi,
     alpha, Jalpha: the tower's results; x, delta, res (n): Newton's iterate, correction and
-    residual; LU (n, n), v (n): the linear solve's; hist (3, n): psi of the three previous steps;
-    memo (8,): how many of them there are, Newton's measured quadratic constant L, the
-    implicit stages' rate h |c|_1 and effect factor (`_stage_measure`), then (`implicit_tower`)
-    inf at the start of a step, the Taylor shifts before the last sweep of every degree and since,
-    the number of sweeps of this step (from its first tower on); y, y_next (n):
-    the state before and after the step; Gx (n): the point where G is expanded (implicit
-    stages); changes (jet degree + 1,): per degree k of G, the weighted change of its
+    residual; LU (n, n), perm (n,) int64, v (n): the linear solve's (`solve_small`); hist (3, n):
+    psi of the three previous steps; memo (8,): how many of them there are, Newton's measured
+    quadratic constant L, the implicit stages' rate h |c|_1 and effect factor (`_stage_measure`),
+    then (`implicit_tower`) inf at the start of a step, the Taylor shifts before the last sweep of
+    every degree and since, the number of sweeps of this step (from its first tower on); y,
+    y_next (n): the state before and after the step; Gx (n): the point where G is expanded
+    (implicit stages); changes (jet degree + 1,): per degree k of G, the weighted change of its
     coefficients at their last sweep (`_stage`, `implicit_tower`); weights (s, jet size): the
     weight of a change of each coefficient of G[i] in that measure (`_stage_weights`); defect
     (s, n, jet size): what the first sweep of a step is predicted to add to G, and defects (jet
@@ -87,6 +88,7 @@ class StepBuffers(NamedTuple):
     delta: np.ndarray
     res: np.ndarray
     LU: np.ndarray
+    perm: np.ndarray
     v: np.ndarray
     hist: np.ndarray
     memo: np.ndarray
@@ -123,39 +125,27 @@ def step_buffers(tapes: SystemTapes, n: int, s: int, space) -> StepBuffers:
         return np.zeros((n, n))
 
     return StepBuffers(tape_work(tapes, size), np.zeros((s, n, size)), vec(), mat(), vec(), mat(),
-                       vec(), vec(), vec(), mat(), vec(), np.zeros((3, n)), np.zeros(8), vec(),
-                       vec(), vec(), np.zeros(space.degree + 1), np.zeros((s, size)),
-                       np.zeros((s, n, size)), np.zeros(space.degree + 1))
+                       vec(), vec(), vec(), mat(), np.zeros(n, np.int64), vec(), np.zeros((3, n)),
+                       np.zeros(8), vec(), vec(), vec(), np.zeros(space.degree + 1),
+                       np.zeros((s, size)), np.zeros((s, n, size)), np.zeros(space.degree + 1))
 
 
-@nb.njit(**NJIT_NORC)
-def solve_small(J, r, out, M, v):
-    """out = J^{-1} r by Gaussian elimination with partial pivoting (J, r copied into the work
-    arrays M (n x n) and v (n): no allocation in the step loop)."""
+@nb.njit(inline="always", **NJIT_NORC)
+def solve_small(J, r, out, LU, perm, v):
+    """out = J^{-1} r by LU factorisation with partial pivoting (`rkhp.taylor.composites._lu`,
+    `_lu_solve`) in the work arrays LU (n x n), perm (n) and v (n): no allocation in the step
+    loop. A singular J gives out = NaN (a non-finite correction: NEWTON_NON_FINITE). Inlined: a
+    compiled function of its own costs a unit of compile time (docs/engine.md "Compile time")."""
     n = r.shape[0]
     for i in range(n):
-        v[i] = r[i]
+        out[i] = r[i]
         for j in range(n):
-            M[i, j] = J[i, j]
-    for c in range(n):
-        piv = c
-        for i in range(c + 1, n):
-            if abs(M[i, c]) > abs(M[piv, c]):
-                piv = i
-        if piv != c:
-            for j in range(n):
-                M[c, j], M[piv, j] = M[piv, j], M[c, j]
-            v[c], v[piv] = v[piv], v[c]
-        for i in range(c + 1, n):
-            f = M[i, c] / M[c, c]
-            for j in range(c, n):
-                M[i, j] -= f * M[c, j]
-            v[i] -= f * v[c]
-    for i in range(n - 1, -1, -1):
-        acc = v[i]
-        for j in range(i + 1, n):
-            acc -= M[i, j] * out[j]
-        out[i] = acc / M[i, i]
+            LU[i, j] = J[i, j]
+    if _lu(LU, perm):
+        _lu_solve(LU, perm, out, v)
+    else:
+        for i in range(n):
+            out[i] = np.nan
 
 
 @nb.njit(**NJIT_NORC)
@@ -690,7 +680,7 @@ def rkhp_step(A, b, h, tapes, space, buf, tol, max_iter, stage):
                 return cause, it, sweeps
         for k in range(n):
             res[k] = y[k] - buf.alpha[k]
-        solve_small(buf.Jalpha, res, delta, buf.LU, buf.v)
+        solve_small(buf.Jalpha, res, delta, buf.LU, buf.perm, buf.v)
         size = _max_abs(delta)
         if not np.isfinite(size):
             return Failure.NEWTON_NON_FINITE, it, sweeps
@@ -769,7 +759,7 @@ def _polish(p, atape, space, buf, scale, iterations, exact):
             if exact:
                 for l in range(n):
                     J[k, l] = W[a, 1 + l]
-        solve_small(J, alpha, delta, buf.LU, buf.v)
+        solve_small(J, alpha, delta, buf.LU, buf.perm, buf.v)
         for k in range(n):
             x[k] += delta[k]
         if not _max_abs(delta) > 4e-16 * scale:

@@ -35,12 +35,21 @@ class Collocation(NamedTuple):
     w: np.ndarray
 
 
-def _lagrange(nodes: np.ndarray, j: int, s: np.ndarray) -> np.ndarray:
-    out = np.ones_like(s)
+def _lagrange(nodes: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """out[j] = l_j(s) for every j (the products in the order of the nodes, element by element)."""
+    q = len(nodes)
+    out = np.ones((q, *s.shape))
     for k, c in enumerate(nodes):
-        if k != j:
-            out = out * (s - c) / (nodes[j] - c)
+        others = np.arange(q) != k
+        out[others] = out[others] * (s - c) / (nodes[others] - c).reshape(-1, *[1] * s.ndim)
     return out
+
+
+def _integrals(nodes: np.ndarray, t: np.ndarray, g: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """M[i, j] = int_0^{ends_i} l_j by the Gauss rule (t, g) of [-1, 1] mapped to [0, ends_i]."""
+    basis = _lagrange(nodes, ends[:, None] * (t + 1.0) / 2.0)
+    return np.array([[0.5 * c * np.dot(g, basis[j, i]) for j in range(len(nodes))]
+                     for i, c in enumerate(ends)])
 
 
 @cache
@@ -48,9 +57,7 @@ def collocation(q: int) -> Collocation:
     """The Gauss–Legendre collocation tables on [0, 1] with q nodes."""
     t, g = np.polynomial.legendre.leggauss(q)
     nodes, b = (t + 1.0) / 2.0, g / 2.0
-    A = np.array([[0.5 * c * np.dot(g, _lagrange(nodes, j, c * (t + 1.0) / 2.0))
-                   for j in range(q)] for c in nodes])
-    return Collocation(nodes, A, b, b * (1.0 - nodes))
+    return Collocation(nodes, _integrals(nodes, t, g, nodes), b, b * (1.0 - nodes))
 
 
 def average_error_constant(q: int) -> float:
@@ -65,9 +72,7 @@ def prolongation(q: int) -> np.ndarray:
     the q-node collocation polynomial u (u' = sum_j X_j l_j) at the q + 1 nodes is
     u(c'_i) = u(0) + sum_j P_ij X_j (a start for the solve with one node more)."""
     t, g = np.polynomial.legendre.leggauss(q)
-    nodes = collocation(q).nodes
-    return np.array([[0.5 * c * np.dot(g, _lagrange(nodes, j, c * (t + 1.0) / 2.0))
-                      for j in range(q)] for c in collocation(q + 1).nodes])
+    return _integrals(collocation(q).nodes, t, g, collocation(q + 1).nodes)
 
 
 def _tables():

@@ -29,11 +29,75 @@ def cache_dir() -> Path:
     return base / "rkhp" / "numba" / digest.hexdigest()[:16]
 
 
+import copy  # noqa: E402
+
 import numba  # noqa: E402
+from numba.core import inline_closurecall  # noqa: E402
 from numba.extending import overload  # noqa: E402
 
 if not os.environ.get("NUMBA_CACHE_DIR"):
     numba.config.CACHE_DIR = str(cache_dir())
+
+
+class _OneMemo:
+    """`copy.deepcopy` with one memo for everything copied while inlining one call site."""
+
+    def __init__(self):
+        self.memo: dict = {}
+
+    def deepcopy(self, x, memo=None):
+        return copy.deepcopy(x, self.memo if memo is None else memo)
+
+
+class _NoCopy:
+    """`copy.deepcopy` for an IR that nothing else holds: the object itself."""
+
+    @staticmethod
+    def deepcopy(x, memo=None):
+        return x
+
+
+def _cheap_inlining(worker) -> None:
+    """Make numba's inlining of `inline="always"` functions cheaper, with the same result.
+
+    At every call site numba's inliner (`InlineWorker.inline_ir`) deep-copies the callee's IR
+    twice (a copy to rewrite and an untouched copy to return), block by block with a memo per
+    block, so each block copies the callee's whole variable scope again: quadratic in the size of
+    the inlined function (numba issue #8989; it was a quarter of the engine's cold compile,
+    docs/engine.md "Compile time"). Here the copies share one memo (the blocks of the copy share
+    one scope, as the callee's do), and an IR that `InlineWorker.inline_function` has just built
+    for this one site (nothing else holds it, and numba's callers drop the returned copy) is not
+    copied at all. The IR, the machine code and the results are the same (bitwise). numba's
+    `copy` module is swapped for the call only (numba compiles under its global lock).
+    `inline_function` is wrapped only in the form this was checked on (numba 0.68: build the
+    IR, then `inline_ir` once)."""
+    inline_ir, inline_function = worker.inline_ir, worker.inline_function
+
+    def inline_ir_cheaply(self, *args, **kwargs):
+        fresh, self._rkhp_fresh_ir = getattr(self, "_rkhp_fresh_ir", False), False
+        inline_closurecall.copy = _NoCopy() if fresh else _OneMemo()
+        try:
+            return inline_ir(self, *args, **kwargs)
+        finally:
+            inline_closurecall.copy = copy
+
+    def inline_function_fresh(self, *args, **kwargs):
+        self._rkhp_fresh_ir = True
+        try:
+            return inline_function(self, *args, **kwargs)
+        finally:
+            self._rkhp_fresh_ir = False
+
+    worker.inline_ir = inline_ir_cheaply
+    if inline_function.__code__.co_names == ("run_untyped_passes", "__code__", "co_freevars",
+                                             "inline_ir"):
+        worker.inline_function = inline_function_fresh
+    worker.rkhp_cheap_inlining = True
+
+
+if (getattr(inline_closurecall, "copy", None) is copy
+        and not getattr(inline_closurecall.InlineWorker, "rkhp_cheap_inlining", False)):
+    _cheap_inlining(inline_closurecall.InlineWorker)
 
 NJIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 """Every compiled function: cached on disk, no GIL, IEEE arithmetic, numpy's error model.
