@@ -24,25 +24,26 @@ class Kernel(NamedTuple):
 
     ``seconds`` was measured on this project's reference machine (numba 0.68, one core of an AMD
     EPYC, CPU time of a fresh process with an empty cache, kernels compiled in the order below,
-    so each figure leaves out what the kernels before it had already compiled); ``run_tape`` and
-    ``rkhp_run`` re-measured after the lazy compilation of composite kernels and of the implicit
-    tower (the rigid body, load about 2.5; docs/engine.md "Compile time")."""
+    so each figure leaves out what the kernels before it had already compiled); all re-measured
+    on the rigid body after the cheaper inlining of `rkhp.taylor.compiler` (load about 2.7, where
+    the version before it measured 6.6, 1.5, 10.3, 8.7, 7.8 and 1.6 s; docs/engine.md "Compile
+    time")."""
 
     module: str
     name: str
     seconds: float
 
 
-TAPE = Kernel("rkhp.taylor.interpreter", "run_tape", 7.0)
+TAPE = Kernel("rkhp.taylor.interpreter", "run_tape", 6.5)
 
 KERNELS: dict[str, tuple[Kernel, ...]] = {
     "tape": (TAPE,),
-    "invariants": (Kernel("rkhp.integrators.classical", "_hamiltonian_loop", 2.0),),
-    "rkhp": (Kernel("rkhp.integrators.engine", "rkhp_run", 10.0),),
+    "invariants": (Kernel("rkhp.integrators.classical", "_hamiltonian_loop", 1.3),),
+    "rkhp": (Kernel("rkhp.integrators.engine", "rkhp_run", 9.1),),
     "taylor": (),  # THP runs the tape interpreter from Python
-    "classical": (Kernel("rkhp.integrators.classical", "_rk_loop", 9.0),),
-    "implicit-midpoint": (Kernel("rkhp.integrators.classical", "_midpoint_loop", 12.0),),
-    "scipy": (Kernel("rkhp.integrators.classical", "_field", 2.0),),  # bench's peers: the compiled field
+    "classical": (Kernel("rkhp.integrators.classical", "_rk_loop", 6.8),),
+    "implicit-midpoint": (Kernel("rkhp.integrators.classical", "_midpoint_loop", 7.6),),
+    "scipy": (Kernel("rkhp.integrators.classical", "_field", 1.1),),  # bench's peers: the compiled field
 }
 """Entry kernels per kind (the tape interpreter is added to every run)."""
 
