@@ -29,8 +29,8 @@ import numpy as np
 from ..systems.core import DOMAINS
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
-from ..taylor.composites import _lu, _lu_solve
 from ..taylor.interpreter import TapeWork, run_tape, tape_work
+from ..taylor.linalg import lu_factor, lu_solve
 from ..taylor.ops import COMPOSE_ARG
 from ..taylor.tape import Tape
 from .failure import Failure
@@ -132,8 +132,8 @@ def step_buffers(tapes: SystemTapes, n: int, s: int, space) -> StepBuffers:
 
 @nb.njit(inline="always", **NJIT_NORC)
 def solve_small(J, r, out, LU, perm, v):
-    """out = J^{-1} r by LU factorisation with partial pivoting (`rkhp.taylor.composites._lu`,
-    `_lu_solve`) in the work arrays LU (n x n), perm (n) and v (n): no allocation in the step
+    """out = J^{-1} r by LU factorisation with partial pivoting (`rkhp.taylor.linalg.lu_factor`,
+    `lu_solve`) in the work arrays LU (n x n), perm (n) and v (n): no allocation in the step
     loop. A singular J gives out = NaN (a non-finite correction: NEWTON_NON_FINITE). Inlined: a
     compiled function of its own costs a unit of compile time (docs/engine.md "Compile time")."""
     n = r.shape[0]
@@ -141,8 +141,8 @@ def solve_small(J, r, out, LU, perm, v):
         out[i] = r[i]
         for j in range(n):
             LU[i, j] = J[i, j]
-    if _lu(LU, perm):
-        _lu_solve(LU, perm, out, v)
+    if lu_factor(LU, perm):
+        lu_solve(LU, perm, out, v)
     else:
         for i in range(n):
             out[i] = np.nan

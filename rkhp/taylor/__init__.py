@@ -8,6 +8,7 @@
 - `rkhp.taylor.jets`: jet spaces (monomial tables) and the jet kernels (product, composition);
 - `rkhp.taylor.elementary`: the Taylor coefficients of every elementary function;
 - `rkhp.taylor.rows`: evaluation of elementary rows (the main program's and sub-programs');
+- `rkhp.taylor.linalg`: small dense LU factorisation and solve (no allocation);
 - `rkhp.taylor.composites`: the kernels of composite operations;
 - `rkhp.taylor.interpreter`: the tape interpreter (`run_tape`, work arrays, `evaluate`).
 

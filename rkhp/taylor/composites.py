@@ -26,6 +26,7 @@ from .compiler import NJIT_NORC, NJIT_NRT
 from .compiler import numba as nb
 from .elementary import PHI_COEF, TWO_PI
 from .jets import jet_mul
+from .linalg import lu_factor, lu_solve
 from .ops import SCRATCH_BASE, SPRAY_MAX_NODES
 from .rows import run_rows, subprogram_at
 
@@ -388,7 +389,7 @@ def _newton_matrix(AW, Js, q, n, LU, perm):
                 for l in range(n):
                     LU[i * n + k, j * n + l] = (1.0 if (i == j and k == l) else 0.0) \
                         - AW[i, j] * Js[j, k, l]
-    return _lu(LU, perm)
+    return lu_factor(LU, perm)
 
 
 @nb.njit(**NJIT_NORC)
@@ -401,7 +402,7 @@ def _newton_step(W, S, args, x_slots, AW, q, n, Ys, Xs, m, LU, perm, rvec, tmp):
             for j in range(q):
                 acc += AW[i, j] * S[Xs + j * n + k, m]
             rvec[i * n + k] = acc
-    _lu_solve(LU, perm, rvec, tmp)
+    lu_solve(LU, perm, rvec, tmp)
     update = 0.0
     for a in range(q * n):
         S[Ys + a, m] += rvec[a]
@@ -444,46 +445,3 @@ def _spectral_norm(J, v, u):
         for k in range(n):
             v[k] /= norm
     return 1.05 * sigma
-
-
-@nb.njit(**NJIT_NORC)
-def _lu(A, perm):
-    """LU factorisation with partial pivoting in place (perm: the row order); False if singular."""
-    n = A.shape[0]
-    for i in range(n):
-        perm[i] = i
-    for c in range(n):
-        piv = c
-        for i in range(c + 1, n):
-            if abs(A[i, c]) > abs(A[piv, c]):
-                piv = i
-        if not abs(A[piv, c]) > 0.0:
-            return False
-        if piv != c:
-            for j in range(n):
-                A[c, j], A[piv, j] = A[piv, j], A[c, j]
-            perm[c], perm[piv] = perm[piv], perm[c]
-        for i in range(c + 1, n):
-            f = A[i, c] / A[c, c]
-            A[i, c] = f
-            for j in range(c + 1, n):
-                A[i, j] -= f * A[c, j]
-    return True
-
-
-@nb.njit(**NJIT_NORC)
-def _lu_solve(LU, perm, b, tmp):
-    """b := A^-1 b from the factors of `_lu` (tmp: a work vector as long as b)."""
-    n = LU.shape[0]
-    for i in range(n):
-        acc = b[perm[i]]
-        for j in range(i):
-            acc -= LU[i, j] * tmp[j]
-        tmp[i] = acc
-    for i in range(n - 1, -1, -1):
-        acc = tmp[i]
-        for j in range(i + 1, n):
-            acc -= LU[i, j] * tmp[j]
-        tmp[i] = acc / LU[i, i]
-    for i in range(n):
-        b[i] = tmp[i]
