@@ -1,6 +1,7 @@
 """Cold and warm `rkhp converge rigid-body`, and the cost of a step, before and after (issue 11).
 
 Run: python benchmarks/compile.py [--before COMMIT] [--also COMMIT] [--rounds N] [--step-runs N]
+                                  [--kernels]
 
 Each version is a copy of rkhp (the library, its CLI and its tableau files) in a temporary folder:
 the version to compare with from `git archive COMMIT` (default d63087d, the engine before issue 11's
@@ -12,7 +13,11 @@ Python with PYTHONPATH set to their copy, so that the same interpreter and numba
 - warm: the same command again, on the cache the cold run filled;
 - us/step: the rigid body at h = 0.05, 1000 steps, with the paper's three-stage method, RK4
   (4 stages) and Butcher's six-stage `butcher5`, warm: CPU seconds of the process around each
-  run (the fairer figure on a loaded machine), the minimum over the repeats.
+  run (the fairer figure on a loaded machine), the minimum over the repeats;
+- with --kernels, the cold compile of each entry kernel of `rkhp.integrators.kernels`, in the order
+  of its table (each figure leaves out what the kernels before it compiled), in one fresh process
+  with an empty cache: CPU seconds from numba's compile event of the kernel to its end, the
+  figures behind the compile notice's estimates.
 
 Versions alternate within a round and the minimum over the rounds (and over the step processes
 of a round) is printed, so that a burst of load on a shared machine does not fall on one version
@@ -50,6 +55,39 @@ for method in sys.argv[1:]:
         integrate(system, method, 0.05, 1000)
         best = min(best, time.process_time() - start)
     out[method] = best / 1000 * 1e6
+print(json.dumps(out))
+"""
+
+
+#: the rigid body's first call of each entry kernel, in the order of rkhp.integrators.kernels
+KERNEL_CODE = """
+import json, time
+import numpy as np
+from numba.core import event
+from rkhp.integrators import rkhp_method
+from rkhp.integrators.classical import (hamiltonian_values, integrate_classical,
+                                        integrate_midpoint, vector_field)
+from rkhp.systems import get_system
+from rkhp.tablefiles import load_tableau
+KERNELS = ("run_tape", "_hamiltonian_loop", "rkhp_run", "_rk_loop", "_midpoint_loop", "_field")
+start, out = {}, {}
+class Timer(event.Listener):
+    def on_start(self, ev):
+        name = ev.data["dispatcher"].py_func.__name__
+        if name in KERNELS and name not in start:
+            start[name] = time.process_time()
+    def on_end(self, ev):
+        name = ev.data["dispatcher"].py_func.__name__
+        if name in start and name not in out:
+            out[name] = time.process_time() - start[name]
+event.register("numba:compile", Timer())
+system, rk4 = get_system("rigid-body"), load_tableau("rk4")
+system.hamiltonian(system.x0)
+hamiltonian_values(system, np.array([system.x0, system.x0]))
+rkhp_method.integrate(system, rk4, 0.05, 2)
+integrate_classical(system, rk4, 0.05, 2)
+integrate_midpoint(system, 0.05, 2)
+vector_field(system)(system.x0)
 print(json.dumps(out))
 """
 
@@ -98,6 +136,14 @@ def measure(tree: Path, work: Path, repeats: int, step_runs: int) -> dict:
             "us_per_step": {m: min(r[m] for r in runs) for m in methods}}
 
 
+def measure_kernels(tree: Path, work: Path) -> dict:
+    """CPU seconds of each entry kernel's cold compile (one process, empty cache), one version."""
+    cache = Path(tempfile.mkdtemp(prefix="numba-", dir=work))
+    seconds = json.loads(run(tree, ["-c", KERNEL_CODE], cache)[2])
+    shutil.rmtree(cache)
+    return seconds
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--before", default=BEFORE, help=f"the commit to compare with ({BEFORE})")
@@ -107,6 +153,8 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5, help="runs per step timing (default 5)")
     parser.add_argument("--step-runs", type=int, default=3,
                         help="processes per round for the step timings (default 3)")
+    parser.add_argument("--kernels", action="store_true",
+                        help="also each entry kernel's cold compile CPU (a process per round)")
     options = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="rkhp-compile-"))
     try:
@@ -119,6 +167,8 @@ def main() -> None:
         for _ in range(options.rounds):
             for name, tree in versions.items():
                 results[name].append(measure(tree, work, options.repeats, options.step_runs))
+                if options.kernels:
+                    results[name][-1]["kernels"] = measure_kernels(tree, work)
                 loads.append(os.getloadavg()[0])
         print(f"machine: {os.cpu_count()} CPUs, load average {min(loads):.1f} to {max(loads):.1f} "
               f"during the runs; `rkhp {' '.join(COMMAND)}`, minima over {options.rounds} rounds")
@@ -130,6 +180,12 @@ def main() -> None:
             steps = [min(r["us_per_step"][m] for r in rounds) for m, _ in STEP_METHODS]
             print(f"{name:24s} {cold[0]:9.1f}s {cold[1]:8.1f}s {warm[0]:9.2f}s {warm[1]:8.2f}s  "
                   + "  ".join(f"{v:9.2f}" for v in steps))
+        if options.kernels:
+            names = list(results["after (this tree)"][0]["kernels"])
+            print("cold compile CPU of each entry kernel (s, minima): " + ", ".join(names))
+            for name, rounds in results.items():
+                print(f"{name:24s} " + " ".join(f"{min(r['kernels'][k] for r in rounds):6.2f}"
+                                                for k in names))
     finally:
         shutil.rmtree(work, ignore_errors=True)
 

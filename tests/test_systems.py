@@ -83,7 +83,7 @@ def test_rigid_body_alpha_against_mpmath():
 
 
 def test_rigid_body_c_taylor_coefficients():
-    """The Taylor coefficients of c(u) (series below u = 4, closed form above) against mpmath."""
+    """The Taylor coefficients of c(u) (series below u = 20, pole and rest above) against mpmath."""
     from rkhp.taylor.elementary import crb_coef
 
     mpmath.mp.dps = 40
@@ -98,6 +98,33 @@ def test_rigid_body_c_taylor_coefficients():
         for m in range(5):
             exact = mpmath.diff(c, mpmath.mpf(u0), m) / mpmath.factorial(m)
             assert abs(coef[m] - float(exact)) <= 1e-13 * abs(float(exact)), (u0, m)
+
+
+def test_rigid_body_c_near_the_pole():
+    """c's Taylor coefficients up to degree 8 between u = 20 and the pole u = (2 pi)^2 (the pole's
+    part plus the rest's series) to a few units of round-off against mpmath at 50 digits, with u
+    given as a double-double u0 + u_lo; NaN at and beyond the pole and for u <= -20."""
+    from rkhp.taylor.elementary import crb_coef
+
+    mpmath.mp.dps = 50
+
+    def c(u):
+        r = mpmath.sqrt(u)
+        return (1 - (r / 2) * mpmath.cot(r / 2)) / u
+
+    D = 8
+    coef = np.zeros(D + 1)
+    for u0 in (20.0, 25.0, 30.0, 35.0, 39.0, 39.4, 39.47, 39.478):
+        for u_lo in (0.0, 3e-15):
+            crb_coef(u0, u_lo, D, coef)
+            exact = mpmath.taylor(c, mpmath.mpf(u0) + mpmath.mpf(u_lo), D)
+            for m in range(D + 1):
+                assert abs(coef[m] - exact[m]) <= 2e-15 * abs(exact[m]), (u0, u_lo, m)
+    pole = 4 * mpmath.pi ** 2
+    pole_hi = float(pole)
+    for u0, u_lo in ((pole_hi, float(pole - pole_hi)), (40.0, 0.0), (-20.0, 0.0), (-30.0, 0.0)):
+        crb_coef(u0, u_lo, D, coef)
+        assert np.isnan(coef).all(), u0
 
 
 def test_rigid_body_exact_solution_against_dop853():

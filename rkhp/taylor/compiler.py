@@ -109,7 +109,7 @@ NJIT_NORC = dict(NJIT, _nrt=False)
 may only call functions that allocate nothing, or ones that set NJIT_NRT: callees without an
 explicit setting inherit the caller's."""
 NJIT_NRT = dict(NJIT, _nrt=True)
-"""Functions that allocate and are called from NJIT_NORC kernels (e.g. crb_coef's closed form)."""
+"""Functions that allocate and are called from NJIT_NORC kernels (e.g. in rkhp.taylor.composites)."""
 
 
 

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from .compiler import NJIT, NJIT_NORC, NJIT_NRT
+from .compiler import NJIT_NORC
 from .compiler import numba as nb
 from .ops import ATAN, COS, CRB, DIV, EXP, LOG, POWI, POWR, SIN, SQRT
 
@@ -28,15 +28,26 @@ def _bernoulli_tables():
     mpmath.mp.dps = 50
     phi = [mpmath.bernoulli(k) / mpmath.factorial(k) for k in range(200)]
     phi[1] = -phi[1]  # z / (1 - e^{-z}) has B_1^+ = +1/2
-    series = [(-1) ** j * mpmath.bernoulli(2 * j + 2) / mpmath.factorial(2 * j + 2)
-              for j in range(200)]
-    return np.array([float(v) for v in phi]), np.array([float(v) for v in series])
+    # c's series minus its first pole's, 2 (4 pi^2)^-(j+1): the rest 2 (4 pi^2)^-(j+1) (zeta(2j+2)
+    # - 1) cancels about 0.6 j digits (zeta(2j+2) - 1 ~ 4^-(j+1)), so 180 digits for j < 200
+    with mpmath.workdps(180):
+        series = [(-1) ** j * mpmath.bernoulli(2 * j + 2) / mpmath.factorial(2 * j + 2)
+                  for j in range(200)]
+        pole = 4 * mpmath.pi ** 2
+        rest = [v - 2 / pole ** (j + 1) for j, v in enumerate(series)]
+        pole_hi = float(pole)
+        pole_lo = float(pole - pole_hi)
+    return (np.array([float(v) for v in phi]), np.array([float(v) for v in series]),
+            np.array([float(v) for v in rest]), pole_hi, pole_lo)
 
 
 #: PHI_COEF[k]: Taylor coefficients of phi(z) = z / (1 - exp(-z)); radius 2 pi.
-#: CRB_SERIES[j]: c(u) = sum_j CRB_SERIES[j] u^j, c(u) = (1 - (r/2) cot(r/2)) / r^2, u = r^2.
-PHI_COEF, CRB_SERIES = _bernoulli_tables()
-CRB_SERIES_LIMIT = 20.0  # series for |u| < 20 (ratio < 1/2 per term), closed form above
+#: CRB_SERIES[j]: c(u) = sum_j CRB_SERIES[j] u^j, c(u) = (1 - (r/2) cot(r/2)) / r^2, u = r^2;
+#: radius (2 pi)^2, the first pole. By the partial fractions of x cot x,
+#: c(u) = 2 sum_{k >= 1} 1 / (4 pi^2 k^2 - u) = 2 / (CRB_POLE - u) + sum_j CRB_REST[j] u^j,
+#: CRB_REST's radius 16 pi^2 (the second pole); CRB_POLE = (2 pi)^2 as CRB_POLE_HI + CRB_POLE_LO.
+PHI_COEF, CRB_SERIES, CRB_REST, CRB_POLE_HI, CRB_POLE_LO = _bernoulli_tables()
+CRB_SERIES_LIMIT = 20.0  # CRB_SERIES for |u| < 20 (ratio < 1/2 per term), pole + CRB_REST above
 TWO_PI = 2.0 * math.pi
 
 
@@ -96,27 +107,6 @@ def _pow_coef(u0, power, D, coef):
         coef[k] = coef[k - 1] * (power - k + 1) / (k * u0)
 
 
-@nb.njit(**NJIT)
-def _uni_mul(a, b, D):
-    c = np.zeros(D + 1)
-    for i in range(D + 1):
-        for j in range(D + 1 - i):
-            c[i + j] += a[i] * b[j]
-    return c
-
-
-@nb.njit(**NJIT)
-def _uni_compose(coef, a, D):
-    v = a.copy()
-    v[0] = 0.0
-    r = np.zeros(D + 1)
-    r[0] = coef[D]
-    for k in range(D - 1, -1, -1):
-        r = _uni_mul(r, v, D)
-        r[0] += coef[k]
-    return r
-
-
 @nb.njit(**NJIT_NORC)
 def two_prod(a, b):
     """a * b = p + e exactly (Dekker)."""
@@ -131,69 +121,33 @@ def two_prod(a, b):
 
 
 @nb.njit(**NJIT_NORC)
-def _crb_value(u_hi, u_lo):
-    """c(u) for 20 <= u < (2 pi)^2 from u = u_hi + u_lo (double-double): near the pole r = 2 pi
-    cot is ill-conditioned, so r = sqrt(u) is carried to double-double accuracy."""
-    r = math.sqrt(u_hi)
-    p, e = two_prod(r, r)
-    r_lo = ((u_hi - p) - e + u_lo) / (2.0 * r)
-    w = 0.5 * r
-    w_lo = 0.5 * r_lo
-    sw = math.sin(w)
-    cot = math.cos(w) / sw
-    wcot = w * (cot - w_lo / (sw * sw)) + w_lo * cot
-    return (1.0 - wcot) / u_hi * (1.0 - u_lo / u_hi)
-
-
-@nb.njit(**NJIT_NRT)
 def crb_coef(u0, u_lo, D, coef):
     """Taylor coefficients at u0 of c(u) = (1 - (sqrt(u)/2) cot(sqrt(u)/2)) / u (docs/theory.md
     §4).
 
-    Power series (exact to round-off) for |u0| < 20; closed form in univariate jets for
-    20 <= u0 < (2 pi)^2, the value from u0 + u_lo in double-double; NaN beyond the first pole
-    u = (2 pi)^2.
+    Power series (exact to round-off) for |u0| < 20; for 20 <= u0 < (2 pi)^2 the first pole's
+    part 2 / (4 pi^2 - u) plus the rest's power series CRB_REST (radius 16 pi^2, all terms
+    positive), with d = 4 pi^2 - u from u0 + u_lo in double-double (4 pi^2 - u0 is exact, Sterbenz);
+    NaN beyond the first pole u = (2 pi)^2 and for u0 <= -20.
     """
-    if abs(u0) < CRB_SERIES_LIMIT:
-        for m in range(D + 1):
-            s = 0.0
-            weight = 1.0  # binom(j, m) u0^(j - m)
-            for j in range(m, CRB_SERIES.shape[0]):
-                term = CRB_SERIES[j] * weight
-                s += term
-                if j > m + 2 and abs(term) <= 1e-18 * abs(s):
-                    break
-                weight *= u0 * (j + 1) / (j + 1 - m)
-            coef[m] = s
-        return
-    if not (u0 < TWO_PI * TWO_PI):
-        for m in range(D + 1):
-            coef[m] = np.nan
-        return
-    c = np.zeros(D + 1)
-    u = np.zeros(D + 1)
-    u[0] = u0
-    if D >= 1:
-        u[1] = 1.0
-    _pow_coef(u0, 0.5, D, c)
-    w = _uni_compose(c, u, D) * 0.5
-    w0 = w[0]
-    sc = np.zeros(D + 1)
-    cc = np.zeros(D + 1)
-    f = 1.0
-    for k in range(D + 1):
-        if k > 0:
-            f /= k
-        sc[k] = math.sin(w0 + 0.5 * math.pi * k) * f
-        cc[k] = math.cos(w0 + 0.5 * math.pi * k) * f
-    sw = _uni_compose(sc, w, D)
-    cw = _uni_compose(cc, w, D)
-    _pow_coef(sw[0], -1.0, D, c)
-    cot = _uni_mul(cw, _uni_compose(c, sw, D), D)
-    num = -_uni_mul(w, cot, D)
-    num[0] += 1.0
-    _pow_coef(u0, -1.0, D, c)
-    res = _uni_mul(num, _uni_compose(c, u, D), D)
+    series = CRB_SERIES
+    pole, d = 0.0, 1.0  # 2 / d^(m+1): the m-th Taylor coefficient of 2 / (4 pi^2 - u) at u0
+    if not abs(u0) < CRB_SERIES_LIMIT:
+        d = (CRB_POLE_HI - u0) + (CRB_POLE_LO - u_lo)
+        if not (u0 > 0.0 and d > 0.0):
+            for m in range(D + 1):
+                coef[m] = np.nan
+            return
+        series = CRB_REST
+        pole = 2.0 / d
     for m in range(D + 1):
-        coef[m] = res[m]
-    coef[0] = _crb_value(u0, u_lo)
+        s = 0.0  # sum_{j >= m} series[j] binom(j, m) u0^(j - m), to a relative 1e-18
+        weight = 1.0  # binom(j, m) u0^(j - m)
+        for j in range(m, series.shape[0]):
+            term = series[j] * weight
+            s += term
+            if j > m + 2 and abs(term) <= 1e-18 * abs(s):
+                break
+            weight *= u0 * (j + 1) / (j + 1 - m)
+        coef[m] = pole + s
+        pole /= d
