@@ -22,6 +22,11 @@ from rkhp.systems import get_system
 from rkhp.systems.check import check_birealisation
 from rkhp.systems.problems import as_general
 from rkhp.taylor.collocation import average_error_constant, collocation
+from rkhp.taylor.composites import SPRAY_AFFINE_RATIO
+from rkhp.taylor.interpreter import run_tape, tape_work
+from rkhp.taylor.jets import jet_space
+from rkhp.taylor.ops import ADD, CONST, DIV, EXP, MUL, MULC, POWI, SPRAY, SPRAY_MAX_NODES, SUB
+from rkhp.taylor.tape import degree_in
 
 
 @pytest.fixture(scope="module")
@@ -59,6 +64,112 @@ def test_average_error_constant():
             alpha = 1 - lam * sum(w[j] * Y[j] for j in range(q))
             error = (alpha - lam / (mpmath.e**lam - 1)) / lam ** (2 * q)
             assert float(error) == pytest.approx((-1) ** q * average_error_constant(q), rel=1e-2)
+
+
+def _spray_flags(system):
+    """The float parameter of each spray row of a system's alpha tape (1.0: X affine in y)."""
+    tape = system.alpha_tape
+    return [float(tape.fpar[r]) for r in range(tape.ops.shape[0]) if tape.ops[r, 0] == SPRAY]
+
+
+@pytest.mark.parametrize("name, affine", [("heavy-top", True), ("toda:6", True),
+                                          ("charged-particle", False),
+                                          ("point-vortices", False), ("nambu", False)])
+def test_the_field_is_marked_affine_exactly_for_linear_pi(name, affine):
+    """pi linear in y (Lie–Poisson: heavy top; Flaschka's Toda lattice) makes X(y, p) affine in
+    y; the charged particle (1/B), point vortices (1/(1 + 2|y|^2)) and the quartic Casimir's
+    Nambu bracket (cubic) do not (problems' sources, rkhp.systems.problems)."""
+    assert _spray_flags(as_general(name)) == [1.0 if affine else 0.0]
+
+
+def test_the_rigid_body_spec_is_affine(rigid_body_general):
+    assert _spray_flags(rigid_body_general) == [1.0]
+
+
+def test_degree_in_polynomial_and_non_polynomial_rows():
+    """degree_in on hand-written rows (code, out, a, b, k) over inputs 0, 1 and a parameter 2:
+    products add degrees, sums take the larger, a division by a constant keeps it, powers
+    multiply it, functions of an input and divisions by one are not polynomial."""
+    rows = [(MUL, 3, 0, 2, 0),      # y0 p: 1
+            (MUL, 4, 0, 1, 0),      # y0 y1: 2
+            (ADD, 5, 3, 4, 0),      # 2
+            (CONST, 6, -1, -1, 0),  # 0
+            (DIV, 7, 3, 6, 0),      # y0 p / c: 1
+            (POWI, 8, 0, -1, 3),    # y0^3: 3
+            (EXP, 9, 2, -1, 0),     # exp(p): 0
+            (EXP, 10, 0, -1, 0),    # exp(y0): not polynomial
+            (DIV, 11, 2, 0, 0),     # p / y0: not polynomial
+            (SUB, 12, 7, 9, 0),     # 1
+            (MULC, 13, 8, -1, 0)]   # 3
+    assert degree_in(rows, (0, 1), (3, 12)) == 1.0
+    assert degree_in(rows, (0, 1), (6, 9)) == 0.0
+    assert degree_in(rows, (0, 1), (5,)) == 2.0
+    assert degree_in(rows, (0, 1), (13, 3)) == 3.0
+    assert degree_in(rows, (0, 1), (10,)) == math.inf
+    assert degree_in(rows, (0, 1), (11,)) == math.inf
+
+
+def _average_error_series(q, terms):
+    """r_k, k = 0..terms: for X affine in y, x - alpha_Q - (x - alpha) = sum_k r_k J^(k-1) X(x)
+    with r(z) = z / (e^z - 1) - 1 + z w^T (I - z (A - w))^-1 1 (mpmath tables), so
+    r_k = B_k / k! + w^T (A - w)^(k-1) 1 for k >= 1."""
+    A, w = _mp_tables(q)
+    AW = mpmath.matrix([[A[i][j] - w[j] for j in range(q)] for i in range(q)])
+    v = mpmath.matrix([1] * q)
+    r = [mpmath.mpf(0)]
+    for k in range(1, terms + 1):
+        r.append(mpmath.bernoulli(k) / mpmath.factorial(k) + sum(w[j] * v[j] for j in range(q)))
+        v = AW * v
+    return r
+
+
+def test_affine_error_bound_of_the_average():
+    """The a-priori choice of Q for X affine in y (docs/theory.md §9.3): the truncation error's
+    series starts at z^(2Q) with |r_2Q| = E_Q, and |r_k| <= E_Q SPRAY_AFFINE_RATIO^(k - 2Q)
+    (mpmath at 100 digits, 60 terms past 2Q, every Q the kernel may use; the ratio tends to
+    rho(A - w) <= 1 / (2 pi) beyond)."""
+    with mpmath.workdps(100):
+        for q in range(1, SPRAY_MAX_NODES + 1):
+            r = _average_error_series(q, 2 * q + 60)
+            E = average_error_constant(q)
+            assert max(abs(r[k]) for k in range(2 * q)) < mpmath.mpf(10) ** -80
+            assert float(abs(r[2 * q])) == pytest.approx(E, rel=1e-12)
+            for k in range(2 * q + 1, 2 * q + 61):
+                assert abs(r[k]) <= E * SPRAY_AFFINE_RATIO ** (k - 2 * q)
+
+
+def _jets(tape, point, seeds, degree):
+    """The output jets of a tape at `point`, in all of its inputs (input i = point[i] +
+    seeds[i] t_i), to `degree`."""
+    space = jet_space(len(point), degree)
+    work = tape_work((tape,), space.size)
+    work.W[: len(point), 0] = point
+    if degree > 0:
+        for i in range(len(point)):
+            work.W[i, 1 + i] = seeds[i]
+    run_tape(tape, np.int64(degree), space, work)
+    return work.W[tape.outputs, : space.size].copy()
+
+
+@pytest.mark.parametrize("degree", [0, 1, 2, 3])
+def test_affine_spray_is_the_closed_form_on_jets(rigid_body_general, degree):
+    """so(3)*: the spray realisation's Taylor coefficients in (x, p) equal the closed form's
+    (docs/theory.md §4) to a few units of round-off, at |p| from 1e-9 to 0.75 (the a-priori Q at
+    the values where |d_y X|_F <= 1, the checked Q elsewhere and on jets), p's directions
+    scaled like p itself, as in an RKHP step (docs/theory.md §9.3, "Choice of Q": on jets Q is
+    chosen at the values)."""
+    builtin = get_system("rigid-body")
+    rng = np.random.default_rng(3)
+    for r in (1e-9, 1e-4, 0.05, 0.3, 0.75):
+        for _ in range(3):
+            x, d = rng.normal(size=3), rng.normal(size=3)
+            point = np.concatenate([x, r * d / np.linalg.norm(d)])
+            seeds = [1.0] * 3 + [r] * 3
+            for tape, closed in ((rigid_body_general.alpha_tape, builtin.alpha_tape),
+                                 (rigid_body_general.beta_tape, builtin.beta_tape)):
+                a, b = _jets(tape, point, seeds, degree), _jets(closed, point, seeds, degree)
+                scale = max(1.0, np.abs(b).max())
+                assert np.abs(a - b).max() <= 8 * 2.0**-52 * scale
 
 
 def test_rigid_body_spray_is_the_closed_form(rigid_body_general):

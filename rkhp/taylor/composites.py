@@ -85,6 +85,16 @@ def phimv(tape, r, W, D, space, S, deg):
 #: Q nodes are used when the alpha of Q - 1 nodes agrees with theirs to this, relative to
 #: max(1, |x|) (a few units of round-off: the solves themselves are accurate to about that)
 SPRAY_AGREEMENT = 8.0 * 2.0**-52
+#: X affine in y: Q nodes are used when the bound of their truncation error at the values,
+#: E_Q theta^(2Q - 1) |X(x)| / (1 - SPRAY_AFFINE_RATIO theta) (theta >= |d_y X|_2, theta <= 1),
+#: is at most SPRAY_AFFINE_BOUND max(1, |x|) (docs/theory.md §9.3, "Choice of Q")
+SPRAY_AFFINE_BOUND = 2.0**-53
+#: the ratio of the truncation error's successive Taylor coefficients, at most (measured with
+#: mpmath for every Q up to SPRAY_MAX_NODES: tests/test_spray.py)
+SPRAY_AFFINE_RATIO = 0.28
+#: nodes added to the a-priori Q for X affine in y on jets (D >= 1): Q is chosen at the values,
+#: and the jet coefficients of degree d carry the truncation error's terms of degree >= d in p
+SPRAY_AFFINE_JET_NODES = 1
 #: value-level Newton sweeps at most; one that does not reach the round-off level by then, or
 #: that stops contracting above it, gives NaN results (a numerical failure, never a wrong value)
 SPRAY_MAX_SWEEPS = 50
@@ -93,7 +103,7 @@ SPRAY_MAX_SWEEPS = 50
 TABLE_AW = TABLE_A - TABLE_W[:, None, :]
 
 
-@nb.njit(**NJIT_NORC)
+@nb.njit(inline="always", **NJIT_NORC)
 def _spray_field(tape, sub, W, D, space, S, deg, y_row, p_slots, n):
     """X = pi(y) p by the sub-program at degree D: y from the scratch rows S[y_row + k] (with
     y_row < 0: already in the sub-program's input slots, degree 0), p from the slots listed at
@@ -139,7 +149,8 @@ def spray(tape, r, W, D, space, S, deg):
     M = space.counts[D]
     Ys = SCRATCH_BASE
     Xs = SCRATCH_BASE + SPRAY_MAX_NODES * n
-    q = _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs)
+    affine = tape.fpar[r] == 1.0
+    q = _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs, affine)
     for k in range(n):
         xs = args[x_slots + k]
         for m in range(M):
@@ -159,11 +170,12 @@ def spray(tape, r, W, D, space, S, deg):
         deg[out + n + k] = D
 
 
-@nb.njit(**NJIT_NORC)
-def _jacobian(tape, sub, W, space, S, deg, y_row, p_slots, n, J, base):
+@nb.njit(inline="always", **NJIT_NORC)
+def _jacobian(tape, sub, W, space, S, deg, y_row, p_slots, n, J, base, affine):
     """J := d_y X(y, p) and base := X(y, p) at the values y = S[y_row + k, 0] and p's values:
     by forward mode (one evaluation at degree 1) when the jet space has n variables, else by
-    finite differences."""
+    finite differences (for X affine in y, `affine`, with steps max(1, |y_k|): exact but for
+    round-off)."""
     args = tape.args
     in0, out0 = sub[2], sub[3]
     if space.n_vars >= n and space.degree >= 1:
@@ -193,7 +205,7 @@ def _jacobian(tape, sub, W, space, S, deg, y_row, p_slots, n, J, base):
         base[i] = W[args[out0 + i], 0]
     for k in range(n):
         yk = S[y_row + k, 0]
-        step = 1.4901161193847656e-08 * max(1.0, abs(yk))
+        step = (1.0 if affine else 1.4901161193847656e-08) * max(1.0, abs(yk))
         for j in range(n):
             W[args[in0 + j], 0] = S[y_row + j, 0]
         W[args[in0 + k], 0] = yk + step
@@ -203,20 +215,26 @@ def _jacobian(tape, sub, W, space, S, deg, y_row, p_slots, n, J, base):
 
 
 @nb.njit(**NJIT_NRT)
-def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
+def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs, affine):
     """The stage values of `spray` (rows Ys) and their X (rows Xs) up to degree D; returns Q,
     or 0 when they cannot be solved. Allocates the Jacobians and the Newton matrices.
+    docs/theory.md §9.3, "Choice of Q" and "Solving for the stages".
 
-    1. Q, at the values (`_value_stages`): with Q0 the smallest with
-       E_Q0 theta^(2 Q0) <= 8 SPRAY_AGREEMENT for theta an estimate of |J|_2, J = d_y X(x)
-       (`rkhp.taylor.collocation.average_error_constant`: the gap between Q0 and Q0 + 1 nodes
-       predicted for linear X, pessimistic by (1.05)^(2 Q0) and more, so that the first check
-       usually passes and a solve whose check fails is skipped), Q is the first Q > Q0 whose
-       alpha agrees with that of Q - 1 nodes to SPRAY_AGREEMENT max(1, |x|) (the truncation
-       error of Q nodes is then smaller by about theta^2 / (16 Q^2)): theta alone
-       misses the non-linearity of X (where J is small but d^2 X is not).
+    1. Q and the stages at the values.
+       - X affine in y (`affine`: the tape's flag): Q a priori, the fewest nodes whose
+         truncation error is below SPRAY_AFFINE_BOUND max(1, |x|) by the bound
+         E_Q theta^(2Q - 1) |X(x)| / (1 - SPRAY_AFFINE_RATIO theta), theta >= |d_y X|_2
+         (`_norm_bound`), theta <= 1 (`_affine_nodes`), plus SPRAY_AFFINE_JET_NODES on jets
+         (D >= 1); the stages by one linear solve (`_affine_stages`).
+       - Otherwise (or theta > 1), by Newton (`_value_stages`): Q0 is the smallest with
+         E_Q0 theta^(2 Q0) <= 8 SPRAY_AGREEMENT, theta an estimate of |J|_2, J = d_y X(x),
+         pessimistic so that the first check usually passes; Q is the first Q > Q0 whose
+         alpha agrees with that of Q - 1 nodes to SPRAY_AGREEMENT max(1, |x|) (the truncation
+         error of Q nodes is then smaller by about theta^2 / (16 Q^2)): theta alone misses the
+         non-linearity of X (where J is small but d^2 X is not).
     2. Degrees 1..D, one at a time (D >= 1): with the exact value-level matrix
-       N = I - [(A - w)_ij J(Y_j)] (J at each stage value), the degree-d coefficients solve one
+       N = I - [(A - w)_ij J(Y_j)] (J at each stage value; for affine X the last value-level
+       matrix, whose J is the same at every stage), the degree-d coefficients solve one
        linear system once the lower ones are known: evaluate X on the stages at degree d, solve
        N dY_d = (x + (A - w) X(Y) - Y)_d, and correct X's degree-d coefficients by J(Y_j) dY_d
        (exact at degree d). One evaluation per stage and degree, at that degree (two with
@@ -233,53 +251,72 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
     tmp = np.empty(SPRAY_MAX_NODES * n)
     for k in range(n):
         S[Ys + k, 0] = W[args[x_slots + k], 0]
-    _jacobian(tape, sub, W, space, S, deg, np.int64(Ys), p_slots, n, J, X0)
-    theta = _spectral_norm(J, rvec, tmp)
-    q = 1
-    while q < SPRAY_MAX_NODES - 1 and not (TABLE_E[q] * theta ** (2 * q)
-                                           <= 8.0 * SPRAY_AGREEMENT):
-        q += 1
+    _jacobian(tape, sub, W, space, S, deg, np.int64(Ys), p_slots, n, J, X0, affine)
     scale = 1.0
     for k in range(n):
         scale = max(scale, abs(W[args[x_slots + k], 0]))
     alpha = np.empty(n)
-    # the Newton matrix of the last value-level solve (its Jacobians, factors and row order)
-    Jv = np.empty((q, n, n))
-    LUv = np.empty((q * n, q * n))
-    permv = np.empty(q * n, dtype=np.int64)
-    if not _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J, X0,
-                         theta, scale, alpha, False, Jv, LUv, permv, rvec, tmp, work):
-        return 0
-    while True:
-        if q + 1 > SPRAY_MAX_NODES:
-            return 0
-        previous = alpha.copy()
-        Jv = np.empty((q + 1, n, n))
-        LUv = np.empty(((q + 1) * n, (q + 1) * n))
-        permv = np.empty((q + 1) * n, dtype=np.int64)
-        if not _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q + 1,
-                             J, X0, theta, scale, alpha, True, Jv, LUv, permv, rvec, tmp,
-                             work):
-            return 0
-        q += 1
-        gap = 0.0
+    q = 0
+    if affine:
+        theta = _norm_bound(J)
+        field = 0.0
         for k in range(n):
-            gap = max(gap, abs(alpha[k] - previous[k]))
-        if gap <= SPRAY_AGREEMENT * scale:
-            break
+            field += X0[k] * X0[k]
+        q = _affine_nodes(theta, math.sqrt(field), scale)
+        if q > 0 and D >= 1:
+            q = min(q + SPRAY_AFFINE_JET_NODES, SPRAY_MAX_NODES)
+    if q > 0:
+        Jv = np.empty((q, n, n))
+        LUv = np.empty((q * n, q * n))
+        permv = np.empty(q * n, dtype=np.int64)
+        if not _affine_stages(W, S, args, x_slots, q, n, Ys, Xs, J, X0, Jv, LUv, permv, rvec,
+                              tmp):
+            return 0
+    else:
+        theta = _spectral_norm(J, rvec, tmp)
+        q = 1
+        while q < SPRAY_MAX_NODES - 1 and not (TABLE_E[q] * theta ** (2 * q)
+                                               <= 8.0 * SPRAY_AGREEMENT):
+            q += 1
+        # the Newton matrix of the last value-level solve (its Jacobians, factors, row order)
+        Jv = np.empty((q, n, n))
+        LUv = np.empty((q * n, q * n))
+        permv = np.empty(q * n, dtype=np.int64)
+        if not _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J,
+                             X0, theta, scale, alpha, False, Jv, LUv, permv, rvec, tmp, work):
+            return 0
+        while True:
+            if q + 1 > SPRAY_MAX_NODES:
+                return 0
+            previous = alpha.copy()
+            Jv = np.empty((q + 1, n, n))
+            LUv = np.empty(((q + 1) * n, (q + 1) * n))
+            permv = np.empty((q + 1) * n, dtype=np.int64)
+            if not _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs,
+                                 q + 1, J, X0, theta, scale, alpha, True, Jv, LUv, permv, rvec,
+                                 tmp, work):
+                return 0
+            q += 1
+            gap = 0.0
+            for k in range(n):
+                gap = max(gap, abs(alpha[k] - previous[k]))
+            if gap <= SPRAY_AGREEMENT * scale:
+                break
     if D == 0:
         return q
     # 2. degrees 1..D with the exact value-level matrix
     AW = TABLE_AW[q]
-    Js = np.empty((q, n, n))
-    for j in range(q):
-        _jacobian(tape, sub, W, space, S, deg, np.int64(Ys + j * n), p_slots, n, Js[j], work)
-    # the last value-level matrix is the exact one when its Jacobians are these (for X linear
-    # in y they are, bitwise): then its factors serve, else factorise
-    LU, perm = LUv, permv
-    if not np.array_equal(Js, Jv):
-        if not _newton_matrix(AW, Js, q, n, LU, perm):
-            return 0
+    # the last value-level matrix is the exact one when its Jacobians are the stages' (for X
+    # affine in y they are all J): then its factors serve, else factorise
+    LU, perm, Js = LUv, permv, Jv
+    if not affine:
+        Js = np.empty((q, n, n))
+        for j in range(q):
+            _jacobian(tape, sub, W, space, S, deg, np.int64(Ys + j * n), p_slots, n, Js[j],
+                      work, False)
+        if not np.array_equal(Js, Jv):
+            if not _newton_matrix(AW, Js, q, n, LU, perm):
+                return 0
     for i in range(q):
         for k in range(n):
             xs = args[x_slots + k]
@@ -309,7 +346,42 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
     return q
 
 
-@nb.njit(**NJIT_NRT)
+@nb.njit(**NJIT_NORC)
+def _affine_stages(W, S, args, x_slots, q, n, Ys, Xs, J, X0, Js, LU, perm, rvec, tmp):
+    """The stage values with q nodes at the values (rows Ys, column 0; their X in Xs) for X
+    affine in y, X(y) = X(x) + J (y - x): Z = Y - x solves the linear system
+    (I - (A - w) (x) J) Z = (A - w) 1 (x) X(x), one factorisation and one solve, no evaluation
+    of X. Js (q, n, n), LU (qn, qn), perm (qn): the matrix's Jacobians (J at every node),
+    factors and row order; rvec, tmp (at least qn): work vectors. False if it is singular or
+    the result is not finite."""
+    AW = TABLE_AW[q]
+    for j in range(q):
+        for i in range(n):
+            for k in range(n):
+                Js[j, i, k] = J[i, k]
+    if not _newton_matrix(AW, Js, q, n, LU, perm):
+        return False
+    for i in range(q):
+        row = 0.0
+        for j in range(q):
+            row += AW[i, j]
+        for k in range(n):
+            rvec[i * n + k] = row * X0[k]
+    lu_solve(LU, perm, rvec, tmp)
+    for j in range(q):
+        for k in range(n):
+            z = rvec[j * n + k]
+            if not abs(z) < np.inf:
+                return False
+            S[Ys + j * n + k, 0] = W[args[x_slots + k], 0] + z
+            acc = X0[k]
+            for l in range(n):
+                acc += J[k, l] * rvec[j * n + l]
+            S[Xs + j * n + k, 0] = acc
+    return True
+
+
+@nb.njit(**NJIT_NORC)
 def _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J, X0, theta,
                   scale, alpha, warm, Js, LU, perm, rvec, tmp, work):
     """The stage values with q nodes at the values (rows Ys, column 0; their X in Xs) by Newton
@@ -330,13 +402,17 @@ def _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J
     zero = np.int64(0)
     AW = TABLE_AW[q]
     for j in range(q):
-        Js[j] = J
+        for i in range(n):
+            for k in range(n):
+                Js[j, i, k] = J[i, k]
     if not _newton_matrix(AW, Js, q, n, LU, perm):
         return False
     eps = 2.220446049250313e-16
     tol = min(4.0 * eps * scale / max(theta, 1e-3), 1e-13 * scale)
     for i in range(q):
-        c = TABLE_A[q, i, :q].sum()
+        c = 0.0
+        for j in range(q):
+            c += TABLE_A[q, i, j]
         for k in range(n):
             acc = W[args[x_slots + k], 0]
             if warm:
@@ -373,14 +449,14 @@ def _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J
         if sweep == 1 and update > 0.05 * previous:
             for j in range(q):
                 _jacobian(tape, sub, W, space, S, deg, np.int64(Ys + j * n), p_slots, n, Js[j],
-                          work)
+                          work, False)
             if not _newton_matrix(AW, Js, q, n, LU, perm):
                 return False
         previous = update
     return False
 
 
-@nb.njit(**NJIT_NORC)
+@nb.njit(inline="always", **NJIT_NORC)
 def _newton_matrix(AW, Js, q, n, LU, perm):
     """LU := I - [(A - w)_ij J_j] (blocks i, j of size n), factorised; False if singular."""
     for i in range(q):
@@ -392,7 +468,7 @@ def _newton_matrix(AW, Js, q, n, LU, perm):
     return lu_factor(LU, perm)
 
 
-@nb.njit(**NJIT_NORC)
+@nb.njit(inline="always", **NJIT_NORC)
 def _newton_step(W, S, args, x_slots, AW, q, n, Ys, Xs, m, LU, perm, rvec, tmp):
     """One Newton correction of the stage values' coefficient m: rvec := N^-1 (x + (A - w) X
     - Y)_m, added to the rows Ys; returns its largest magnitude (NaN-safe)."""
@@ -412,7 +488,7 @@ def _newton_step(W, S, args, x_slots, AW, q, n, Ys, Xs, m, LU, perm, rvec, tmp):
     return update
 
 
-@nb.njit(**NJIT_NORC)
+@nb.njit(inline="always", **NJIT_NORC)
 def _spectral_norm(J, v, u):
     """An estimate of the largest singular value of J (power iteration on J^T J from the
     all-ones vector, 8 steps, 5% added), inf for a non-finite J; v, u: work vectors (at least
@@ -445,3 +521,41 @@ def _spectral_norm(J, v, u):
         for k in range(n):
             v[k] /= norm
     return 1.05 * sigma
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _norm_bound(J):
+    """A bound of |J|_2 (so |J^k|_2 <= bound^k): the smaller of |J|_F and
+    (|J|_1 |J|_inf)^(1/2); inf if J is not finite."""
+    frobenius = 0.0
+    rows = 0.0
+    for i in range(J.shape[0]):
+        row = 0.0
+        for k in range(J.shape[1]):
+            frobenius += J[i, k] * J[i, k]
+            row += abs(J[i, k])
+        rows = max(rows, row)
+    columns = 0.0
+    for k in range(J.shape[1]):
+        column = 0.0
+        for i in range(J.shape[0]):
+            column += abs(J[i, k])
+        columns = max(columns, column)
+    bound = min(math.sqrt(frobenius), math.sqrt(rows * columns))
+    return bound if bound < np.inf else np.inf
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _affine_nodes(theta, field, scale):
+    """For X affine in y with |d_y X|_2 <= theta (`_norm_bound`) and |X(x)|_2 = field: the fewest nodes whose
+    alpha is exact to SPRAY_AFFINE_BOUND scale (docs/theory.md §9.3, "Choice of Q"), or 0 when
+    theta > 1 or no Q <= SPRAY_MAX_NODES is enough."""
+    if not (theta <= 1.0 and field < np.inf):
+        return 0
+    limit = SPRAY_AFFINE_BOUND * scale * (1.0 - SPRAY_AFFINE_RATIO * theta)
+    power = theta * field  # theta^(2 Q - 1) |X(x)| for Q = 1
+    for q in range(1, SPRAY_MAX_NODES + 1):
+        if TABLE_E[q] * power <= limit:
+            return q
+        power *= theta * theta
+    return 0

@@ -29,6 +29,7 @@ range, input and output slots), goes at the head of the composite operation's op
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import NamedTuple
@@ -370,10 +371,42 @@ def phimv(K: list[list], x: list) -> list[Var]:
     return builder.composite(PHIMV, [v for row in K for v in row] + list(x), n, k=n)
 
 
+def degree_in(rows, inputs, outputs) -> float:
+    """The largest polynomial degree of the `outputs` slots in the `inputs` slots, over rows
+    (code, out, a, b, k) of a program: inf where an output is not polynomial in them (a function
+    or a divisor that depends on them); other slots are constants (degree 0)."""
+    degree = dict.fromkeys(inputs, 1.0)
+
+    def of(slot):
+        return degree.get(slot, 0.0)
+
+    for code, out, a, b, k in rows:
+        if code == CONST:
+            d = 0.0
+        elif code == MUL:
+            d = of(a) + of(b)
+        elif code in (ADD, SUB):
+            d = max(of(a), of(b))
+        elif code in (NEG, MULC, ADDC):
+            d = of(a)
+        elif code == DIV:
+            d = of(a) if of(b) == 0.0 else math.inf
+        elif code == POWI and k >= 0:
+            d = k * of(a) if k > 0 else 0.0
+        elif code == CRB:  # a, b: its operand list, not slots
+            d = math.inf
+        else:
+            d = 0.0 if of(a) == 0.0 and of(b) == 0.0 else math.inf
+        degree[out] = d
+    return max((of(s) for s in outputs), default=0.0)
+
+
 def spray(poisson, x: list, p: list) -> list[Var]:
     """alpha and beta of the Poisson-spray realisation of pi (docs/theory.md §9.3), 2n Vars:
     a composite operation whose sub-program is X(y, p) = pi(y) p (`poisson(y)`: the n x n
-    entries of pi, numbers or values computed from y) and whose operands are x, then p."""
+    entries of pi, numbers or values computed from y) and whose operands are x, then p. Its
+    float parameter is 1.0 when X is affine in y (pi affine: constant, Lie–Poisson), which lets
+    the kernel choose its nodes a priori (docs/theory.md §9.3, "Choice of Q"), else 0.0."""
     builder = next(v.builder for v in [*x, *p] if isinstance(v, Var))
     n = len(x)
 
@@ -388,7 +421,9 @@ def spray(poisson, x: list, p: list) -> list[Var]:
         return out
 
     sub = builder.subprogram(2 * n, field)
-    return builder.composite(SPRAY, list(x) + list(p), 2 * n, k=n, subprograms=(sub,))
+    affine = degree_in(builder._sub_rows[sub.lo:sub.hi], sub.inputs[:n], sub.outputs) <= 1.0
+    return builder.composite(SPRAY, list(x) + list(p), 2 * n, k=n, f=1.0 if affine else 0.0,
+                             subprograms=(sub,))
 
 
 #: the functions a family's base program calls on tape Vars (`rkhp.systems.families`)
