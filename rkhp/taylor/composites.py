@@ -255,7 +255,6 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs, a
     scale = 1.0
     for k in range(n):
         scale = max(scale, abs(W[args[x_slots + k], 0]))
-    alpha = np.empty(n)
     q = 0
     if affine:
         theta = _norm_bound(J)
@@ -273,6 +272,7 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs, a
                               tmp):
             return 0
     else:
+        alpha = np.empty(n)
         theta = _spectral_norm(J, rvec, tmp)
         q = 1
         while q < SPRAY_MAX_NODES - 1 and not (TABLE_E[q] * theta ** (2 * q)
@@ -355,11 +355,7 @@ def _affine_stages(W, S, args, x_slots, q, n, Ys, Xs, J, X0, Js, LU, perm, rvec,
     factors and row order; rvec, tmp (at least qn): work vectors. False if it is singular or
     the result is not finite."""
     AW = TABLE_AW[q]
-    for j in range(q):
-        for i in range(n):
-            for k in range(n):
-                Js[j, i, k] = J[i, k]
-    if not _newton_matrix(AW, Js, q, n, LU, perm):
+    if not _frozen_newton_matrix(AW, J, q, n, Js, LU, perm):
         return False
     for i in range(q):
         row = 0.0
@@ -401,11 +397,7 @@ def _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J
     out0 = sub[3]
     zero = np.int64(0)
     AW = TABLE_AW[q]
-    for j in range(q):
-        for i in range(n):
-            for k in range(n):
-                Js[j, i, k] = J[i, k]
-    if not _newton_matrix(AW, Js, q, n, LU, perm):
+    if not _frozen_newton_matrix(AW, J, q, n, Js, LU, perm):
         return False
     eps = 2.220446049250313e-16
     tol = min(4.0 * eps * scale / max(theta, 1e-3), 1e-13 * scale)
@@ -466,6 +458,17 @@ def _newton_matrix(AW, Js, q, n, LU, perm):
                     LU[i * n + k, j * n + l] = (1.0 if (i == j and k == l) else 0.0) \
                         - AW[i, j] * Js[j, k, l]
     return lu_factor(LU, perm)
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _frozen_newton_matrix(AW, J, q, n, Js, LU, perm):
+    """Js[j] := J at every node, then LU := I - (A - w) (x) J factorised (`_newton_matrix`);
+    False if singular."""
+    for j in range(q):
+        for i in range(n):
+            for k in range(n):
+                Js[j, i, k] = J[i, k]
+    return _newton_matrix(AW, Js, q, n, LU, perm)
 
 
 @nb.njit(inline="always", **NJIT_NORC)
