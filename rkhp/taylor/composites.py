@@ -85,16 +85,15 @@ def phimv(tape, r, W, D, space, S, deg):
 #: Q nodes are used when the alpha of Q - 1 nodes agrees with theirs to this, relative to
 #: max(1, |x|) (a few units of round-off: the solves themselves are accurate to about that)
 SPRAY_AGREEMENT = 8.0 * 2.0**-52
-#: X affine in y: Q nodes are used when the bound of their truncation error at the values,
-#: E_Q theta^(2Q - 1) |X(x)| / (1 - SPRAY_AFFINE_RATIO theta) (theta >= |d_y X|_2, theta <= 1),
-#: is at most SPRAY_AFFINE_BOUND max(1, |x|) (docs/theory.md §9.3, "Choice of Q")
-SPRAY_AFFINE_BOUND = 2.0**-53
-#: the ratio of the truncation error's successive Taylor coefficients, at most (measured with
-#: mpmath for every Q up to SPRAY_MAX_NODES: tests/test_spray.py)
-SPRAY_AFFINE_RATIO = 0.28
-#: nodes added to the a-priori Q for X affine in y on jets (D >= 1): Q is chosen at the values,
-#: and the jet coefficients of degree d carry the truncation error's terms of degree >= d in p
-SPRAY_AFFINE_JET_NODES = 1
+#: X affine in y: the Bernoulli series of the spray (`_bernoulli_spray`) stops when the bound of
+#: its tail is at most SPRAY_SERIES_BOUND max(1, |x|) (docs/theory.md §9.3, "X affine in y")
+SPRAY_SERIES_BOUND = 2.0**-53
+#: ... and is used when theta / (2 pi) <= SPRAY_SERIES_RATIO (theta >= |d_y X|_2; about 55 terms
+#: at most); beyond, the collocation solve takes over
+SPRAY_SERIES_RATIO = 0.5
+#: |B_k / k!| <= SPRAY_BERNOULLI_MAJORANT (2 pi)^-k for k >= 2 (2 zeta(2) = pi^2 / 3 = 3.29; B_1
+#: is summed exactly)
+SPRAY_BERNOULLI_MAJORANT = 3.3
 #: value-level Newton sweeps at most; one that does not reach the round-off level by then, or
 #: that stops contracting above it, gives NaN results (a numerical failure, never a wrong value)
 SPRAY_MAX_SWEEPS = 50
@@ -132,7 +131,9 @@ def spray(tape, r, W, D, space, S, deg):
     Operands: the sub-program X(y, p) = pi(y) p (inputs y then p, outputs X), then x (k slots),
     then p (k slots); results alpha (k slots), then beta (k slots).
 
-    Q-node Gauss collocation of y' = X(y) on [0, 1] with the average constraint: the stage values
+    X affine in y (the tape's flag, `rkhp.taylor.tape.degree_in`): by the Bernoulli series
+    (`_bernoulli_spray`) where it converges fast. Otherwise Q-node Gauss collocation of
+    y' = X(y) on [0, 1] with the average constraint: the stage values
     solve Y_i = x + sum_j (A_ij - w_j) X(Y_j), then alpha = x - sum_j w_j X(Y_j) and
     beta = x + sum_j (b_j - w_j) X(Y_j) (`rkhp.taylor.collocation`; `_spray_stages` solves for
     the stage values). NaN results when the stages cannot be solved (no Q <= SPRAY_MAX_NODES is
@@ -149,8 +150,10 @@ def spray(tape, r, W, D, space, S, deg):
     M = space.counts[D]
     Ys = SCRATCH_BASE
     Xs = SCRATCH_BASE + SPRAY_MAX_NODES * n
-    affine = tape.fpar[r] == 1.0
-    q = _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs, affine)
+    if tape.fpar[r] == 1.0 and _bernoulli_spray(tape, sub, W, D, space, S, deg, x_slots, p_slots,
+                                                n, out, Ys):
+        return
+    q = _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs)
     for k in range(n):
         xs = args[x_slots + k]
         for m in range(M):
@@ -168,6 +171,98 @@ def spray(tape, r, W, D, space, S, deg):
             W[out + n + k, m] = b
         deg[out + k] = D
         deg[out + n + k] = D
+
+
+@nb.njit(**NJIT_NRT)
+def _bernoulli_spray(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, out, rows):
+    """alpha and beta of `spray` for X affine in y, X(y) = c + L y (c = X(0), L = d_y X: jets in
+    p), by the Bernoulli series (docs/theory.md §9.3, "X affine in y"):
+    alpha = x - v_1 / 2 + E, beta = x + v_1 / 2 + E, E = sum_{k even >= 2} B_k / k! v_k, with
+    v_1 = X(x) and v_{k+1} = L v_k = X(v_k) - c: one evaluation of X per term, at degree D.
+
+    The sum stops at the first k whose tail bound SPRAY_BERNOULLI_MAJORANT (2 pi)^-k |v_k|
+    rho / (1 - rho) is at most SPRAY_SERIES_BOUND max(1, |x|), |v_k| <= sqrt(n) times its
+    largest coefficient. At the values rho = theta / (2 pi), theta = `_norm_bound` of d_y X(x)
+    >= |L|_2: a bound. On jets (D >= 1) also k >= D + 2 and rho >= |v_k| / |v_{k-1}| / (2 pi)
+    (the degree-d coefficients of v_k grow like binom(k, d) theta^(k - d) until k > d, then
+    shrink by ratios that decrease towards theta). Writes the results (slots out..) and returns
+    True; False, nothing written, when theta > SPRAY_SERIES_RATIO 2 pi or the series does not
+    meet the bound within PHI_COEF's terms. Scratch rows from `rows`: v_k, c, E, v_1 (n each)."""
+    args = tape.args
+    out0 = sub[3]
+    M = space.counts[D]
+    V, C, E, V1 = rows, rows + n, rows + 2 * n, rows + 3 * n
+    J = np.empty((n, n))
+    X0 = np.empty(n)
+    scale = 1.0
+    for k in range(n):
+        S[V + k, 0] = W[args[x_slots + k], 0]
+        scale = max(scale, abs(S[V + k, 0]))
+    _jacobian(tape, sub, W, space, S, deg, np.int64(V), p_slots, n, J, X0, True)
+    ratio = _norm_bound(J) / TWO_PI
+    if not ratio <= SPRAY_SERIES_RATIO:
+        return False
+    tol = SPRAY_SERIES_BOUND * scale / (SPRAY_BERNOULLI_MAJORANT * math.sqrt(n))
+    # c = X(0), then v_1 = X(x)
+    for k in range(n):
+        for m in range(M):
+            S[V + k, m] = 0.0
+    _spray_field(tape, sub, W, D, space, S, deg, np.int64(V), p_slots, n)
+    for k in range(n):
+        xs, o = args[x_slots + k], args[out0 + k]
+        for m in range(M):
+            S[C + k, m] = W[o, m]
+            S[V + k, m] = W[xs, m]
+    _spray_field(tape, sub, W, D, space, S, deg, np.int64(V), p_slots, n)
+    previous = 0.0
+    for k in range(n):
+        o = args[out0 + k]
+        for m in range(M):
+            S[V + k, m] = W[o, m]
+            S[V1 + k, m] = W[o, m]
+            S[E + k, m] = 0.0
+            previous = max(previous, abs(W[o, m]))
+    power = 1.0 / TWO_PI
+    done = False
+    for k in range(2, PHI_COEF.shape[0]):
+        power /= TWO_PI
+        _spray_field(tape, sub, W, D, space, S, deg, np.int64(V), p_slots, n)
+        b = PHI_COEF[k]  # B_k / k! for even k, 0 for odd k >= 3
+        norm = 0.0
+        for i in range(n):
+            o = args[out0 + i]
+            for m in range(M):
+                v = W[o, m] - S[C + i, m]
+                S[V + i, m] = v
+                S[E + i, m] += b * v
+                if not abs(v) <= norm:  # also catches NaN
+                    norm = abs(v)
+        if not norm < np.inf:
+            return False
+        if norm == 0.0:
+            done = True
+            break
+        rho = ratio
+        if D >= 1:
+            if k < D + 2:
+                previous = norm
+                continue
+            rho = max(rho, norm / previous / TWO_PI)
+        if rho < 1.0 and power * norm * rho / (1.0 - rho) <= tol:
+            done = True
+            break
+        previous = norm
+    if not done:
+        return False
+    for k in range(n):
+        xs = args[x_slots + k]
+        for m in range(M):
+            half = 0.5 * S[V1 + k, m]
+            W[out + k, m] = W[xs, m] - half + S[E + k, m]
+            W[out + n + k, m] = W[xs, m] + half + S[E + k, m]
+        deg[out + k] = D
+        deg[out + n + k] = D
+    return True
 
 
 @nb.njit(inline="always", **NJIT_NORC)
@@ -215,26 +310,19 @@ def _jacobian(tape, sub, W, space, S, deg, y_row, p_slots, n, J, base, affine):
 
 
 @nb.njit(**NJIT_NRT)
-def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs, affine):
+def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
     """The stage values of `spray` (rows Ys) and their X (rows Xs) up to degree D; returns Q,
     or 0 when they cannot be solved. Allocates the Jacobians and the Newton matrices.
     docs/theory.md §9.3, "Choice of Q" and "Solving for the stages".
 
-    1. Q and the stages at the values.
-       - X affine in y (`affine`: the tape's flag): Q a priori, the fewest nodes whose
-         truncation error is below SPRAY_AFFINE_BOUND max(1, |x|) by the bound
-         E_Q theta^(2Q - 1) |X(x)| / (1 - SPRAY_AFFINE_RATIO theta), theta >= |d_y X|_2
-         (`_norm_bound`), theta <= 1 (`_affine_nodes`), plus SPRAY_AFFINE_JET_NODES on jets
-         (D >= 1); the stages by one linear solve (`_affine_stages`).
-       - Otherwise (or theta > 1), by Newton (`_value_stages`): Q0 is the smallest with
-         E_Q0 theta^(2 Q0) <= 8 SPRAY_AGREEMENT, theta an estimate of |J|_2, J = d_y X(x),
-         pessimistic so that the first check usually passes; Q is the first Q > Q0 whose
-         alpha agrees with that of Q - 1 nodes to SPRAY_AGREEMENT max(1, |x|) (the truncation
-         error of Q nodes is then smaller by about theta^2 / (16 Q^2)): theta alone misses the
-         non-linearity of X (where J is small but d^2 X is not).
+    1. Q and the stages at the values, by Newton (`_value_stages`): Q0 is the smallest with
+       E_Q0 theta^(2 Q0) <= 8 SPRAY_AGREEMENT, theta an estimate of |J|_2, J = d_y X(x),
+       pessimistic so that the first check usually passes; Q is the first Q > Q0 whose alpha
+       agrees with that of Q - 1 nodes to SPRAY_AGREEMENT max(1, |x|) (the truncation error of
+       Q nodes is then smaller by about theta^2 / (16 Q^2)): theta alone misses the
+       non-linearity of X (where J is small but d^2 X is not).
     2. Degrees 1..D, one at a time (D >= 1): with the exact value-level matrix
-       N = I - [(A - w)_ij J(Y_j)] (J at each stage value; for affine X the last value-level
-       matrix, whose J is the same at every stage), the degree-d coefficients solve one
+       N = I - [(A - w)_ij J(Y_j)] (J at each stage value), the degree-d coefficients solve one
        linear system once the lower ones are known: evaluate X on the stages at degree d, solve
        N dY_d = (x + (A - w) X(Y) - Y)_d, and correct X's degree-d coefficients by J(Y_j) dY_d
        (exact at degree d). One evaluation per stage and degree, at that degree (two with
@@ -251,72 +339,53 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs, a
     tmp = np.empty(SPRAY_MAX_NODES * n)
     for k in range(n):
         S[Ys + k, 0] = W[args[x_slots + k], 0]
-    _jacobian(tape, sub, W, space, S, deg, np.int64(Ys), p_slots, n, J, X0, affine)
+    _jacobian(tape, sub, W, space, S, deg, np.int64(Ys), p_slots, n, J, X0, False)
     scale = 1.0
     for k in range(n):
         scale = max(scale, abs(W[args[x_slots + k], 0]))
-    q = 0
-    if affine:
-        theta = _norm_bound(J)
-        field = 0.0
+    alpha = np.empty(n)
+    theta = _spectral_norm(J, rvec, tmp)
+    q = 1
+    while q < SPRAY_MAX_NODES - 1 and not (TABLE_E[q] * theta ** (2 * q)
+                                           <= 8.0 * SPRAY_AGREEMENT):
+        q += 1
+    # the Newton matrix of the last value-level solve (its Jacobians, factors, row order)
+    Jv = np.empty((q, n, n))
+    LUv = np.empty((q * n, q * n))
+    permv = np.empty(q * n, dtype=np.int64)
+    if not _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J, X0,
+                         theta, scale, alpha, False, Jv, LUv, permv, rvec, tmp, work):
+        return 0
+    while True:
+        if q + 1 > SPRAY_MAX_NODES:
+            return 0
+        previous = alpha.copy()
+        Jv = np.empty((q + 1, n, n))
+        LUv = np.empty(((q + 1) * n, (q + 1) * n))
+        permv = np.empty((q + 1) * n, dtype=np.int64)
+        if not _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q + 1,
+                             J, X0, theta, scale, alpha, True, Jv, LUv, permv, rvec, tmp, work):
+            return 0
+        q += 1
+        gap = 0.0
         for k in range(n):
-            field += X0[k] * X0[k]
-        q = _affine_nodes(theta, math.sqrt(field), scale)
-        if q > 0 and D >= 1:
-            q = min(q + SPRAY_AFFINE_JET_NODES, SPRAY_MAX_NODES)
-    if q > 0:
-        Jv = np.empty((q, n, n))
-        LUv = np.empty((q * n, q * n))
-        permv = np.empty(q * n, dtype=np.int64)
-        if not _affine_stages(W, S, args, x_slots, q, n, Ys, Xs, J, X0, Jv, LUv, permv, rvec,
-                              tmp):
-            return 0
-    else:
-        alpha = np.empty(n)
-        theta = _spectral_norm(J, rvec, tmp)
-        q = 1
-        while q < SPRAY_MAX_NODES - 1 and not (TABLE_E[q] * theta ** (2 * q)
-                                               <= 8.0 * SPRAY_AGREEMENT):
-            q += 1
-        # the Newton matrix of the last value-level solve (its Jacobians, factors, row order)
-        Jv = np.empty((q, n, n))
-        LUv = np.empty((q * n, q * n))
-        permv = np.empty(q * n, dtype=np.int64)
-        if not _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J,
-                             X0, theta, scale, alpha, False, Jv, LUv, permv, rvec, tmp, work):
-            return 0
-        while True:
-            if q + 1 > SPRAY_MAX_NODES:
-                return 0
-            previous = alpha.copy()
-            Jv = np.empty((q + 1, n, n))
-            LUv = np.empty(((q + 1) * n, (q + 1) * n))
-            permv = np.empty((q + 1) * n, dtype=np.int64)
-            if not _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs,
-                                 q + 1, J, X0, theta, scale, alpha, True, Jv, LUv, permv, rvec,
-                                 tmp, work):
-                return 0
-            q += 1
-            gap = 0.0
-            for k in range(n):
-                gap = max(gap, abs(alpha[k] - previous[k]))
-            if gap <= SPRAY_AGREEMENT * scale:
-                break
+            gap = max(gap, abs(alpha[k] - previous[k]))
+        if gap <= SPRAY_AGREEMENT * scale:
+            break
     if D == 0:
         return q
     # 2. degrees 1..D with the exact value-level matrix
     AW = TABLE_AW[q]
-    # the last value-level matrix is the exact one when its Jacobians are the stages' (for X
-    # affine in y they are all J): then its factors serve, else factorise
-    LU, perm, Js = LUv, permv, Jv
-    if not affine:
-        Js = np.empty((q, n, n))
-        for j in range(q):
-            _jacobian(tape, sub, W, space, S, deg, np.int64(Ys + j * n), p_slots, n, Js[j],
-                      work, False)
-        if not np.array_equal(Js, Jv):
-            if not _newton_matrix(AW, Js, q, n, LU, perm):
-                return 0
+    # the last value-level matrix is the exact one when its Jacobians are the stages': then
+    # its factors serve, else factorise
+    LU, perm = LUv, permv
+    Js = np.empty((q, n, n))
+    for j in range(q):
+        _jacobian(tape, sub, W, space, S, deg, np.int64(Ys + j * n), p_slots, n, Js[j], work,
+                  False)
+    if not np.array_equal(Js, Jv):
+        if not _newton_matrix(AW, Js, q, n, LU, perm):
+            return 0
     for i in range(q):
         for k in range(n):
             xs = args[x_slots + k]
@@ -344,37 +413,6 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs, a
                         acc += Js[j, i, k] * rvec[j * n + k]
                     S[Xs + j * n + i, m] += acc
     return q
-
-
-@nb.njit(**NJIT_NORC)
-def _affine_stages(W, S, args, x_slots, q, n, Ys, Xs, J, X0, Js, LU, perm, rvec, tmp):
-    """The stage values with q nodes at the values (rows Ys, column 0; their X in Xs) for X
-    affine in y, X(y) = X(x) + J (y - x): Z = Y - x solves the linear system
-    (I - (A - w) (x) J) Z = (A - w) 1 (x) X(x), one factorisation and one solve, no evaluation
-    of X. Js (q, n, n), LU (qn, qn), perm (qn): the matrix's Jacobians (J at every node),
-    factors and row order; rvec, tmp (at least qn): work vectors. False if it is singular or
-    the result is not finite."""
-    AW = TABLE_AW[q]
-    if not _frozen_newton_matrix(AW, J, q, n, Js, LU, perm):
-        return False
-    for i in range(q):
-        row = 0.0
-        for j in range(q):
-            row += AW[i, j]
-        for k in range(n):
-            rvec[i * n + k] = row * X0[k]
-    lu_solve(LU, perm, rvec, tmp)
-    for j in range(q):
-        for k in range(n):
-            z = rvec[j * n + k]
-            if not abs(z) < np.inf:
-                return False
-            S[Ys + j * n + k, 0] = W[args[x_slots + k], 0] + z
-            acc = X0[k]
-            for l in range(n):
-                acc += J[k, l] * rvec[j * n + l]
-            S[Xs + j * n + k, 0] = acc
-    return True
 
 
 @nb.njit(**NJIT_NORC)
@@ -546,19 +584,3 @@ def _norm_bound(J):
         columns = max(columns, column)
     bound = min(math.sqrt(frobenius), math.sqrt(rows * columns))
     return bound if bound < np.inf else np.inf
-
-
-@nb.njit(inline="always", **NJIT_NORC)
-def _affine_nodes(theta, field, scale):
-    """For X affine in y with |d_y X|_2 <= theta (`_norm_bound`) and |X(x)|_2 = field: the fewest nodes whose
-    alpha is exact to SPRAY_AFFINE_BOUND scale (docs/theory.md §9.3, "Choice of Q"), or 0 when
-    theta > 1 or no Q <= SPRAY_MAX_NODES is enough."""
-    if not (theta <= 1.0 and field < np.inf):
-        return 0
-    limit = SPRAY_AFFINE_BOUND * scale * (1.0 - SPRAY_AFFINE_RATIO * theta)
-    power = theta * field  # theta^(2 Q - 1) |X(x)| for Q = 1
-    for q in range(1, SPRAY_MAX_NODES + 1):
-        if TABLE_E[q] * power <= limit:
-            return q
-        power *= theta * theta
-    return 0

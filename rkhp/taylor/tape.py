@@ -406,7 +406,7 @@ def spray(poisson, x: list, p: list) -> list[Var]:
     a composite operation whose sub-program is X(y, p) = pi(y) p (`poisson(y)`: the n x n
     entries of pi, numbers or values computed from y) and whose operands are x, then p. Its
     float parameter is 1.0 when X is affine in y (pi affine: constant, Lie–Poisson), which lets
-    the kernel choose its nodes a priori (docs/theory.md §9.3, "Choice of Q"), else 0.0."""
+    the kernel sum the Bernoulli series (docs/theory.md §9.3, "X affine in y"), else 0.0."""
     builder = next(v.builder for v in [*x, *p] if isinstance(v, Var))
     n = len(x)
 
