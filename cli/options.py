@@ -210,17 +210,17 @@ def progress(enabled: bool):
 COMPILE_NOTICE = "compiling the integrator kernels once for this machine, ~{seconds:.0f} s"
 
 
-def compile_notice(kinds, enabled: bool) -> None:
+def compile_notice(kinds, enabled: bool, system=None) -> None:
     """One line on stderr before a run whose compiled kernels are not in numba's cache yet
-    (rkhp.integrators.kernels), under the rules of :func:`progress`: only when `enabled` (not
-    JSON mode) and stderr is a terminal."""
+    (rkhp.integrators.kernels; for `system`'s class of tapes when given), under the rules of
+    :func:`progress`: only when `enabled` (not JSON mode) and stderr is a terminal."""
     import sys
 
     if not (enabled and sys.stderr.isatty()):
         return
     from rkhp.integrators.kernels import cold_start
 
-    cold = cold_start(kinds)
+    cold = cold_start(kinds, None if system is None else type(system.h_tape))
     if cold:
         click.echo(COMPILE_NOTICE.format(seconds=cold.seconds), err=True)
 

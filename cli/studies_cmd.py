@@ -107,7 +107,7 @@ def converge(system, methods, x0, realisation, t_final, steps, refinements, plot
 
     counts = step_counts(steps, refinements)
     sys_, resolved = _setup(system, realisation, x0, methods, t_final, plot)
-    compile_notice(_kinds(resolved), fmt != "json")
+    compile_notice(_kinds(resolved), fmt != "json", sys_)
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("converge", total=len(resolved) * len(counts))
         study = run(sys_, resolved, counts, t_final, executor=executor,
@@ -209,7 +209,7 @@ def bench(system, methods, x0, realisation, peers, t_final, steps, tolerances, r
     peer_list = peers or ()
     peer_methods = [B.resolve_peer(p) for p in peer_list]
     sys_, resolved = _setup(system, realisation, x0, methods, t_final, plot)
-    compile_notice(_kinds((*resolved, *peer_methods)), fmt != "json")
+    compile_notice(_kinds((*resolved, *peer_methods)), fmt != "json", sys_)
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("bench", total=len(resolved) + len(peer_list))
         study = B.bench(sys_, resolved, peer_list, step_list, tol_list, t_final, repeats, ensemble, seed,
@@ -282,7 +282,7 @@ def stress(system, methods, x0, realisation, t_final, long_steps, long_h, sweep_
     if len(ro) < 3:
         raise click.BadParameter("a fit needs at least 3 step sizes", param_hint="--round-off-steps")
     sys_, resolved = _setup(system, realisation, x0, methods, t_final, plot)
-    compile_notice((*_kinds(resolved), "classical"), fmt != "json")  # part (b)'s peer: classical RK4
+    compile_notice((*_kinds(resolved), "classical"), fmt != "json", sys_)  # part (b)'s peer: classical RK4
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("stress", total=4)
         study = S.stress(sys_, resolved, t_final, long_steps, long_h, sweep_coarsest, ro,

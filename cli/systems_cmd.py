@@ -79,7 +79,7 @@ def check(system, realisation, samples, seed, fmt):
     from rkhp.systems.check import check_birealisation
 
     poisson = get_system(system, realisation)
-    compile_notice((), fmt != "json")
+    compile_notice((), fmt != "json", poisson)
     result = check_birealisation(poisson, samples=samples, seed=seed)
     if fmt == "json":
         emit_json(result.to_json())
@@ -164,7 +164,7 @@ def integrate(system, method, steps, h, t_final, x0, modified_order, realisation
         from .modified_cmd import modified_series
 
         series = modified_series(poisson, chosen, modified_order, fmt != "json")
-    compile_notice((chosen.kind,), fmt != "json")
+    compile_notice((chosen.kind,), fmt != "json", poisson)
     trajectory = chosen.integrate(poisson, step, n)
     report = integration_report(poisson, trajectory, chosen.name, step, n)
     if series is not None and trajectory.ok:

@@ -18,8 +18,10 @@ import time
 
 import pytest
 
-from rkhp.integrators.kernels import cold_start
+from rkhp.integrators.kernels import COMPOSITE_SECONDS, KERNELS, TAPE, cold_start
 from rkhp.methods import resolve_method, resolve_system
+from rkhp.taylor.ops import PHIMV, SPRAY
+from rkhp.taylor.tape import Tape, tape_class
 
 NOTICE = b"compiling the integrator kernels once for this machine, ~"
 
@@ -69,6 +71,19 @@ def test_a_run_leaves_its_kernels_in_the_cache():
     assert not cold_start(["rkhp"])
 
 
+def test_the_cache_is_asked_for_the_class_of_the_system_tapes():
+    """A kernel compiled for the rigid body's tapes (no composite operation) is not compiled for
+    a class of tapes that holds composite ones: those runs are announced, with the composite
+    kernels' compile time added (rkhp.integrators.kernels.COMPOSITE_SECONDS)."""
+    resolve_method("rk4").integrate(resolve_system("rigid-body"), 0.1, 1)
+    assert not cold_start(["rkhp"], Tape)
+    both = tape_class((PHIMV, SPRAY))  # no system has both: never compiled
+    cold = cold_start(["rkhp"], both)
+    assert cold.kernels == ("rkhp.taylor.interpreter.run_tape", "rkhp.integrators.engine.rkhp_run")
+    expected = TAPE.seconds + KERNELS["rkhp"][0].seconds + COMPOSITE_SECONDS["spray"] + COMPOSITE_SECONDS["phimv"]
+    assert cold.seconds == pytest.approx(expected)
+
+
 def test_an_empty_cache_lacks_the_kernels_of_each_kind(tmp_path):
     script = ("import json; from rkhp.integrators.kernels import cold_start; "
               "print(json.dumps({k: cold_start([k]) for k in ('rkhp', 'classical', 'taylor')}))")
@@ -97,6 +112,7 @@ def test_the_notice_follows_the_progress_rules(tmp_path):
     (["integrate", "rigid-body", "--method", "rk4", "--steps", "100"], 14),  # run_tape 4.8 + rkhp_run 9.1
     (["converge", "rigid-body", "--method", "classical:rk4"], 13),  # run_tape 4.8 + _rk_loop 6.8 + H loop 1.0
     (["check", "rigid-body"], 5),  # run_tape 4.8
+    (["check", "nambu"], 48),  # run_tape 4.8 + the spray kernel 43
 ])
 def test_commands_say_so_before_compiling(tmp_path, args, seconds):
     shown = _stderr_on_a_terminal([sys.executable, "-m", "rkhp", *args], _fresh_cache(tmp_path), until=b" s\r\n")

@@ -113,20 +113,25 @@ NJIT_NRT = dict(NJIT, _nrt=True)
 
 
 
-def is_cached(kernel) -> bool:
+def is_cached(kernel, signature: str | None = None) -> bool:
     """Whether numba's disk cache holds a fresh compiled version of ``kernel`` (a dispatcher
     compiled with ``cache=True``): its index file exists, is of this numba version and matches the
     stamp of the source file (numba recompiles otherwise). Reads numba's cache index the way
     numba does on a call (``FunctionCache``'s index file), so a call after True loads, not compiles.
+    With ``signature``, only a version whose argument types, as numba writes them, contain that
+    text counts (a tape class's name and "(": the kernel for that class of tapes).
     """
     cache = getattr(kernel, "_cache", None)
     index = getattr(getattr(cache, "_cache_file", None), "_load_index", None)
     if index is None:  # not a caching dispatcher (or numba's internals moved): nothing to announce
         return True
     try:
-        return bool(index())
+        entries = index()
     except Exception:  # an index numba cannot read (truncated, foreign pickle): numba recompiles
         return False
+    if signature is None:
+        return bool(entries)
+    return any(signature in str(key[0]) for key in entries)
 
 
 __all__ = ["numba", "overload", "cache_dir", "is_cached", "NJIT", "NJIT_NORC", "NJIT_NRT"]

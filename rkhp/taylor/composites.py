@@ -203,51 +203,43 @@ def _bernoulli_spray(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, out, r
     if not ratio <= SPRAY_SERIES_RATIO:
         return False
     tol = SPRAY_SERIES_BOUND * scale / (SPRAY_BERNOULLI_MAJORANT * math.sqrt(n))
-    # c = X(0), then v_1 = X(x)
-    for k in range(n):
+    # X evaluated at y = 0 (k = 0: c), at x (k = 1: v_1), then at v_{k-1} (k >= 2: v_k + c)
+    for i in range(n):
         for m in range(M):
-            S[V + k, m] = 0.0
-    _spray_field(tape, sub, W, D, space, S, deg, np.int64(V), p_slots, n)
-    for k in range(n):
-        xs, o = args[x_slots + k], args[out0 + k]
-        for m in range(M):
-            S[C + k, m] = W[o, m]
-            S[V + k, m] = W[xs, m]
-    _spray_field(tape, sub, W, D, space, S, deg, np.int64(V), p_slots, n)
+            S[V + i, m] = 0.0
+    power = TWO_PI  # (2 pi)^-k once divided in the loop
     previous = 0.0
-    for k in range(n):
-        o = args[out0 + k]
-        for m in range(M):
-            S[V + k, m] = W[o, m]
-            S[V1 + k, m] = W[o, m]
-            S[E + k, m] = 0.0
-            previous = max(previous, abs(W[o, m]))
-    power = 1.0 / TWO_PI
     done = False
-    for k in range(2, PHI_COEF.shape[0]):
-        power /= TWO_PI
+    for k in range(PHI_COEF.shape[0]):
         _spray_field(tape, sub, W, D, space, S, deg, np.int64(V), p_slots, n)
+        power /= TWO_PI
         b = PHI_COEF[k]  # B_k / k! for even k, 0 for odd k >= 3
         norm = 0.0
         for i in range(n):
-            o = args[out0 + i]
+            o, xs = args[out0 + i], args[x_slots + i]
             for m in range(M):
-                v = W[o, m] - S[C + i, m]
+                if k == 0:
+                    S[C + i, m] = W[o, m]
+                    S[V + i, m] = W[xs, m]
+                    continue
+                v = W[o, m] if k == 1 else W[o, m] - S[C + i, m]
                 S[V + i, m] = v
-                S[E + i, m] += b * v
+                if k == 1:
+                    S[V1 + i, m] = v
+                    S[E + i, m] = 0.0
+                else:
+                    S[E + i, m] += b * v
                 if not abs(v) <= norm:  # also catches NaN
                     norm = abs(v)
         if not norm < np.inf:
             return False
-        if norm == 0.0:
+        if k >= 2 and norm == 0.0:
             done = True
             break
-        rho = ratio
-        if D >= 1:
-            if k < D + 2:
-                previous = norm
-                continue
-            rho = max(rho, norm / previous / TWO_PI)
+        if k < 2 or (D >= 1 and k < D + 2):
+            previous = norm
+            continue
+        rho = ratio if D == 0 else max(ratio, norm / previous / TWO_PI)
         if rho < 1.0 and power * norm * rho / (1.0 - rho) <= tol:
             done = True
             break
@@ -292,21 +284,21 @@ def _jacobian(tape, sub, W, space, S, deg, y_row, p_slots, n, J, base, affine):
             for k in range(n):
                 J[i, k] = W[args[out0 + i], 1 + k]
         return
+    # finite differences: X at y (k = -1), then at y + step e_k
     zero = np.int64(0)
-    for k in range(n):
-        W[args[in0 + k], 0] = S[y_row + k, 0]
-    _spray_field(tape, sub, W, zero, space, S, deg, np.int64(-1), p_slots, n)
-    for i in range(n):
-        base[i] = W[args[out0 + i], 0]
-    for k in range(n):
-        yk = S[y_row + k, 0]
-        step = (1.0 if affine else 1.4901161193847656e-08) * max(1.0, abs(yk))
+    step = 0.0
+    for k in range(-1, n):
         for j in range(n):
             W[args[in0 + j], 0] = S[y_row + j, 0]
-        W[args[in0 + k], 0] = yk + step
+        if k >= 0:
+            step = (1.0 if affine else 1.4901161193847656e-08) * max(1.0, abs(S[y_row + k, 0]))
+            W[args[in0 + k], 0] = S[y_row + k, 0] + step
         _spray_field(tape, sub, W, zero, space, S, deg, np.int64(-1), p_slots, n)
         for i in range(n):
-            J[i, k] = (W[args[out0 + i], 0] - base[i]) / step
+            if k < 0:
+                base[i] = W[args[out0 + i], 0]
+            else:
+                J[i, k] = (W[args[out0 + i], 0] - base[i]) / step
 
 
 @nb.njit(**NJIT_NRT)
@@ -349,29 +341,28 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
     while q < SPRAY_MAX_NODES - 1 and not (TABLE_E[q] * theta ** (2 * q)
                                            <= 8.0 * SPRAY_AGREEMENT):
         q += 1
-    # the Newton matrix of the last value-level solve (its Jacobians, factors, row order)
-    Jv = np.empty((q, n, n))
-    LUv = np.empty((q * n, q * n))
-    permv = np.empty(q * n, dtype=np.int64)
-    if not _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J, X0,
-                         theta, scale, alpha, False, Jv, LUv, permv, rvec, tmp, work):
-        return 0
+    # Q0 nodes, then Q0 + 1, ... warm-started from the previous solve, until two agree; the
+    # Newton matrix of the last value-level solve (its Jacobians, factors, row order)
+    previous = np.empty(n)
+    warm = False
     while True:
-        if q + 1 > SPRAY_MAX_NODES:
+        if q > SPRAY_MAX_NODES:
             return 0
-        previous = alpha.copy()
-        Jv = np.empty((q + 1, n, n))
-        LUv = np.empty(((q + 1) * n, (q + 1) * n))
-        permv = np.empty((q + 1) * n, dtype=np.int64)
-        if not _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q + 1,
-                             J, X0, theta, scale, alpha, True, Jv, LUv, permv, rvec, tmp, work):
+        Jv = np.empty((q, n, n))
+        LUv = np.empty((q * n, q * n))
+        permv = np.empty(q * n, dtype=np.int64)
+        if not _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J, X0,
+                             theta, scale, alpha, warm, Jv, LUv, permv, rvec, tmp, work):
             return 0
+        if warm:
+            gap = 0.0
+            for k in range(n):
+                gap = max(gap, abs(alpha[k] - previous[k]))
+            if gap <= SPRAY_AGREEMENT * scale:
+                break
+        previous[:] = alpha
+        warm = True
         q += 1
-        gap = 0.0
-        for k in range(n):
-            gap = max(gap, abs(alpha[k] - previous[k]))
-        if gap <= SPRAY_AGREEMENT * scale:
-            break
     if D == 0:
         return q
     # 2. degrees 1..D with the exact value-level matrix
@@ -486,7 +477,7 @@ def _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J
     return False
 
 
-@nb.njit(inline="always", **NJIT_NORC)
+@nb.njit(**NJIT_NORC)
 def _newton_matrix(AW, Js, q, n, LU, perm):
     """LU := I - [(A - w)_ij J_j] (blocks i, j of size n), factorised; False if singular."""
     for i in range(q):
@@ -498,7 +489,7 @@ def _newton_matrix(AW, Js, q, n, LU, perm):
     return lu_factor(LU, perm)
 
 
-@nb.njit(inline="always", **NJIT_NORC)
+@nb.njit(**NJIT_NORC)
 def _frozen_newton_matrix(AW, J, q, n, Js, LU, perm):
     """Js[j] := J at every node, then LU := I - (A - w) (x) J factorised (`_newton_matrix`);
     False if singular."""
@@ -529,7 +520,7 @@ def _newton_step(W, S, args, x_slots, AW, q, n, Ys, Xs, m, LU, perm, rvec, tmp):
     return update
 
 
-@nb.njit(inline="always", **NJIT_NORC)
+@nb.njit(**NJIT_NORC)
 def _spectral_norm(J, v, u):
     """An estimate of the largest singular value of J (power iteration on J^T J from the
     all-ones vector, 8 steps, 5% added), inf for a non-finite J; v, u: work vectors (at least
@@ -564,7 +555,7 @@ def _spectral_norm(J, v, u):
     return 1.05 * sigma
 
 
-@nb.njit(inline="always", **NJIT_NORC)
+@nb.njit(**NJIT_NORC)
 def _norm_bound(J):
     """A bound of |J|_2 (so |J^k|_2 <= bound^k): the smaller of |J|_F and
     (|J|_1 |J|_inf)^(1/2); inf if J is not finite."""
