@@ -18,6 +18,8 @@ from __future__ import annotations
 import importlib
 from typing import NamedTuple
 
+from ..taylor.ops import OPS
+
 
 class Kernel(NamedTuple):
     """An entry kernel: module, function name, and its cold compile time in seconds of one core.
@@ -80,7 +82,6 @@ def cold_start(kinds, tape_class=None) -> ColdStart:
     is cold unless the cache holds it for that class, and a cold interpreter adds the
     :data:`COMPOSITE_SECONDS` of the class's composite operations."""
     from ..taylor.compiler import is_cached
-    from ..taylor.ops import OPS
 
     signature = None if tape_class is None else f"{tape_class.__name__}("
     wanted = [TAPE]
