@@ -18,7 +18,7 @@ from __future__ import annotations
 import importlib
 from typing import NamedTuple
 
-from ..taylor.ops import OPS
+from ..taylor.ops import BY_CODE
 
 
 class Kernel(NamedTuple):
@@ -90,8 +90,7 @@ def cold_start(kinds, tape_class=None) -> ColdStart:
     cold = [k for k in wanted if not is_cached(_dispatcher(k), signature)]
     seconds = sum(k.seconds for k in cold)
     if TAPE in cold and tape_class is not None:
-        names = {op.code: op.name for op in OPS}
-        seconds += sum(COMPOSITE_SECONDS.get(names[c], 0.0) for c in tape_class.composites)
+        seconds += sum(COMPOSITE_SECONDS.get(BY_CODE[c].name, 0.0) for c in tape_class.composites)
     return ColdStart(tuple(f"{k.module}.{k.name}" for k in cold), seconds)
 
 

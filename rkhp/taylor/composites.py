@@ -426,7 +426,11 @@ def _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J
     out0 = sub[3]
     zero = np.int64(0)
     AW = TABLE_AW[q]
-    if not _frozen_newton_matrix(AW, J, q, n, Js, LU, perm):
+    for j in range(q):  # J frozen at every node
+        for i in range(n):
+            for k in range(n):
+                Js[j, i, k] = J[i, k]
+    if not _newton_matrix(AW, Js, q, n, LU, perm):
         return False
     eps = 2.220446049250313e-16
     tol = min(4.0 * eps * scale / max(theta, 1e-3), 1e-13 * scale)
@@ -489,17 +493,6 @@ def _newton_matrix(AW, Js, q, n, LU, perm):
     return lu_factor(LU, perm)
 
 
-@nb.njit(**NJIT_NORC)
-def _frozen_newton_matrix(AW, J, q, n, Js, LU, perm):
-    """Js[j] := J at every node, then LU := I - (A - w) (x) J factorised (`_newton_matrix`);
-    False if singular."""
-    for j in range(q):
-        for i in range(n):
-            for k in range(n):
-                Js[j, i, k] = J[i, k]
-    return _newton_matrix(AW, Js, q, n, LU, perm)
-
-
 @nb.njit(inline="always", **NJIT_NORC)
 def _newton_step(W, S, args, x_slots, AW, q, n, Ys, Xs, m, LU, perm, rvec, tmp):
     """One Newton correction of the stage values' coefficient m: rvec := N^-1 (x + (A - w) X
@@ -558,7 +551,7 @@ def _spectral_norm(J, v, u):
 @nb.njit(**NJIT_NORC)
 def _norm_bound(J):
     """A bound of |J|_2 (so |J^k|_2 <= bound^k): the smaller of |J|_F and
-    (|J|_1 |J|_inf)^(1/2); inf if J is not finite."""
+    (|J|_1 |J|_inf)^(1/2); inf or NaN if J is not finite."""
     frobenius = 0.0
     rows = 0.0
     for i in range(J.shape[0]):
@@ -573,5 +566,4 @@ def _norm_bound(J):
         for i in range(J.shape[0]):
             column += abs(J[i, k])
         columns = max(columns, column)
-    bound = min(math.sqrt(frobenius), math.sqrt(rows * columns))
-    return bound if bound < np.inf else np.inf
+    return min(math.sqrt(frobenius), math.sqrt(rows * columns))
