@@ -68,7 +68,7 @@ from rkhp.integrators import rkhp_method
 from rkhp.integrators.classical import (hamiltonian_values, integrate_classical,
                                         integrate_midpoint, vector_field)
 from rkhp.systems import get_system
-from rkhp.tablefiles import load_tableau
+from rkhp.tableaux.files import load_tableau
 KERNELS = ("run_tape", "_hamiltonian_loop", "rkhp_run", "_rk_loop", "_midpoint_loop", "_field")
 start, out = {}, {}
 class Timer(event.Listener):

@@ -6,7 +6,7 @@ The search is degenerate order 7 with 7 explicit stages (issue 16 (b)); every co
 the same restarts (indices 0..R-1, no early stop), so the work is identical and the results are
 checked equal. The per-task overhead is the wall time per task of R_EMPTY empty tasks submitted
 at once (submission, scheduling, transfer of the result). The cluster is `dask scheduler` and two
-`dask worker --nthreads 1 --no-nanny` processes on 127.0.0.1 (rkhp.executors.loopback_cluster).
+`dask worker --nthreads 1 --no-nanny` processes on 127.0.0.1 (rkhp.base.executors.loopback_cluster).
 
 Projection (labelled as such in the output): a 100-worker cluster runs restarts at
 100 x (one-process rate) x t / (t + overhead), t the time of one restart, capped by the task rate
@@ -30,7 +30,7 @@ import time
 # `distributed` package that Dask needs: take the folder off.
 sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != os.path.dirname(os.path.abspath(__file__))]
 
-from rkhp.executors import InProcess, LocalProcesses, loopback_cluster, make_executor, run_all  # noqa: E402
+from rkhp.base.executors import InProcess, LocalProcesses, loopback_cluster, make_executor, run_all  # noqa: E402
 from rkhp.search.multistart import Problem, run_restarts  # noqa: E402
 
 PROBLEM = Problem(7, 7, "degenerate")

@@ -35,7 +35,7 @@ RIGID_BODY_H = "x1^2/4 + x2^2/2 + 3*x3^2/4"
 
 def rigid_body_general():
     """The rigid body in the general family (the matrix of so(3)*, the built-in's H and x0)."""
-    from rkhp.expressions import parse_expression, variable_names
+    from rkhp.base.expressions import parse_expression, variable_names
     from rkhp.systems.program import to_program
     from rkhp.systems.structure import symbols_of
 

@@ -49,9 +49,9 @@ def commands() -> None:
 def rigid_body() -> None:
     from rkhp.integrators import integrate
     from rkhp.integrators.modified_energy import ModifiedEnergy, energy_errors
-    from rkhp.modified import method_character, modified_hamiltonian
+    from rkhp.series.modified import method_character, modified_hamiltonian
     from rkhp.systems import get_system
-    from rkhp.tablefiles import load_tableau
+    from rkhp.tableaux.files import load_tableau
 
     system = get_system("rigid-body")
     tableau = load_tableau("paper-three-stage")

@@ -13,10 +13,10 @@ import time
 
 import numpy as np
 
-from rkhp.differentials import constant_pi_values, general_values
-from rkhp.modular import PRIMES
-from rkhp.relations import derive_relations
-from rkhp.trees import trees_of_order
+from rkhp.series.differentials import constant_pi_values, general_values
+from rkhp.base.modular import PRIMES
+from rkhp.trees.relations import derive_relations
+from rkhp.trees.rooted import trees_of_order
 
 
 def timed(fn, *args, **kwargs):

@@ -4,7 +4,7 @@ Targets (issue 4): degenerate order 4 with 3 stages <= 1 s; degenerate order 5 a
 stage count (4) <= 10 s; general order 5 with 6 stages <= 30 s.
 
 For each problem: the wall time of ``search(..., order=N)`` until the first solution verified by
-``rkhp.verification`` at 30 digits (without and with closed-form recognition, which ends in an exact
+``rkhp.tableaux.verification`` at 30 digits (without and with closed-form recognition, which ends in an exact
 verification), over several seeds (median and max), and the success rate of the restarts
 (``run_restarts`` with no early stop). One worker; imports and the first call's set-up are warmed
 up before timing. Run: ``.venv/bin/python benchmarks/search.py [--quick]``.

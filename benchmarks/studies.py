@@ -60,7 +60,7 @@ def converge_cold_warm(repeats: int = 3) -> None:
 def peer_step_costs(steps: int = 20_000, repeats: int = 5) -> None:
     from rkhp.integrators.classical import integrate_classical, integrate_midpoint
     from rkhp.systems import get_system
-    from rkhp.tablefiles import load_tableau
+    from rkhp.tableaux.files import load_tableau
 
     rigid = get_system("rigid-body")
     rk4 = load_tableau("rk4")

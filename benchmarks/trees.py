@@ -12,7 +12,8 @@ import subprocess
 import sys
 import time
 
-from rkhp import conditions, trees
+from rkhp.trees import conditions
+from rkhp.trees import rooted as trees
 
 
 def best_of(fn, repeats=3):

@@ -17,7 +17,7 @@ CHILD = r"""
 import json, sys, time
 name, precision, repeats = sys.argv[1], sys.argv[2], int(sys.argv[3])
 precision = None if precision == "default" else (int(precision) if precision.isdigit() else precision)
-from rkhp.verification import verify
+from rkhp.tableaux.verification import verify
 times = []
 for _ in range(repeats):
     t0 = time.perf_counter()
@@ -32,7 +32,7 @@ NODEPY = r"""
 import json, sys, time
 import numpy as np
 from nodepy import rk
-from rkhp.tablefiles import load_tableau
+from rkhp.tableaux.files import load_tableau
 t = load_tableau(sys.argv[1])
 method = rk.ExplicitRungeKuttaMethod(np.array(t.A_float), np.array(t.b_float))
 t0 = time.perf_counter()

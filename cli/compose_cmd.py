@@ -23,9 +23,9 @@ def compose(methods, order, degenerate, symmetric, seed, fmt):
     """Compose RKHP steps of size h (tableau names or files, or thpN, applied left to right; `exact`
     is the exact flow) and compare the generating function of the composition with the Butcher products
     of the methods' characters. Exact, on generic systems modulo primes (docs/modified.md)."""
-    from rkhp.composition import MAX_ORDER, composition_series
-    from rkhp.errors import InputError
-    from rkhp.trees import check_order
+    from rkhp.series.composition import MAX_ORDER, composition_series
+    from rkhp.base.errors import InputError
+    from rkhp.trees.rooted import check_order
 
     cls = _class_of(degenerate, symmetric)
     check_order(order, MAX_ORDER, what="order of the composition")
@@ -47,7 +47,7 @@ def compose(methods, order, degenerate, symmetric, seed, fmt):
 
 def composition_json(series) -> dict:
     """The JSON document of `rkhp compose` (docs/modified.md, "JSON keys")."""
-    from rkhp.modified import coefficient_text
+    from rkhp.series.modified import coefficient_text
 
     def text(d, t, top=None):
         if d is None or (top is not None and t.order > top):

@@ -48,7 +48,7 @@ class LazyGroup(click.Group):
             formatter.write_dl(rows)
 
     def main(self, *args, **kwargs):
-        from rkhp.errors import CheckFailed, InputError, NumericalFailure
+        from rkhp.base.errors import CheckFailed, InputError, NumericalFailure
 
         kwargs["standalone_mode"] = False
         try:

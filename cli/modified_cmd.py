@@ -14,9 +14,9 @@ EXACT = "exact"
 
 def character_of(name: str, order: int):
     """(name, character a(t) on T up to `order`) of a method name of docs/methods.md, or of `exact`."""
-    from rkhp.algebra import exact_flow_character
-    from rkhp.methods import resolve_method
-    from rkhp.modified import method_character
+    from rkhp.trees.algebra import exact_flow_character
+    from rkhp.integrators.methods import resolve_method
+    from rkhp.series.modified import method_character
 
     if name == EXACT:
         return EXACT, exact_flow_character(order)
@@ -43,8 +43,8 @@ def modified(method, order, degenerate, symmetric, modifying, seed, fmt):
     radicals), found order by order on generic systems modulo primes; c(t) = beta(t)/sigma(t) in the
     canonical basis of the class (docs/modified.md). Exits 1 at the first order whose term is not a
     combination of the F(t) of the class."""
-    from rkhp.modified import MAX_ORDER, modified_hamiltonian, modifying_hamiltonian
-    from rkhp.trees import check_order
+    from rkhp.series.modified import MAX_ORDER, modified_hamiltonian, modifying_hamiltonian
+    from rkhp.trees.rooted import check_order
 
     cls = _class_of(degenerate, symmetric)
     check_order(order, MAX_ORDER, what="order of the modified Hamiltonian")
@@ -64,7 +64,7 @@ def modified(method, order, degenerate, symmetric, modifying, seed, fmt):
 
 def series_json(series, method: str) -> dict:
     """The JSON document of `rkhp modified` (docs/modified.md, "JSON keys")."""
-    from rkhp.modified import coefficient_text
+    from rkhp.series.modified import coefficient_text
 
     return {
         "method": method,
@@ -84,7 +84,7 @@ def _render(series, method: str) -> None:
     from rich.table import Table
     from rich.text import Text
 
-    from rkhp.modified import coefficient_text
+    from rkhp.series.modified import coefficient_text
 
     from .render import print_table
 
@@ -115,7 +115,7 @@ def _decimal(c):
 def _latex(series, method: str) -> None:
     import sympy
 
-    from rkhp.latex import escape_text, longtable, standalone, tree_latex
+    from rkhp.base.latex import escape_text, longtable, standalone, tree_latex
 
     rows = []
     for t, c in series.terms():
@@ -128,11 +128,11 @@ def _latex(series, method: str) -> None:
 
 
 def modified_series(system, method, order: int, show_progress: bool):
-    """The modified Hamiltonian of an RKHP or THP method (rkhp.methods.Method) to ``order``, in the
+    """The modified Hamiltonian of an RKHP or THP method (rkhp.integrators.methods.Method) to ``order``, in the
     class of the system's realisation (for ``rkhp integrate --modified N``)."""
-    from rkhp.methods import condition_class
-    from rkhp.modified import MAX_ORDER, method_character, modified_hamiltonian
-    from rkhp.trees import check_order
+    from rkhp.integrators.methods import condition_class
+    from rkhp.series.modified import MAX_ORDER, method_character, modified_hamiltonian
+    from rkhp.trees.rooted import check_order
 
     check_order(order, MAX_ORDER, what="--modified order")
     character = method_character(method, order)

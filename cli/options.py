@@ -1,4 +1,4 @@
-"""Options and helpers shared by the command modules (click, and the light `rkhp.bounds`; other
+"""Options and helpers shared by the command modules (click, and the light `rkhp.base.bounds`; other
 library modules are imported lazily).
 
 The option types below check every value when the command line is parsed, before any work or
@@ -12,8 +12,8 @@ import math
 
 import click
 
-from rkhp import bounds
-from rkhp.errors import InputError
+from rkhp.base import bounds
+from rkhp.base.errors import InputError
 
 
 class Checked(click.ParamType):
@@ -85,7 +85,7 @@ def names(name: str = "NAME,...") -> Checked:
 
 
 def output_path(*suffixes: str) -> Checked:
-    """A file to write, checked before the work (`rkhp.bounds.check_output_path`); returns the text."""
+    """A file to write, checked before the work (`rkhp.base.bounds.check_output_path`); returns the text."""
     return Checked("FILE", lambda text, label: str(bounds.check_output_path(text, suffixes, label)))
 
 
@@ -113,7 +113,7 @@ def format_option(*choices: str, default: str = "table"):
 
 def executor_options(what: str):
     """`--workers N` and `--scheduler ADDRESS`: where the independent tasks of ``what`` run
-    (rkhp.executors; docs/distributed.md). The command passes both to rkhp.executors.open_executor."""
+    (rkhp.base.executors; docs/distributed.md). The command passes both to rkhp.base.executors.open_executor."""
 
     def decorate(f):
         f = click.option("--scheduler", default=None, metavar="ADDRESS",

@@ -35,8 +35,8 @@ def relations(order, regenerate, seed, output, workers, scheduler, fmt):
     For each order: the number of T_0 trees, of relations and of symmetric order conditions, the
     relations (sum c_t F(t) = 0) and the conditions (sum w_t r(t) = 0, r(t) = gamma(t) a(t) - 1).
     """
-    from rkhp.executors import open_executor
-    from rkhp.relations import relations_for
+    from rkhp.base.executors import open_executor
+    from rkhp.trees.relations import relations_for
 
     if output and not regenerate:
         raise click.UsageError("--output writes freshly derived relations: add --regenerate")
@@ -49,7 +49,7 @@ def relations(order, regenerate, seed, output, workers, scheduler, fmt):
     doc = data.to_json()
     doc["source"] = "regenerated" if regenerate else "shipped"
     if output:
-        from rkhp.errors import InputError
+        from rkhp.base.errors import InputError
 
         document = data.to_json()
         document["method"]["regenerate"] += f" --output {output}"
@@ -67,7 +67,7 @@ def relations(order, regenerate, seed, output, workers, scheduler, fmt):
 def _render(data, source: str) -> None:
     from rich.table import Table
 
-    from rkhp.relations import condition_text, relation_text
+    from rkhp.trees.relations import condition_text, relation_text
 
     out = console()
     summary = Table(title="Symmetric birealisations: relations among F(t)", caption=f"{source} data")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from rkhp import bounds
+from rkhp.base import bounds
 
 from .options import SEED, console, emit_json, executor_options, format_option, integer, output_path, progress, real
 from .render import print_table
@@ -51,7 +51,7 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
     verifies the result with the verify engine. --prove looks for a Groebner certificate that
     the first order not reached is impossible.
     """
-    from rkhp.executors import open_executor
+    from rkhp.base.executors import open_executor
     from rkhp.search.driver import SearchOptions
     from rkhp.search.driver import search as run_search
     from rkhp.search.system import check_problem
@@ -83,7 +83,7 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
         click.echo("rkhp: interrupted: the best found so far is shown", err=True)
         raise click.exceptions.Exit(130)
     if result.found is None:  # a failed check: exit status 1 (docs/exit-status.md)
-        from rkhp.errors import CheckFailed
+        from rkhp.base.errors import CheckFailed
 
         proved = result.proof is not None and result.proof.proved
         raise CheckFailed(f"no tableau found of order {result.order} with {stages} stages"
@@ -92,7 +92,7 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
 
 
 def _save(result, path) -> None:
-    from rkhp.tablefiles import save_tableau
+    from rkhp.tableaux.files import save_tableau
 
     save_tableau(result.tableau_to_save(), path)
 
@@ -102,7 +102,7 @@ SHOWN_DIGITS = 12
 
 def _shown(x) -> str:
     """An entry as shown: exact forms whole, decimals of D digits rounded to SHOWN_DIGITS."""
-    from rkhp.tableau import entry_decimal, entry_text, is_exact
+    from rkhp.tableaux.tableau import entry_decimal, entry_text, is_exact
 
     return entry_text(x) if is_exact(x) else entry_decimal(x, SHOWN_DIGITS)
 

@@ -16,13 +16,13 @@ _CLASS_NAMES = {"general": "general", "degenerate": "degenerate", "symmetric": "
 def show(tableau, fmt):
     """Show a tableau: the Butcher array c | A / b (exact entries and decimals), its source and
     the orders it claims (check them with `rkhp verify`)."""
-    from rkhp.tablefiles import load_tableau
+    from rkhp.tableaux.files import load_tableau
 
     tab = load_tableau(tableau)
     if fmt == "json":
         emit_json(tableau_json(tab))
     elif fmt == "latex":
-        from rkhp.latex import standalone
+        from rkhp.base.latex import standalone
 
         click.echo(standalone("\\[\n" + tab.to_latex() + "\n\\]", title=_latex_title(tab)))
     else:
@@ -33,7 +33,7 @@ def tableau_json(tab) -> dict:
     """The JSON document of `rkhp show` (docs/json.md)."""
     import mpmath
 
-    from rkhp.tableau import entry_text, to_float
+    from rkhp.tableaux.tableau import entry_text, to_float
 
     claims = tab.claims
     with mpmath.workdps(tab.digits or mpmath.mp.dps):  # row sums of given digits: those digits
@@ -51,7 +51,7 @@ def tableau_json(tab) -> dict:
 
 
 def _latex_title(tab) -> str:
-    from rkhp.latex import escape_text
+    from rkhp.base.latex import escape_text
 
     return escape_text(tab.describe())
 
@@ -64,7 +64,7 @@ def claims_text(tab) -> str:
 def _render(tab) -> None:
     from rich.markup import escape
 
-    from rkhp.tableau import entry_decimal, entry_text
+    from rkhp.tableaux.tableau import entry_decimal, entry_text
 
     out = console()
     out.print(f"[bold]{escape(tab.name)}[/bold]: {tab.stages} stages, {tab.kind}")
@@ -90,7 +90,7 @@ def print_array(out, tab, fmt, heading: str) -> None:
     row, packed into lines (a number is never split across lines)."""
     from rich.text import Text
 
-    from rkhp.tableau import butcher_text, is_zero
+    from rkhp.tableaux.tableau import butcher_text, is_zero
 
     block = butcher_text(tab, fmt)
     out.print()

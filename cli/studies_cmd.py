@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from rkhp import bounds
+from rkhp.base import bounds
 
 from .options import (
     METHOD_HELP,
@@ -55,7 +55,7 @@ def _common(f):
 def _setup(system_name, realisation, x0, methods, t_final, plot):
     """Validate the cheap inputs first (T; the plot path is checked by its option type), then load the
     system and the methods."""
-    from rkhp.methods import resolve_methods, resolve_system
+    from rkhp.integrators.methods import resolve_methods, resolve_system
     from rkhp.studies.converge import check_t_final
     if t_final is not None:
         check_t_final(t_final)
@@ -101,7 +101,7 @@ def _f(x, digits=2) -> str:
 @format_option("table", "json")
 def converge(system, methods, x0, realisation, t_final, steps, refinements, plot, workers, scheduler, fmt):
     """Empirical convergence: global error at T against h, observed and expected orders, verdicts."""
-    from rkhp.executors import open_executor
+    from rkhp.base.executors import open_executor
     from rkhp.studies.converge import converge as run
     from rkhp.studies.converge import step_counts
 
@@ -201,7 +201,7 @@ def _render_converge(study, plot) -> None:
 def bench(system, methods, x0, realisation, peers, t_final, steps, tolerances, repeats, ensemble, seed, plot,
           workers, scheduler, fmt):
     """Work-precision: wall time (median of repeats) against error, methods and peers."""
-    from rkhp.executors import open_executor
+    from rkhp.base.executors import open_executor
     from rkhp.studies import bench as B
 
     step_list = steps or B.DEFAULT_STEPS
@@ -275,7 +275,7 @@ def stress(system, methods, x0, realisation, t_final, long_steps, long_h, sweep_
            workers, scheduler, fmt):
     """Stress tests: (a) step sweep to Newton failure, (b) long-run drift, (c) near-singular starts,
     (d) round-off floor; each part ends with a verdict."""
-    from rkhp.executors import open_executor
+    from rkhp.base.executors import open_executor
     from rkhp.studies import stress as S
 
     ro = round_off_steps or S.ROUND_OFF_STEPS

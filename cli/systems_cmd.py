@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from rkhp import bounds
+from rkhp.base import bounds
 
 from .options import (
     METHOD_HELP,
@@ -104,7 +104,7 @@ def check(system, realisation, samples, seed, fmt):
                   f"symmetric: {'yes' if result.symmetric else 'no'}    "
                   f"axioms: {'ok' if result.ok else 'FAILED'} (tolerance {result.tolerance:g})")
     if not result.ok:
-        from rkhp.errors import CheckFailed
+        from rkhp.base.errors import CheckFailed
 
         bad = ", ".join(f"{k} {v:.2e}" for k, v in result.deviations.items() if v > result.tolerance)
         raise CheckFailed(f"{result.system} ({result.realisation}): birealisation axioms violated "
@@ -150,8 +150,8 @@ def integration_report(system, trajectory, method: str, h: float, steps: int) ->
 @format_option("table", "json")
 def integrate(system, method, steps, h, t_final, x0, modified_order, realisation, fmt):
     """Integrate SYSTEM (built-in or spec file) with METHOD (docs/methods.md)."""
-    from rkhp.errors import InputError, NumericalFailure
-    from rkhp.methods import resolve_method, resolve_system
+    from rkhp.base.errors import InputError, NumericalFailure
+    from rkhp.integrators.methods import resolve_method, resolve_system
 
     if (steps is None) == (h is None):
         raise InputError("give exactly one of --steps and --h")

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import click
 
-from rkhp.bounds import BYTES_PER_CONDITION, BYTES_PER_PRINTED_TREE, check_tree_memory
-from rkhp.conditions import order_conditions
-from rkhp.exact_text import fraction_text
-from rkhp.trees import MAX_COUNT_ORDER, MAX_ENUMERATION_ORDER, check_order, count_trees, trees_up_to
+from rkhp.base.bounds import BYTES_PER_CONDITION, BYTES_PER_PRINTED_TREE, check_tree_memory
+from rkhp.trees.conditions import order_conditions
+from rkhp.base.exact_text import fraction_text
+from rkhp.trees.rooted import MAX_COUNT_ORDER, MAX_ENUMERATION_ORDER, check_order, count_trees, trees_up_to
 
 from .options import console, emit_json, format_option, integer
 from .render import print_table
@@ -59,7 +59,7 @@ def trees(order, degenerate, exact_order, count, fmt):
     rows = [(str(t.order), str(t), str(t.sigma), str(t.gamma)) for t in found]
     header = ("Order", "Tree", "sigma", "gamma")
     if fmt == "latex":
-        from rkhp.latex import tree_latex
+        from rkhp.base.latex import tree_latex
 
         body = [(str(t.order), tree_latex(t), str(t.sigma), str(t.gamma)) for t in found]
         _echo_latex(("\\text{Order}", "\\text{Tree}", "\\sigma", "\\gamma"), body, trees=True)
@@ -94,7 +94,7 @@ def conditions(order, degenerate, symmetric, exact_order, fmt):
                    "conditions": [_condition_json(c) for c in conds]})
         return
     if fmt == "latex":
-        from rkhp.latex import tree_latex
+        from rkhp.base.latex import tree_latex
 
         _echo_latex(("\\text{Order}", "\\text{Butcher tree } \\tau", "\\text{Order condition}"),
                     [(str(c.order), " ".join(tree_latex(t) for t in c.trees), c.latex()) for c in conds],
@@ -162,7 +162,7 @@ def _render_counts(counts, degenerate, fmt) -> None:
 
 def _echo_latex(header, rows, trees: bool = False) -> None:
     """A standalone LaTeX document holding the longtable (compiles with pdflatex as it is)."""
-    from rkhp.latex import longtable, standalone
+    from rkhp.base.latex import longtable, standalone
 
     click.echo(standalone(longtable(header, rows), tables=True, trees=trees))
 

@@ -24,8 +24,8 @@ _CLASS_SETS = {"general": "general (T)", "degenerate": "degenerate (T_0)"}
 def verify(tableau, max_order, precision, show, fmt):
     """Verify the order of a tableau over T (general) and T_0 (degenerate), exactly or at a
     stated tolerance, with the failing trees and the principal error (paper §5)."""
-    from rkhp.tablefiles import load_tableau
-    from rkhp.verification import verify as run_verify
+    from rkhp.tableaux.files import load_tableau
+    from rkhp.tableaux.verification import verify as run_verify
 
     tab = load_tableau(tableau)
     with progress(fmt != "json") as bar:
@@ -43,7 +43,7 @@ def fail_on_overstated(results) -> None:
     """Exit status 1 when a claimed order is overstated (docs/exit-status.md)."""
     bad = [f"{r.name} ({', '.join(r.overstated)})" for r in results if r.overstated]
     if bad:
-        from rkhp.errors import CheckFailed
+        from rkhp.base.errors import CheckFailed
 
         raise CheckFailed(f"claimed order overstated: {'; '.join(bad)}")
 
@@ -129,12 +129,12 @@ def _exact_cell(text: str) -> str:
 def tables(precision, fmt, name):
     """List the built-in tableaux with stages, kind, verified and claimed orders."""
     if name is not None:  # one tableau is `rkhp show`'s (issue 15: `rkhp tables rk4` said only "extra argument")
-        from rkhp.errors import InputError
+        from rkhp.base.errors import InputError
 
         shown = name if len(name) <= 40 and name.isprintable() else "NAME"
         raise InputError(f"rkhp tables lists every built-in tableau and takes no name; to see one: rkhp show {shown}")
-    from rkhp.tablefiles import builtin_names, load_tableau
-    from rkhp.verification import verify as run_verify
+    from rkhp.tableaux.files import builtin_names, load_tableau
+    from rkhp.tableaux.verification import verify as run_verify
 
     names = builtin_names()
     rows = []

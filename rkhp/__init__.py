@@ -11,19 +11,19 @@ __version__ = "0.1.0"
 
 # public name -> module that defines it (loaded lazily, PEP 562)
 _LAZY = {
-    "Tree": "rkhp.trees",
-    "parse_tree": "rkhp.trees",
-    "trees_of_order": "rkhp.trees",
-    "trees_up_to": "rkhp.trees",
-    "count_trees": "rkhp.trees",
-    "order_conditions": "rkhp.conditions",
-    "InputError": "rkhp.errors",
-    "NumericalFailure": "rkhp.errors",
-    "integrate": "rkhp.methods",
-    "resolve_method": "rkhp.methods",
-    "Tableau": "rkhp.tableau",
-    "load_tableau": "rkhp.tablefiles",
-    "verify": "rkhp.verification",
+    "Tree": "rkhp.trees.rooted",
+    "parse_tree": "rkhp.trees.rooted",
+    "trees_of_order": "rkhp.trees.rooted",
+    "trees_up_to": "rkhp.trees.rooted",
+    "count_trees": "rkhp.trees.rooted",
+    "order_conditions": "rkhp.trees.conditions",
+    "InputError": "rkhp.base.errors",
+    "NumericalFailure": "rkhp.base.errors",
+    "integrate": "rkhp.integrators.methods",
+    "resolve_method": "rkhp.integrators.methods",
+    "Tableau": "rkhp.tableaux.tableau",
+    "load_tableau": "rkhp.tableaux.files",
+    "verify": "rkhp.tableaux.verification",
     "get_system": "rkhp.systems",
 }
 

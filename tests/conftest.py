@@ -29,8 +29,8 @@ def oscillator():
 
     import numpy as np
 
-    from rkhp.differentials import constant_matrix_jets, monomial_basis
-    from rkhp.trees import trees_up_to
+    from rkhp.series.differentials import constant_matrix_jets, monomial_basis
+    from rkhp.trees.rooted import trees_up_to
 
     def values(order):
         basis = monomial_basis(2, order - 1)

@@ -7,7 +7,7 @@ from fractions import Fraction
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rkhp.algebra import (
+from rkhp.trees.algebra import (
     butcher_product,
     compose,
     coproduct,
@@ -18,8 +18,8 @@ from rkhp.algebra import (
     hamilton_jacobi_expansion,
     inverse,
 )
-from rkhp.trees import LEAF, trees_of_order, trees_up_to
-from rkhp.trees import parse_tree as P
+from rkhp.trees.rooted import LEAF, trees_of_order, trees_up_to
+from rkhp.trees.rooted import parse_tree as P
 
 
 def combo(d):

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from rkhp.errors import InputError
+from rkhp.base.errors import InputError
 from rkhp.integrators.classical import (
     hamiltonian_values,
     integrate_classical,
@@ -16,7 +16,7 @@ from rkhp.integrators.classical import (
 )
 from rkhp.integrators.failure import Failure
 from rkhp.systems import get_system
-from rkhp.tablefiles import load_tableau
+from rkhp.tableaux.files import load_tableau
 
 
 @pytest.fixture(scope="module")
@@ -143,7 +143,7 @@ def test_kernel_self_check_turns_a_mismatch_into_an_error(rigid, monkeypatch):
     would) raises instead of returning numbers."""
     from dataclasses import replace
 
-    from rkhp.errors import NumericalFailure
+    from rkhp.base.errors import NumericalFailure
     from rkhp.integrators import classical
 
     monkeypatch.setattr(classical, "_VERIFIED", set())

@@ -19,7 +19,7 @@ import time
 import pytest
 
 from rkhp.integrators.kernels import COMPOSITE_SECONDS, KERNELS, TAPE, cold_start
-from rkhp.methods import resolve_method, resolve_system
+from rkhp.integrators.methods import resolve_method, resolve_system
 from rkhp.taylor.ops import PHIMV, SPRAY
 from rkhp.taylor.tape import Tape, tape_class
 

@@ -4,7 +4,7 @@ docs/modified.md, docs/theory.md §11).
 Outside values: the harmonic oscillator, where a generating function S = c H is the Cayley
 rotation by 2 arctan(c/2), so two implicit midpoint steps (RKHP Euler) have c = 2h/(1 - h^2/4);
 the exact flow's group property (two steps of h are one of 2h: c(t) = 2^|t| e(t)/sigma(t)); the
-Butcher product of rkhp.algebra (checked against the paper's example in tests/test_algebra.py).
+Butcher product of rkhp.trees.algebra (checked against the paper's example in tests/test_algebra.py).
 """
 
 from __future__ import annotations
@@ -14,12 +14,12 @@ from fractions import Fraction
 
 import pytest
 
-from rkhp.algebra import exact_flow_character
-from rkhp.composition import composition_series
-from rkhp.errors import InputError
-from rkhp.modified import method_character
-from rkhp.tablefiles import load_tableau
-from rkhp.trees import parse_tree
+from rkhp.trees.algebra import exact_flow_character
+from rkhp.series.composition import composition_series
+from rkhp.base.errors import InputError
+from rkhp.series.modified import method_character
+from rkhp.tableaux.files import load_tableau
+from rkhp.trees.rooted import parse_tree
 
 T = parse_tree
 

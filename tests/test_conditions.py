@@ -6,9 +6,9 @@ from fractions import Fraction
 
 import pytest
 
-from rkhp.conditions import butcher_form, conditions_of_order, latex_form, order_conditions
-from rkhp.errors import InputError
-from rkhp.trees import parse_tree as P
+from rkhp.trees.conditions import butcher_form, conditions_of_order, latex_form, order_conditions
+from rkhp.base.errors import InputError
+from rkhp.trees.rooted import parse_tree as P
 
 # The paper's Table 1: the 8 trees of T_0 up to order 5 and their conditions (LaTeX as printed).
 PAPER_TABLE_1 = [

@@ -16,8 +16,8 @@ import sys
 import numpy as np
 import pytest
 
-from rkhp.errors import InputError
-from rkhp.executors import loopback_cluster, open_executor, scheduler_address
+from rkhp.base.errors import InputError
+from rkhp.base.executors import loopback_cluster, open_executor, scheduler_address
 
 pytest.importorskip("distributed", reason="the distributed tests need rkhp[distributed] (make test installs it)")
 
@@ -95,7 +95,7 @@ def test_search_on_the_cluster_equals_the_single_process_run(cluster):
 
 
 def test_converge_on_the_cluster_equals_the_single_process_run(cluster):
-    from rkhp.methods import resolve_methods
+    from rkhp.integrators.methods import resolve_methods
     from rkhp.studies.converge import converge
     from rkhp.systems import get_system
 
@@ -126,8 +126,8 @@ def test_ensemble_on_the_cluster_equals_the_single_process_run(cluster):
 
 
 def test_stress_bench_and_relations_on_the_cluster_equal_the_single_process_runs(cluster):
-    from rkhp.methods import resolve_methods
-    from rkhp.relations import derive_relations, shipped_relations
+    from rkhp.integrators.methods import resolve_methods
+    from rkhp.trees.relations import derive_relations, shipped_relations
     from rkhp.studies.bench import bench
     from rkhp.studies.stress import stress
     from rkhp.systems import get_system

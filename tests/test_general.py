@@ -18,7 +18,7 @@ import sympy
 from click.testing import CliRunner
 from rkhp_cli.main import rkhp
 
-from rkhp.errors import InputError
+from rkhp.base.errors import InputError
 from rkhp.systems import get_system
 from rkhp.systems.families import so3_matrix
 from rkhp.systems.spray import (
@@ -262,7 +262,7 @@ def test_general_spec_refusals(tmp_path, kind):
 
 
 def _orders(system, method, realisation, steps):
-    from rkhp.methods import resolve_methods
+    from rkhp.integrators.methods import resolve_methods
     from rkhp.studies.converge import converge
 
     study = converge(get_system(system, realisation), resolve_methods([method]), steps=steps,

@@ -19,11 +19,11 @@ from rkhp_cli.main import rkhp
 
 from rkhp.integrators import integrate
 from rkhp.integrators.failure import Failure
-from rkhp.methods import resolve_method
+from rkhp.integrators.methods import resolve_method
 from rkhp.studies.converge import converge
 from rkhp.systems import get_system
-from rkhp.tableau import Tableau
-from rkhp.tablefiles import save_tableau
+from rkhp.tableaux.tableau import Tableau
+from rkhp.tableaux.files import save_tableau
 
 IMPLICIT_BUILTINS = ("paper-implicit", "gauss2", "gauss3", "radau-iia3", "lobatto-iiia3",
                      "lobatto-iiic3")

@@ -9,11 +9,11 @@ import pytest
 from click.testing import CliRunner
 from rkhp_cli.main import rkhp
 
-from rkhp.errors import InputError, NumericalFailure
+from rkhp.base.errors import InputError, NumericalFailure
 from rkhp.integrators import integrate, integrate_ensemble
 from rkhp.integrators.failure import Failure
 from rkhp.systems import get_system
-from rkhp.tableau import Tableau
+from rkhp.tableaux.tableau import Tableau
 
 T_ORDERS = 2.0
 STEPS = (20, 40, 80, 160)
@@ -198,7 +198,7 @@ def test_taylor_arithmetic_against_sympy():
 
     import sympy
 
-    from rkhp.expressions import FUNCTIONS
+    from rkhp.base.expressions import FUNCTIONS
     from rkhp.systems.spec import parse_expression, to_program
     from rkhp.taylor.interpreter import run_tape, tape_work
     from rkhp.taylor.jets import jet_space, monomials

@@ -15,8 +15,8 @@ from click.testing import CliRunner
 from rkhp_cli.main import rkhp as cli
 
 import rkhp
-from rkhp.errors import InputError
-from rkhp.methods import resolve_method
+from rkhp.base.errors import InputError
+from rkhp.integrators.methods import resolve_method
 from rkhp.systems import get_system
 
 

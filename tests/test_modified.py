@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 import sympy
 
-from rkhp.algebra import exact_flow_character
-from rkhp.errors import InputError
-from rkhp.modified import (
+from rkhp.trees.algebra import exact_flow_character
+from rkhp.base.errors import InputError
+from rkhp.series.modified import (
     NotATreeSeries,
     canonical_basis,
     canonical_coefficients,
@@ -25,9 +25,9 @@ from rkhp.modified import (
     modified_hamiltonian,
     modifying_hamiltonian,
 )
-from rkhp.modular import FieldEmbeddings, reconstruct_coordinates
-from rkhp.tablefiles import load_tableau
-from rkhp.trees import LEAF, count_trees, parse_tree, trees_of_order, trees_up_to
+from rkhp.base.modular import FieldEmbeddings, reconstruct_coordinates
+from rkhp.tableaux.files import load_tableau
+from rkhp.trees.rooted import LEAF, count_trees, parse_tree, trees_of_order, trees_up_to
 
 T = parse_tree
 
@@ -156,7 +156,7 @@ def test_euler_on_symmetric_realisations_has_no_tree_series_at_order_7():
     """At order 7 the F(t) of T_0 span 17 - 7 = 10 dimensions on constant pi, the elementary
     Hamiltonians of the free trees of order 7 (OEIS A000055: 11, none vanishing at odd order) 11:
     the implicit midpoint rule's h^6 term needs the missing one."""
-    from rkhp.relations import shipped_order
+    from rkhp.trees.relations import shipped_order
 
     assert count_trees(7, True) - len(shipped_order(7).relations) == 10
     with pytest.raises(NotATreeSeries) as info:
@@ -242,7 +242,7 @@ def test_integrate_reports_the_modified_energy_error(run_cli):
 
 
 def test_stress_long_run_has_the_modified_energy():
-    from rkhp.methods import resolve_method
+    from rkhp.integrators.methods import resolve_method
     from rkhp.studies.stress import long_run
     from rkhp.systems import get_system
 
@@ -273,7 +273,7 @@ def test_rigid_body_modified_energy_of_the_paper_method(run_cli):
 def test_the_taylor_integrator_misses_exactly_the_next_order():
     """THP of order N (paper Thm 5.1) has the character e up to N and 0 above: its first correction
     is -sum over the trees of order N + 1 of e(t)/sigma(t) F(t)."""
-    from rkhp.methods import resolve_method
+    from rkhp.integrators.methods import resolve_method
 
     series = modified_hamiltonian(method_character(resolve_method("thp4-t0"), 5), 5, "degenerate")
     assert series.terms() == [(LEAF, 1)] + [(t, -t.e / t.sigma) for t in trees_of_order(5, True)]

@@ -18,12 +18,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rkhp import bounds, documents
-from rkhp.errors import InputError
-from rkhp.expressions import CONSTANTS, FUNCTIONS, parse_expression
-from rkhp.tableau import Tableau, entry_text, parse_entry
-from rkhp.tablefiles import load_file, save_tableau
-from rkhp.trees import Tree, format_tree, parse_tree, trees_up_to
+from rkhp.base import bounds, documents
+from rkhp.base.errors import InputError
+from rkhp.base.expressions import CONSTANTS, FUNCTIONS, parse_expression
+from rkhp.tableaux.tableau import Tableau, entry_text, parse_entry
+from rkhp.tableaux.files import load_file, save_tableau
+from rkhp.trees.rooted import Tree, format_tree, parse_tree, trees_up_to
 
 FAST = settings(max_examples=300, deadline=None, derandomize=True)
 SLOW = settings(max_examples=40, deadline=None, derandomize=True)
@@ -140,7 +140,7 @@ NAMES = ("x1", "x2", "x3")
 
 
 def expressions():
-    """Texts in the grammar of rkhp.expressions (random, possibly not finite: 1/0)."""
+    """Texts in the grammar of rkhp.base.expressions (random, possibly not finite: 1/0)."""
     atom = st.one_of(st.sampled_from(NAMES + tuple(CONSTANTS)), st.integers(0, 10**6).map(str),
                      st.decimals(min_value=0, max_value=1000, allow_nan=False, places=3).map(str))
 

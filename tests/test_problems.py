@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rkhp.errors import InputError
+from rkhp.base.errors import InputError
 from rkhp.integrators import integrate
 from rkhp.studies.reference import reference
 from rkhp.systems import builtin_systems, get_system

@@ -10,9 +10,9 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from rkhp.errors import InputError
-from rkhp.modular import PRIMES, crt_pair, nullspace_mod, rational_reconstruction, rref_fraction, rref_mod, to_residue
-from rkhp.relations import (
+from rkhp.base.errors import InputError
+from rkhp.base.modular import PRIMES, crt_pair, nullspace_mod, rational_reconstruction, rref_fraction, rref_mod, to_residue
+from rkhp.trees.relations import (
     MAX_SHIPPED_ORDER,
     conditions_from_relations,
     derive_relations,
@@ -20,7 +20,7 @@ from rkhp.relations import (
     shipped_relations,
     symmetric_condition_rows,
 )
-from rkhp.trees import LEAF, from_children, parse_tree, trees_of_order
+from rkhp.trees.rooted import LEAF, from_children, parse_tree, trees_of_order
 
 T = parse_tree
 
@@ -87,7 +87,7 @@ def test_jets_match_the_definition_by_symbolic_differentiation():
     """F(t)(0) on jets equals docs/theory.md §5's definition differentiated by sympy (constant pi)."""
     import sympy
 
-    from rkhp.differentials import constant_pi_jets, monomial_basis
+    from rkhp.series.differentials import constant_pi_jets, monomial_basis
 
     dim, order = 3, 5
     x = sympy.symbols("x0:3")
@@ -129,7 +129,7 @@ def test_jets_match_the_definition_by_symbolic_differentiation():
 
 def test_order_four_oddness_on_every_family():
     """F(b[b,b,b]) + F(b[b[b,b]]) = 0 (docs/theory.md §8) on constant pi, so(3)* and log-canonical."""
-    from rkhp.differentials import constant_pi_values, general_values
+    from rkhp.series.differentials import constant_pi_values, general_values
 
     trees = trees_of_order(4, True)
     p = PRIMES[2]
@@ -143,7 +143,7 @@ def test_order_four_oddness_on_every_family():
 
 def test_quartic_realisation_breaks_the_symmetric_relations():
     """Degenerate but not symmetric (docs/theory.md §8): trees outside T_0 still vanish, the relations fail."""
-    from rkhp.differentials import general_values
+    from rkhp.series.differentials import general_values
 
     p = PRIMES[1]
     trees = [t for n in range(1, 6) for t in trees_of_order(n)]
@@ -158,7 +158,7 @@ def test_quartic_realisation_breaks_the_symmetric_relations():
 
 @pytest.mark.parametrize("family", ["lie-poisson", "log-canonical"])
 def test_trees_outside_t0_vanish_on_symmetric_families(family):
-    from rkhp.differentials import general_values
+    from rkhp.series.differentials import general_values
 
     p = PRIMES[1]
     trees = [t for n in range(1, 6) for t in trees_of_order(n)]
@@ -245,7 +245,7 @@ def test_conditions_annihilate_exactly_the_relations():
 
 
 def test_symmetric_order_conditions_for_the_conditions_module():
-    from rkhp.conditions import OrderCondition, order_conditions, symmetric_order_conditions
+    from rkhp.trees.conditions import OrderCondition, order_conditions, symmetric_order_conditions
 
     (c,) = symmetric_order_conditions(4)
     assert isinstance(c, OrderCondition)
@@ -266,8 +266,8 @@ def test_paper_methods_symmetric_order(name, order):
     """The paper's methods keep their degenerate order, and no more, under the symmetric class."""
     import sympy
 
-    from rkhp.tablefiles import load_tableau
-    from rkhp.weights import elementary_weights
+    from rkhp.tableaux.files import load_tableau
+    from rkhp.tableaux.weights import elementary_weights
 
     a = elementary_weights(load_tableau(name), order + 1, precision="exact")
 
@@ -293,7 +293,7 @@ def test_regeneration_reproduces_the_shipped_data_to_order_six():
 
 def test_relations_do_not_depend_on_the_dimension_or_family():
     """Constant pi in dimension 4 and log-canonical in dimension 4 give the same spaces (order <= 6)."""
-    from rkhp.differentials import constant_pi_values, general_values
+    from rkhp.series.differentials import constant_pi_values, general_values
 
     p = PRIMES[3]
     trees = [t for n in range(1, 7) for t in trees_of_order(n, True)]

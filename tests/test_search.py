@@ -17,15 +17,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rkhp.executors import open_executor
+from rkhp.base.executors import open_executor
 from rkhp.search.driver import SearchOptions, search
 from rkhp.search.multistart import Problem, run_restarts
 from rkhp.search.polish import polish
 from rkhp.search.prove import prove_impossible
 from rkhp.search.recognise import recognise_number
 from rkhp.search.system import ResidualSystem
-from rkhp.tablefiles import builtin_names, load_tableau
-from rkhp.verification import verify
+from rkhp.tableaux.files import builtin_names, load_tableau
+from rkhp.tableaux.verification import verify
 
 ROOT = Path(__file__).resolve().parent.parent
 ISSUE_KEYS = ["stages", "degenerate", "implicit", "order", "found", "tableau", "residual",

@@ -13,7 +13,7 @@ import subprocess
 
 import pytest
 
-from rkhp.tablefiles import load_tableau
+from rkhp.tableaux.files import load_tableau
 
 RK4_ROWS = ["0   │", "1/2 │ 1/2", "1/2 │ 0    1/2", "1   │ 0    0    1"]
 

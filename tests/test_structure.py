@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 import sympy
 
-from rkhp.errors import InputError
-from rkhp.expressions import parse_expression, variable_names
+from rkhp.base.errors import InputError
+from rkhp.base.expressions import parse_expression, variable_names
 from rkhp.systems.structure import (
     TOLERANCE,
     check_antisymmetric,

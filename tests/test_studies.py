@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 from rkhp_cli.main import rkhp
 
-from rkhp.errors import InputError
+from rkhp.base.errors import InputError
 from rkhp.studies.fit import fit_order, local_order, verdict
 from rkhp.systems import get_system
 
@@ -127,7 +127,7 @@ def test_dop853_error_estimate_is_honest_against_mpmath():
 
 
 def _study(system, realisation, methods, steps, t_final=None):
-    from rkhp.methods import resolve_methods
+    from rkhp.integrators.methods import resolve_methods
     from rkhp.studies.converge import converge
 
     return converge(get_system(system, realisation=realisation), resolve_methods(methods), steps, t_final)
@@ -325,7 +325,7 @@ def test_bench_ensemble_mode():
 
 
 def test_stress_finds_the_newton_failure_range_of_the_rigid_body():
-    from rkhp.methods import resolve_method
+    from rkhp.integrators.methods import resolve_method
     from rkhp.studies.stress import sweep
 
     rigid = get_system("rigid-body")
@@ -388,7 +388,7 @@ def test_full_default_converge_and_bench():
 
 def test_round_off_floor_of_the_energy_error():
     """Part (d): the energy error of the 3-stage method stops falling at round-off level."""
-    from rkhp.methods import resolve_method
+    from rkhp.integrators.methods import resolve_method
     from rkhp.studies.stress import round_off
 
     rigid = get_system("rigid-body")
@@ -404,7 +404,7 @@ def test_round_off_floor_of_the_energy_error():
 
 def test_converge_on_spec_file_system_with_tableau_file(tmp_path):
     """A system from a spec file (no exact solution: DOP853 reference) and a method from a file."""
-    from rkhp.tablefiles import load_tableau, save_tableau
+    from rkhp.tableaux.files import load_tableau, save_tableau
 
     spec = tmp_path / "lv.json"
     spec.write_text('{"family": "log-canonical", "lambda": [[0,1,2],[-1,0,1],[-2,-1,0]], '

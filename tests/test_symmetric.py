@@ -17,13 +17,13 @@ import json
 import numpy as np
 import pytest
 
-from rkhp.methods import resolve_methods
+from rkhp.integrators.methods import resolve_methods
 from rkhp.search.driver import SearchOptions, search
 from rkhp.studies.converge import converge
 from rkhp.systems import builtin_systems, get_system
 from rkhp.systems.check import check_birealisation
-from rkhp.tablefiles import load_tableau
-from rkhp.verification import verify
+from rkhp.tableaux.files import load_tableau
+from rkhp.tableaux.verification import verify
 
 # ----------------------------------------------------------------------------- quartic realisation
 

@@ -11,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 from rkhp_cli.main import rkhp
 
-from rkhp.errors import InputError
+from rkhp.base.errors import InputError
 from rkhp.systems import builtin_systems, get_system
 from rkhp.systems.check import check_birealisation
 

@@ -11,9 +11,9 @@ import sympy
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rkhp.errors import InputError
-from rkhp.tableau import GivenDecimal, Tableau, parse_entry
-from rkhp.tablefiles import builtin_names, load_file, load_tableau, save_tableau
+from rkhp.base.errors import InputError
+from rkhp.tableaux.tableau import GivenDecimal, Tableau, parse_entry
+from rkhp.tableaux.files import builtin_names, load_file, load_tableau, save_tableau
 
 PUBLISHED = Path(__file__).resolve().parent / "data" / "published"
 

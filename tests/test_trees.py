@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rkhp.errors import InputError
-from rkhp.trees import (
+from rkhp.base.errors import InputError
+from rkhp.trees.rooted import (
     LEAF,
     Tree,
     count_trees,

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from rkhp.errors import InputError
-from rkhp.tableau import Tableau
-from rkhp.tablefiles import load_tableau
-from rkhp.trees import count_trees
-from rkhp.verification import verify
+from rkhp.base.errors import InputError
+from rkhp.tableaux.tableau import Tableau
+from rkhp.tableaux.files import load_tableau
+from rkhp.trees.rooted import count_trees
+from rkhp.tableaux.verification import verify
 
 HNW = "Hairer, Norsett & Wanner, Solving ODEs I (1993)"
 HW = "Hairer & Wanner, Solving ODEs II (1996)"
@@ -279,7 +279,7 @@ def test_the_copied_nodepy_tableaux_are_nodepys(name):
     # bench extra installs it, the copies are compared with nodepy's own entries, exactly
     import sympy
 
-    from rkhp.tableau import as_sympy
+    from rkhp.tableaux.tableau import as_sympy
 
     theirs = _nodepys_own(name)
     ours = load_tableau(str(DATA / f"nodepy-{name}.toml"))

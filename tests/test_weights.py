@@ -10,10 +10,10 @@ import sympy
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rkhp.tableau import Tableau
-from rkhp.tablefiles import load_tableau
-from rkhp.trees import count_trees, in_t0, parse_tree, trees_up_to
-from rkhp.weights import (
+from rkhp.tableaux.tableau import Tableau
+from rkhp.tableaux.files import load_tableau
+from rkhp.trees.rooted import count_trees, in_t0, parse_tree, trees_up_to
+from rkhp.tableaux.weights import (
     FixedPointArithmetic,
     elementary_weights,
     symbolic_weights,

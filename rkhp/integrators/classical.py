@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from ..errors import InputError, NumericalFailure
+from ..base.errors import InputError, NumericalFailure
 from ..taylor.compiler import NJIT
 from ..taylor.compiler import numba as nb
 from ..taylor.interpreter import run_tape, tape_work
@@ -286,7 +286,7 @@ def integrate_classical(system, tableau, h, n_steps, x0=None) -> Trajectory:
     """Explicit Runge–Kutta on ``xdot = pi(x) grad H(x)`` with an explicit ``tableau``.
 
     Args:
-        system: a PoissonSystem; tableau: an explicit :class:`rkhp.tableau.Tableau`;
+        system: a PoissonSystem; tableau: an explicit :class:`rkhp.tableaux.tableau.Tableau`;
         h: step size (> 0); n_steps: number of steps (>= 1); x0: start (default ``system.x0``).
 
     Returns:

@@ -8,7 +8,7 @@ and about how long compiling them takes, so that a front end can say so (the CLI
 line on a terminal; docs/methods.md). Nothing is compiled here.
 
 A kernel named below is an entry point called from Python; the kernels it calls are compiled
-with it (and cached with it). Kinds are those of :mod:`rkhp.methods` plus ``tape`` (the tape
+with it (and cached with it). Kinds are those of :mod:`rkhp.integrators.methods` plus ``tape`` (the tape
 interpreter, which every run uses to evaluate H) and ``invariants`` (the compiled loop of H over a
 trajectory used by the studies).
 """

@@ -1,7 +1,7 @@
 """A modified Hamiltonian evaluated on a system: H~_N(x) = sum_(|t|<=N) h^(|t|-1) c(t) F(t)(x)
 (docs/theory.md §11, docs/modified.md).
 
-The series comes exact from :mod:`rkhp.modified`; the F(t)(x) of the system are the THP tower's
+The series comes exact from :mod:`rkhp.series.modified`; the F(t)(x) of the system are the THP tower's
 (:mod:`rkhp.integrators.taylor`: the compiled tape interpreter on Taylor jets), evaluated with
 values only (jet margin 0) on the series' trees and their subtrees. Its class must be the one of
 the system's realisation (``rkhp.studies.methods.condition_class``).
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..modified import NotATreeSeries, modified_hamiltonian
+from ..series.modified import NotATreeSeries, modified_hamiltonian
 
 
 @dataclass
@@ -58,7 +58,7 @@ def energy_errors(system, series, h: float, states, advance=None) -> dict:
 
 def method_series(character, order: int, cls: str, seed: int = 0):
     """The modified Hamiltonian of a character to ``order``, or to the largest order below at
-    which it is a tree series (rkhp.modified.NotATreeSeries stops it there)."""
+    which it is a tree series (rkhp.series.modified.NotATreeSeries stops it there)."""
     try:
         return modified_hamiltonian(character, order, cls, seed)
     except NotATreeSeries as exc:

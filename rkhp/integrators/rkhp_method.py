@@ -17,8 +17,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ..errors import InputError, NumericalFailure
-from ..executors import run_all
+from ..base.errors import InputError, NumericalFailure
+from ..base.executors import run_all
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE, STAGE_MAX_SWEEPS
 from .trajectory import Trajectory
@@ -31,7 +31,7 @@ tableau, `implicit_degree` for an implicit one)."""
 def resolve_tableau(tableau):
     """A Tableau from a Tableau, a built-in name or a file path."""
     if isinstance(tableau, str):
-        from ..tablefiles import load_tableau
+        from ..tableaux.files import load_tableau
 
         return load_tableau(tableau)
     return tableau
@@ -57,7 +57,7 @@ def stage_solve(tableau, A, degree=None, max_sweeps=STAGE_MAX_SWEEPS):
     if not is_implicit(A):
         return StageSolve(0, int(max_sweeps))
     if degree is None:
-        from ..verification import class_orders
+        from ..tableaux.verification import class_orders
 
         degree = implicit_degree(max(class_orders(tableau).values()))
     if int(degree) != degree or degree < 1:
@@ -165,7 +165,7 @@ def integrate_ensemble(system, tableau, h, n_steps, x0s, *, tol: float = NEWTON_
                        executor=None, stage_degree: int | None = None) -> np.ndarray:
     """Final states of many trajectories at once (shape (m, n)), in `threads` threads (default:
     the CPUs available) running the compiled loop without the GIL (the "vmap"); with an
-    `executor` (rkhp.executors), the starts are cut into one chunk per slot and each chunk runs so
+    `executor` (rkhp.base.executors), the starts are cut into one chunk per slot and each chunk runs so
     on a worker (same final states: each trajectory is computed on its own). NumericalFailure
     naming the first failing trajectory if any fails."""
     tableau = resolve_tableau(tableau)

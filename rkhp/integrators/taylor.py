@@ -21,10 +21,10 @@ from math import factorial
 
 import numpy as np
 
-from ..errors import InputError
+from ..base.errors import InputError
 from ..taylor.interpreter import run_tape, tape_work
 from ..taylor.jets import jet_space, monomials
-from ..trees import trees_up_to
+from ..trees.rooted import trees_up_to
 from .engine import state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import NumericalFailure
+from ..base.errors import NumericalFailure
 from .failure import Failure
 
 

@@ -3,7 +3,7 @@
 Modules, one idea each:
 
 - :mod:`.system`: unknowns, order-condition residuals and their exact Jacobian (forward pass);
-- :mod:`.multistart`: seeded restarts of scipy least squares, on an executor (:mod:`rkhp.executors`);
+- :mod:`.multistart`: seeded restarts of scipy least squares, on an executor (:mod:`rkhp.base.executors`);
 - :mod:`.polish`: Newton's method in mpmath to D digits;
 - :mod:`.recognise`: closed forms (free parameters fixed at simple values, PSLQ), exact check;
 - :mod:`.prove`: Groebner-basis certificates of impossibility;

@@ -4,7 +4,7 @@
 the order conditions of a class (paper, Theorems 5.1–5.2: "general" over T, "degenerate" over
 T_0; docs/theory.md §8 for "symmetric") up to ``order``; without an order it raises N until the restarts
 fail and reports the evidence against the first order not reached. Every reported tableau has
-been verified by :func:`rkhp.verification.verify`, exactly when a closed form was recognised, else at D
+been verified by :func:`rkhp.tableaux.verification.verify`, exactly when a closed form was recognised, else at D
 digits after Newton polishing; ``decided_by`` says which.
 """
 
@@ -17,9 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import bounds
-from ..conditions import check_class
-from ..errors import InputError
+from ..base import bounds
+from ..trees.conditions import check_class
+from ..base.errors import InputError
 from .multistart import Problem, Restarts, run_restarts
 from .optimise import KnownMethod, known_methods, minimise_error, refine_optimum
 from .polish import polish
@@ -68,8 +68,8 @@ class Found:
     """A verified tableau of order ``order`` in the searched class.
 
     Attributes:
-        tableau: rkhp.tableau.Tableau (exact entries when a closed form verified, else D digits).
-        verification: rkhp.verification.Verification of that tableau.
+        tableau: rkhp.tableaux.tableau.Tableau (exact entries when a closed form verified, else D digits).
+        verification: rkhp.tableaux.verification.Verification of that tableau.
         residual: max |order-condition residual| of the polished solution (0 when exact).
         restart: index of the restart it came from (None for an optimum).
     """
@@ -155,7 +155,7 @@ class SearchResult:
         """The reported tableau as a file would hold it: named by its content (its class, order,
         stages and a hash of its entries), claiming its verified order in every class (verified
         again without an order limit), with the command line that reproduces it."""
-        from ..verification import verify
+        from ..tableaux.verification import verify
 
         found = self.found
         orders = verify(found.tableau, precision=found.verification.precision
@@ -171,7 +171,7 @@ class SearchResult:
         """The issue's keys, then extras (decided_by, verified orders, optimisation, proof text)."""
         import mpmath
 
-        from ..tableau import entry_text
+        from ..tableaux.tableau import entry_text
 
         tab = None
         if self.found is not None:
@@ -229,7 +229,7 @@ class SearchResult:
 
 def make_tableau(problem: Problem, entries, name: str):
     """A Tableau from the unknowns (strings of D digits, or sympy closed forms)."""
-    from ..tableau import Tableau
+    from ..tableaux.tableau import Tableau
 
     system = problem.system()
     s = problem.stages
@@ -245,7 +245,7 @@ def verified(problem: Problem, x_float, polished, digits: int, closed: bool, nam
     """Verify a polished solution: exactly when its entries (or, with ``closed``, those of a
     nearby member of its family, see :func:`closed_form`) have closed forms that satisfy the
     conditions, else at D digits. None if the verification disagrees with the search."""
-    from ..verification import verify
+    from ..tableaux.verification import verify
     exact = recognise_point(problem.system(), polished)
     if exact is None and closed:
         exact, _ = closed_form(problem.system(), x_float, digits)
@@ -270,7 +270,7 @@ def method_name(problem: Problem) -> str:
 def content_name(tableau, base: str) -> str:
     """``base-<8 hex digits>``: the digits hash the entries of A and b, so that two files hold the
     same name only when they hold the same tableau."""
-    from ..tableau import entry_text
+    from ..tableaux.tableau import entry_text
 
     text = ";".join(",".join(entry_text(x) for x in row) for row in tableau.A)
     text += "|" + ",".join(entry_text(x) for x in tableau.b)
@@ -280,7 +280,7 @@ def content_name(tableau, base: str) -> str:
 def search(stages: int, order: int | None = None, cls: str = "general", implicit: bool = False,
            options: SearchOptions = SearchOptions(), on_progress=None, executor=None) -> SearchResult:
     """Search tableaux (see the module docstring). ``on_progress(order, done, total)``; the
-    restarts run on ``executor`` (:mod:`rkhp.executors`; default: in this process), with the same
+    restarts run on ``executor`` (:mod:`rkhp.base.executors`; default: in this process), with the same
     result whatever the executor."""
     check_problem(stages, order)
     check_class(cls)

@@ -4,7 +4,7 @@ Restart k of a problem starts from ``numpy.random.default_rng([seed, stages, ord
 restart is reproducible on its own, whatever the number of workers or the order they finish in.
 A restart succeeds when scipy's least_squares (trust region, exact Jacobian) brings every residual
 below 1e-6 with coefficients bounded by ``bound``, and Newton in mpmath then polishes it to D digits.
-Restarts run on an executor (:mod:`rkhp.executors`: in process, local processes or a Dask cluster);
+Restarts run on an executor (:mod:`rkhp.base.executors`: in process, local processes or a Dask cluster);
 Ctrl-C cancels them and returns what was found.
 """
 
@@ -16,7 +16,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..executors import InProcess, first_done
+from ..base.executors import InProcess, first_done
 from .polish import Polished, polish
 from .system import ResidualSystem
 
@@ -161,7 +161,7 @@ def run_restarts(problem: Problem, restarts: int, seed: int = 0, executor=None,
                  time_limit: float | None = None, digits: int = 30, stop_after: int | None = 1,
                  on_progress=None) -> Restarts:
     """Run up to ``restarts`` restarts (indices 0..restarts-1) on ``executor`` (default: in this
-    process; see :mod:`rkhp.executors`), stopping after ``stop_after`` successes (None: run them all).
+    process; see :mod:`rkhp.base.executors`), stopping after ``stop_after`` successes (None: run them all).
 
     The restarts kept are those of index up to the ``stop_after``-th success, and every one of
     them has run, so the answer does not depend on the executor or its number of workers (only the

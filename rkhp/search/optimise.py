@@ -130,7 +130,7 @@ class KnownMethod:
 
 def known_methods(system: ResidualSystem) -> list[KnownMethod]:
     """Built-in tableaux with the same stages (and kind) meeting every condition up to order N."""
-    from ..tablefiles import builtin_names, load_tableau
+    from ..tableaux.files import builtin_names, load_tableau
 
     out = []
     for name in builtin_names():

@@ -1,7 +1,7 @@
 """The residual system of a tableau search: unknowns, order-condition residuals, exact Jacobian.
 
 Unknowns x = (a_ij over the strict lower triangle, or every (i, j) when implicit; then b_i), with
-c = row sums of A (docs/theory.md §2). For each condition of :func:`rkhp.conditions.order_conditions`
+c = row sums of A (docs/theory.md §2). For each condition of :func:`rkhp.trees.conditions.order_conditions`
 (paper, Theorems 5.1–5.2; the "symmetric" class of docs/theory.md §8 plugs in the same way) the residual is
 sum_k w_k r(t_k) with r(t) = gamma(t) a(t) - 1, so every residual is of order one.
 
@@ -18,9 +18,9 @@ from fractions import Fraction
 
 import numpy as np
 
-from ..conditions import condition_trees, order_conditions
-from ..errors import InputError
-from ..trees import Tree
+from ..trees.conditions import condition_trees, order_conditions
+from ..base.errors import InputError
+from ..trees.rooted import Tree
 
 #: Largest order a search accepts: the conditions over T number 200 up to order 8, 719 more at 9.
 MAX_SEARCH_ORDER = 8
@@ -53,7 +53,7 @@ class ResidualSystem:
     Attributes:
         stages, order, cls, implicit: the problem.
         pattern: positions of the unknown a_ij (then come the s unknowns b_i).
-        conditions: the OrderCondition objects (rkhp.conditions).
+        conditions: the OrderCondition objects (rkhp.trees.conditions).
         trees: every tree needed (condition trees and their subtrees), children before parents.
         error_trees: the trees of order ``order + 1`` of the class (principal error, docs/theory.md §2).
     """

@@ -20,11 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import bounds
-from ..errors import InputError
-from ..executors import InProcess, run_all
+from ..base import bounds
+from ..base.errors import InputError
+from ..base.executors import InProcess, run_all
 from ..integrators import integrate_ensemble
-from ..methods import DEFAULT_METHODS, SCIPY_METHODS, Method, check_distinct, resolve_method, resolve_system
+from ..integrators.methods import DEFAULT_METHODS, SCIPY_METHODS, Method, check_distinct, resolve_method, resolve_system
 from .converge import check_t_final
 from .reference import Reference, dop853_reference, reference
 
@@ -113,7 +113,7 @@ class BenchStudy:
 
 
 def resolve_peer(name) -> Method:
-    """A peer: a method of the grammar of :mod:`rkhp.methods` that is not an RKHP tableau
+    """A peer: a method of the grammar of :mod:`rkhp.integrators.methods` that is not an RKHP tableau
     (``scipy:NAME``, ``classical:NAME``, ``implicit-midpoint``, ``thpN``). A bare tableau name is
     refused, so that a name means the same in --peers as in --method (docs/methods.md)."""
     key = name.strip().lower() if isinstance(name, str) else None
@@ -278,10 +278,10 @@ def _ensemble_scipy_curve(method, system, refs, floor, starts, tolerances, t_fin
 def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=DEFAULT_TOLERANCES,
           t_final=None, repeats: int = 3, ensemble: int | None = None, seed: int = 0,
           on_curve=None, executor=None) -> BenchStudy:
-    """Work-precision study of ``methods`` and ``peers`` (names of :mod:`rkhp.methods`, or Methods;
+    """Work-precision study of ``methods`` and ``peers`` (names of :mod:`rkhp.integrators.methods`, or Methods;
     a method may be ``scipy:NAME`` too) on ``system`` (a name, a spec file or a PoissonSystem).
 
-    With an ``executor`` (rkhp.executors): one trajectory per point, each curve is one task, timed
+    With an ``executor`` (rkhp.base.executors): one trajectory per point, each curve is one task, timed
     on the worker that runs it; in ensemble mode the curves run here one after another and each
     RKHP point spreads its K trajectories over the workers (the time per trajectory is then the
     workers' throughput). The errors do not depend on the executor; ``on_curve(done, total)``.

@@ -14,10 +14,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .. import bounds
-from ..errors import InputError
-from ..executors import InProcess, run_all
-from ..methods import condition_class, require_steps, resolve_methods, resolve_system
+from ..base import bounds
+from ..base.errors import InputError
+from ..base.executors import InProcess, run_all
+from ..integrators.methods import condition_class, require_steps, resolve_methods, resolve_system
 from .fit import MIN_FIT_POINTS, OrderFit, fit_order, verdict
 from .invariants import max_deviations
 from .reference import Reference, reference
@@ -153,7 +153,7 @@ def run_row(method, system, ref: Reference, steps: int, t_final: float) -> Conve
 def study_methods(methods, system, ref: Reference, steps, t_final: float, on_run=None,
                   executor=None) -> tuple[MethodConvergence, ...]:
     """Each method's convergence table, fit and verdict. Every (method, steps) run is one task on
-    ``executor`` (rkhp.executors; default: in this process), reduced in method and step order;
+    ``executor`` (rkhp.base.executors; default: in this process), reduced in method and step order;
     ``on_run(done, total)`` after each finished run."""
     runs = [(m, system, ref, n, t_final) for m in methods for n in steps]
     rows = run_all(executor or InProcess(), run_row, runs, on_run)
@@ -176,9 +176,9 @@ def _with_local_order(row: ConvergenceRow, p) -> ConvergenceRow:
 
 def converge(system, methods, steps=None, t_final=None, refinements=None, on_run=None,
              executor=None) -> ConvergenceStudy:
-    """Run a convergence study of ``methods`` (names of :mod:`rkhp.methods` or Methods; the
+    """Run a convergence study of ``methods`` (names of :mod:`rkhp.integrators.methods` or Methods; the
     defaults when empty) on ``system`` (a name, a spec file or a PoissonSystem) up to ``t_final``
-    (default: the system's). The runs are independent tasks on ``executor`` (rkhp.executors;
+    (default: the system's). The runs are independent tasks on ``executor`` (rkhp.base.executors;
     default: in this process), ``on_run(done, total)`` after each; the reference is computed here,
     once."""
     system = resolve_system(system)

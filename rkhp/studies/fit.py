@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
+from ..base.errors import InputError
 
 SPREAD = 0.2
 """Largest difference between local orders inside the asymptotic range."""

@@ -8,14 +8,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..bounds import check_output_path
-from ..errors import InputError
+from ..base.bounds import check_output_path
+from ..base.errors import InputError
 
 FORMATS = ("png", "svg", "pdf")
 
 
 def check_plot_path(path) -> Path:
-    """The plot path, after checking its extension and that it can be written (`rkhp.bounds`)."""
+    """The plot path, after checking its extension and that it can be written (`rkhp.base.bounds`)."""
     return check_output_path(path, tuple("." + f for f in FORMATS), "plot file")
 
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError, NumericalFailure
+from ..base.errors import InputError, NumericalFailure
 
 EPS = float(np.finfo(float).eps)
 #: steps of one DOP853 reference solve (about a minute), and the steps after which the number

@@ -23,13 +23,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import bounds
-from ..errors import InputError
-from ..executors import InProcess, run_all
+from ..base import bounds
+from ..base.errors import InputError
+from ..base.executors import InProcess, run_all
 from ..integrators.failure import Failure
 from ..integrators.modified_energy import ModifiedEnergy, method_series
-from ..methods import condition_class, require_steps, resolve_method, resolve_methods, resolve_system
-from ..modified import MAX_ORDER, method_character
+from ..integrators.methods import condition_class, require_steps, resolve_method, resolve_methods, resolve_system
+from ..series.modified import MAX_ORDER, method_character
 from .converge import check_t_final, study_methods
 from .fit import fit_order
 from .invariants import invariant_deviations, max_deviations, window_maxima
@@ -249,7 +249,7 @@ def _modified_windows(method, system, h: float, states, windows: int) -> Modifie
 def long_run(methods, system, h: float, steps: int = LONG_STEPS, windows: int = LONG_WINDOWS,
              executor=None) -> LongRunResult:
     """Part (b): Casimir and energy error per window, the methods against classical RK4 (one task
-    per method on ``executor``, rkhp.executors)."""
+    per method on ``executor``, rkhp.base.executors)."""
     if steps < windows:
         raise InputError(f"a long run needs at least {windows} steps, got {steps}")
     everyone = [*methods, resolve_method("classical:rk4")]
@@ -304,7 +304,7 @@ class SingularResult:
 def near_singular(methods, system, t_final: float, steps: int = SINGULAR_STEPS,
                   values=SINGULAR_VALUES, executor=None) -> SingularResult:
     """Part (c): starts with the first species at 1e-3 and 1e-6 (log-canonical systems only), one
-    task per start and method on ``executor`` (rkhp.executors)."""
+    task per start and method on ``executor`` (rkhp.base.executors)."""
     if system.family != "log-canonical":
         return SingularResult(False, (), f"near-singular starts are defined for log-canonical systems, "
                                          f"{system.name} is {system.family}")
@@ -378,7 +378,7 @@ class RoundOffResult:
 def round_off(methods, system, t_final: float, steps=ROUND_OFF_STEPS, executor=None) -> RoundOffResult:
     """Part (d): errors at T and energy errors for h down to T/10^5; the first row past the
     asymptotic range of each fit (energy errors at or below 2 eps |H(x0)| are not measurements).
-    Each run is a task on ``executor`` (rkhp.executors)."""
+    Each run is a task on ``executor`` (rkhp.base.executors)."""
     ref = reference(system, t_final)
     studies = study_methods(methods, system, ref, tuple(steps), t_final, executor=executor)
     h0 = abs(float(system.hamiltonian(np.asarray(system.x0, dtype=float))))
@@ -416,9 +416,9 @@ class StressStudy:
 def stress(system, methods, t_final=None, long_steps: int = LONG_STEPS, long_h: float | None = None,
            sweep_coarsest: int = SWEEP_COARSEST, round_off_steps=ROUND_OFF_STEPS, on_part=None,
            executor=None) -> StressStudy:
-    """Run parts (a)-(d) for ``methods`` (names of :mod:`rkhp.methods` or Methods; the defaults
+    """Run parts (a)-(d) for ``methods`` (names of :mod:`rkhp.integrators.methods` or Methods; the defaults
     when empty) on ``system`` (a name, a spec file or a PoissonSystem), one part after the other,
-    each part's independent runs as tasks on ``executor`` (rkhp.executors; default: in this
+    each part's independent runs as tasks on ``executor`` (rkhp.base.executors; default: in this
     process); the results do not depend on it."""
     system = resolve_system(system)
     methods = require_steps(resolve_methods(methods))

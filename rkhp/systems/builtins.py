@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..base.errors import InputError
 from ..taylor import tape as tp
 from .core import PoissonSystem
 from .families import SO3, LieAlgebra, family_system

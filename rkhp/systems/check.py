@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import bounds
+from ..base import bounds
 
 TOLERANCE = 1e-12
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..errors import InputError
+from ..base.errors import InputError
 from ..taylor import tape as tp
 from .spray import MAX_TRUNCATION, truncated_order, truncated_realisation
 

@@ -10,12 +10,12 @@ constants, a matrix...), with
 - its domain and its default Casimirs;
 - its symmetric base birealisation: ``base(structure, sign)`` is the program (x, p, f) -> alpha
   (sign +1) or beta (sign -1), a list of n values, written once over any arithmetic that has
-  + - * and numbers (tape Vars, `rkhp.differentials`' exact jets) and the functions of the
+  + - * and numbers (tape Vars, `rkhp.series.differentials`' exact jets) and the functions of the
   namespace f (f.exp, f.phimv, f.crb: `rkhp.taylor.tape.functions` for tapes).
 
 Realisations (`rkhp.systems.core`) compose every family's base with a shift. Spec files
 (`rkhp.systems.spec`), the built-ins, `rkhp check` (through the system's pi) and the exact
-elementary differentials (`rkhp.differentials`) all read the families from :data:`FAMILIES`.
+elementary differentials (`rkhp.series.differentials`) all read the families from :data:`FAMILIES`.
 
 The families:
 - ``lie-poisson``: pi_ij(x) = sum_k C_ijk x_k; K(p) with K(p) x = -pi(x) p; alpha = phi(K(p)) x,
@@ -39,9 +39,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import documents
-from ..errors import InputError
-from ..exact_text import combination_text
+from ..base import documents
+from ..base.errors import InputError
+from ..base.exact_text import combination_text
 from ..taylor import tape as tp
 from .core import PoissonSystem, build_system
 from .structure import lie_poisson_matrix, log_canonical_matrix
@@ -137,7 +137,7 @@ def check_antisymmetric(matrix: np.ndarray, what: str) -> None:
 
 
 def read_matrix(value, n: int, where: str) -> np.ndarray:
-    """An n x n float matrix from a spec value (`rkhp.documents`: types, finite numbers)."""
+    """An n x n float matrix from a spec value (`rkhp.base.documents`: types, finite numbers)."""
     return np.array(documents.matrix(value, where, n))
 
 

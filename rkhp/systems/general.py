@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
-from ..expressions import parse_expression, variable_names
+from ..base.errors import InputError
+from ..base.expressions import parse_expression, variable_names
 from .core import PoissonSystem
 from .families import PoissonFamily, family_system, register_family, short
 from .program import matrix_program, numeric_function

@@ -29,9 +29,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..bounds import MAX_DIMENSION
-from ..errors import InputError
-from ..expressions import parse_expression, variable_names
+from ..base.bounds import MAX_DIMENSION
+from ..base.errors import InputError
+from ..base.expressions import parse_expression, variable_names
 from .core import PoissonSystem
 from .families import LieAlgebra, family_system
 from .general import PoissonMatrix

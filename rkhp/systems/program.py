@@ -1,6 +1,6 @@
 """Sympy expressions as programs over tape values (`rkhp.taylor.tape`).
 
-The expressions come from the safe reader (`rkhp.expressions`), so they hold only numbers, the
+The expressions come from the safe reader (`rkhp.base.expressions`), so they hold only numbers, the
 variables x1..xn, + - * / and powers, and the functions of the opcode table
 (`rkhp.taylor.ops.FUNCTIONS`), recorded by `rkhp.taylor.tape.RECORDERS`. A program takes a
 list x of n values of any arithmetic with + - * / ** (tape Vars, or the series of

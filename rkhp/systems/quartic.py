@@ -25,7 +25,7 @@ from fractions import Fraction
 from .core import register_realisation
 
 SIXTH = Fraction(1, 6)
-"""Exact, so that the exact elementary differentials (`rkhp.differentials`) read 1/6; a tape
+"""Exact, so that the exact elementary differentials (`rkhp.series.differentials`) read 1/6; a tape
 Var reads it as the float 1/6."""
 
 

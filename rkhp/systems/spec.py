@@ -18,7 +18,7 @@ Keys (docs/spec-files.md): the common keys below, and the spec key of the family
     t_final = 10.0                         # optional (default 10)
     casimirs = ["x1^2 + x2^2 + x3^2"]      # optional
 
-Expressions are read by the safe reader `rkhp.expressions` (no code is ever executed) and recorded
+Expressions are read by the safe reader `rkhp.base.expressions` (no code is ever executed) and recorded
 on a tape (`rkhp.taylor.tape`) that the compiled engine differentiates; the functions allowed are
 those of the opcode table (`rkhp.taylor.ops.FUNCTIONS`).
 """
@@ -30,12 +30,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import documents
-from ..bounds import MAX_DIMENSION
-from ..documents import load_document
-from ..errors import InputError
-from ..expressions import parse_expression as read
-from ..expressions import variable_names
+from ..base import documents
+from ..base.bounds import MAX_DIMENSION
+from ..base.documents import load_document
+from ..base.errors import InputError
+from ..base.expressions import parse_expression as read
+from ..base.expressions import variable_names
 from .core import PoissonSystem
 from .families import FAMILIES, family_system, short
 from .general import general
@@ -56,7 +56,7 @@ def spec_keys() -> tuple[str, ...]:
 
 
 def _read(path: Path) -> dict:
-    """The keys of a spec file, read safely (`rkhp.documents`: size, encoding, nesting, repeated keys)."""
+    """The keys of a spec file, read safely (`rkhp.base.documents`: size, encoding, nesting, repeated keys)."""
     if not path.exists() and not path.is_symlink():
         raise InputError(f"spec file {path} not found")
     data = load_document(path, "spec file")
@@ -68,7 +68,7 @@ def _read(path: Path) -> dict:
 
 
 def parse_expression(text, n: int, where: str):
-    """A sympy expression in x1..xn read by the safe reader (`rkhp.expressions`), with its
+    """A sympy expression in x1..xn read by the safe reader (`rkhp.base.expressions`), with its
     symbols (InputError naming unknown symbols, bad syntax or anything outside the grammar)."""
     names = variable_names(n)
     expr = read(text, names, where=where)

@@ -36,8 +36,8 @@ from itertools import combinations
 
 import numpy as np
 
-from ..errors import InputError
-from ..expressions import variable_names
+from ..base.errors import InputError
+from ..base.expressions import variable_names
 
 #: a numeric residual passes when |r| <= TOLERANCE * (sum of |terms|)
 TOLERANCE = 1e-9

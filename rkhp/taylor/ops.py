@@ -17,7 +17,7 @@ to bound constant sizes. Three kinds:
   has a compiled kernel called from `rkhp.taylor.interpreter._composite`, and declares the
   scratch rows it needs beyond the interpreter's own (:attr:`Op.scratch`).
 
-:data:`FUNCTIONS` are the functions of mathematical text (`rkhp.expressions` reads exactly these
+:data:`FUNCTIONS` are the functions of mathematical text (`rkhp.base.expressions` reads exactly these
 names; `rkhp.systems.spec` records them): the FUNCTION ops with a sympy name, and derived functions
 recorded as compositions of them (tan = sin/cos, ...).
 

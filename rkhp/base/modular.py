@@ -1,6 +1,6 @@
 """Exact linear algebra modulo primes, Chinese remaindering and rational reconstruction.
 
-Used by :mod:`rkhp.relations` (docs/theory.md §8) to find the linear relations among elementary
+Used by :mod:`rkhp.trees.relations` (docs/theory.md §8) to find the linear relations among elementary
 differentials exactly: the evaluations are integers modulo word-sized primes (numpy int64, every
 product of two residues below 2^62), the row-reduced echelon forms modulo two primes are combined
 by the Chinese remainder theorem into residues modulo a ~2^62 modulus, the rationals are recovered

@@ -12,7 +12,7 @@ The F(t) carry linear relations, and F of a combination of F(t) is not a tree-wi
 exactly (§11, "An exact and universal way"):
 
 1. generic systems of the class, as Taylor jets at a base point with residues modulo a prime below
-   2^31 (:mod:`rkhp.differentials`): random antisymmetric pi, random polynomial H, and for the
+   2^31 (:mod:`rkhp.series.differentials`): random antisymmetric pi, random polynomial H, and for the
    general and degenerate classes a random shift of the realisation (§4, §8);
 2. with the step h a graded variable of the jets, the series of K_(k-1) = H_0 + ... + h^(k-1) H_(k-1)
    is computed to h^(k+1); the residual against the target series at h^(k+1) is H_k at the base
@@ -21,7 +21,7 @@ exactly (§11, "An exact and universal way"):
    over the instances. Inconsistent: no tree series exists at that order (:class:`NotATreeSeries`,
    confirmed modulo a second prime); consistent: c is the same for every instance;
 4. radical weights (a tableau with sqrt(3)) live in a number field Q(theta): the computation runs
-   once per root of theta's minimal polynomial modulo p (:class:`rkhp.modular.FieldEmbeddings`),
+   once per root of theta's minimal polynomial modulo p (:class:`rkhp.base.modular.FieldEmbeddings`),
    and the coordinates come back over several primes by CRT and rational reconstruction,
    confirmed modulo a further prime.
 
@@ -41,12 +41,12 @@ from functools import lru_cache
 
 import numpy as np
 
-from .conditions import check_class
+from ..trees.conditions import check_class
 from .differentials import RandomRealisations, monomial_basis
-from .errors import CheckFailed, InputError, NumericalFailure
-from .modular import FieldEmbeddings, Inconsistent, rref_fraction, rref_mod, solve_over_primes, to_residue
-from .relations import shipped_order
-from .trees import LEAF, Tree, check_order, format_tree, trees_of_order, trees_up_to
+from ..base.errors import CheckFailed, InputError, NumericalFailure
+from ..base.modular import FieldEmbeddings, Inconsistent, rref_fraction, rref_mod, solve_over_primes, to_residue
+from ..trees.relations import shipped_order
+from ..trees.rooted import LEAF, Tree, check_order, format_tree, trees_of_order, trees_up_to
 
 #: Largest order of a modified or modifying Hamiltonian (the symmetric relations ship to order 8).
 MAX_ORDER = 8
@@ -129,10 +129,10 @@ def modifying_hamiltonian(character: Mapping, order: int, cls: str = "general", 
 
 def method_character(method, order: int) -> dict[Tree, object]:
     """The character a(t) on T up to ``order`` of a method: a tableau (its exact elementary weights,
-    docs/theory.md §2), or a :class:`rkhp.methods.Method` of kind rkhp (its tableau's) or taylor
+    docs/theory.md §2), or a :class:`rkhp.integrators.methods.Method` of kind rkhp (its tableau's) or taylor
     (the THP of order N, paper Thm 5.1: e(t) for |t| <= N, over T_0 for ``thpN-t0``, 0 elsewhere)."""
-    from .tableau import Tableau
-    from .weights import elementary_weights
+    from ..tableaux.tableau import Tableau
+    from ..tableaux.weights import elementary_weights
 
     if isinstance(method, Tableau):
         tableau = method
@@ -372,7 +372,7 @@ _FAMILY_TEXT = {
 
 def _family(cls: str, n: int, N: int, ncols: int, rng, p: int):
     """jets(trees, max_order, K, basis): F(t) jets of K on random instances of the class
-    (:class:`rkhp.differentials.RandomRealisations`)."""
+    (:class:`rkhp.series.differentials.RandomRealisations`)."""
     return RandomRealisations.of_class(cls, n, N, ncols, rng, p).jets
 
 
@@ -390,7 +390,7 @@ def _symmetric_reduction(n: int):
 
 
 def _read_character(character: Mapping, trees) -> dict:
-    from .tableau import parse_entry
+    from ..tableaux.tableau import parse_entry
 
     out = {}
     for t in trees:
@@ -409,8 +409,8 @@ def _read_character(character: Mapping, trees) -> dict:
 
 
 def _field_of(values):
-    """The number field of the values (None for Q): :func:`rkhp.weights.number_field`."""
-    from .weights import number_field
+    """The number field of the values (None for Q): :func:`rkhp.tableaux.weights.number_field`."""
+    from ..tableaux.weights import number_field
 
     return number_field(values)
 

@@ -1,7 +1,7 @@
 """One grammar of method names, for every command and for the Python API (docs/methods.md).
 
 A method is named by a string (or given as a :class:`Method` or a
-:class:`~rkhp.tableau.Tableau`):
+:class:`~rkhp.tableaux.tableau.Tableau`):
 
 - ``NAME`` or ``FILE``: a tableau (built-in name or alias, or a .toml/.json/.txt tableau file)
   used as an RKHP method (paper §5.2, docs/theory.md §5), e.g. ``rk4`` is RK4 used as an RKHP
@@ -27,8 +27,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from .conditions import conditions_of_order
-from .errors import InputError
+from ..trees.conditions import conditions_of_order
+from ..base.errors import InputError
 
 DEFAULT_METHODS = ("euler", "paper-two-stage", "paper-three-stage", "rk4")
 CLASSICAL_PREFIX = "classical:"
@@ -47,7 +47,7 @@ class Method:
     Attributes:
         name: the name as given (or the tableau's name).
         kind: one of :data:`KINDS`.
-        tableau: a :class:`rkhp.tableau.Tableau` (rkhp and classical kinds), else None.
+        tableau: a :class:`rkhp.tableaux.tableau.Tableau` (rkhp and classical kinds), else None.
         order: the THP order N (taylor kind), else None.
         degenerate: THP over T_0 (``thpN-t0``).
         solver: scipy's name of the method (scipy kind), else None.
@@ -63,19 +63,19 @@ class Method:
     def integrate(self, system, h: float, n_steps: int, x0=None):
         """Run the method; returns a :class:`~rkhp.integrators.trajectory.Trajectory`."""
         if self.kind == "rkhp":
-            from .integrators import integrate
+            from . import integrate
 
             return integrate(system, self.tableau, h, n_steps, x0)
         if self.kind == "taylor":
-            from .integrators.taylor import integrate_taylor
+            from .taylor import integrate_taylor
 
             return integrate_taylor(system, self.order, self.degenerate, h, n_steps, x0)
         if self.kind == "classical":
-            from .integrators.classical import integrate_classical
+            from .classical import integrate_classical
 
             return integrate_classical(system, self.tableau, h, n_steps, x0)
         if self.kind == "implicit-midpoint":
-            from .integrators.classical import integrate_midpoint
+            from .classical import integrate_midpoint
 
             return integrate_midpoint(system, h, n_steps, x0)
         raise InputError(f"{self.name} is scipy's adaptive {self.solver}: it runs by tolerance, not "
@@ -96,7 +96,7 @@ class Method:
             return taylor_orders(self.order, self.degenerate)[condition_class]
         if self.kind == "scipy":
             raise InputError(f"{self.name} is adaptive: it has no order in h")
-        from .verification import class_orders
+        from ..tableaux.verification import class_orders
 
         return class_orders(self.tableau)[condition_class if self.kind == "rkhp" else "general"]
 
@@ -154,8 +154,8 @@ def resolve_method(spec) -> Method:
 
     InputError for an empty or unknown name, or a malformed THP or scipy name.
     """
-    from .tableau import Tableau
-    from .tablefiles import load_tableau
+    from ..tableaux.tableau import Tableau
+    from ..tableaux.files import load_tableau
 
     if isinstance(spec, Method):
         return spec
@@ -216,13 +216,13 @@ def require_steps(methods) -> tuple[Method, ...]:
 def resolve_system(system, realisation: str = "symmetric", x0=None):
     """A :class:`~rkhp.systems.PoissonSystem` from a built-in name, a spec file or a system
     object (kept with its own realisation), started at ``x0`` when given."""
-    from .systems import PoissonSystem, get_system
+    from ..systems import PoissonSystem, get_system
 
     if not isinstance(system, PoissonSystem):
         system = get_system(system, realisation)
     if x0 is None:
         return system
-    from .systems.spec import check_start
+    from ..systems.spec import check_start
 
     started = system.with_x0(x0)
     check_start(started, "x0")

@@ -13,7 +13,7 @@ Schema (TOML, or the same keys in JSON; README "Tableau files"):
     b = ["0", "1"]
     c = ["0", "1/2"]                  # optional; compared with the row sums of A
 
-Entries are numbers or strings (see :func:`rkhp.tableau.parse_entry`). The 60-digit text files
+Entries are numbers or strings (see :func:`rkhp.tableaux.tableau.parse_entry`). The 60-digit text files
 (Feagin's format: sections ``c[k]``, ``b[k]``, ``bhat[k]``, ``A[k,j]``, 0-based indices, rows not
 listed are zero) load as well.
 """
@@ -30,9 +30,9 @@ from pathlib import Path
 
 import tomli_w
 
-from .bounds import MAX_CLAIMED_ORDER, MAX_STAGES
-from .documents import parse_document, read_text
-from .errors import InputError
+from ..base.bounds import MAX_CLAIMED_ORDER, MAX_STAGES
+from ..base.documents import parse_document, read_text
+from ..base.errors import InputError
 from .tableau import Tableau, entry_text, parse_entry
 
 _KEYS = ("name", "aliases", "reference", "order", "degenerate_order", "symmetric_order", "notes", "A",

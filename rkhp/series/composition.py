@@ -1,7 +1,7 @@
 """The series of a composition of RKHP steps, against the Butcher product (docs/theory.md §11).
 
 Paper Proposition 4.2 (``prop:composition``) and Theorem 4.3 (``thm:somewhat``) state that the
-Butcher product a1 * a2 (:func:`rkhp.algebra.compose`, a1 applied first) describes the product of
+Butcher product a1 * a2 (:func:`rkhp.trees.algebra.compose`, a1 applied first) describes the product of
 the jets of bisections. Two compositions can be meant:
 
 - the *groupoid product* of the bisections, i.e. the RKHP steps composed as maps, y -> y' -> y''
@@ -11,7 +11,7 @@ the jets of bisections. Two compositions can be meant:
   Hamilton–Jacobi series restarted from the first bisection instead of the zero section.
 
 :func:`composition_series` computes both generating functions exactly, on generic instances of the
-class modulo primes (as :mod:`rkhp.modified`), as combinations of the F(t) in the canonical basis,
+class modulo primes (as :mod:`rkhp.series.modified`), as combinations of the F(t) in the canonical basis,
 next to the Butcher product. Steps all have the size h. On the generic instances, in a dimension
 where pi is invertible (4):
 
@@ -32,13 +32,13 @@ from fractions import Fraction
 
 import numpy as np
 
-from .algebra import compose
-from .conditions import check_class
+from ..trees.algebra import compose
+from ..trees.conditions import check_class
 from .differentials import JetRing, RandomRealisations, elementary_differentials, monomial_basis
-from .errors import InputError, NumericalFailure
+from ..base.errors import InputError, NumericalFailure
 from .modified import MAX_FIELD_DEGREE, _field_of, _read_character, canonical_basis, canonical_coefficients, check_seed
-from .modular import FieldEmbeddings, Inconsistent, rref_mod, solve_over_primes, to_residue
-from .trees import Tree, check_order, trees_of_order, trees_up_to
+from ..base.modular import FieldEmbeddings, Inconsistent, rref_mod, solve_over_primes, to_residue
+from ..trees.rooted import Tree, check_order, trees_of_order, trees_up_to
 
 #: Largest order of a composition series.
 MAX_ORDER = 7
@@ -56,13 +56,13 @@ class CompositionSeries:
         names: the steps' names, in the order they are applied.
         cls: the class (general, degenerate, symmetric).
         order: largest tree order.
-        basis: per order, the canonical basis trees (rkhp.modified.canonical_basis).
+        basis: per order, the canonical basis trees (rkhp.series.modified.canonical_basis).
         groupoid: c(t) of the steps composed as maps (groupoid product), to ``groupoid_order``.
         groupoid_order: the largest order to which the groupoid product is a tree series.
         restart: c(t) of the Hamilton–Jacobi composition (None when not computed: realisations
             of the class that are not linear in p).
         butcher: c(t) of the Butcher product a_1 * ... * a_k (a_1 applied first, the convention of
-            rkhp.algebra.compose), in the canonical form.
+            rkhp.trees.algebra.compose), in the canonical form.
         butcher_reversed: c(t) of a_k * ... * a_1: the product that paper Proposition 4.2 assigns
             to the composed map, since L_1 . L_2 induces phi_1 o phi_2 (paper eq. (9)).
         checks: primes, instances, dimension, seed.

@@ -33,11 +33,11 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .modular import to_residue
-from .systems.core import realisation as realisation_kind
-from .systems.families import SO3, LieAlgebra
-from .systems.families import family as poisson_family
-from .trees import Tree
+from ..base.modular import to_residue
+from ..systems.core import realisation as realisation_kind
+from ..systems.families import SO3, LieAlgebra
+from ..systems.families import family as poisson_family
+from ..trees.rooted import Tree
 
 # ----------------------------------------------------------------------------- monomial bases
 

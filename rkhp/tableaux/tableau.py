@@ -23,10 +23,10 @@ from functools import cached_property
 
 import mpmath
 
-from .bounds import MAX_DECIMAL_DIGITS, MAX_DECIMAL_EXPONENT
-from .errors import InputError
-from .exact_text import fraction_latex
-from .expressions import ENTRY_LIMITS, parse_expression
+from ..base.bounds import MAX_DECIMAL_DIGITS, MAX_DECIMAL_EXPONENT
+from ..base.errors import InputError
+from ..base.exact_text import fraction_latex
+from ..base.expressions import ENTRY_LIMITS, parse_expression
 
 #: Decimals with at most this many significant digits are read as exact decimals.
 EXACT_DECIMAL_DIGITS = 15

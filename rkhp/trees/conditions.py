@@ -4,7 +4,7 @@ Paper §5 (Theorem "order conditions" and Table 1): an RKHP method with coeffici
 N when a(t) = e(t) = 1/gamma(t) for every tree t of T with |t| <= N (general birealisations), or
 for every t of T_0 under the degeneracy condition (eq. (degen)). The third class, "symmetric"
 (issue 7, docs/theory.md §8), replaces the T_0 conditions of each order by fewer linear combinations of the
-residuals r(t) = gamma(t) a(t) - 1; its rows come from :mod:`rkhp.relations`.
+residuals r(t) = gamma(t) a(t) - 1; its rows come from :mod:`rkhp.trees.relations`.
 
 The Butcher form folds the leaves into c_i = sum_j a_ij (docs/theory.md §2):
 ``b[b[b,b]]`` -> ``sum_{i,j} b_i a_ij c_j^2``. Index letters follow a depth-first walk over the
@@ -16,10 +16,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from fractions import Fraction
 
-from .errors import InputError
-from .exact_text import combination_text, fraction_latex, fraction_text
+from ..base.errors import InputError
+from ..base.exact_text import combination_text, fraction_latex, fraction_text
 from .relations import symmetric_condition_rows
-from .trees import Tree, check_order, trees_of_order
+from .rooted import Tree, check_order, trees_of_order
 
 #: Condition classes: all trees T, the degenerate subset T_0, symmetric birealisations.
 CLASSES = ("general", "degenerate", "symmetric")
@@ -101,7 +101,7 @@ def order_conditions(order: int, cls: str = "general", exact_order: bool = False
 
 
 def symmetric_order_conditions(n: int) -> tuple[OrderCondition, ...]:
-    """The symmetric order conditions of order n (the shipped rows of `rkhp.relations`)."""
+    """The symmetric order conditions of order n (the shipped rows of `rkhp.trees.relations`)."""
     return tuple(OrderCondition(n, trees, weights) for trees, weights in symmetric_condition_rows(n))
 
 

@@ -1,7 +1,7 @@
 """Elementary weights a(t) of every tree up to order N, in one pass, in several arithmetics.
 
 docs/theory.md §2: Phi_i(b) = 1, Phi_i(b[t1..tn]) = prod_k (A Phi(tk))_i, a(t) = b . Phi(t). The trees are
-built as in the enumeration of :mod:`rkhp.trees`: t = b[c1, *rest] from its largest child c1 and
+built as in the enumeration of :mod:`rkhp.trees.rooted`: t = b[c1, *rest] from its largest child c1 and
 r = b[rest], so that
 
     Phi(t) = (A Phi(c1)) * Phi(r)        (elementwise; Phi(b) = 1)
@@ -27,9 +27,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from .errors import InputError
+from ..base.errors import InputError
 from .tableau import Tableau, as_sympy, is_exact, to_fraction
-from .trees import LEAF, Tree, check_order, count_trees, trees_up_to
+from ..trees.rooted import LEAF, Tree, check_order, count_trees, trees_up_to
 
 # ----------------------------------------------------------------------------- the plan
 

@@ -1,5 +1,5 @@
 """Exact rationals and their linear combinations as text: the one formatter of order conditions
-(`rkhp.conditions`), relations (`rkhp.relations`), tableau entries (`rkhp.tableau`), Casimir names
+(`rkhp.trees.conditions`), relations (`rkhp.trees.relations`), tableau entries (`rkhp.tableaux.tableau`), Casimir names
 (`rkhp.systems.families`) and the CLI.
 """
 

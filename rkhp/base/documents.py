@@ -4,9 +4,9 @@ A spec file or a tableau file comes from elsewhere, so before any parser sees it
 "Files"):
 
 - it must be a regular file (not a folder, a device or a named pipe) of at most
-  :data:`rkhp.bounds.MAX_FILE_BYTES`, readable, in UTF-8 (a byte-order mark is allowed) and
+  :data:`rkhp.base.bounds.MAX_FILE_BYTES`, readable, in UTF-8 (a byte-order mark is allowed) and
   without NUL characters;
-- its arrays and tables may nest at most :data:`rkhp.bounds.MAX_NESTING` deep (counted by an
+- its arrays and tables may nest at most :data:`rkhp.base.bounds.MAX_NESTING` deep (counted by an
   iterative scan, so the recursive parsers never see deeper text);
 - JSON objects may not repeat a key, and JSON's non-standard ``NaN``/``Infinity``, numbers that
   overflow a float and integers of more than 30 digits are refused (TOML refuses repeated keys

@@ -22,7 +22,7 @@ from functools import lru_cache
 from math import factorial
 from operator import itemgetter
 
-from .errors import InputError
+from ..base.errors import InputError
 
 #: Largest order that enumeration accepts (order 18 has 1,721,159 trees, about 1 GB).
 MAX_ENUMERATION_ORDER = 18

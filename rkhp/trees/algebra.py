@@ -14,7 +14,7 @@ from collections.abc import Callable, Iterable, Mapping
 from fractions import Fraction
 from math import prod
 
-from .trees import LEAF, Tree, check_order, from_children, trees_up_to
+from .rooted import LEAF, Tree, check_order, from_children, trees_up_to
 
 Combination = dict  # Tree -> coefficient
 Forest = tuple  # tuple[Tree, ...], canonical order

@@ -17,7 +17,7 @@ import stat
 from pathlib import Path
 
 from .errors import InputError
-from .trees import count_trees
+from ..trees.rooted import count_trees
 
 # ----------------------------------------------------------------------------- limits
 

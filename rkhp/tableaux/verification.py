@@ -2,9 +2,9 @@
 
 A tableau has order p in a class when every condition of order <= p holds: in the general class
 a(t) = 1/gamma(t) for all t in T, in the degenerate class for t in T_0, in the symmetric class
-the combinations of :func:`rkhp.conditions.conditions_of_order` (docs/theory.md §2, §8). Every condition
+the combinations of :func:`rkhp.trees.conditions.conditions_of_order` (docs/theory.md §2, §8). Every condition
 up to the order found plus one is checked (at most ``max_order``), from the elementary weights of
-all trees of T computed in one pass (:mod:`rkhp.weights`).
+all trees of T computed in one pass (:mod:`rkhp.tableaux.weights`).
 
 How each residual is decided (``Verification.tolerance_rule``):
 
@@ -29,12 +29,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .bounds import BYTES_PER_TREE, check_tree_memory
-from .conditions import CLASSES, OrderCondition, check_class, conditions_of_order
-from .errors import InputError
+from ..base.bounds import BYTES_PER_TREE, check_tree_memory
+from ..trees.conditions import CLASSES, OrderCondition, check_class, conditions_of_order
+from ..base.errors import InputError
 from .tableau import Tableau
-from .tablefiles import load_tableau
-from .trees import MAX_ENUMERATION_ORDER, Tree, check_order
+from .files import load_tableau
+from ..trees.rooted import MAX_ENUMERATION_ORDER, Tree, check_order
 from .weights import ExactArithmetic, NoNumberField, arithmetic_for, tree_plan, weights_by_order
 
 #: Tolerance factor on the rounding unit u (float64 or the given digits).
@@ -245,7 +245,7 @@ def _tolerance(arithmetic, tableau: Tableau) -> tuple[float, str]:
 
 
 def available_classes() -> tuple[str, ...]:
-    """The condition classes whose conditions can be built (symmetric needs rkhp.relations)."""
+    """The condition classes whose conditions can be built (symmetric needs rkhp.trees.relations)."""
     out = []
     for cls in CLASSES:
         try:

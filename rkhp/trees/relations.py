@@ -9,10 +9,10 @@ a basis P_n of the annihilator of L_n; with r(t) = gamma(t) a(t) - 1, d_t = r(t)
 
 Derivation (:func:`derive_relations`, ``rkhp relations --regenerate``), exact throughout:
 1. F(t) at the base point on random truncated Taylor jets of generic systems with constant pi in
-   dimension >= 6 (:mod:`rkhp.differentials`), residues modulo primes below 2^31;
+   dimension >= 6 (:mod:`rkhp.series.differentials`), residues modulo primes below 2^31;
 2. per order, the null space of the stacked evaluations modulo primes, in reduced row echelon
    form, combined by the Chinese remainder theorem (two primes: a modulus near 2^62) and recovered
-   as rationals by rational reconstruction (:mod:`rkhp.modular`), then confirmed modulo a third
+   as rationals by rational reconstruction (:mod:`rkhp.base.modular`), then confirmed modulo a third
    prime; more primes are added until a further prime confirms;
 3. checks: exact integer evaluation of every relation on fresh instances, and the relation space of
    a second family (Lie–Poisson so(3)*, symmetric realisation alpha = phi(K(p)) x, docs/theory.md §4),
@@ -29,11 +29,11 @@ from functools import lru_cache
 from math import gcd, lcm
 from pathlib import Path
 
-from .bounds import seed as check_seed
-from .errors import InputError, NumericalFailure
-from .exact_text import combination_text, fraction_text
-from .executors import InProcess
-from .trees import Tree, check_order, format_tree, parse_tree, trees_of_order
+from ..base.bounds import seed as check_seed
+from ..base.errors import InputError, NumericalFailure
+from ..base.exact_text import combination_text, fraction_text
+from ..base.executors import InProcess
+from .rooted import Tree, check_order, format_tree, parse_tree, trees_of_order
 
 #: Orders whose relations ship in ``rkhp/data/symmetric_relations.json``.
 MAX_SHIPPED_ORDER = 8
@@ -103,7 +103,7 @@ def shipped_order(n: int) -> OrderRelations:
 @lru_cache(maxsize=1)
 def shipped_relations() -> RelationData:
     """The relations shipped in ``rkhp/data/symmetric_relations.json``, validated."""
-    path = Path(__file__).with_name("data") / DATA_FILE
+    path = Path(__file__).parent.parent / "data" / DATA_FILE
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
@@ -159,7 +159,7 @@ def conditions_from_relations(trees, relations) -> tuple[tuple[tuple[Tree, ...],
     the weights on r are P_t / (gamma(t) sigma(t)); returned in reduced echelon form over the tree
     order, each row scaled to coprime integers with a positive leading entry.
     """
-    from .modular import rref_fraction
+    from ..base.modular import rref_fraction
 
     ncols = len(trees)
     annihilator = _nullspace_fraction(relations, ncols)
@@ -174,7 +174,7 @@ def conditions_from_relations(trees, relations) -> tuple[tuple[tuple[Tree, ...],
 
 
 def _nullspace_fraction(rows, ncols: int) -> list[list[Fraction]]:
-    from .modular import rref_fraction
+    from ..base.modular import rref_fraction
 
     red, pivots = rref_fraction(rows) if rows else ((), ())
     free = [c for c in range(ncols) if c not in pivots]
@@ -217,7 +217,7 @@ def derive_relations(max_order: int, seed: int = 0, dim: int = 6, extra: int = 1
         cross_check: check the relation space on Lie–Poisson so(3)* (symmetric realisation).
         exact_instances: instances on which each relation is checked in exact integers.
         progress: optional callable(step: str) told about each stage.
-        executor: where the independent evaluations run (rkhp.executors; default: in this
+        executor: where the independent evaluations run (rkhp.base.executors; default: in this
             process): the first three primes and the Lie–Poisson instances at once, then one prime
             at a time, then the exact check; the result does not depend on it (each prime has its
             own seeded stream).
@@ -225,7 +225,7 @@ def derive_relations(max_order: int, seed: int = 0, dim: int = 6, extra: int = 1
     """
     import numpy as np
 
-    from .modular import PRIMES
+    from ..base.modular import PRIMES
 
     check_order(max_order, MAX_REGENERATE_ORDER, what="relation order")
     if dim < 2:
@@ -292,7 +292,7 @@ def _prime_null_spaces(all_trees, max_order: int, dim: int, batch: int, stream, 
     """A task: the null spaces modulo p of F(t) on ``batch`` constant-pi instances from ``stream``."""
     import numpy as np
 
-    from .differentials import constant_pi_values
+    from ..series.differentials import constant_pi_values
 
     values = constant_pi_values(all_trees, max_order, dim, batch, np.random.default_rng(stream), p)
     return _null_spaces(values, max_order, p)
@@ -302,7 +302,7 @@ def _general_null_spaces(all_trees, max_order: int, family: str, batch: int, str
     """A task: the null spaces modulo p of F(t) on ``batch`` instances of another ``family``."""
     import numpy as np
 
-    from .differentials import general_values
+    from ..series.differentials import general_values
 
     values = general_values(all_trees, max_order, family, batch, np.random.default_rng(stream), p)
     return _null_spaces(values, max_order, p)
@@ -312,7 +312,7 @@ def _null_spaces(values, max_order: int, p: int) -> dict:
     """Per order, the RREF basis modulo p of the relations among the evaluated F(t)."""
     import numpy as np
 
-    from .modular import nullspace_mod
+    from ..base.modular import nullspace_mod
 
     out = {}
     for n in range(1, max_order + 1):
@@ -329,7 +329,7 @@ def _reconstruct(spaces, primes, max_order):
 
     Returns (relations by order, primes used) or None when reconstruction fails or disagrees.
     """
-    from .modular import crt_pair, rational_reconstruction, to_residue
+    from ..base.modular import crt_pair, rational_reconstruction, to_residue
 
     relations = {}
     for n in range(1, max_order + 1):
@@ -361,7 +361,7 @@ def _exact_check(relations, all_trees, max_order, dim, count, stream) -> None:
     """Every relation, evaluated in exact integers on ``count`` fresh constant-pi instances, is 0."""
     import numpy as np
 
-    from .differentials import constant_pi_values
+    from ..series.differentials import constant_pi_values
 
     exact = constant_pi_values(all_trees, max_order, dim, count, np.random.default_rng(stream), None)
     for n in range(1, max_order + 1):
@@ -379,7 +379,7 @@ def _lie_poisson_check(relations, other, max_order) -> dict:
     prime) must contain the relations."""
     import numpy as np
 
-    from .modular import PRIMES, to_residue
+    from ..base.modular import PRIMES, to_residue
 
     p = PRIMES[0]
     out = {}
@@ -398,7 +398,7 @@ def _in_row_space(rows, basis, p):
     """For each row, whether it lies in the row space of ``basis`` modulo p."""
     import numpy as np
 
-    from .modular import rref_mod
+    from ..base.modular import rref_mod
 
     rank = rref_mod(basis, p)[0].shape[0] if basis.size else 0
     out = []
