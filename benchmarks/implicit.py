@@ -26,8 +26,8 @@ import numpy as np
 import scipy.linalg
 
 from rkhp.integrators import integrate
-from rkhp.integrators.rkhp_method import stage_solve, tableau_arrays
 from rkhp.integrators.methods import resolve_method
+from rkhp.integrators.rkhp_method import stage_solve, tableau_arrays
 from rkhp.systems import get_system
 
 REPEATS = 5

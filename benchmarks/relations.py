@@ -13,9 +13,9 @@ import time
 
 import numpy as np
 
-from rkhp.series.differentials import constant_pi_values, general_values
 from rkhp.base.modular import PRIMES
-from rkhp.trees.relations import derive_relations
+from rkhp.series.differentials import constant_pi_values, general_values
+from rkhp.series.relation_derivation import derive_relations
 from rkhp.trees.rooted import trees_of_order
 
 

@@ -23,8 +23,8 @@ def compose(methods, order, degenerate, symmetric, seed, fmt):
     """Compose RKHP steps of size h (tableau names or files, or thpN, applied left to right; `exact`
     is the exact flow) and compare the generating function of the composition with the Butcher products
     of the methods' characters. Exact, on generic systems modulo primes (docs/modified.md)."""
-    from rkhp.series.composition import MAX_ORDER, composition_series
     from rkhp.base.errors import InputError
+    from rkhp.series.composition import MAX_ORDER, composition_series
     from rkhp.trees.rooted import check_order
 
     cls = _class_of(degenerate, symmetric)

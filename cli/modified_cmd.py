@@ -14,9 +14,9 @@ EXACT = "exact"
 
 def character_of(name: str, order: int):
     """(name, character a(t) on T up to `order`) of a method name of docs/methods.md, or of `exact`."""
-    from rkhp.trees.algebra import exact_flow_character
     from rkhp.integrators.methods import resolve_method
     from rkhp.series.modified import method_character
+    from rkhp.trees.algebra import exact_flow_character
 
     if name == EXACT:
         return EXACT, exact_flow_character(order)

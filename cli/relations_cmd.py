@@ -36,7 +36,7 @@ def relations(order, regenerate, seed, output, workers, scheduler, fmt):
     relations (sum c_t F(t) = 0) and the conditions (sum w_t r(t) = 0, r(t) = gamma(t) a(t) - 1).
     """
     from rkhp.base.executors import open_executor
-    from rkhp.trees.relations import relations_for
+    from rkhp.series.relation_derivation import relations_for
 
     if output and not regenerate:
         raise click.UsageError("--output writes freshly derived relations: add --regenerate")

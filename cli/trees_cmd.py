@@ -4,10 +4,17 @@ from __future__ import annotations
 
 import click
 
-from rkhp.base.bounds import BYTES_PER_CONDITION, BYTES_PER_PRINTED_TREE, check_tree_memory
-from rkhp.trees.conditions import order_conditions
+from rkhp.base.bounds import BYTES_PER_CONDITION, BYTES_PER_PRINTED_TREE
 from rkhp.base.exact_text import fraction_text
-from rkhp.trees.rooted import MAX_COUNT_ORDER, MAX_ENUMERATION_ORDER, check_order, count_trees, trees_up_to
+from rkhp.trees.conditions import order_conditions
+from rkhp.trees.rooted import (
+    MAX_COUNT_ORDER,
+    MAX_ENUMERATION_ORDER,
+    check_order,
+    check_tree_memory,
+    count_trees,
+    trees_up_to,
+)
 
 from .options import console, emit_json, format_option, integer
 from .render import print_table

@@ -14,11 +14,11 @@ from fractions import Fraction
 
 import pytest
 
-from rkhp.trees.algebra import exact_flow_character
-from rkhp.series.composition import composition_series
 from rkhp.base.errors import InputError
+from rkhp.series.composition import composition_series
 from rkhp.series.modified import method_character
 from rkhp.tableaux.files import load_tableau
+from rkhp.trees.algebra import exact_flow_character
 from rkhp.trees.rooted import parse_tree
 
 T = parse_tree

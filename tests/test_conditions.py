@@ -6,8 +6,8 @@ from fractions import Fraction
 
 import pytest
 
-from rkhp.trees.conditions import butcher_form, conditions_of_order, latex_form, order_conditions
 from rkhp.base.errors import InputError
+from rkhp.trees.conditions import butcher_form, conditions_of_order, latex_form, order_conditions
 from rkhp.trees.rooted import parse_tree as P
 
 # The paper's Table 1: the 8 trees of T_0 up to order 5 and their conditions (LaTeX as printed).

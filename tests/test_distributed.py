@@ -127,10 +127,11 @@ def test_ensemble_on_the_cluster_equals_the_single_process_run(cluster):
 
 def test_stress_bench_and_relations_on_the_cluster_equal_the_single_process_runs(cluster):
     from rkhp.integrators.methods import resolve_methods
-    from rkhp.trees.relations import derive_relations, shipped_relations
+    from rkhp.series.relation_derivation import derive_relations
     from rkhp.studies.bench import bench
     from rkhp.studies.stress import stress
     from rkhp.systems import get_system
+    from rkhp.trees.relations import shipped_relations
 
     system = get_system("lotka-volterra")
     methods = resolve_methods(["paper-three-stage"])

@@ -22,8 +22,8 @@ from rkhp.integrators.failure import Failure
 from rkhp.integrators.methods import resolve_method
 from rkhp.studies.converge import converge
 from rkhp.systems import get_system
-from rkhp.tableaux.tableau import Tableau
 from rkhp.tableaux.files import save_tableau
+from rkhp.tableaux.tableau import Tableau
 
 IMPLICIT_BUILTINS = ("paper-implicit", "gauss2", "gauss3", "radau-iia3", "lobatto-iiia3",
                      "lobatto-iiic3")

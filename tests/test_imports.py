@@ -198,13 +198,26 @@ def test_no_import_cycle_among_rkhp_modules():
     assert not cycles, [[(a, sorted(edges[a] & set(c))) for a in c] for c in cycles]
 
 
+ABOVE_BASE = ("rkhp.trees", "rkhp.tableaux", "rkhp.series", "rkhp.systems", "rkhp.integrators",
+              "rkhp.studies", "rkhp.search")
+
+
 @pytest.mark.parametrize("package,forbidden", [
-    ("rkhp.taylor", ("rkhp.systems", "rkhp.integrators", "rkhp.studies", "rkhp.search", "rkhp.integrators.methods")),
-    ("rkhp.systems", ("rkhp.integrators", "rkhp.studies", "rkhp.search", "rkhp.integrators.methods")),
+    ("rkhp.taylor", ("rkhp.base",) + ABOVE_BASE),
+    ("rkhp.base", ABOVE_BASE),
+    ("rkhp.trees", ABOVE_BASE[1:] + ("rkhp.taylor",)),
+    ("rkhp.tableaux", ABOVE_BASE[2:] + ("rkhp.taylor",)),
+    ("rkhp.systems", ("rkhp.trees", "rkhp.tableaux", "rkhp.series", "rkhp.integrators", "rkhp.studies",
+                      "rkhp.search")),
+    ("rkhp.series", ("rkhp.integrators", "rkhp.studies", "rkhp.search")),
+    ("rkhp.search", ("rkhp.integrators", "rkhp.studies")),
     ("rkhp.integrators", ("rkhp.studies", "rkhp.search")),
 ])
 def test_layers_point_one_way(package, forbidden):
-    """rkhp.taylor is below rkhp.systems, which is below rkhp.integrators, below the studies."""
+    """The rooms stand in layers (docs/engine.md "Layers and imports"): rkhp.taylor at the ground,
+    then rkhp.base; the order conditions (rkhp.trees, then rkhp.tableaux) stand beside the Poisson
+    systems and below the series evaluated on them (rkhp.series), the search and the integrators,
+    with the studies on top."""
     edges = _edges()
     bad = {m: sorted(t for t in edges[m] if t.startswith(forbidden))
            for m in MODULES if m == package or m.startswith(package + ".")}

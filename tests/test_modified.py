@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 import sympy
 
-from rkhp.trees.algebra import exact_flow_character
 from rkhp.base.errors import InputError
+from rkhp.base.modular import FieldEmbeddings, reconstruct_coordinates
 from rkhp.series.modified import (
     NotATreeSeries,
     canonical_basis,
@@ -25,8 +25,8 @@ from rkhp.series.modified import (
     modified_hamiltonian,
     modifying_hamiltonian,
 )
-from rkhp.base.modular import FieldEmbeddings, reconstruct_coordinates
 from rkhp.tableaux.files import load_tableau
+from rkhp.trees.algebra import exact_flow_character
 from rkhp.trees.rooted import LEAF, count_trees, parse_tree, trees_of_order, trees_up_to
 
 T = parse_tree

@@ -21,8 +21,8 @@ from hypothesis import strategies as st
 from rkhp.base import bounds, documents
 from rkhp.base.errors import InputError
 from rkhp.base.expressions import CONSTANTS, FUNCTIONS, parse_expression
-from rkhp.tableaux.tableau import Tableau, entry_text, parse_entry
 from rkhp.tableaux.files import load_file, save_tableau
+from rkhp.tableaux.tableau import Tableau, entry_text, parse_entry
 from rkhp.trees.rooted import Tree, format_tree, parse_tree, trees_up_to
 
 FAST = settings(max_examples=300, deadline=None, derandomize=True)

@@ -11,11 +11,19 @@ import numpy as np
 import pytest
 
 from rkhp.base.errors import InputError
-from rkhp.base.modular import PRIMES, crt_pair, nullspace_mod, rational_reconstruction, rref_fraction, rref_mod, to_residue
+from rkhp.base.modular import (
+    PRIMES,
+    crt_pair,
+    nullspace_mod,
+    rational_reconstruction,
+    rref_fraction,
+    rref_mod,
+    to_residue,
+)
+from rkhp.series.relation_derivation import derive_relations
 from rkhp.trees.relations import (
     MAX_SHIPPED_ORDER,
     conditions_from_relations,
-    derive_relations,
     relation_space,
     shipped_relations,
     symmetric_condition_rows,

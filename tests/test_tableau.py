@@ -12,8 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rkhp.base.errors import InputError
-from rkhp.tableaux.tableau import GivenDecimal, Tableau, parse_entry
 from rkhp.tableaux.files import builtin_names, load_file, load_tableau, save_tableau
+from rkhp.tableaux.tableau import GivenDecimal, Tableau, parse_entry
 
 PUBLISHED = Path(__file__).resolve().parent / "data" / "published"
 

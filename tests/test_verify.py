@@ -9,10 +9,10 @@ from pathlib import Path
 import pytest
 
 from rkhp.base.errors import InputError
-from rkhp.tableaux.tableau import Tableau
 from rkhp.tableaux.files import load_tableau
-from rkhp.trees.rooted import count_trees
+from rkhp.tableaux.tableau import Tableau
 from rkhp.tableaux.verification import verify
+from rkhp.trees.rooted import count_trees
 
 HNW = "Hairer, Norsett & Wanner, Solving ODEs I (1993)"
 HW = "Hairer & Wanner, Solving ODEs II (1996)"

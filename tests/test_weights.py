@@ -10,9 +10,8 @@ import sympy
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rkhp.tableaux.tableau import Tableau
 from rkhp.tableaux.files import load_tableau
-from rkhp.trees.rooted import count_trees, in_t0, parse_tree, trees_up_to
+from rkhp.tableaux.tableau import Tableau
 from rkhp.tableaux.weights import (
     FixedPointArithmetic,
     elementary_weights,
@@ -21,6 +20,7 @@ from rkhp.tableaux.weights import (
     tree_plan,
     weights_by_order,
 )
+from rkhp.trees.rooted import count_trees, in_t0, parse_tree, trees_up_to
 
 
 def direct_weight(A, b, t):

@@ -17,7 +17,6 @@ import stat
 from pathlib import Path
 
 from .errors import InputError
-from ..trees.rooted import count_trees
 
 # ----------------------------------------------------------------------------- limits
 
@@ -232,13 +231,6 @@ BYTES_PER_TREE = 500
 BYTES_PER_PRINTED_TREE = 2000
 #: bytes per order condition that `rkhp conditions` prints (3.4 KB measured at order 13, JSON)
 BYTES_PER_CONDITION = 4000
-
-
-def check_tree_memory(order: int, degenerate: bool = False, what: str = "the enumeration",
-                      per_tree: float = BYTES_PER_TREE) -> None:
-    """The memory check of work on every tree of order <= `order` (of T, or T_0), `per_tree` bytes each."""
-    total = sum(count_trees(n, degenerate) for n in range(1, order + 1))
-    check_memory(float(total) * per_tree, f"{what} ({total} trees up to order {order})")
 
 
 # ----------------------------------------------------------------------------- write targets

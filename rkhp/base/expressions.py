@@ -27,8 +27,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
-from .errors import InputError
 from ..taylor.ops import FUNCTIONS as _TAPE_FUNCTIONS
+from .errors import InputError
 
 #: function name -> name of the sympy function it builds (documented in README "Expressions"):
 #: the functions of the opcode table `rkhp.taylor.ops`, which the engine can differentiate

@@ -27,8 +27,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from ..trees.conditions import conditions_of_order
 from ..base.errors import InputError
+from ..trees.conditions import conditions_of_order
 
 DEFAULT_METHODS = ("euler", "paper-two-stage", "paper-three-stage", "rk4")
 CLASSICAL_PREFIX = "classical:"
@@ -154,8 +154,8 @@ def resolve_method(spec) -> Method:
 
     InputError for an empty or unknown name, or a malformed THP or scipy name.
     """
-    from ..tableaux.tableau import Tableau
     from ..tableaux.files import load_tableau
+    from ..tableaux.tableau import Tableau
 
     if isinstance(spec, Method):
         return spec

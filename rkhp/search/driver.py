@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..base import bounds
-from ..trees.conditions import check_class
 from ..base.errors import InputError
+from ..trees.conditions import check_class
 from .multistart import Problem, Restarts, run_restarts
 from .optimise import KnownMethod, known_methods, minimise_error, refine_optimum
 from .polish import polish

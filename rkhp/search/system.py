@@ -18,8 +18,8 @@ from fractions import Fraction
 
 import numpy as np
 
-from ..trees.conditions import condition_trees, order_conditions
 from ..base.errors import InputError
+from ..trees.conditions import condition_trees, order_conditions
 from ..trees.rooted import Tree
 
 #: Largest order a search accepts: the conditions over T number 200 up to order 8, 719 more at 9.

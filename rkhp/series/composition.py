@@ -32,13 +32,14 @@ from fractions import Fraction
 
 import numpy as np
 
+from ..base.bounds import seed as check_seed
+from ..base.errors import InputError, NumericalFailure
+from ..base.modular import FieldEmbeddings, Inconsistent, rref_mod, solve_over_primes, to_residue
 from ..trees.algebra import compose
 from ..trees.conditions import check_class
-from .differentials import JetRing, RandomRealisations, elementary_differentials, monomial_basis
-from ..base.errors import InputError, NumericalFailure
-from .modified import MAX_FIELD_DEGREE, _field_of, _read_character, canonical_basis, canonical_coefficients, check_seed
-from ..base.modular import FieldEmbeddings, Inconsistent, rref_mod, solve_over_primes, to_residue
 from ..trees.rooted import Tree, check_order, trees_of_order, trees_up_to
+from .differentials import JetRing, RandomRealisations, elementary_differentials, monomial_basis
+from .modified import MAX_FIELD_DEGREE, canonical_basis, canonical_coefficients, field_of, read_character
 
 #: Largest order of a composition series.
 MAX_ORDER = 7
@@ -100,8 +101,8 @@ def composition_series(characters, order: int, cls: str = "symmetric", names=Non
     if len(characters) < 2:
         raise InputError("a composition needs at least two steps")
     all_trees = trees_up_to(order)
-    chars = [_read_character(a, all_trees) for a in characters]
-    field_ = _field_of([v for a in chars for v in a.values()])
+    chars = [read_character(a, all_trees) for a in characters]
+    field_ = field_of([v for a in chars for v in a.values()])
     embeddings = FieldEmbeddings(field_)
     if embeddings.degree > MAX_FIELD_DEGREE:
         raise InputError(f"the weights lie in a number field of degree {embeddings.degree} (at most "

@@ -41,12 +41,13 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..trees.conditions import check_class
-from .differentials import RandomRealisations, monomial_basis
+from ..base.bounds import seed as check_seed
 from ..base.errors import CheckFailed, InputError, NumericalFailure
 from ..base.modular import FieldEmbeddings, Inconsistent, rref_fraction, rref_mod, solve_over_primes, to_residue
+from ..trees.conditions import check_class
 from ..trees.relations import shipped_order
 from ..trees.rooted import LEAF, Tree, check_order, format_tree, trees_of_order, trees_up_to
+from .differentials import RandomRealisations, monomial_basis
 
 #: Largest order of a modified or modifying Hamiltonian (the symmetric relations ship to order 8).
 MAX_ORDER = 8
@@ -192,24 +193,17 @@ class _Problem:
     seed: int
 
 
-def check_seed(seed) -> int:
-    """A seed of the generic instances: a non-negative integer."""
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise InputError(f"the seed must be a non-negative integer, got {seed!r}")
-    return seed
-
-
 def _series(kind: str, character: Mapping, order: int, cls: str, seed: int) -> HamiltonianSeries:
     check_seed(seed)
     check_class(cls)
     check_order(order, MAX_ORDER, what="order of the modified Hamiltonian")
     trees = trees_up_to(order, degenerate=cls != "general")
-    method = _read_character(character, trees)
+    method = read_character(character, trees)
     exact = {t: t.e for t in trees}
     inner, target = (exact, method) if kind == "modified" else (method, exact)
     if _is_zero(inner[LEAF]):
         raise InputError("a(b) = 0: the method is not consistent, its steps are no near-identity flows")
-    embeddings = FieldEmbeddings(_field_of(method.values()))
+    embeddings = FieldEmbeddings(field_of(method.values()))
     if embeddings.degree > MAX_FIELD_DEGREE:
         raise InputError(f"the weights lie in a number field of degree {embeddings.degree}: the exact solve runs "
                          f"once per embedding and handles degree <= {MAX_FIELD_DEGREE}")
@@ -389,7 +383,7 @@ def _symmetric_reduction(n: int):
     return rows, tuple(o.trees[k] for k in pivots)
 
 
-def _read_character(character: Mapping, trees) -> dict:
+def read_character(character: Mapping, trees) -> dict:
     from ..tableaux.tableau import parse_entry
 
     out = {}
@@ -408,7 +402,7 @@ def _read_character(character: Mapping, trees) -> dict:
     return out
 
 
-def _field_of(values):
+def field_of(values):
     """The number field of the values (None for Q): :func:`rkhp.tableaux.weights.number_field`."""
     from ..tableaux.weights import number_field
 

@@ -27,8 +27,8 @@ from ..base import bounds
 from ..base.errors import InputError
 from ..base.executors import InProcess, run_all
 from ..integrators.failure import Failure
-from ..integrators.modified_energy import ModifiedEnergy, method_series
 from ..integrators.methods import condition_class, require_steps, resolve_method, resolve_methods, resolve_system
+from ..integrators.modified_energy import ModifiedEnergy, method_series
 from ..series.modified import MAX_ORDER, method_character
 from .converge import check_t_final, study_methods
 from .fit import fit_order

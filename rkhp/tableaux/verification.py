@@ -29,12 +29,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..base.bounds import BYTES_PER_TREE, check_tree_memory
-from ..trees.conditions import CLASSES, OrderCondition, check_class, conditions_of_order
+from ..base.bounds import BYTES_PER_TREE
 from ..base.errors import InputError
-from .tableau import Tableau
+from ..trees.conditions import CLASSES, OrderCondition, check_class, conditions_of_order
+from ..trees.rooted import MAX_ENUMERATION_ORDER, Tree, check_order, check_tree_memory
 from .files import load_tableau
-from ..trees.rooted import MAX_ENUMERATION_ORDER, Tree, check_order
+from .tableau import Tableau
 from .weights import ExactArithmetic, NoNumberField, arithmetic_for, tree_plan, weights_by_order
 
 #: Tolerance factor on the rounding unit u (float64 or the given digits).

@@ -28,8 +28,8 @@ from functools import lru_cache
 import numpy as np
 
 from ..base.errors import InputError
-from .tableau import Tableau, as_sympy, is_exact, to_fraction
 from ..trees.rooted import LEAF, Tree, check_order, count_trees, trees_up_to
+from .tableau import Tableau, as_sympy, is_exact, to_fraction
 
 # ----------------------------------------------------------------------------- the plan
 

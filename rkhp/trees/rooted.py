@@ -22,6 +22,7 @@ from functools import lru_cache
 from math import factorial
 from operator import itemgetter
 
+from ..base.bounds import BYTES_PER_TREE, check_memory
 from ..base.errors import InputError
 
 #: Largest order that enumeration accepts (order 18 has 1,721,159 trees, about 1 GB).
@@ -362,3 +363,10 @@ def count_trees(n: int, degenerate: bool = False) -> int:
     """Number of trees of order n in T (OEIS A000081) or in T_0, without building any tree."""
     check_order(n, MAX_COUNT_ORDER)
     return _counts(max(n, 16), degenerate)[n]
+
+
+def check_tree_memory(order: int, degenerate: bool = False, what: str = "the enumeration",
+                      per_tree: float = BYTES_PER_TREE) -> None:
+    """The memory check of work on every tree of order <= `order` (of T, or T_0), `per_tree` bytes each."""
+    total = sum(count_trees(n, degenerate) for n in range(1, order + 1))
+    check_memory(float(total) * per_tree, f"{what} ({total} trees up to order {order})")
