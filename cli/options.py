@@ -95,6 +95,8 @@ SEED = integer(0, bounds.MAX_SEED, "seed")
 POSITIVE = real(0.0, low_open=True, name="positive number")
 #: the final time T
 T_FINAL = real(0.0, low_open=True, name="T", label="--t-final (final time T)")
+#: a signed step or final time of one run (negative: backwards; zero is refused by the step plan)
+SIGNED = real(name="number")
 #: the number of steps of one run
 STEPS = integer(1, bounds.MAX_STEPS, "steps")
 #: an initial state: finite numbers

@@ -16,8 +16,14 @@ _CLASS_NAMES = {"general": "general", "degenerate": "degenerate", "symmetric": "
 def show(tableau, fmt):
     """Show a tableau: the Butcher array c | A / b (exact entries and decimals), its source and
     the orders it claims (check them with `rkhp verify`)."""
+    from rkhp.tableaux.compositions import is_composition_name
     from rkhp.tableaux.files import load_tableau
 
+    if is_composition_name(tableau):
+        from .composition_views import show_composition
+
+        show_composition(tableau, fmt)
+        return
     tab = load_tableau(tableau)
     if fmt == "json":
         emit_json(tableau_json(tab))

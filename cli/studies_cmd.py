@@ -161,8 +161,8 @@ def _render_converge(study, plot) -> None:
               "floor = round-off floor, drift = order drift, <ref = below the reference's accuracy)")
     out.print("[bold]verdicts[/]")
     for m in study.methods:
-        kind = {"rkhp": study.condition_class, "taylor": "THP", "implicit-midpoint": "midpoint rule"}.get(
-            m.kind, "general")
+        kind = {"rkhp": study.condition_class, "taylor": "THP", "implicit-midpoint": "midpoint rule",
+                "composition": f"composition, {study.condition_class}"}.get(m.kind, "general")
         left = ", ".join(f"row {i} {why}" for i, why in m.fit.excluded) or "none"
         basis = f"{kind} order"
         if m.realisation_bound is not None:

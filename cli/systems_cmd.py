@@ -8,10 +8,9 @@ from rkhp.base import bounds
 
 from .options import (
     METHOD_HELP,
-    POSITIVE,
     SEED,
+    SIGNED,
     STEPS,
-    T_FINAL,
     compile_notice,
     console,
     emit_json,
@@ -139,9 +138,10 @@ def integration_report(system, trajectory, method: str, h: float, steps: int) ->
 @click.argument("system")
 @click.option("--method", "method", required=True, metavar="METHOD", help=METHOD_HELP)
 @click.option("--steps", type=STEPS, default=None, help="Number of steps over [0, T].")
-@click.option("--h", "h", type=POSITIVE, default=None,
-              help="Step size; it must divide T (steps = T / h; docs/input.md).")
-@click.option("--t-final", type=T_FINAL, default=None, help="Final time T (default: the system's).")
+@click.option("--h", "h", type=SIGNED, default=None,
+              help="Step size; it must divide T (steps = T / h; docs/input.md); negative runs backwards.")
+@click.option("--t-final", type=SIGNED, default=None,
+              help="Final time T (default: the system's, negated for a negative --h); negative runs backwards.")
 @x0_option()
 @click.option("--modified", "modified_order", type=integer(1, name="N"), default=None, metavar="N",
               help="Also report max over the run of |H~_N(y_n) - H~_N(y_0)|, H~_N the method's modified "
@@ -157,7 +157,9 @@ def integrate(system, method, steps, h, t_final, x0, modified_order, realisation
         raise InputError("give exactly one of --steps and --h")
     poisson = resolve_system(system, realisation, parse_x0(x0))
     chosen = resolve_method(method)
-    n, step = bounds.step_plan(poisson.t_final if t_final is None else t_final, steps, h)
+    if t_final is None:
+        t_final = -poisson.t_final if h is not None and h < 0 else poisson.t_final
+    n, step = bounds.step_plan(t_final, steps, h)
     bounds.check_trajectory(n, poisson.dim)
     series = None
     if modified_order is not None:

@@ -23,10 +23,17 @@ _CLASS_SETS = {"general": "general (T)", "degenerate": "degenerate (T_0)"}
 @format_option("table", "json")
 def verify(tableau, max_order, precision, show, fmt):
     """Verify the order of a tableau over T (general) and T_0 (degenerate), exactly or at a
-    stated tolerance, with the failing trees and the principal error (paper §5)."""
+    stated tolerance, with the failing trees and the principal error (paper §5); or the order and
+    symmetry of a composition (docs/compositions.md)."""
+    from rkhp.tableaux.compositions import is_composition_name
     from rkhp.tableaux.files import load_tableau
     from rkhp.tableaux.verification import verify as run_verify
 
+    if is_composition_name(tableau):
+        from .composition_views import verify_composition
+
+        verify_composition(tableau, fmt)
+        return
     tab = load_tableau(tableau)
     with progress(fmt != "json") as bar:
         task = bar.add_task(f"verifying {tab.name}", total=None)
@@ -127,7 +134,8 @@ def _exact_cell(text: str) -> str:
 @format_option("table", "json")
 @click.argument("name", required=False, metavar="")
 def tables(precision, fmt, name):
-    """List the built-in tableaux with stages, kind, verified and claimed orders."""
+    """List the built-in tableaux with stages, kind, verified and claimed orders, and the built-in
+    compositions with their orders."""
     if name is not None:  # one tableau is `rkhp show`'s (issue 15: `rkhp tables rk4` said only "extra argument")
         from rkhp.base.errors import InputError
 
@@ -148,11 +156,20 @@ def tables(precision, fmt, name):
             result = run_verify(tab, precision=chosen)
             rows.append((tab, result))
             bar.advance(task)
+    from .composition_views import composition_rows, render_composition_table
+
+    compositions = composition_rows()
     if fmt == "json":
-        emit_json([tables_row(tab, r) for tab, r in rows])
+        emit_json([tables_row(tab, r) for tab, r in rows] + [c.to_json() for c in compositions])
     else:
         _render_tables(rows, precision)
+        render_composition_table(compositions)
     fail_on_overstated([r for _, r in rows])
+    bad = [c.composition.name for c in compositions if c.claim == "overstated"]
+    if bad:
+        from rkhp.base.errors import CheckFailed
+
+        raise CheckFailed(f"claimed order overstated: {', '.join(bad)}")
 
 
 _CLASSES = ("general", "degenerate", "symmetric")

@@ -108,6 +108,14 @@ def positive(value, what: str) -> float:
     return number(value, what, 0.0, low_open=True)
 
 
+def nonzero(value, what: str) -> float:
+    """A finite, non-zero number (a signed step size or time: negative runs backwards)."""
+    x = number(value, what)
+    if x == 0.0:
+        raise InputError(f"{what} must be non-zero, got 0")
+    return x
+
+
 def seed(value, what: str = "seed") -> int:
     """A seed: an integer from 0 to MAX_SEED."""
     return integer(value, what, 0, MAX_SEED)
@@ -154,12 +162,15 @@ def parse_float(text: str, what: str) -> float:
 def steps_for_h(t_final: float, h: float) -> int:
     """The number of steps N = T/h when h divides T, else InputError.
 
-    h divides T when T/h is within DIVIDES_TOLERANCE (relative) of an integer N >= 1: the run
-    then reaches t = N h = T up to rounding. Otherwise it is refused, naming the nearest step
-    sizes that divide T (never a run that stops short of T or overshoots it).
+    T and h are non-zero and of one sign (negative: a backward run). h divides T when T/h is
+    within DIVIDES_TOLERANCE (relative) of an integer N >= 1: the run then reaches t = N h = T up
+    to rounding. Otherwise it is refused, naming the nearest step sizes that divide T (never a run
+    that stops short of T or overshoots it).
     """
-    t_final = positive(t_final, "T (--t-final)")
-    h = positive(h, "--h")
+    t_final = nonzero(t_final, "T (--t-final)")
+    h = nonzero(h, "--h")
+    if (t_final > 0) != (h > 0):
+        raise InputError(f"--h {h:g} and T = {t_final:g} have opposite signs: a run goes from 0 to T")
     ratio = t_final / h
     if ratio > MAX_STEPS:
         raise InputError(f"--h {h:g} over T = {t_final:g} means {ratio:.3g} steps; at most {MAX_STEPS}")
@@ -173,10 +184,11 @@ def steps_for_h(t_final: float, h: float) -> int:
 
 
 def step_plan(t_final, steps: int | None, h: float | None) -> tuple[int, float]:
-    """(N, h) from exactly one of --steps N (h = T/N) and --h (N = T/h, h must divide T)."""
+    """(N, h) from exactly one of --steps N (h = T/N) and --h (N = T/h, h must divide T); T and h
+    may be negative (a backward run), of one sign."""
     if (steps is None) == (h is None):
         raise InputError("give exactly one of --steps and --h")
-    t_final = positive(t_final, "T (--t-final)")
+    t_final = nonzero(t_final, "T (--t-final)")
     if steps is not None:
         n = integer(steps, "--steps", 1, MAX_STEPS)
         return n, t_final / n

@@ -196,8 +196,8 @@ def check_step(h, n_steps) -> tuple[float, int]:
         h = float(h)
     except (TypeError, ValueError):
         raise InputError(f"step size h must be a number, got {h!r}") from None
-    if not math.isfinite(h) or h <= 0:
-        raise InputError(f"step size h must be positive and finite, got {h}")
+    if not math.isfinite(h) or h == 0.0:
+        raise InputError(f"step size h must be finite and non-zero, got {h}")
     if int(n_steps) != n_steps or n_steps < 1:
         raise InputError(f"number of steps must be a positive integer, got {n_steps}")
     return h, int(n_steps)

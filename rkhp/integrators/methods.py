@@ -13,13 +13,18 @@ A method is named by a string (or given as a :class:`Method` or a
   ``xdot = pi(x) grad H(x)``;
 - ``implicit-midpoint``: the implicit midpoint rule (Newton per step);
 - ``scipy:NAME``: scipy's adaptive ``solve_ivp`` method NAME (dop853, rk45, rk23, radau, bdf,
-  lsoda), run by tolerance: a peer of ``rkhp bench`` only.
+  lsoda), run by tolerance: a peer of ``rkhp bench`` only;
+- a composition (built-in name such as ``kahan-li8``, or a composition file): substeps
+  gamma_1 h, ..., gamma_s h of an RKHP base method (:mod:`rkhp.tableaux.compositions`,
+  docs/compositions.md).
 
 The expected order comes from the verify engine: for RKHP, the symmetric order (the reduced
 conditions of docs/theory.md §8) on a symmetric realisation, the degenerate order (over T_0) on
 a degenerate one and the general order (over T) otherwise (paper, Theorems 4.4 and 5.1); for THP
 the same classes applied to its B-series (:func:`taylor_orders`); for a classical method its
-order over T; 2 for the midpoint rule.
+order over T; 2 for the midpoint rule; for a composition, the order its coefficients give with
+the base's order in the class, the base counted symmetric when the class is symmetric and the base
+RKHP method is (:func:`rkhp.tableaux.symmetry.rkhp_symmetry`).
 """
 
 from __future__ import annotations
@@ -37,7 +42,7 @@ MIDPOINT = "implicit-midpoint"
 SCIPY_METHODS = {"dop853": "DOP853", "rk45": "RK45", "rk23": "RK23", "radau": "Radau", "bdf": "BDF",
                  "lsoda": "LSODA"}
 _TAYLOR = re.compile(r"thp([0-9]+)(-t0)?")
-KINDS = ("rkhp", "taylor", "classical", "implicit-midpoint", "scipy")
+KINDS = ("rkhp", "taylor", "classical", "implicit-midpoint", "scipy", "composition")
 
 
 @dataclass(frozen=True)
@@ -51,6 +56,8 @@ class Method:
         order: the THP order N (taylor kind), else None.
         degenerate: THP over T_0 (``thpN-t0``).
         solver: scipy's name of the method (scipy kind), else None.
+        composition: the :class:`~rkhp.tableaux.compositions.Composition` (composition kind; its
+            base tableau is `tableau`), else None.
     """
 
     name: str
@@ -59,6 +66,7 @@ class Method:
     order: int | None = None
     degenerate: bool = False
     solver: str | None = None
+    composition: object = None
 
     def integrate(self, system, h: float, n_steps: int, x0=None):
         """Run the method; returns a :class:`~rkhp.integrators.trajectory.Trajectory`."""
@@ -78,6 +86,10 @@ class Method:
             from .classical import integrate_midpoint
 
             return integrate_midpoint(system, h, n_steps, x0)
+        if self.kind == "composition":
+            from .composed import integrate_composition
+
+            return integrate_composition(system, self.composition, h, n_steps, x0)
         raise InputError(f"{self.name} is scipy's adaptive {self.solver}: it runs by tolerance, not "
                          "by steps (a peer of `rkhp bench`, --peers)")
 
@@ -98,19 +110,29 @@ class Method:
             raise InputError(f"{self.name} is adaptive: it has no order in h")
         from ..tableaux.verification import class_orders
 
+        if self.kind == "composition":
+            return composed_order(self.composition, self.tableau, condition_class)
         return class_orders(self.tableau)[condition_class if self.kind == "rkhp" else "general"]
 
 
     def realisation_bound(self, system) -> int | None:
         """The order the system's realisation allows a method that runs through it (RKHP and THP;
         ``truncated:K``: docs/theory.md §9), or None when it sets no bound."""
-        return system.realisation_order if self.kind in ("rkhp", "taylor") else None
+        return system.realisation_order if self.kind in ("rkhp", "taylor", "composition") else None
 
     def expected_order_on(self, system) -> int:
         """Order expected on `system`: the class's order, bounded by :meth:`realisation_bound`."""
         order = self.expected_order(condition_class(system))
         bound = self.realisation_bound(system)
         return order if bound is None else min(order, bound)
+
+
+def composed_order(composition, base, condition_class: str) -> int:
+    """The order of a composition of the RKHP method `base` on a realisation of `condition_class`
+    (:func:`rkhp.tableaux.compositions.class_composition_orders`)."""
+    from ..tableaux.compositions import class_composition_orders
+
+    return class_composition_orders(composition, base)[condition_class].order
 
 
 def condition_class(system) -> str:
@@ -182,6 +204,11 @@ def resolve_method(spec) -> Method:
         return Method(spec, "scipy", solver=SCIPY_METHODS[key])
     if spec.startswith(CLASSICAL_PREFIX):
         return Method(spec, "classical", load_tableau(spec[len(CLASSICAL_PREFIX):]))
+    from ..tableaux.compositions import is_composition_name, load_composition
+
+    if is_composition_name(spec):
+        composition = load_composition(spec)
+        return Method(spec, "composition", load_tableau(composition.base), composition=composition)
     return Method(spec, "rkhp", load_tableau(spec))
 
 
@@ -197,7 +224,8 @@ def resolve_methods(specs) -> tuple[Method, ...]:
 def check_distinct(methods) -> tuple[Method, ...]:
     """The methods, if no two are the same method under two names (an alias, a file: ``rk4`` and
     ``classical``); InputError naming both otherwise (docs/input.md)."""
-    keys = [(m.kind, getattr(m.tableau, "name", None), m.order, m.degenerate, m.solver) for m in methods]
+    keys = [(m.kind, getattr(m.tableau, "name", None), m.order, m.degenerate, m.solver,
+             getattr(m.composition, "gamma", None)) for m in methods]
     for i, key in enumerate(keys):
         if key in keys[:i]:
             raise InputError(f"{methods[keys.index(key)].name} and {methods[i].name} are the same method")

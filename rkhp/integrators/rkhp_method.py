@@ -87,12 +87,14 @@ def implicit_degree(order: int) -> int:
 
 
 def check_step(h, n_steps) -> tuple[float, int]:
+    """(h, n_steps) of a run: h finite and non-zero (negative h integrates backwards, docs/methods.md
+    "Backward steps"), n_steps a non-negative integer."""
     try:
         h = float(h)
     except (TypeError, ValueError):
         raise InputError(f"step size h must be a number, got {h!r}") from None
-    if not math.isfinite(h) or h <= 0.0:
-        raise InputError(f"step size h must be positive and finite, got {h}")
+    if not math.isfinite(h) or h == 0.0:
+        raise InputError(f"step size h must be finite and non-zero, got {h}")
     if int(n_steps) != n_steps or n_steps < 0:
         raise InputError(f"number of steps must be a non-negative integer, got {n_steps}")
     return h, int(n_steps)
