@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from rkhp.base.errors import InputError
-from rkhp.integrators.methods import integrate, resolve_method
+from rkhp.integrators.methods import integrate
 from rkhp.tableaux.compositions import (
     Composition,
     builtin_compositions,
