@@ -28,7 +28,7 @@ from ..integrators.methods import DEFAULT_METHODS, SCIPY_METHODS, Method, check_
 from .converge import check_t_final
 from .reference import Reference, dop853_reference, reference
 
-TARGETS = (1e-4, 1e-6, 1e-8, 1e-10)
+TARGETS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
 DEFAULT_STEPS = tuple(10 * 2**k for k in range(9))
 DEFAULT_TOLERANCES = tuple(10.0**-k for k in range(3, 14))
 DEFAULT_PEERS = ("scipy:dop853", "scipy:rk45", "classical:rk4", "implicit-midpoint")
