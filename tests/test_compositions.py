@@ -170,7 +170,7 @@ def test_an_overstated_claim_fails_and_bad_files_are_refused(run_cli, tmp_path):
            "keys.toml": 'kind = "composition"\ngamma = ["1"]\nfoo = 1\n',
            "empty.toml": 'kind = "composition"\ngamma = []\n',
            "code.toml": 'kind = "composition"\ngamma = ["__import__(\'os\')"]\n',
-           "many.toml": 'kind = "composition"\ngamma = [' + ", ".join(['"0.001"'] * 1001) + "]\n"}
+           "many.toml": 'kind = "composition"\ngamma = [' + ", ".join(['"0.001"'] * 101) + "]\n"}
     for name, text in bad.items():
         path = tmp_path / name
         path.write_text(text)

@@ -38,14 +38,15 @@ from pathlib import Path
 
 import mpmath
 
-from ..base.bounds import MAX_CLAIMED_ORDER
+from ..base.bounds import MAX_CLAIMED_ORDER, MAX_STAGES
 from ..base.documents import parse_document, read_text
 from ..base.errors import InputError
 from .tableau import GivenDecimal, entry_text, is_exact, parse_entry, to_float
 
 KIND = "composition"
-#: Most substeps of a composition (a file of more is refused before it is read further).
-MAX_SUBSTEPS = 1000
+#: Most substeps of a composition, as many as a tableau's stages (a file of more is refused before
+#: its coefficients are read).
+MAX_SUBSTEPS = MAX_STAGES
 #: Highest order :func:`composition_order` looks at (376 words of weight <= 12 with a symmetric
 #: base of order 2: the order-10 compositions are checked one order past theirs).
 MAX_COMPOSITION_ORDER = 12
