@@ -94,6 +94,22 @@ def interleaved(runners: dict) -> dict:
     return best
 
 
+def _ms(seconds) -> str:
+    return "-" if seconds is None else f"{seconds * 1e3:.3f} ms"
+
+
+def race_line(system_name: str, target: float, ours: dict, times: dict, settings: dict) -> str:
+    """One row: the best rkhp method and its time, DOP853's and Radau's, the ratio, every method."""
+    best = min(ours, key=ours.get) if ours else None
+    dop = times.get("DOP853")
+    ratio = f"{dop / ours[best]:.2f}x" if best and dop else "-"
+    rtol = settings["DOP853"].get(target, ("-",))[0]
+    detail = ", ".join(f"{m} {settings[m][target][0]} steps {_ms(t)}" for m, t in ours.items())
+    return (f"{system_name:17s} {target:7.0e}  best {best or '-':21s} {_ms(ours.get(best)):>11s}  "
+            f"DOP853 {_ms(dop):>11s} (rtol {rtol:.3g})  Radau {_ms(times.get('Radau')):>11s}  "
+            f"DOP853/rkhp {ratio}   [{detail}]")
+
+
 def race(system_name: str, methods, targets) -> list[str]:
     system = resolve_system(system_name)
     ref = reference(system, T_FINAL)
@@ -111,16 +127,8 @@ def race(system_name: str, methods, targets) -> list[str]:
             if target in settings[p]:
                 runners[p] = scipy_runner(f, p, x0, settings[p][target][0])
         times = interleaved(runners)
-        ours = {m: times[m] for m in methods if m in times}
-        best = min(ours, key=ours.get) if ours else None
-        dop = times.get("DOP853")
-        radau = times.get("Radau")
-        ratio = dop / ours[best] if best and dop else float("nan")
-        detail = ", ".join(f"{m} {settings[m][target][0]} steps {times[m] * 1e3:.2f} ms" for m in ours)
-        lines.append(f"{system_name:17s} {target:7.0e}  best {best or '-':21s} "
-                     f"{(ours[best] * 1e3 if best else float('nan')):9.3f} ms  DOP853 "
-                     f"{(dop * 1e3 if dop else float('nan')):8.3f} ms (rtol {settings['DOP853'].get(target, ('-',))[0]})  "
-                     f"Radau {(radau * 1e3 if radau else float('nan')):8.3f} ms  DOP853/rkhp {ratio:6.2f}x   [{detail}]")
+        lines.append(race_line(system_name, target, {m: times[m] for m in methods if m in times},
+                               times, settings))
         print(lines[-1], flush=True)
     return lines
 
