@@ -103,10 +103,11 @@ def race_line(system_name: str, target: float, ours: dict, times: dict, settings
     best = min(ours, key=ours.get) if ours else None
     dop = times.get("DOP853")
     ratio = f"{dop / ours[best]:.2f}x" if best and dop else "-"
-    rtol = settings["DOP853"].get(target, ("-",))[0]
+    setting = settings["DOP853"].get(target)
+    rtol = "-" if setting is None else f"{setting[0]:.3g}"
     detail = ", ".join(f"{m} {settings[m][target][0]} steps {_ms(t)}" for m, t in ours.items())
     return (f"{system_name:17s} {target:7.0e}  best {best or '-':21s} {_ms(ours.get(best)):>11s}  "
-            f"DOP853 {_ms(dop):>11s} (rtol {rtol:.3g})  Radau {_ms(times.get('Radau')):>11s}  "
+            f"DOP853 {_ms(dop):>11s} (rtol {rtol})  Radau {_ms(times.get('Radau')):>11s}  "
             f"DOP853/rkhp {ratio}   [{detail}]")
 
 
