@@ -9,6 +9,7 @@ from rkhp.base import bounds
 from .options import SEED, console, emit_json, executor_options, format_option, integer, output_path, progress, real
 from .render import print_table
 from .show_cmd import print_array
+from .terminal import plain
 
 
 def _class_of(degenerate: bool, symmetric: bool) -> str:
@@ -140,7 +141,7 @@ def _render(result, save) -> None:
                            for cls, n in ver.orders.items())
         con.print(f"verified orders: {orders}; decided by: {data['decided_by']}")
         if save:
-            con.print(f"saved to {save}")
+            con.print(f"saved to {plain(save)}")
     if result.optimisation is not None:
         opt = result.optimisation
         rows = Table("method", "principal error norm", title="Error norms at order N+1")

@@ -21,6 +21,7 @@ from .options import (
     x0_option,
 )
 from .render import compact_table, print_table
+from .terminal import plain
 
 
 def realisation_option():
@@ -59,9 +60,9 @@ def systems(fmt):
     for col in ("name", "family", "n", "domain", "x0", "t_final", "Casimirs", "exact"):
         table.add_column(col, no_wrap=col in ("name", "family"))
     for r in rows:
-        table.add_row(r["name"], r["family"], str(r["dim"]), r["domain"],
+        table.add_row(plain(r["name"]), r["family"], str(r["dim"]), r["domain"],
                       ", ".join(f"{v:.4g}" for v in r["x0"]), _fmt(r["t_final"]),
-                      "; ".join(r["casimirs"]) or "-", "yes" if r["exact_solution"] else "no")
+                      plain("; ".join(r["casimirs"])) or "-", "yes" if r["exact_solution"] else "no")
     print_table(console(), table)
 
 
@@ -86,7 +87,7 @@ def check(system, realisation, samples, seed, fmt):
     else:
         from rich.table import Table
 
-        table = Table(title=f"{result.system} ({result.realisation}): {samples} samples, "
+        table = Table(title=f"{plain(result.system)} ({plain(result.realisation)}): {samples} samples, "
                             f"seed {seed}")
         table.add_column("axiom")
         table.add_column("max deviation", justify="right")
@@ -191,7 +192,7 @@ def _modified_rows(r: dict) -> list[tuple[str, str]]:
 def _print_integration(r: dict) -> None:
     from rich.table import Table
 
-    table = Table(title=f"{r['system']} ({r['realisation']}) with {r['method']}: "
+    table = Table(title=f"{plain(r['system'])} ({plain(r['realisation'])}) with {plain(r['method'])}: "
                         f"{r['steps']} steps of h = {r['h']:.6g}")
     table.add_column("quantity")
     table.add_column("value", justify="right")
@@ -202,7 +203,7 @@ def _print_integration(r: dict) -> None:
             ("energy error", _fmt(r["energy_error"], 3)),
             *_modified_rows(r),
             ("Newton iterations (mean, max)", f"{r['newton_mean']:.2f}, {r['newton_max']}"),
-            ("status", r["status"]),
+            ("status", plain(r["status"])),
             ("compile seconds", f"{r['compile_seconds']:.3f}"),
             ("run seconds", f"{r['run_seconds']:.4f}")]
     for key, value in rows:

@@ -85,6 +85,21 @@ def run_all(executor: Executor, fn: Callable, argument_tuples: Iterable[tuple], 
     """``[fn(*args) for args in argument_tuples]`` on the executor, results in the given order;
     ``on_done(done, total)`` after each completion (progress from the workers' finished tasks).
     On an error or Ctrl-C the unfinished tasks are cancelled and the exception goes on."""
+    results, finished = _run(executor, fn, argument_tuples, on_done, keep_on_interrupt=False)
+    return results
+
+
+def run_until_interrupted(executor: Executor, fn: Callable, argument_tuples: Iterable[tuple],
+                          on_done=None) -> tuple[list, bool]:
+    """As :func:`run_all`, but an interrupt (`rkhp.base.interrupts.is_interrupt`) cancels the
+    unfinished tasks and returns what finished: (results in the given order, None where a task did
+    not finish; whether the run was interrupted)."""
+    return _run(executor, fn, argument_tuples, on_done, keep_on_interrupt=True)
+
+
+def _run(executor, fn, argument_tuples, on_done, keep_on_interrupt: bool) -> tuple[list, bool]:
+    from .interrupts import is_interrupt
+
     tasks = [executor.submit(fn, *args) for args in argument_tuples]
     order = {id(t): k for k, t in enumerate(tasks)}
     results: list = [None] * len(tasks)
@@ -93,10 +108,16 @@ def run_all(executor: Executor, fn: Callable, argument_tuples: Iterable[tuple], 
             results[order[id(task)]] = task.result()
             if on_done is not None:
                 on_done(count, len(tasks))
-    except BaseException:
+    except BaseException as exc:
         executor.cancel(tasks)
+        if keep_on_interrupt and is_interrupt(exc):
+            partial = getattr(exc, "partial", None)
+            running = next((k for k, t in enumerate(tasks) if not t.done()), None)
+            if partial is not None and executor.kind == "in-process" and running is not None:
+                results[running] = partial  # the task that was running here, as far as it got
+            return results, True
         raise
-    return results
+    return results, False
 
 
 # ----------------------------------------------------------------------------- in this process

@@ -27,7 +27,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..systems.core import DOMAINS
-from ..taylor.compiler import NJIT_NORC
+from ..taylor.compiler import NJIT_NORC, NJIT_NRT
 from ..taylor.compiler import numba as nb
 from ..taylor.interpreter import TapeWork, run_tape, tape_work
 from ..taylor.linalg import lu_factor, lu_solve
@@ -66,11 +66,12 @@ class StepBuffers(NamedTuple):
     work: the interpreter's; G (s, n, jet size): gradients of the stage functions; psi, Jpsi,
     alpha, Jalpha: the tower's results; x, delta, res (n): Newton's iterate, correction and
     residual; LU (n, n), perm (n,) int64, v (n): the linear solve's (`solve_small`); hist (3, n):
-    psi of the three previous steps; memo (8,): how many of them there are, Newton's measured
+    psi of the three previous steps; memo (9,): how many of them there are, Newton's measured
     quadratic constant L, the implicit stages' rate h |c|_1 and effect factor (`_stage_measure`),
     then (`implicit_tower`) inf at the start of a step, the Taylor shifts before the last sweep of
-    every degree and since, the number of sweeps of this step (from its first tower on); y,
-    y_next (n): the state before and after the step; Gx (n): the point where G is expanded
+    every degree and since, the number of sweeps of this step (from its first tower on), and 1
+    once the sweeps have stalled in this run (every tower then solves the stages by
+    `_stage_newton`); y, y_next (n): the state before and after the step; Gx (n): the point where G is expanded
     (implicit stages); changes (jet degree + 1,): per degree k of G, the weighted change of its
     coefficients at their last sweep (`_stage`, `implicit_tower`); weights (s, jet size): the
     weight of a change of each coefficient of G[i] in that measure (`_stage_weights`); defect
@@ -126,7 +127,7 @@ def step_buffers(tapes: SystemTapes, n: int, s: int, space) -> StepBuffers:
 
     return StepBuffers(tape_work(tapes, size), np.zeros((s, n, size)), vec(), mat(), vec(), mat(),
                        vec(), vec(), vec(), mat(), np.zeros(n, np.int64), vec(), np.zeros((3, n)),
-                       np.zeros(8), vec(), vec(), vec(), np.zeros(space.degree + 1),
+                       np.zeros(9), vec(), vec(), vec(), np.zeros(space.degree + 1),
                        np.zeros((s, size)), np.zeros((s, n, size)), np.zeros(space.degree + 1))
 
 
@@ -490,6 +491,145 @@ def _psi_at(b, h, space, buf, top):
         psi[k] = acc
 
 
+STAGE_NEWTON_ITERATIONS = 30
+"""Most Newton iterations of `_stage_newton` on the coefficients of the stage polynomials."""
+STAGE_NEWTON_MAX_UNKNOWNS = 1500
+"""Most coefficients (stages x components x monomials of degree < D) that `_stage_newton` solves
+for: its Jacobian takes 8 N^2 bytes (18 MB) and its factorisation N^3 / 3 operations (about a
+second); beyond, the stalled sweeps end the step as before (STAGES_NO_CONVERGENCE)."""
+STAGE_NEWTON_DONE = 1e-14
+"""`_stage_newton` has converged when a full correction is at most this times the coefficients'
+size (max(1, max-norm)): 45 eps, the round-off of a sweep of the stage polynomials."""
+STAGE_NEWTON_ROUND_OFF = 1e-12
+"""A correction of `_stage_newton` that no halving makes decrease the residual is round-off (the
+iteration has converged) when at most this times the coefficients' size: the forward-difference
+Jacobian (step sqrt(eps)) is accurate to about sqrt(eps), so the residual's noise of a few eps
+times the coefficients, divided by that accuracy, is below it."""
+STAGE_NEWTON_HALVINGS = 30
+"""Most halvings of a Newton correction of `_stage_newton` before it gives up (no decrease of the
+residual along the correction: no solution near the iterate)."""
+
+
+@nb.njit(**NJIT_NORC)
+def _sweep_residual(u, r, x0, A, h, D, tapes, space, buf, M):
+    """r = P(u) - u, P one Gauss-Seidel sweep of every stage at degree D (`_stage`) of the
+    coefficients u of the stage polynomials G (degree < D, M = counts[D - 1] each, flattened over
+    (stage, component, coefficient)); G := P(u). Returns the max-norm of r (inf if non-finite).
+    P and the Picard sweeps of `implicit_tower` have the same fixed points: the stage equations."""
+    G = buf.G
+    s, n = G.shape[0], G.shape[1]
+    q = 0
+    for j in range(s):
+        for k in range(n):
+            for m in range(M):
+                G[j, k, m] = u[q]
+                q += 1
+    for i in range(s):
+        _stage(i, x0, A, h, D, s, tapes, space, buf, 1.0)
+    size = 0.0
+    q = 0
+    for j in range(s):
+        for k in range(n):
+            for m in range(M):
+                r[q] = G[j, k, m] - u[q]
+                a = abs(r[q])
+                if not a <= size:  # also catches NaN
+                    size = a
+                q += 1
+    return size
+
+
+@nb.njit(**NJIT_NRT)
+def _stage_newton(x0, A, h, D, tapes, space, buf):
+    """Solve the stage equations (the fixed point of the sweeps) for the coefficients of the stage
+    polynomials G by Newton's method when the Picard sweeps stall (do not contract: h beyond
+    their contraction radius, where a solution may still exist; docs/implicit.md "When the
+    sweeps stall"): Jacobian of the sweep's residual by forward differences (step sqrt(eps)
+    times the coefficient's size), each correction halved until the residual decreases, from the
+    sweeps' last polynomials (from G = 0 if they are not finite). Stops when a correction is at
+    round-off (4 eps) of the coefficients. Returns whether it converged; G then holds the
+    solution (buf.changes is reset: the caller's next sweep measures it).
+    """
+    G = buf.G
+    s, n = G.shape[0], G.shape[1]
+    M = space.counts[D - 1]
+    N = s * n * M
+    if N > STAGE_NEWTON_MAX_UNKNOWNS:
+        return False
+    u = np.empty(N)
+    r = np.empty(N)
+    trial = np.empty(N)
+    rt = np.empty(N)
+    J = np.empty((N, N))
+    perm = np.empty(N, np.int64)
+    tmp = np.empty(N)
+    q = 0
+    finite = True
+    for j in range(s):
+        for k in range(n):
+            for m in range(M):
+                u[q] = G[j, k, m]
+                if not np.isfinite(u[q]):
+                    finite = False
+                q += 1
+    if not finite:
+        u[:] = 0.0
+    size = _sweep_residual(u, r, x0, A, h, D, tapes, space, buf, M)
+    converged = False
+    for _ in range(STAGE_NEWTON_ITERATIONS):
+        if not np.isfinite(size):
+            break
+        for c in range(N):
+            e = 1.4901161193847656e-08 * max(1.0, abs(u[c]))
+            keep = u[c]
+            u[c] = keep + e
+            _sweep_residual(u, rt, x0, A, h, D, tapes, space, buf, M)
+            u[c] = keep
+            for q in range(N):
+                J[q, c] = (rt[q] - r[q]) / e
+        if not lu_factor(J, perm):
+            break
+        for q in range(N):
+            tmp[q] = 0.0
+            trial[q] = -r[q]
+        lu_solve(J, perm, trial, tmp)
+        correction = _max_abs(trial)
+        if not np.isfinite(correction):
+            break
+        scale = max(1.0, _max_abs(u))
+        step = 1.0
+        accepted = False
+        for _h in range(STAGE_NEWTON_HALVINGS):
+            for q in range(N):
+                rt[q] = u[q] + step * trial[q]
+            new = _sweep_residual(rt, tmp, x0, A, h, D, tapes, space, buf, M)
+            if new < size:
+                accepted = True
+                break
+            step *= 0.5
+        if not accepted:
+            # no decrease: at round-off when the correction is (the residual's own noise)
+            converged = correction <= STAGE_NEWTON_ROUND_OFF * scale
+            break
+        for q in range(N):
+            u[q] = rt[q]
+            r[q] = tmp[q]
+        size = new
+        if step * correction <= STAGE_NEWTON_DONE * scale:
+            converged = True
+            break
+    _sweep_residual(u, r, x0, A, h, D, tapes, space, buf, M)
+    q = 0
+    for j in range(s):
+        for k in range(n):
+            for m in range(M):
+                G[j, k, m] = u[q]
+                q += 1
+    for k in range(D + 1):
+        buf.changes[k] = 0.0
+    return converged
+
+
 @nb.njit(**NJIT_NORC)
 def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, scale):
     """The implicit tower (docs/theory.md §10, docs/implicit.md): psi and alpha(x0, psi) (with
@@ -543,7 +683,9 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     shift = 0.0 if settle else _max_abs(buf.delta)
     since = memo[6] + shift
     stale = _stale_factor(since, memo[5])
-    top = D if jacobian else _value_degree(changes, buf.defects, factor, stale, D, bound)
+    # once the sweeps have stalled in a run, every tower solves its stages by Newton (`_stage_newton`)
+    newton = memo[8] > 0.0 and not settle
+    top = D if jacobian or newton else _value_degree(changes, buf.defects, factor, stale, D, bound)
     memo[5], memo[6] = (since, 0.0) if top == D else (memo[5], since)
     if settle:
         for k in range(n):
@@ -556,6 +698,7 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
         for k in range(D + 1):
             buf.defects[k] = 0.0
         memo[7] = 0.0
+        memo[8] = 0.0
         _stage_weights(A, b, space, buf.weights)
     elif top > 0:
         if predict:
@@ -565,6 +708,11 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
         _shift(G, buf.delta, D - 1, space)
         if learn:
             _predict(G, buf.defect, D, space, np.bool_(False), predict)
+    if newton:
+        if not _stage_newton(x0, A, h, D, tapes, space, buf):
+            return Failure.STAGES_NO_CONVERGENCE, 0, False
+        _psi_alpha(x0, b, h, tapes, space, buf, jacobian)
+        return Failure.OK, 0, True
     sweeps = 0
     converged = False
     if top == 0:
@@ -595,8 +743,6 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
             memo[7] += 1.0
         kept = _kept(changes, buf.defects, factor, stale, top, D)
         effect = swept + kept
-        if not np.isfinite(effect):
-            return Failure.STAGES_NO_CONVERGENCE, sweeps, False
         tail = _tail_factor(swept, previous)
         if settle:
             tail = max(1.0, tail)
@@ -604,10 +750,20 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
         # a sweep that did not contract proves nothing, unless its changes are already far below
         # the tolerance (round-off: the measure then no longer decreases)
         converged = swept * tail + kept <= bound or effect <= ROUND_OFF_SHARE * bound
-        if converged or not settle:
+        if converged:
             break
-        if sweeps >= stage.max_sweeps:
-            return Failure.STAGES_NO_CONVERGENCE, sweeps, False
+        # the sweeps stall: not finite, no contraction (after the first sweep of a step), or too
+        # many of them while settling; Newton on the stage equations instead (`_stage_newton`)
+        stalled = not np.isfinite(effect) or (
+            sweeps >= stage.max_sweeps if settle else (tail == np.inf and effect > bound))
+        if stalled:
+            if not _stage_newton(x0, A, h, D, tapes, space, buf):
+                return Failure.STAGES_NO_CONVERGENCE, sweeps, False
+            memo[8] = 1.0
+            converged = True
+            break
+        if not settle:
+            break
     _psi_alpha(x0, b, h, tapes, space, buf, jacobian)
     return Failure.OK, sweeps, converged
 
