@@ -6,7 +6,18 @@ import click
 
 from rkhp.base import bounds
 
-from .options import SEED, console, emit_json, executor_options, format_option, integer, output_path, progress, real
+from .options import (
+    SEED,
+    console,
+    emit_json,
+    executor_options,
+    force_option,
+    format_option,
+    integer,
+    output_path,
+    progress,
+    real,
+)
 from .render import print_table
 from .show_cmd import print_array
 from .terminal import plain
@@ -41,9 +52,10 @@ def _class_of(degenerate: bool, symmetric: bool) -> str:
               help="When an order is not reached, try to prove that no tableau exists (Groebner).")
 @click.option("--save", type=output_path(".toml", ".json"), default=None,
               help="Write the tableau found to a .toml or .json file (loadable by verify).")
+@force_option()
 @format_option("table", "json")
 def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit, seed, workers,
-           scheduler, optimize, digits, prove, save, fmt):
+           scheduler, optimize, digits, prove, save, force, fmt):
     """Search Runge–Kutta tableaux meeting the RKHP order conditions (paper §5).
 
     Solves the order conditions over T (general), T_0 (--degenerate) or the symmetric class from
@@ -74,8 +86,8 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
             bar.update(tasks[n], completed=done)
 
         result = run_search(stages, order, cls, implicit, options, on_progress, executor)
-    if save and result.found is not None:
-        _save(result, save)
+    if save and result.found is not None and not result.interrupted:
+        _save(result, save, force)
     if fmt == "json":
         emit_json(result.to_json())
     else:
@@ -92,10 +104,10 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
                           + (f"; nothing was saved to {save}" if save else ""))
 
 
-def _save(result, path) -> None:
+def _save(result, path, force) -> None:
     from rkhp.tableaux.files import save_tableau
 
-    save_tableau(result.tableau_to_save(), path)
+    save_tableau(result.tableau_to_save(), path, force)
 
 
 SHOWN_DIGITS = 12

@@ -16,6 +16,7 @@ from .options import (
     console,
     emit_json,
     executor_options,
+    force_option,
     format_option,
     integer,
     integers,
@@ -98,9 +99,10 @@ def _f(x, digits=2) -> str:
 @click.option("--refinements", type=integer(0, bounds.MAX_REFINEMENTS, "K"),
               help="Halvings of h after the coarsest step (default 6, from N = 20).")
 @click.option("--plot", type=PLOT_FILE, help="Log-log plot of error against h (.png, .svg, .pdf).")
+@force_option()
 @executor_options("runs")
 @format_option("table", "json")
-def converge(system, methods, x0, realisation, t_final, steps, refinements, plot, workers, scheduler, fmt):
+def converge(system, methods, x0, realisation, t_final, steps, refinements, plot, force, workers, scheduler, fmt):
     """Empirical convergence: global error at T against h, observed and expected orders, verdicts."""
     from rkhp.base.executors import open_executor
     from rkhp.studies.converge import converge as run
@@ -116,7 +118,7 @@ def converge(system, methods, x0, realisation, t_final, steps, refinements, plot
     if plot and not study.interrupted:
         from rkhp.studies.plots import plot_convergence
 
-        plot_convergence(study, plot)
+        plot_convergence(study, plot, force)
     if fmt == "json":
         emit_json(study.to_json())
     else:
@@ -205,10 +207,11 @@ def _render_converge(study, plot) -> None:
               help="Time K initial conditions near x0 at once (per-trajectory times).")
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Seed of the ensemble's starts.")
 @click.option("--plot", type=PLOT_FILE, help="Log-log plot of time against error (.png, .svg, .pdf).")
+@force_option()
 @executor_options("curves (with --ensemble: the trajectories)")
 @format_option("table", "json")
 def bench(system, methods, x0, realisation, peers, t_final, steps, tolerances, repeats, ensemble, seed, plot,
-          workers, scheduler, fmt):
+          force, workers, scheduler, fmt):
     """Work-precision: wall time (median of repeats) against error, methods and peers."""
     from rkhp.base.executors import open_executor
     from rkhp.studies import bench as B
@@ -226,7 +229,7 @@ def bench(system, methods, x0, realisation, peers, t_final, steps, tolerances, r
     if plot and not study.interrupted:
         from rkhp.studies.plots import plot_work_precision
 
-        plot_work_precision(study, plot)
+        plot_work_precision(study, plot, force)
     if fmt == "json":
         emit_json(study.to_json())
     else:
@@ -280,10 +283,11 @@ def _render_bench(study, plot) -> None:
               help="Part (a) sweeps h = T/N upward from N = this down to 1.")
 @click.option("--round-off-steps", type=STEP_LIST, help="Numbers of steps of part (d) over T (default 32 to 10^5).")
 @click.option("--plot", type=PLOT_FILE, help="Plot of the long run's drift (.png, .svg, .pdf).")
+@force_option()
 @executor_options("runs of each part")
 @format_option("table", "json")
 def stress(system, methods, x0, realisation, t_final, long_steps, long_h, sweep_coarsest, round_off_steps, plot,
-           workers, scheduler, fmt):
+           force, workers, scheduler, fmt):
     """Stress tests: (a) step sweep to Newton failure, (b) long-run drift, (c) near-singular starts,
     (d) round-off floor; each part ends with a verdict."""
     from rkhp.base.executors import open_executor
@@ -301,7 +305,7 @@ def stress(system, methods, x0, realisation, t_final, long_steps, long_h, sweep_
     if plot and not study.interrupted:
         from rkhp.studies.plots import plot_stress
 
-        plot_stress(study, plot)
+        plot_stress(study, plot, force)
     if fmt == "json":
         emit_json(study.to_json())
     else:

@@ -252,9 +252,11 @@ def check_output_path(path, suffixes: tuple[str, ...] = (), what: str = "output 
         raise InputError(f"{what} {path}: the folder {folder} {reason}")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise InputError(f"{what} {path}: the folder {folder} is not writable")
+    if path.is_symlink():
+        return path  # never followed: rkhp.base.files refuses it or replaces the link itself
     if path.is_dir():
         raise InputError(f"{what} {path}: is a folder")
-    if path.exists() or path.is_symlink():
+    if path.exists():
         try:
             mode = path.stat().st_mode
         except OSError as exc:

@@ -35,7 +35,7 @@ from ..taylor.jets import jet_space
 from .engine import state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_TOLERANCE
-from .trajectory import Trajectory
+from .trajectory import Trajectory, checked
 
 MIDPOINT_MAX_ITERATIONS = 30
 """Newton iterations after which a step of the implicit midpoint rule is declared failed."""
@@ -265,12 +265,12 @@ def _compiled(kernel) -> bool:
 def _trajectory(system, method, h, k_done, cause, states, newton, started, compile_s, extra=None):
     failed = cause != Failure.OK
     n = k_done + 1
-    return Trajectory(times=h * np.arange(n, dtype=np.float64), states=states[:n].copy(),
-                      newton_iterations=newton[:k_done + failed].copy(),
-                      status=failure_status(cause, k_done, h, system.domain) if failed else "ok",
-                      failed_step=k_done if failed else None, cause=cause,
-                      compile_seconds=compile_s, run_seconds=time.perf_counter() - started - compile_s,
-                      method=method, system=system.name, extra=extra or {})
+    return checked(Trajectory(times=h * np.arange(n, dtype=np.float64), states=states[:n].copy(),
+                              newton_iterations=newton[:k_done + failed].copy(),
+                              status=failure_status(cause, k_done, h, system.domain) if failed else "ok",
+                              failed_step=k_done if failed else None, cause=cause,
+                              compile_seconds=compile_s, run_seconds=time.perf_counter() - started - compile_s,
+                              method=method, system=system.name, extra=extra or {}), system)
 
 
 def _warm_up(kernel, args_of_one_step) -> float:

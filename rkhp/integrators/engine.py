@@ -27,7 +27,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..systems.core import DOMAINS
-from ..taylor.compiler import NJIT_NORC, NJIT_NRT
+from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
 from ..taylor.interpreter import TapeWork, run_tape, tape_work
 from ..taylor.linalg import lu_factor, lu_solve
@@ -66,17 +66,19 @@ class StepBuffers(NamedTuple):
     work: the interpreter's; G (s, n, jet size): gradients of the stage functions; psi, Jpsi,
     alpha, Jalpha: the tower's results; x, delta, res (n): Newton's iterate, correction and
     residual; LU (n, n), perm (n,) int64, v (n): the linear solve's (`solve_small`); hist (3, n):
-    psi of the three previous steps; memo (9,): how many of them there are, Newton's measured
+    psi of the three previous steps; memo (10,): how many of them there are, Newton's measured
     quadratic constant L, the implicit stages' rate h |c|_1 and effect factor (`_stage_measure`),
     then (`implicit_tower`) inf at the start of a step, the Taylor shifts before the last sweep of
     every degree and since, the number of sweeps of this step (from its first tower on), and 1
     once the sweeps have stalled in this run (every tower then solves the stages by
-    `_stage_newton`); y, y_next (n): the state before and after the step; Gx (n): the point where G is expanded
+    `_stage_newton`), and 1 while stage_newton holds a factorised Jacobian; y, y_next (n): the
+    state before and after the step; Gx (n): the point where G is expanded
     (implicit stages); changes (jet degree + 1,): per degree k of G, the weighted change of its
     coefficients at their last sweep (`_stage`, `implicit_tower`); weights (s, jet size): the
     weight of a change of each coefficient of G[i] in that measure (`_stage_weights`); defect
     (s, n, jet size): what the first sweep of a step is predicted to add to G, and defects (jet
-    degree + 1,): its measure per degree (`_predict`, `_learn`).
+    degree + 1,): its measure per degree (`_predict`, `_learn`); stage_newton: the work arrays of
+    `_stage_newton`.
     """
 
     work: TapeWork
@@ -100,6 +102,7 @@ class StepBuffers(NamedTuple):
     weights: np.ndarray
     defect: np.ndarray
     defects: np.ndarray
+    stage_newton: StageNewtonWork
 
 
 class StageSolve(NamedTuple):
@@ -115,9 +118,54 @@ class StageSolve(NamedTuple):
     max_sweeps: int
 
 
-def step_buffers(tapes: SystemTapes, n: int, s: int, space) -> StepBuffers:
-    """The work arrays of the step loop for dimension n, s stages and a jet space."""
+STAGE_NEWTON_ITERATIONS = 30
+"""Most iterations of one `_stage_newton` solve of the stage equations."""
+STAGE_NEWTON_MAX_UNKNOWNS = 1500
+"""Most coefficients (stages x components x monomials of degree < D) that `_stage_newton` solves
+for: its Jacobian takes 8 N^2 bytes (18 MB) and its factorisation N^3 / 3 operations (about a
+second); beyond, stalled sweeps end the step as they did (STAGES_NO_CONVERGENCE)."""
+STAGE_NEWTON_DONE = 1e-14
+"""`_stage_newton` has converged when a full correction is at most this times the coefficients'
+size (max(1, max-norm)): 45 eps, the round-off of a sweep of the stage polynomials."""
+STAGE_NEWTON_ROUND_OFF = 1e-12
+"""A correction of `_stage_newton` that no halving makes decrease the residual is round-off (the
+iteration has converged) when at most this times the coefficients' size: the forward-difference
+Jacobian (step sqrt(eps)) is accurate to about sqrt(eps), so the residual's noise of a few eps
+times the coefficients, divided by that accuracy, is below it."""
+STAGE_NEWTON_HALVINGS = 30
+"""Most halvings of a correction of `_stage_newton` before it gives up (no decrease of the
+residual along the correction: no solution near the iterate)."""
+STAGE_NEWTON_CONTRACTION = 0.5
+"""A correction of `_stage_newton` with a kept (earlier) Jacobian larger than this times the
+previous one refreshes the Jacobian (the chord iteration converges too slowly)."""
+
+
+class StageNewtonWork(NamedTuple):
+    """The work arrays of `_stage_newton` for N unknowns (N = 0: none, the fallback is off): the
+    factorised Jacobian J (N, N) and its row order perm, kept between calls (memo[9] says whether
+    it holds one); u, r, trial, rt, tmp (N,): iterate, residual, correction, trial point and its
+    residual."""
+
+    J: np.ndarray
+    perm: np.ndarray
+    u: np.ndarray
+    r: np.ndarray
+    trial: np.ndarray
+    rt: np.ndarray
+    tmp: np.ndarray
+
+
+def stage_newton_work(unknowns: int) -> StageNewtonWork:
+    """Work arrays for `unknowns` coefficients (none above STAGE_NEWTON_MAX_UNKNOWNS)."""
+    N = unknowns if 0 < unknowns <= STAGE_NEWTON_MAX_UNKNOWNS else 0
+    return StageNewtonWork(np.zeros((N, N)), np.zeros(N, np.int64), *(np.zeros(N) for _ in range(5)))
+
+
+def step_buffers(tapes: SystemTapes, n: int, s: int, space, stage_degree: int = 0) -> StepBuffers:
+    """The work arrays of the step loop for dimension n, s stages and a jet space; with an implicit
+    tableau's `stage_degree` D, also those of `_stage_newton` (s n counts[D - 1] unknowns)."""
     size = space.size
+    unknowns = s * n * int(space.counts[stage_degree - 1]) if stage_degree > 0 else 0
 
     def vec():
         return np.zeros(n)
@@ -127,8 +175,9 @@ def step_buffers(tapes: SystemTapes, n: int, s: int, space) -> StepBuffers:
 
     return StepBuffers(tape_work(tapes, size), np.zeros((s, n, size)), vec(), mat(), vec(), mat(),
                        vec(), vec(), vec(), mat(), np.zeros(n, np.int64), vec(), np.zeros((3, n)),
-                       np.zeros(9), vec(), vec(), vec(), np.zeros(space.degree + 1),
-                       np.zeros((s, size)), np.zeros((s, n, size)), np.zeros(space.degree + 1))
+                       np.zeros(10), vec(), vec(), vec(), np.zeros(space.degree + 1),
+                       np.zeros((s, size)), np.zeros((s, n, size)), np.zeros(space.degree + 1),
+                       stage_newton_work(unknowns))
 
 
 @nb.njit(inline="always", **NJIT_NORC)
@@ -491,25 +540,6 @@ def _psi_at(b, h, space, buf, top):
         psi[k] = acc
 
 
-STAGE_NEWTON_ITERATIONS = 30
-"""Most Newton iterations of `_stage_newton` on the coefficients of the stage polynomials."""
-STAGE_NEWTON_MAX_UNKNOWNS = 1500
-"""Most coefficients (stages x components x monomials of degree < D) that `_stage_newton` solves
-for: its Jacobian takes 8 N^2 bytes (18 MB) and its factorisation N^3 / 3 operations (about a
-second); beyond, the stalled sweeps end the step as before (STAGES_NO_CONVERGENCE)."""
-STAGE_NEWTON_DONE = 1e-14
-"""`_stage_newton` has converged when a full correction is at most this times the coefficients'
-size (max(1, max-norm)): 45 eps, the round-off of a sweep of the stage polynomials."""
-STAGE_NEWTON_ROUND_OFF = 1e-12
-"""A correction of `_stage_newton` that no halving makes decrease the residual is round-off (the
-iteration has converged) when at most this times the coefficients' size: the forward-difference
-Jacobian (step sqrt(eps)) is accurate to about sqrt(eps), so the residual's noise of a few eps
-times the coefficients, divided by that accuracy, is below it."""
-STAGE_NEWTON_HALVINGS = 30
-"""Most halvings of a Newton correction of `_stage_newton` before it gives up (no decrease of the
-residual along the correction: no solution near the iterate)."""
-
-
 @nb.njit(**NJIT_NORC)
 def _sweep_residual(u, r, x0, A, h, D, tapes, space, buf, M):
     """r = P(u) - u, P one Gauss-Seidel sweep of every stage at degree D (`_stage`) of the
@@ -539,30 +569,46 @@ def _sweep_residual(u, r, x0, A, h, D, tapes, space, buf, M):
     return size
 
 
-@nb.njit(**NJIT_NRT)
+@nb.njit(**NJIT_NORC)
+def _sweep_jacobian(x0, A, h, D, tapes, space, buf, M):
+    """work.J := the Jacobian of `_sweep_residual` at work.u (whose residual is work.r) by forward
+    differences, step sqrt(eps) times max(1, |u_c|), factorised in place; False if singular."""
+    work = buf.stage_newton
+    u, r, rt, J = work.u, work.r, work.rt, work.J
+    N = u.shape[0]
+    for c in range(N):
+        e = 1.4901161193847656e-08 * max(1.0, abs(u[c]))
+        keep = u[c]
+        u[c] = keep + e
+        _sweep_residual(u, rt, x0, A, h, D, tapes, space, buf, M)
+        u[c] = keep
+        for q in range(N):
+            J[q, c] = (rt[q] - r[q]) / e
+    return lu_factor(J, work.perm)
+
+
+@nb.njit(**NJIT_NORC)
 def _stage_newton(x0, A, h, D, tapes, space, buf):
     """Solve the stage equations (the fixed point of the sweeps) for the coefficients of the stage
-    polynomials G by Newton's method when the Picard sweeps stall (do not contract: h beyond
-    their contraction radius, where a solution may still exist; docs/implicit.md "When the
-    sweeps stall"): Jacobian of the sweep's residual by forward differences (step sqrt(eps)
-    times the coefficient's size), each correction halved until the residual decreases, from the
-    sweeps' last polynomials (from G = 0 if they are not finite). Stops when a correction is at
-    round-off (4 eps) of the coefficients. Returns whether it converged; G then holds the
-    solution (buf.changes is reset: the caller's next sweep measures it).
+    polynomials G by Newton's method, when the Picard sweeps stall (h beyond their contraction
+    radius, where a solution may still exist; docs/implicit.md "When the sweeps stall").
+
+    Simplified Newton: the forward-difference Jacobian (`_sweep_jacobian`) is kept between calls
+    (the stage equations change little from one Newton iterate or step to the next) and refreshed
+    when a correction is not below STAGE_NEWTON_CONTRACTION times the previous one, or when it
+    does not decrease the residual; each correction is halved until the residual decreases. From
+    the polynomials in G (G = 0 if they are not finite). Converged when a correction is at
+    round-off of the coefficients (`STAGE_NEWTON_DONE`, `STAGE_NEWTON_ROUND_OFF`); returns whether
+    it did, G holding the solution (buf.changes reset). False at once when the work arrays hold
+    fewer than the unknowns (`STAGE_NEWTON_MAX_UNKNOWNS`).
     """
-    G = buf.G
+    G, memo, work = buf.G, buf.memo, buf.stage_newton
     s, n = G.shape[0], G.shape[1]
     M = space.counts[D - 1]
     N = s * n * M
-    if N > STAGE_NEWTON_MAX_UNKNOWNS:
+    if work.u.shape[0] != N:
         return False
-    u = np.empty(N)
-    r = np.empty(N)
-    trial = np.empty(N)
-    rt = np.empty(N)
-    J = np.empty((N, N))
-    perm = np.empty(N, np.int64)
-    tmp = np.empty(N)
+    u, r, trial, rt, tmp = work.u, work.r, work.trial, work.rt, work.tmp
     q = 0
     finite = True
     for j in range(s):
@@ -573,30 +619,28 @@ def _stage_newton(x0, A, h, D, tapes, space, buf):
                     finite = False
                 q += 1
     if not finite:
-        u[:] = 0.0
+        for q in range(N):
+            u[q] = 0.0
     size = _sweep_residual(u, r, x0, A, h, D, tapes, space, buf, M)
+    fresh = memo[9] == 0.0
+    previous = np.inf
     converged = False
     for _ in range(STAGE_NEWTON_ITERATIONS):
         if not np.isfinite(size):
             break
-        for c in range(N):
-            e = 1.4901161193847656e-08 * max(1.0, abs(u[c]))
-            keep = u[c]
-            u[c] = keep + e
-            _sweep_residual(u, rt, x0, A, h, D, tapes, space, buf, M)
-            u[c] = keep
-            for q in range(N):
-                J[q, c] = (rt[q] - r[q]) / e
-        if not lu_factor(J, perm):
-            break
+        if fresh:
+            if not _sweep_jacobian(x0, A, h, D, tapes, space, buf, M):
+                memo[9] = 0.0
+                break
+            memo[9] = 1.0
         for q in range(N):
-            tmp[q] = 0.0
             trial[q] = -r[q]
-        lu_solve(J, perm, trial, tmp)
+        lu_solve(work.J, work.perm, trial, tmp)
         correction = _max_abs(trial)
-        if not np.isfinite(correction):
-            break
         scale = max(1.0, _max_abs(u))
+        if not fresh and not correction < STAGE_NEWTON_CONTRACTION * previous:
+            fresh = True  # the kept Jacobian no longer serves: refresh it
+            continue
         step = 1.0
         accepted = False
         for _h in range(STAGE_NEWTON_HALVINGS):
@@ -608,17 +652,22 @@ def _stage_newton(x0, A, h, D, tapes, space, buf):
                 break
             step *= 0.5
         if not accepted:
-            # no decrease: at round-off when the correction is (the residual's own noise)
-            converged = correction <= STAGE_NEWTON_ROUND_OFF * scale
-            break
+            if correction <= STAGE_NEWTON_ROUND_OFF * scale:
+                converged = True  # the residual's own noise
+                break
+            if fresh:
+                break
+            fresh = True
+            continue
         for q in range(N):
             u[q] = rt[q]
             r[q] = tmp[q]
         size = new
+        previous = step * correction
+        fresh = False
         if step * correction <= STAGE_NEWTON_DONE * scale:
             converged = True
             break
-    _sweep_residual(u, r, x0, A, h, D, tapes, space, buf, M)
     q = 0
     for j in range(s):
         for k in range(n):
@@ -699,6 +748,7 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
             buf.defects[k] = 0.0
         memo[7] = 0.0
         memo[8] = 0.0
+        memo[9] = 0.0
         _stage_weights(A, b, space, buf.weights)
     elif top > 0:
         if predict:

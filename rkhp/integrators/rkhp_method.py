@@ -21,7 +21,7 @@ from ..base.errors import InputError, NumericalFailure
 from ..base.executors import run_all
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE, STAGE_MAX_SWEEPS
-from .trajectory import Trajectory
+from .trajectory import Trajectory, checked
 
 MAX_PRODUCT_PAIRS = 2_000_000
 """Largest product table the Taylor tower accepts (n variables, degree s + 1 for an explicit
@@ -137,7 +137,7 @@ def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLER
     A, b = tableau_arrays(tableau)
     stage = stage_solve(tableau, A, stage_degree)
     tapes, space = engine_data(system, len(b), stage)
-    buf = step_buffers(tapes, system.dim, len(b), space)
+    buf = step_buffers(tapes, system.dim, len(b), space, stage.degree)
     rest = (tapes, space, buf, system.domain_code, float(tol), int(max_iter), compiled_stage(stage))
     t0 = time.perf_counter()
     rkhp_run(y0, A, b, h, 0, *rest, np.zeros((1, y0.size)), np.zeros(1, np.int64),
@@ -150,14 +150,14 @@ def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLER
     done, cause = rkhp_run(y0, A, b, h, n_steps, *rest, states, iterations, sweeps, True)
     run_seconds = time.perf_counter() - t0
     failed = cause != Failure.OK
-    return Trajectory(
+    return checked(Trajectory(
         times=h * np.arange(done + 1), states=states[: done + 1],
         newton_iterations=iterations[: done + failed], stage_sweeps=sweeps[: done + failed],
         cause=cause, status=failure_status(cause, done, h, system.domain) if failed else "ok",
         failed_step=done if failed else None, compile_seconds=compile_seconds,
         run_seconds=run_seconds, method=getattr(tableau, "name", "custom"), system=system.name,
         extra={"newton_tolerance": tol, "newton_max_iterations": max_iter,
-               "realisation": system.realisation, "stage_degree": stage.degree})
+               "realisation": system.realisation, "stage_degree": stage.degree}), system)
 
 
 def integrate_ensemble(system, tableau, h, n_steps, x0s, *, tol: float = NEWTON_TOLERANCE,
@@ -208,7 +208,7 @@ def _ensemble_chunk(system, A, b, h, n_steps, x0s, tol, max_iter, stage, threads
         last = np.zeros((1, system.dim))
         iterations = np.zeros(max(n_steps, 1), dtype=np.int64)
         sweeps = np.zeros(max(n_steps, 1), dtype=np.int64)
-        buf = step_buffers(tapes, system.dim, len(b), space)
+        buf = step_buffers(tapes, system.dim, len(b), space, stage.degree)
         for t in range(lo, hi):
             done[t], codes[t] = rkhp_run(x0s[t], A, b, h, n_steps, tapes, space, buf,
                                          system.domain_code, tol, max_iter, compiled_stage(stage), last,
