@@ -183,6 +183,33 @@ def step_plan(t_final, steps: int | None, h: float | None) -> tuple[int, float]:
     return steps_for_h(t_final, h), float(h)
 
 
+def real_vector(values, what: str = "x0") -> list[float]:
+    """A state from Python: a list, tuple or 1-d array of real numbers (int, float, Fraction, numpy
+    reals), each finite; text, a mapping, a bool, a complex number or a nested list is refused
+    (InputError), never converted silently."""
+    import numbers
+
+    if isinstance(values, (str, bytes, dict)) or not hasattr(values, "__iter__"):
+        raise InputError(f"{what} must be a list of numbers, got {type(values).__name__}")
+    shape = getattr(values, "shape", None)
+    if shape is not None and len(shape) != 1:
+        raise InputError(f"{what} must be a list of numbers, got an array of shape {tuple(shape)}")
+    out = []
+    for k, v in enumerate(values):
+        if len(out) >= MAX_LIST:
+            raise InputError(f"{what} has more than {MAX_LIST} components")
+        if isinstance(v, bool) or not isinstance(v, numbers.Real):
+            raise InputError(f"{what}[{k}] must be a real number, got {type(v).__name__} {_shown(v)}")
+        try:
+            x = float(v)
+        except OverflowError:
+            raise InputError(f"{what}[{k}] is too large for a float") from None
+        if not math.isfinite(x):
+            raise InputError(f"{what}[{k}] must be finite, got {x}")
+        out.append(x)
+    return out
+
+
 # ----------------------------------------------------------------------------- memory
 
 

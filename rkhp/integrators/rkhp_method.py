@@ -11,12 +11,14 @@ time.
 from __future__ import annotations
 
 import math
+import numbers
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from ..base.bounds import MAX_STEPS, check_trajectory
 from ..base.errors import InputError, NumericalFailure
 from ..base.executors import run_all
 from .failure import Failure, failure_status
@@ -86,16 +88,25 @@ def implicit_degree(order: int) -> int:
     return max(order + 1, 2)
 
 
-def check_step(h, n_steps) -> tuple[float, int]:
+def check_step(h, n_steps, dim: int | None = None) -> tuple[float, int]:
+    """(h, n_steps) of a run, checked as the command line checks them: h a positive finite real
+    number (not text, not a bool), n_steps an integer 0..MAX_STEPS (an integral float too); with
+    the dimension, the stored trajectory within the memory limit (`rkhp.base.bounds`)."""
+    if isinstance(h, bool) or not isinstance(h, numbers.Real):
+        raise InputError(f"step size h must be a number, got {type(h).__name__} {h!r:.40}")
     try:
         h = float(h)
-    except (TypeError, ValueError):
-        raise InputError(f"step size h must be a number, got {h!r}") from None
+    except OverflowError:
+        raise InputError("step size h is too large for a float") from None
     if not math.isfinite(h) or h <= 0.0:
         raise InputError(f"step size h must be positive and finite, got {h}")
-    if int(n_steps) != n_steps or n_steps < 0:
-        raise InputError(f"number of steps must be a non-negative integer, got {n_steps}")
-    return h, int(n_steps)
+    if isinstance(n_steps, bool) or not isinstance(n_steps, numbers.Real) or not (
+            math.isfinite(n_steps) and int(n_steps) == n_steps and 0 <= n_steps <= MAX_STEPS):
+        raise InputError(f"number of steps must be an integer 0..{MAX_STEPS}, got {n_steps!r:.40}")
+    n_steps = int(n_steps)
+    if dim is not None:
+        check_trajectory(n_steps, dim)
+    return h, n_steps
 
 
 def start_state(system, x0) -> np.ndarray:
@@ -132,7 +143,7 @@ def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLER
     from .engine import rkhp_run, step_buffers
 
     tableau = resolve_tableau(tableau)
-    h, n_steps = check_step(h, n_steps)
+    h, n_steps = check_step(h, n_steps, system.dim)
     y0 = start_state(system, x0)
     A, b = tableau_arrays(tableau)
     stage = stage_solve(tableau, A, stage_degree)

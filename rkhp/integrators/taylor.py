@@ -187,7 +187,7 @@ def integrate_taylor(system, order: int, degenerate: bool, h, n_steps, x0=None, 
     """THP of order `order` over T_0 (`degenerate`) or T, as a Trajectory (paper Thm 5.1)."""
     if not isinstance(order, int) or not 1 <= order <= 8:
         raise InputError(f"THP order must be an integer from 1 to 8, got {order!r}")
-    h, n_steps = check_step(h, n_steps)
+    h, n_steps = check_step(h, n_steps, system.dim)
     y = start_state(system, x0)
     t0 = time.perf_counter()
     tower = _Tower(system, order, degenerate)

@@ -241,8 +241,9 @@ class Tableau:
     source: str = field(default="", compare=False)
 
     def __post_init__(self):
-        s = len(self.A)
         where = self.source or self.name
+        self._read_entries(where)
+        s = len(self.A)
         if s == 0:
             raise InputError(f"{where}: A is empty")
         for i, row in enumerate(self.A):
@@ -260,6 +261,33 @@ class Tableau:
                                       or value < 1):
                 raise InputError(f"{where}: claimed {what} must be a positive integer, "
                                  f"got {value!r}")
+
+    def _read_entries(self, where: str) -> None:
+        """Entries given as plain Python or numpy numbers or text (``Tableau(name, A, b)`` called
+        directly) read as :meth:`from_arrays` reads them (`parse_entry`); InputError otherwise."""
+        def ready(x):
+            return isinstance(x, (Fraction, GivenDecimal)) or type(x).__module__.startswith("sympy")
+
+        def rows(value, label):
+            if isinstance(value, (str, bytes, dict)) or not hasattr(value, "__iter__"):
+                raise InputError(f"{where}: {label} must be a list, got {type(value).__name__}")
+            return list(value)
+
+        A = [rows(r, f"row {i + 1} of A") for i, r in enumerate(rows(self.A, "A"))]
+        b = rows(self.b, "b")
+        c = None if self.c_given is None else rows(self.c_given, "c")
+        if all(ready(x) for r in A for x in r) and all(ready(x) for x in b) and all(ready(x) for x in c or ()):
+            if not (isinstance(self.A, tuple) and all(isinstance(r, tuple) for r in self.A)
+                    and isinstance(self.b, tuple)):
+                object.__setattr__(self, "A", tuple(tuple(r) for r in A))
+                object.__setattr__(self, "b", tuple(b))
+            return
+        object.__setattr__(self, "A", tuple(tuple(parse_entry(x, f"{where}: A[{i + 1}][{j + 1}]")
+                                                  for j, x in enumerate(r)) for i, r in enumerate(A)))
+        object.__setattr__(self, "b", tuple(parse_entry(x, f"{where}: b[{i + 1}]") for i, x in enumerate(b)))
+        if c is not None:
+            object.__setattr__(self, "c_given", tuple(parse_entry(x, f"{where}: c[{i + 1}]")
+                                                      for i, x in enumerate(c)))
 
     @classmethod
     def from_arrays(cls, A, b, name: str = "custom", c=None, **metadata) -> Tableau:
