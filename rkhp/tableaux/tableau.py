@@ -171,11 +171,27 @@ def entry_text(x) -> str:
     return str(x)
 
 
+def _magnitude(x) -> str:
+    """A short text of a (huge) entry: six significant digits and an exponent."""
+    try:
+        if isinstance(x, Fraction):
+            return mpmath.nstr(mpmath.mpf(x.numerator) / x.denominator, 6)
+        return mpmath.nstr(mpmath.mpf(str(x)) if isinstance(x, GivenDecimal) else x, 6)
+    except (TypeError, ValueError):
+        return str(x)[:40]
+
+
 def to_float(x) -> float:
-    """float64 value of an entry."""
-    if isinstance(x, (Fraction, mpmath.mpf)):
-        return float(x)
-    return float(x.evalf(20))
+    """float64 value of an entry; InputError when it is beyond the float range (the float paths,
+    integration and float verification, cannot represent it; exact verification can)."""
+    try:
+        value = float(x) if isinstance(x, (Fraction, mpmath.mpf)) else float(x.evalf(20))
+    except OverflowError:
+        value = math.inf
+    if not math.isfinite(value):
+        raise InputError(f"the entry {_magnitude(x)} is beyond the float range (|x| > 1.8e308): "
+                         "float arithmetic cannot represent it (verify with --precision exact)")
+    return value
 
 
 def to_fraction(x, bits: int) -> Fraction:
