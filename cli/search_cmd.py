@@ -39,8 +39,8 @@ def _class_of(degenerate: bool, symmetric: bool) -> str:
 @click.option("--restarts", type=integer(1, bounds.MAX_RESTARTS, "N"), default=50, show_default=True,
               help="Restart budget per order (random starts).")
 @click.option("--time-limit", type=real(0.0, bounds.MAX_SECONDS, low_open=True, name="SECONDS"), default=None,
-              help="Seconds allowed to the restarts of each order and to the proof (default: "
-                   "no limit for restarts, 60 s for --prove).")
+              help="Seconds allowed to the whole search, every order, restarts (checked inside each "
+                   "one) and proof included (default: no limit for restarts, 60 s for --prove).")
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Seed: restart k of order N "
               "starts from numpy default_rng([seed, S, N, k]).")
 @executor_options("restarts")

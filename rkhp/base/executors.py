@@ -40,8 +40,6 @@ from .errors import InputError
 SCHEDULER_VARIABLE = "DASK_SCHEDULER_ADDRESS"
 #: Seconds allowed to reach a scheduler before giving up with one line.
 CONNECT_SECONDS = 10
-#: Seconds allowed beyond CONNECT_SECONDS for a connection that never answers to be abandoned.
-CONNECT_GRACE_SECONDS = 5
 #: Seconds a Dask cluster may be without workers (at the start, or during a run) before the
 #: command ends with one line: its tasks would never run.
 WORKERS_SECONDS = 30
@@ -313,7 +311,8 @@ def _connect(address: str, seconds: float):
     """A distributed Client of the scheduler at ``address``, or InputError in one line within
     about ``seconds``: an address Dask cannot use (no port, an unknown scheme), a refused or
     unanswered connection, a server that is not a Dask scheduler. The connection runs in a thread
-    that is abandoned if it has not answered by then (some failures never answer)."""
+    that is abandoned if it has not answered after 1.5 ``seconds`` (some failures never answer:
+    a server that accepts and is silent)."""
     import threading
 
     from distributed import Client
@@ -328,7 +327,7 @@ def _connect(address: str, seconds: float):
 
     thread = threading.Thread(target=connect, name="rkhp-dask-connect", daemon=True)
     thread.start()
-    thread.join(seconds + CONNECT_GRACE_SECONDS)
+    thread.join(1.5 * seconds)  # distributed's own timeout, then half as long again
     if thread.is_alive():
         raise InputError(f"no answer from a Dask scheduler at {address} within {seconds:g} s")
     error = outcome.get("error")

@@ -38,9 +38,10 @@ OPTIMISATION_STARTS = 8
 
 @dataclass(frozen=True)
 class SearchOptions:
-    """How to search: restart budget, seed, time limit (per order and for the proof), digits D,
-    ``optimize`` ("error" or None), ``prove``, ``closed_form`` (recognition). Where the restarts
-    run is not an option of the search: it is the executor handed to :func:`search`."""
+    """How to search: restart budget, seed, time limit (of the whole search: every order and the
+    proof), digits D, ``optimize`` ("error" or None), ``prove``, ``closed_form`` (recognition).
+    Where the restarts run is not an option of the search: it is the executor handed to
+    :func:`search`."""
 
     restarts: int = 50
     seed: int = 0
@@ -316,12 +317,15 @@ def search(stages: int, order: int | None = None, cls: str = "general", implicit
                 break
             firsts[n] = time.perf_counter() - t0
             best = found
-        if best is not None and order is None and options.closed_form and not interrupted:
+        left = _time_left(options, t0)
+        if best is not None and order is None and options.closed_form and not interrupted and (
+                left is None or left > 0.0):
             problem = Problem(stages, best.order, cls, implicit)
             run = next(r for r in runs if r.problem.order == best.order)
             best = verified(problem, run.first.x, run.first.polished, options.digits, True,
                             method_name(problem), run.first.index) or best
-        if best is not None and options.optimize == "error" and not interrupted:
+        if best is not None and options.optimize == "error" and not interrupted and (
+                left is None or left > 0.0):
             best, optimisation = _optimise(Problem(stages, best.order, cls, implicit),
                                            runs[[r.problem.order for r in runs].index(best.order)],
                                            options, best)
