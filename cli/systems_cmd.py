@@ -158,6 +158,7 @@ def integrate(system, method, steps, h, t_final, x0, modified_order, realisation
         raise InputError("give exactly one of --steps and --h")
     poisson = resolve_system(system, realisation, parse_x0(x0))
     chosen = resolve_method(method)
+    _warn_c(chosen)
     n, step = bounds.step_plan(poisson.t_final if t_final is None else t_final, steps, h)
     bounds.check_trajectory(n, poisson.dim)
     series = None
@@ -179,6 +180,19 @@ def integrate(system, method, steps, h, t_final, x0, modified_order, realisation
     if not trajectory.ok:
         raise NumericalFailure(f"{poisson.name}, {chosen.name}, h = {step:g}: "
                                f"{trajectory.status}")
+
+
+def _warn_c(method) -> None:
+    """The warning `rkhp verify` gives for a given c that differs from A's row sums, on stderr: the
+    integrators, like the order conditions, use c = A 1 and never the file's c."""
+    tableau = method.tableau if method.kind in ("rkhp", "classical") else None
+    mismatch = tableau.c_mismatch() if tableau is not None else []
+    if mismatch:
+        from .terminal import printable
+
+        stages = ", ".join(str(k + 1) for k, _ in mismatch)
+        click.echo(printable(f"rkhp: warning: {tableau.name}: the given c of stage {stages} (counting from 1) "
+                             "differs from the row sum of A; the integrator uses the row sums"), err=True)
 
 
 def _modified_rows(r: dict) -> list[tuple[str, str]]:

@@ -11,6 +11,7 @@ it before importing anything heavy.
 from __future__ import annotations
 
 import math
+import numbers
 import os
 import re
 import stat
@@ -128,10 +129,14 @@ def parse_list(text: str, what: str, convert) -> tuple:
     return tuple(convert(t) for t in items if t)
 
 
+MAX_INT_DIGITS = 30
+"""Most decimal digits of an integer read from text, a flag or a document (TOML and JSON alike)."""
+
+
 def parse_int(text: str, what: str) -> int:
-    """An integer written in decimal (at most 30 digits, so that no bignum is ever parsed)."""
+    """An integer written in decimal (at most MAX_INT_DIGITS digits, so that no bignum is ever parsed)."""
     s = text.strip()
-    if not re.fullmatch(r"[+-]?[0-9]{1,30}", s):
+    if not re.fullmatch(rf"[+-]?[0-9]{{1,{MAX_INT_DIGITS}}}", s):
         raise InputError(f"{what}: {_shown(s)} is not a valid integer")
     return int(s)
 
@@ -187,8 +192,6 @@ def real_vector(values, what: str = "x0") -> list[float]:
     """A state from Python: a list, tuple or 1-d array of real numbers (int, float, Fraction, numpy
     reals), each finite; text, a mapping, a bool, a complex number or a nested list is refused
     (InputError), never converted silently."""
-    import numbers
-
     if isinstance(values, (str, bytes, dict)) or not hasattr(values, "__iter__"):
         raise InputError(f"{what} must be a list of numbers, got {type(values).__name__}")
     shape = getattr(values, "shape", None)

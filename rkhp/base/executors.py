@@ -27,6 +27,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -35,6 +36,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from .errors import InputError
+from .interrupts import is_interrupt
 
 #: The environment variable Dask itself reads for the scheduler's address.
 SCHEDULER_VARIABLE = "DASK_SCHEDULER_ADDRESS"
@@ -101,8 +103,6 @@ def run_until_interrupted(executor: Executor, fn: Callable, argument_tuples: Ite
 
 
 def _run(executor, fn, argument_tuples, on_done, keep_on_interrupt: bool) -> tuple[list, bool]:
-    from .interrupts import is_interrupt
-
     tasks = [executor.submit(fn, *args) for args in argument_tuples]
     order = {id(t): k for k, t in enumerate(tasks)}
     results: list = [None] * len(tasks)
@@ -313,8 +313,6 @@ def _connect(address: str, seconds: float):
     unanswered connection, a server that is not a Dask scheduler. The connection runs in a thread
     that is abandoned if it has not answered after 1.5 ``seconds`` (some failures never answer:
     a server that accepts and is silent)."""
-    import threading
-
     from distributed import Client
 
     outcome: dict = {}
