@@ -705,8 +705,13 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     `_stale_factor` for the Taylor shifts since their last sweep. The stages have converged when
     that is at most Newton's tolerance `tol` times `scale`.
 
-    Returns (Failure, sweeps, converged): STAGES_NO_CONVERGENCE for a non-finite sweep or more
-    than stage.max_sweeps sweeps in one tower.
+    When the sweeps stall (a sweep that does not contract after the first of a step, a non-finite
+    one, or stage.max_sweeps of them while settling), the stages are solved by `_stage_newton`,
+    and from then on in the run every tower solves them so (memo[8]; docs/implicit.md "When the
+    sweeps stall").
+
+    Returns (Failure, sweeps, converged): STAGES_NO_CONVERGENCE when the sweeps stalled and
+    `_stage_newton` found no solution.
 
     Not inlined (unlike `tower`): numba's inlining copies a callee's whole inlined subtree at every
     site, and the loop of explicit tableaux, where this call sits in a pruned branch, would pay
