@@ -174,7 +174,7 @@ def _render_converge(study, plot) -> None:
         basis = f"{kind} order"
         if m.realisation_bound is not None:
             basis += f", at most {m.realisation_bound} with {plain(study.realisation)}"
-        moving = drift(m.fit)
+        moving = drift(m.fit) if m.verdict == "inconclusive" and m.observed_order is not None else None
         trend = "" if moving is None else (
             f" (local orders {moving} steadily over the fit: {_f(m.fit.local_orders[m.fit.fit_rows[1]])} to "
             f"{_f(m.fit.local_orders[m.fit.fit_rows[-1]])}, not yet asymptotic)")

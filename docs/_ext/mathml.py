@@ -16,7 +16,10 @@ LOGGER = logging.getLogger(__name__)
 
 
 def mathml(latex: str, display: bool, node) -> str:
-    """The MathML of a formula; a warning naming it (an error in the build) if it cannot be read."""
+    """The MathML of a formula; a warning naming it (an error in the build) if it cannot be read
+    (an empty one, which MyST makes of the ``$$`` of a display formula already given, is nothing)."""
+    if not latex.strip():
+        return ""
     try:
         return convert(latex.strip(), display="block" if display else "inline")
     except Exception as exc:  # noqa: BLE001 - any failure of the converter is the formula's

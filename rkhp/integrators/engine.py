@@ -705,8 +705,8 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     `_stale_factor` for the Taylor shifts since their last sweep. The stages have converged when
     that is at most Newton's tolerance `tol` times `scale`.
 
-    When the sweeps stall (a sweep that does not contract after the first of a step, a non-finite
-    one, or stage.max_sweeps of them while settling), the stages are solved by `_stage_newton`,
+    When the sweeps stall (a non-finite one, stage.max_sweeps of them while settling, or half as
+    many in one step without converging), the stages are solved by `_stage_newton`,
     and from then on in the run every tower solves them so (memo[8]; docs/implicit.md "When the
     sweeps stall").
 
@@ -807,10 +807,12 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
         converged = swept * tail + kept <= bound or effect <= ROUND_OFF_SHARE * bound
         if converged:
             break
-        # the sweeps stall: not finite, no contraction (after the first sweep of a step), or too
-        # many of them while settling; Newton on the stage equations instead (`_stage_newton`)
+        # the sweeps stall: not finite, stage.max_sweeps of them while settling, or half as many
+        # in one step without converging; Newton on the stage equations instead (`_stage_newton`).
+        # (A sweep larger than the previous one is no stall by itself: after a Taylor shift it
+        # also measures what the shift moved.)
         stalled = not np.isfinite(effect) or (
-            sweeps >= stage.max_sweeps if settle else (tail == np.inf and effect > bound))
+            sweeps >= stage.max_sweeps if settle else memo[7] >= stage.max_sweeps // 2)
         if stalled:
             if not _stage_newton(x0, A, h, D, tapes, space, buf):
                 return Failure.STAGES_NO_CONVERGENCE, sweeps, False

@@ -90,7 +90,7 @@ def implicit_degree(order: int) -> int:
 
 def check_step(h, n_steps, dim: int | None = None) -> tuple[float, int]:
     """(h, n_steps) of a run, checked as the command line checks them: h a positive finite real
-    number (not text, not a bool), n_steps an integer 0..MAX_STEPS (an integral float too); with
+    number (not text, not a bool), n_steps an integer 1..MAX_STEPS (an integral float too); with
     the dimension, the stored trajectory within the memory limit (`rkhp.base.bounds`)."""
     if isinstance(h, bool) or not isinstance(h, numbers.Real):
         raise InputError(f"step size h must be a number, got {type(h).__name__} {h!r:.40}")
@@ -101,8 +101,8 @@ def check_step(h, n_steps, dim: int | None = None) -> tuple[float, int]:
     if not math.isfinite(h) or h <= 0.0:
         raise InputError(f"step size h must be positive and finite, got {h}")
     if isinstance(n_steps, bool) or not isinstance(n_steps, numbers.Real) or not (
-            math.isfinite(n_steps) and int(n_steps) == n_steps and 0 <= n_steps <= MAX_STEPS):
-        raise InputError(f"number of steps must be an integer 0..{MAX_STEPS}, got {n_steps!r:.40}")
+            math.isfinite(n_steps) and int(n_steps) == n_steps and 1 <= n_steps <= MAX_STEPS):
+        raise InputError(f"number of steps must be an integer 1..{MAX_STEPS}, got {n_steps!r:.40}")
     n_steps = int(n_steps)
     if dim is not None:
         check_trajectory(n_steps, dim)

@@ -517,17 +517,18 @@ def _run(tableau, N, arithmetic, tolerance, classes, on_order):
                       per_tree=BYTES_PER_TREE + tableau.stages * value_bytes)
     plan = tree_plan(N)
     states = {cls: _ClassState(cls) for cls in classes}
-    for n, blk, a in weights_by_order(tableau, N, arithmetic):
-        R = arithmetic.residuals(a, plan.gamma_float[blk] if arithmetic.name == "float"
-                                 else plan.gamma[blk])
-        if arithmetic.name == "float" and not np.all(np.isfinite(R)):
-            raise NumericalFailure(f"{tableau.name}: the weights of order {n} overflow float arithmetic "
-                                   "(entries too large for float64): verify with --precision exact")
-        for state in states.values():
-            if state.done is False:
-                _evaluate_class(state, n, blk, R, plan, arithmetic, tolerance)
-        if on_order is not None:
-            on_order(n, N)
-        if all(s.done for s in states.values()):
-            break
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow of float weights is refused below
+        for n, blk, a in weights_by_order(tableau, N, arithmetic):
+            R = arithmetic.residuals(a, plan.gamma_float[blk] if arithmetic.name == "float"
+                                     else plan.gamma[blk])
+            if arithmetic.name == "float" and not np.all(np.isfinite(R)):
+                raise NumericalFailure(f"{tableau.name}: the weights of order {n} overflow float arithmetic "
+                                       "(entries too large for float64): verify with --precision exact")
+            for state in states.values():
+                if state.done is False:
+                    _evaluate_class(state, n, blk, R, plan, arithmetic, tolerance)
+            if on_order is not None:
+                on_order(n, N)
+            if all(s.done for s in states.values()):
+                break
     return states, n
