@@ -84,9 +84,36 @@ def names(name: str = "NAME,...") -> Checked:
     return Checked(name, read)
 
 
+class OutputPath(Checked):
+    """A file to write, checked before the work (`rkhp.base.bounds.check_output_path`, and
+    `rkhp.base.files.check_target`: an existing file or a symbolic link only with the command's
+    `--force`, an eager option, so already read); returns the text."""
+
+    def __init__(self, suffixes: tuple[str, ...]):
+        super().__init__("FILE", lambda text, label: str(bounds.check_output_path(text, suffixes, label)))
+
+    def convert(self, value, param, ctx):
+        from rkhp.base.files import check_target
+
+        text = super().convert(value, param, ctx)
+        force = bool(ctx is not None and ctx.params.get("force"))
+        label = (param.opts[0] if param is not None and param.opts else "output file")
+        try:
+            check_target(text, label, force)
+        except InputError as exc:
+            raise click.UsageError(str(exc), ctx) from None
+        return text
+
+
 def output_path(*suffixes: str) -> Checked:
-    """A file to write, checked before the work (`rkhp.base.bounds.check_output_path`); returns the text."""
-    return Checked("FILE", lambda text, label: str(bounds.check_output_path(text, suffixes, label)))
+    """A file to write (:class:`OutputPath`)."""
+    return OutputPath(suffixes)
+
+
+def force_option():
+    """`--force`: replace an existing output file (read before the other options: eager)."""
+    return click.option("--force", is_flag=True, is_eager=True,
+                        help="Replace an existing output file (or a symbolic link, itself; docs/input.md).")
 
 
 #: a seed: 0 .. 2^64 - 1

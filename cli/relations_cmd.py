@@ -10,6 +10,7 @@ from .options import (
     console,
     emit_json,
     executor_options,
+    force_option,
     format_option,
     integer,
     json_text,
@@ -27,9 +28,10 @@ from .options import (
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Seed of the random instances (--regenerate).")
 @click.option("--output", type=output_path(".json"),
               help="Write the relations document (the shipped format) to this JSON file.")
+@force_option()
 @executor_options("evaluations of --regenerate (one task per prime)")
 @format_option("table", "json")
-def relations(order, regenerate, seed, output, workers, scheduler, fmt):
+def relations(order, regenerate, seed, output, force, workers, scheduler, fmt):
     """Relations among F(t), t in T_0, valid for every symmetric birealisation, per order.
 
     For each order: the number of T_0 trees, of relations and of symmetric order conditions, the
@@ -49,15 +51,11 @@ def relations(order, regenerate, seed, output, workers, scheduler, fmt):
     doc = data.to_json()
     doc["source"] = "regenerated" if regenerate else "shipped"
     if output:
-        from rkhp.base.errors import InputError
+        from rkhp.base.files import write_atomic
 
         document = data.to_json()
         document["method"]["regenerate"] += f" --output {output}"
-        try:
-            with open(output, "w", encoding="utf-8") as fh:
-                fh.write(json_text(document, indent=1) + "\n")
-        except OSError as exc:
-            raise InputError(f"--output {output}: cannot write the file ({exc.strerror or exc})") from None
+        write_atomic(output, json_text(document, indent=1) + "\n", "--output", force)
     if fmt == "json":
         emit_json(doc)
         return

@@ -6,9 +6,21 @@ import click
 
 from rkhp.base import bounds
 
-from .options import SEED, console, emit_json, executor_options, format_option, integer, output_path, progress, real
+from .options import (
+    SEED,
+    console,
+    emit_json,
+    executor_options,
+    force_option,
+    format_option,
+    integer,
+    output_path,
+    progress,
+    real,
+)
 from .render import print_table
 from .show_cmd import print_array
+from .terminal import plain
 
 
 def _class_of(degenerate: bool, symmetric: bool) -> str:
@@ -27,8 +39,8 @@ def _class_of(degenerate: bool, symmetric: bool) -> str:
 @click.option("--restarts", type=integer(1, bounds.MAX_RESTARTS, "N"), default=50, show_default=True,
               help="Restart budget per order (random starts).")
 @click.option("--time-limit", type=real(0.0, bounds.MAX_SECONDS, low_open=True, name="SECONDS"), default=None,
-              help="Seconds allowed to the restarts of each order and to the proof (default: "
-                   "no limit for restarts, 60 s for --prove).")
+              help="Seconds allowed to the whole search, every order, restarts (checked inside each "
+                   "one) and proof included (default: no limit for restarts, 60 s for --prove).")
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Seed: restart k of order N "
               "starts from numpy default_rng([seed, S, N, k]).")
 @executor_options("restarts")
@@ -40,9 +52,10 @@ def _class_of(degenerate: bool, symmetric: bool) -> str:
               help="When an order is not reached, try to prove that no tableau exists (Groebner).")
 @click.option("--save", type=output_path(".toml", ".json"), default=None,
               help="Write the tableau found to a .toml or .json file (loadable by verify).")
+@force_option()
 @format_option("table", "json")
 def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit, seed, workers,
-           scheduler, optimize, digits, prove, save, fmt):
+           scheduler, optimize, digits, prove, save, force, fmt):
     """Search Runge–Kutta tableaux meeting the RKHP order conditions (paper §5).
 
     Solves the order conditions over T (general), T_0 (--degenerate) or the symmetric class from
@@ -73,8 +86,8 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
             bar.update(tasks[n], completed=done)
 
         result = run_search(stages, order, cls, implicit, options, on_progress, executor)
-    if save and result.found is not None:
-        _save(result, save)
+    if save and result.found is not None and not result.interrupted:
+        _save(result, save, force)
     if fmt == "json":
         emit_json(result.to_json())
     else:
@@ -91,10 +104,10 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
                           + (f"; nothing was saved to {save}" if save else ""))
 
 
-def _save(result, path) -> None:
+def _save(result, path, force) -> None:
     from rkhp.tableaux.files import save_tableau
 
-    save_tableau(result.tableau_to_save(), path)
+    save_tableau(result.tableau_to_save(), path, force)
 
 
 SHOWN_DIGITS = 12
@@ -140,7 +153,7 @@ def _render(result, save) -> None:
                            for cls, n in ver.orders.items())
         con.print(f"verified orders: {orders}; decided by: {data['decided_by']}")
         if save:
-            con.print(f"saved to {save}")
+            con.print(f"saved to {plain(save)}")
     if result.optimisation is not None:
         opt = result.optimisation
         rows = Table("method", "principal error norm", title="Error norms at order N+1")

@@ -68,16 +68,16 @@ def claims_text(tab) -> str:
 
 
 def _render(tab) -> None:
-    from rich.markup import escape
-
     from rkhp.tableaux.tableau import entry_decimal, entry_text
 
+    from .terminal import plain
+
     out = console()
-    out.print(f"[bold]{escape(tab.name)}[/bold]: {tab.stages} stages, {tab.kind}")
+    out.print(f"[bold]{plain(tab.name)}[/bold]: {tab.stages} stages, {tab.kind}")
     for label, value in (("aliases", ", ".join(tab.aliases)), ("source", tab.source),
                          ("reference", tab.reference), ("notes", tab.notes)):
         if value:
-            out.print(f"{label}: {escape(value)}")
+            out.print(f"{label}: {plain(value)}")
     out.print(f"claimed orders: {claims_text(tab)} (check them with `rkhp verify`)")
     import mpmath
 

@@ -20,6 +20,7 @@ from .options import (
     x0_option,
 )
 from .render import compact_table, print_table
+from .terminal import plain
 
 
 def realisation_option():
@@ -58,9 +59,9 @@ def systems(fmt):
     for col in ("name", "family", "n", "domain", "x0", "t_final", "Casimirs", "exact"):
         table.add_column(col, no_wrap=col in ("name", "family"))
     for r in rows:
-        table.add_row(r["name"], r["family"], str(r["dim"]), r["domain"],
+        table.add_row(plain(r["name"]), r["family"], str(r["dim"]), r["domain"],
                       ", ".join(f"{v:.4g}" for v in r["x0"]), _fmt(r["t_final"]),
-                      "; ".join(r["casimirs"]) or "-", "yes" if r["exact_solution"] else "no")
+                      plain("; ".join(r["casimirs"])) or "-", "yes" if r["exact_solution"] else "no")
     print_table(console(), table)
 
 
@@ -85,7 +86,7 @@ def check(system, realisation, samples, seed, fmt):
     else:
         from rich.table import Table
 
-        table = Table(title=f"{result.system} ({result.realisation}): {samples} samples, "
+        table = Table(title=f"{plain(result.system)} ({plain(result.realisation)}): {samples} samples, "
                             f"seed {seed}")
         table.add_column("axiom")
         table.add_column("max deviation", justify="right")
@@ -157,6 +158,7 @@ def integrate(system, method, steps, h, t_final, x0, modified_order, realisation
         raise InputError("give exactly one of --steps and --h")
     poisson = resolve_system(system, realisation, parse_x0(x0))
     chosen = resolve_method(method)
+    _warn_c(chosen)
     if t_final is None:
         t_final = -poisson.t_final if h is not None and h < 0 else poisson.t_final
     n, step = bounds.step_plan(t_final, steps, h)
@@ -182,6 +184,19 @@ def integrate(system, method, steps, h, t_final, x0, modified_order, realisation
                                f"{trajectory.status}")
 
 
+def _warn_c(method) -> None:
+    """The warning `rkhp verify` gives for a given c that differs from A's row sums, on stderr: the
+    integrators, like the order conditions, use c = A 1 and never the file's c."""
+    tableau = method.tableau if method.kind in ("rkhp", "classical") else None
+    mismatch = tableau.c_mismatch() if tableau is not None else []
+    if mismatch:
+        from .terminal import printable
+
+        stages = ", ".join(str(k + 1) for k, _ in mismatch)
+        click.echo(printable(f"rkhp: warning: {tableau.name}: the given c of stage {stages} (counting from 1) "
+                             "differs from the row sum of A; the integrator uses the row sums"), err=True)
+
+
 def _modified_rows(r: dict) -> list[tuple[str, str]]:
     if "modified_energy_error" not in r:
         return []
@@ -193,7 +208,7 @@ def _modified_rows(r: dict) -> list[tuple[str, str]]:
 def _print_integration(r: dict) -> None:
     from rich.table import Table
 
-    table = Table(title=f"{r['system']} ({r['realisation']}) with {r['method']}: "
+    table = Table(title=f"{plain(r['system'])} ({plain(r['realisation'])}) with {plain(r['method'])}: "
                         f"{r['steps']} steps of h = {r['h']:.6g}")
     table.add_column("quantity")
     table.add_column("value", justify="right")
@@ -204,7 +219,7 @@ def _print_integration(r: dict) -> None:
             ("energy error", _fmt(r["energy_error"], 3)),
             *_modified_rows(r),
             ("Newton iterations (mean, max)", f"{r['newton_mean']:.2f}, {r['newton_max']}"),
-            ("status", r["status"]),
+            ("status", plain(r["status"])),
             ("compile seconds", f"{r['compile_seconds']:.3f}"),
             ("run seconds", f"{r['run_seconds']:.4f}")]
     for key, value in rows:

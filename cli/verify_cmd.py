@@ -56,13 +56,14 @@ def fail_on_overstated(results) -> None:
 
 
 def _render(result, tab, show: int) -> None:
-    from rich.markup import escape
     from rich.table import Table
 
+    from .terminal import plain
+
     out = console()
-    out.print(f"[bold]{escape(result.name)}[/bold]: {result.stages} stages, {result.kind}"
-              + (f" — {escape(tab.reference)}" if tab.reference else ""))
-    out.print(f"precision: {result.precision}; {escape(result.tolerance_rule)}")
+    out.print(f"[bold]{plain(result.name)}[/bold]: {result.stages} stages, {result.kind}"
+              + (f" — {plain(tab.reference)}" if tab.reference else ""))
+    out.print(f"precision: {result.precision}; {plain(result.tolerance_rule)}")
     for stage, diff in result.c_mismatch:
         out.print(f"[yellow]warning:[/yellow] the given c of stage {stage + 1} (counting from 1) "
                   f"differs from the row sum of A by {diff:.3g}; the row sums are used")
@@ -76,7 +77,7 @@ def _render(result, tab, show: int) -> None:
         pm = result.principal_error_max.get(cls)
         claimed = result.claimed.get(cls)
         claim = "" if claimed is None else f"{claimed} ({result.claims.get(cls, 'not checked')})"
-        table.add_row(_CLASS_SETS.get(cls, cls), f"{lower}{order}", str(checked), escape(claim),
+        table.add_row(_CLASS_SETS.get(cls, cls), f"{lower}{order}", str(checked), plain(claim),
                       "" if pe is None else f"{pe:.3e}", "" if pm is None else f"{pm:.3e}")
     print_table(out, table)
     for cls, failures in result.failing.items():
@@ -90,9 +91,9 @@ def _render(result, tab, show: int) -> None:
         if exact:
             t.add_column("exact")
         for k, f in enumerate(failures[:show]):
-            row = [escape(f.label), f"{f.residual:.6e}"]
+            row = [plain(f.label), f"{f.residual:.6e}"]
             if exact:
-                row.append(escape(_exact_cell(exact[k])))
+                row.append(plain(_exact_cell(exact[k])))
             t.add_row(*row)
         if len(failures) > show:
             t.caption = f"... and {len(failures) - show} more (--show N, or --format json)"

@@ -11,6 +11,7 @@ it before importing anything heavy.
 from __future__ import annotations
 
 import math
+import numbers
 import os
 import re
 import stat
@@ -136,10 +137,14 @@ def parse_list(text: str, what: str, convert) -> tuple:
     return tuple(convert(t) for t in items if t)
 
 
+MAX_INT_DIGITS = 30
+"""Most decimal digits of an integer read from text, a flag or a document (TOML and JSON alike)."""
+
+
 def parse_int(text: str, what: str) -> int:
-    """An integer written in decimal (at most 30 digits, so that no bignum is ever parsed)."""
+    """An integer written in decimal (at most MAX_INT_DIGITS digits, so that no bignum is ever parsed)."""
     s = text.strip()
-    if not re.fullmatch(r"[+-]?[0-9]{1,30}", s):
+    if not re.fullmatch(rf"[+-]?[0-9]{{1,{MAX_INT_DIGITS}}}", s):
         raise InputError(f"{what}: {_shown(s)} is not a valid integer")
     return int(s)
 
@@ -193,6 +198,31 @@ def step_plan(t_final, steps: int | None, h: float | None) -> tuple[int, float]:
         n = integer(steps, "--steps", 1, MAX_STEPS)
         return n, t_final / n
     return steps_for_h(t_final, h), float(h)
+
+
+def real_vector(values, what: str = "x0") -> list[float]:
+    """A state from Python: a list, tuple or 1-d array of real numbers (int, float, Fraction, numpy
+    reals), each finite; text, a mapping, a bool, a complex number or a nested list is refused
+    (InputError), never converted silently."""
+    if isinstance(values, (str, bytes, dict)) or not hasattr(values, "__iter__"):
+        raise InputError(f"{what} must be a list of numbers, got {type(values).__name__}")
+    shape = getattr(values, "shape", None)
+    if shape is not None and len(shape) != 1:
+        raise InputError(f"{what} must be a list of numbers, got an array of shape {tuple(shape)}")
+    out = []
+    for k, v in enumerate(values):
+        if len(out) >= MAX_LIST:
+            raise InputError(f"{what} has more than {MAX_LIST} components")
+        if isinstance(v, bool) or not isinstance(v, numbers.Real):
+            raise InputError(f"{what}[{k}] must be a real number, got {type(v).__name__} {_shown(v)}")
+        try:
+            x = float(v)
+        except OverflowError:
+            raise InputError(f"{what}[{k}] is too large for a float") from None
+        if not math.isfinite(x):
+            raise InputError(f"{what}[{k}] must be finite, got {x}")
+        out.append(x)
+    return out
 
 
 # ----------------------------------------------------------------------------- memory
@@ -264,9 +294,11 @@ def check_output_path(path, suffixes: tuple[str, ...] = (), what: str = "output 
         raise InputError(f"{what} {path}: the folder {folder} {reason}")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise InputError(f"{what} {path}: the folder {folder} is not writable")
+    if path.is_symlink():
+        return path  # never followed: rkhp.base.files refuses it or replaces the link itself
     if path.is_dir():
         raise InputError(f"{what} {path}: is a folder")
-    if path.exists() or path.is_symlink():
+    if path.exists():
         try:
             mode = path.stat().st_mode
         except OSError as exc:

@@ -124,10 +124,10 @@ def integrate_composition(system, composition, h, n_steps, x0=None, *, keep_all:
         start_state,
         tableau_arrays,
     )
-    from .trajectory import Trajectory
+    from .trajectory import Trajectory, checked
 
     base = resolve_tableau(composition.base)
-    h, n_steps = check_step(h, n_steps)
+    h, n_steps = check_step(h, n_steps, system.dim)
     A, b = tableau_arrays(base)
     if is_implicit(A):
         raise InputError(f"{composition.name}: the base method {base.name} is implicit; compositions "
@@ -153,7 +153,7 @@ def integrate_composition(system, composition, h, n_steps, x0=None, *, keep_all:
     run_seconds = time.perf_counter() - t0
     failed = cause != Failure.OK
     states = record.states[: done + 1] if keep_all else record.states[:1]
-    return Trajectory(
+    return checked(Trajectory(
         times=h * np.arange(done + 1) if keep_all else np.array([h * done]), states=states,
         newton_iterations=record.iterations[: done + failed], stage_sweeps=np.zeros(done + failed, np.int64),
         cause=Failure(cause), status=failure_status(Failure(cause), done, h, system.domain) if failed else "ok",
@@ -161,4 +161,4 @@ def integrate_composition(system, composition, h, n_steps, x0=None, *, keep_all:
         method=composition.name, system=system.name,
         extra={"newton_tolerance": tol, "newton_max_iterations": max_iter,
                "realisation": system.realisation, "base": base.name,
-               "substeps": composition.substeps})
+               "substeps": composition.substeps}), system)

@@ -8,12 +8,17 @@ programs, `status` for people.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..base.errors import NumericalFailure
-from .failure import Failure
+from .failure import Failure, failure_status
+
+GROWTH = 100.0
+"""A state counts as grown when its max-norm exceeds this times max(1, |y_0|) (`divergence`)."""
+DIVERGENCE = 1e8
+"""A grown state whose energy error exceeds this times max(1, |H(y_0)|) ends the run (`divergence`)."""
 
 
 @dataclass(frozen=True)
@@ -63,3 +68,52 @@ class Trajectory:
         if not self.ok:
             raise NumericalFailure(self.status)
         return self
+
+
+def divergence(system, states) -> int | None:
+    """The index k of the first state y_k that has left every sane range, or None.
+
+    The rule (docs/exit-status.md "Divergence"): y_k is non-finite, or it grew (|y_k| > GROWTH
+    max(1, |y_0|), max-norms) and its energy error exceeds DIVERGENCE max(1, |H(y_0)|). The exact
+    flow keeps H; a run that still approximates it, however coarsely, keeps its energy error
+    near the energy's own size (`rkhp stress` calls a relative error above 1 "not bounded"), far
+    below 1e8 times it, while a blow-up passes that within a few steps (H grows like a power of
+    |y|). Growth alone is no divergence (a hyperbolic flow grows like e^t with H conserved), and
+    requiring it first keeps H's evaluation to the few grown states.
+    """
+    states = np.asarray(states, dtype=float)
+    finite = np.isfinite(states).all(axis=1)
+    bad = np.flatnonzero(~finite)
+    first_bad = int(bad[0]) if bad.size else None
+    size = np.abs(np.where(finite[:, None], states, 0.0)).max(axis=1, initial=0.0)
+    grown = np.flatnonzero(finite & (size > GROWTH * max(1.0, size[0])))
+    if grown.size:
+        h0 = float(system.hamiltonian(states[0]))
+        bound = DIVERGENCE * max(1.0, abs(h0))
+        for k in grown:
+            if first_bad is not None and k > first_bad:
+                break
+            try:
+                with np.errstate(all="ignore"):
+                    energy = float(system.hamiltonian(states[k]))
+            except (OverflowError, FloatingPointError, ValueError, ZeroDivisionError):
+                return int(k)  # H cannot even be evaluated there
+            if not abs(energy - h0) <= bound:  # also catches an energy that overflows
+                return int(k)
+    return first_bad
+
+
+def checked(trajectory: Trajectory, system) -> Trajectory:
+    """The trajectory, or when it diverged (`divergence`), the same run ended before the state
+    that diverged: cause Failure.DIVERGED (or NON_FINITE for a non-finite state) at the step that
+    produced it."""
+    k = divergence(system, trajectory.states)
+    if k is None or k == 0:
+        return trajectory
+    cause = Failure.NON_FINITE if not np.isfinite(trajectory.states[k]).all() else Failure.DIVERGED
+    step = k - 1
+    h = float(trajectory.times[1] - trajectory.times[0]) if len(trajectory.times) > 1 else 0.0
+    return replace(trajectory, times=trajectory.times[:k], states=trajectory.states[:k],
+                   newton_iterations=trajectory.newton_iterations[:k],
+                   stage_sweeps=trajectory.stage_sweeps[:k], cause=cause, failed_step=step,
+                   status=failure_status(cause, step, h, system.domain))

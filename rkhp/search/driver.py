@@ -38,9 +38,10 @@ OPTIMISATION_STARTS = 8
 
 @dataclass(frozen=True)
 class SearchOptions:
-    """How to search: restart budget, seed, time limit (per order and for the proof), digits D,
-    ``optimize`` ("error" or None), ``prove``, ``closed_form`` (recognition). Where the restarts
-    run is not an option of the search: it is the executor handed to :func:`search`."""
+    """How to search: restart budget, seed, time limit (of the whole search: every order and the
+    proof), digits D, ``optimize`` ("error" or None), ``prove``, ``closed_form`` (recognition).
+    Where the restarts run is not an option of the search: it is the executor handed to
+    :func:`search`."""
 
     restarts: int = 50
     seed: int = 0
@@ -296,8 +297,11 @@ def search(stages: int, order: int | None = None, cls: str = "general", implicit
         for n in orders:
             problem = Problem(stages, n, cls, implicit)
             want_many = options.optimize and (order is None or n == order)
+            left = _time_left(options, t0)
+            if left is not None and left <= 0.0:
+                break  # the limit is for the whole search, every order included
             run = run_restarts(
-                problem, options.restarts, options.seed, executor, options.time_limit,
+                problem, options.restarts, options.seed, executor, left,
                 options.digits, stop_after=OPTIMISATION_STARTS if want_many else 1,
                 on_progress=None if on_progress is None else
                 (lambda d, tot, n=n: on_progress(n, d, tot)))
@@ -313,12 +317,15 @@ def search(stages: int, order: int | None = None, cls: str = "general", implicit
                 break
             firsts[n] = time.perf_counter() - t0
             best = found
-        if best is not None and order is None and options.closed_form and not interrupted:
+        left = _time_left(options, t0)
+        if best is not None and order is None and options.closed_form and not interrupted and (
+                left is None or left > 0.0):
             problem = Problem(stages, best.order, cls, implicit)
             run = next(r for r in runs if r.problem.order == best.order)
             best = verified(problem, run.first.x, run.first.polished, options.digits, True,
                             method_name(problem), run.first.index) or best
-        if best is not None and options.optimize == "error" and not interrupted:
+        if best is not None and options.optimize == "error" and not interrupted and (
+                left is None or left > 0.0):
             best, optimisation = _optimise(Problem(stages, best.order, cls, implicit),
                                            runs[[r.problem.order for r in runs].index(best.order)],
                                            options, best)
@@ -330,13 +337,21 @@ def search(stages: int, order: int | None = None, cls: str = "general", implicit
     if options.prove and failed is not None and not interrupted:
         proof_order = failed.problem.order
         try:
+            left = _time_left(options, t0)
             proof = prove_impossible(failed.problem.system(),
-                                     options.time_limit or DEFAULT_PROOF_SECONDS)
+                                     DEFAULT_PROOF_SECONDS if left is None else max(left, 0.0))
         except KeyboardInterrupt:
             interrupted = True
     return SearchResult(stages, cls, implicit, order, best, result_runs,
                         time.perf_counter() - t0, options, proof, proof_order, optimisation,
                         interrupted, firsts)
+
+
+def _time_left(options: SearchOptions, t0: float) -> float | None:
+    """Seconds left of --time-limit (the whole search's), None without one."""
+    if options.time_limit is None:
+        return None
+    return options.time_limit - (time.perf_counter() - t0)
 
 
 def _optimise(problem: Problem, run: Restarts, options: SearchOptions, found: Found):

@@ -9,14 +9,15 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..base.bounds import check_output_path
-from ..base.errors import InputError
+from ..base.files import atomic_path, check_target
 
 FORMATS = ("png", "svg", "pdf")
 
 
-def check_plot_path(path) -> Path:
-    """The plot path, after checking its extension and that it can be written (`rkhp.base.bounds`)."""
-    return check_output_path(path, tuple("." + f for f in FORMATS), "plot file")
+def check_plot_path(path, force: bool = False) -> Path:
+    """The plot path, after checking its extension and that it can be written (`rkhp.base.bounds`;
+    an existing file or a link only with ``force``, `rkhp.base.files`)."""
+    return check_target(check_output_path(path, tuple("." + f for f in FORMATS), "plot file"), "plot file", force)
 
 
 def _pyplot():
@@ -28,21 +29,21 @@ def _pyplot():
     return plt
 
 
-def _save(fig, path: Path) -> None:
+def _save(fig, path: Path, force: bool) -> None:
+    """Write the figure atomically (`rkhp.base.files`: an existing file only with ``force``)."""
     try:
-        fig.savefig(path, format=path.suffix.lower().lstrip("."), bbox_inches="tight")
-    except OSError as exc:
-        raise InputError(f"plot file {path}: {exc.strerror or exc}") from None
+        with atomic_path(path, "plot file", force) as tmp:
+            fig.savefig(tmp, format=path.suffix.lower().lstrip("."), bbox_inches="tight")
     finally:
         import matplotlib.pyplot as plt
 
         plt.close(fig)
 
 
-def plot_convergence(study, path) -> Path:
+def plot_convergence(study, path, force: bool = False) -> Path:
     """Log-log global error against h, one line per method, with dashed reference slopes h^p
     for each expected order p, and the reference's accuracy floor."""
-    path = check_plot_path(path)
+    path = check_plot_path(path, force)
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 4.8))
     for m in study.methods:
@@ -65,13 +66,13 @@ def plot_convergence(study, path) -> Path:
     ax.set_title(f"{study.system} ({study.realisation} realisation); dashed: slope = expected order", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
-    _save(fig, path)
+    _save(fig, path, force)
     return path
 
 
-def plot_work_precision(bench, path) -> Path:
+def plot_work_precision(bench, path, force: bool = False) -> Path:
     """Log-log wall time (median) against error at T, one line per method or peer."""
-    path = check_plot_path(path)
+    path = check_plot_path(path, force)
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 4.8))
     for curve in bench.curves:
@@ -87,14 +88,14 @@ def plot_work_precision(bench, path) -> Path:
     ax.grid(True, which="both", alpha=0.3)
     ax.invert_xaxis()
     ax.legend(fontsize=7)
-    _save(fig, path)
+    _save(fig, path, force)
     return path
 
 
-def plot_stress(stress, path) -> Path:
+def plot_stress(stress, path, force: bool = False) -> Path:
     """Casimir and energy drift per window of the long run (part b), log scale; the classical
     RK4 peer dashed."""
-    path = check_plot_path(path)
+    path = check_plot_path(path, force)
     plt = _pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     for run in (*stress.long_run.runs, stress.long_run.peer):
@@ -108,5 +109,5 @@ def plot_stress(stress, path) -> Path:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
     fig.suptitle(f"long run, {stress.system}, h = {stress.long_run.h:g}", fontsize=9)
-    _save(fig, path)
+    _save(fig, path, force)
     return path

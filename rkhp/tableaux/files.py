@@ -33,6 +33,7 @@ import tomli_w
 from ..base.bounds import MAX_CLAIMED_ORDER, MAX_STAGES
 from ..base.documents import parse_document, read_text
 from ..base.errors import InputError
+from ..base.files import write_atomic
 from .tableau import Tableau, entry_text, parse_entry
 
 _KEYS = ("name", "aliases", "reference", "order", "degenerate_order", "symmetric_order", "notes", "A",
@@ -235,8 +236,9 @@ def tableau_mapping(tableau: Tableau) -> dict:
     return data
 
 
-def save_tableau(tableau: Tableau, path) -> None:
-    """Write a tableau as TOML or JSON (by the file's extension)."""
+def save_tableau(tableau: Tableau, path, force: bool = False) -> None:
+    """Write a tableau as TOML or JSON (by the file's extension), atomically; an existing file (or a
+    symbolic link) is replaced only with ``force`` (`rkhp.base.files`)."""
     path = Path(path)
     data = tableau_mapping(tableau)
     suffix = path.suffix.lower()
@@ -247,7 +249,4 @@ def save_tableau(tableau: Tableau, path) -> None:
     else:
         raise InputError(f"{path}: cannot write a tableau as {suffix or 'a file without extension'}"
                          " (use .toml or .json)")
-    try:
-        path.write_text(text, encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"{path}: cannot write the file ({exc})") from None
+    write_atomic(path, text, "tableau file", force)
