@@ -21,16 +21,18 @@ numbers, solve by chord iterations with the frozen Jacobian
 
 whose error is O(h^2) per iteration, factorised once and kept across steps for each substep of a
 composition (refreshed when the iterations contract slowly or the number of nodes changes). Each
-substep starts from its own previous solutions, (p, Z) extrapolated quadratically from the same
-substep of the three previous steps. On a constant pi, J = 0 and the step is the implicit
+substep starts from its own previous solutions, (p, Z) extrapolated (cubic) from the same
+substep of the four previous steps. On a constant pi, J = 0 and the step is the implicit
 midpoint rule.
 
-Number of nodes: as the spray kernel's first guess (`rkhp.taylor.composites._spray_stages`),
-Q0 is the smallest Q with E_Q theta^(2Q) <= 8 SPRAY_AGREEMENT (E_Q the average's error constant,
-theta = `_norm_bound` of J >= |J|_2), and Q = Q0 + 1, so the truncation error is smaller still by
-about theta^2 / (16 Q^2); theta is rescaled by |p| between refreshes (J is linear in p).
+Number of nodes: Q is the smallest (at least 2) with E_Q theta^(2Q) <= NODE_BOUND, E_Q the
+average's error constant for y' = lambda y (`rkhp.taylor.collocation.average_error_constant`) and
+theta = `_norm_bound` of J >= |J|_2, computed at each substep from the derivatives of X at
+(y0, predicted p) by forward mode (`rkhp.taylor.scalar`). A substep needing more nodes than its
+matrix has, or two fewer, refreshes the matrix (one fewer keeps it: more nodes than needed only
+cost, and Q would otherwise toggle along an orbit).
 
-Compiled data: `SprayTapes` (X and H as plain tapes), `SpraySpaces` (the two jet spaces),
+Compiled data: `SprayTapes` (X and H as plain tapes), the jet space of Hess H,
 `EulerWork` (work arrays of one substep), `SubstepMemory` (what each substep keeps across steps).
 `run` is the compiled composed loop; `integrate_spray_euler` the Python entry.
 """
@@ -48,12 +50,13 @@ from ..base.errors import InputError
 from ..taylor.collocation import TABLE_A, TABLE_B, TABLE_E, TABLE_W
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
-from ..taylor.composites import SPRAY_AGREEMENT, _norm_bound
+from ..taylor.composites import _norm_bound
 from ..taylor.interpreter import TapeWork, run_tape, tape_work
 from ..taylor.jets import JetSpace, jet_space
-from ..taylor.linalg import lu_factor, lu_solve
-from ..taylor.ops import ARITHMETIC, BY_CODE, CRB, FUNCTION, SCRATCH_BASE, SPRAY
+from ..taylor.linalg import lu_factor
+from ..taylor.ops import SCRATCH_BASE, SPRAY
 from ..taylor.rows import subprogram_at
+from ..taylor.scalar import SCALAR_CODES, gradients, shared, values
 from ..taylor.tape import Tape
 from .engine import state_failure
 from .failure import Failure, failure_status
@@ -64,11 +67,21 @@ MAX_NODES = 12
 """Collocation nodes of the direct form at most (E_12 theta^24 is below round-off for theta up to
 about 1.5, far beyond the steps at which the chord iterations converge); a substep needing more
 fails with STAGES_NO_CONVERGENCE."""
+NODE_BOUND = 2.0**-53
+"""The bound on E_Q theta^(2 Q), the relative error of the average for y' = lambda y,
+|lambda| <= theta (`rkhp.taylor.collocation.average_error_constant`), that sets the number of
+nodes: half a unit of round-off."""
+RATE_MARGIN = 2.0
+"""Safety factor on a substep's last measured contraction when it predicts the second correction
+from the first (so that one iteration can suffice)."""
 SLOW_CONTRACTION = 0.25
-"""Chord iterations contracting by more than this refresh the substep's Jacobian (as the
-engine's Newton iteration does, `rkhp.integrators.engine.rkhp_step`)."""
-HISTORY = 3
-"""Previous solutions of a substep kept for the extrapolated start (quadratic)."""
+"""A chord iteration contracting by more than this refreshes the substep's matrix (once per
+substep; as the engine's Newton iteration, `rkhp.integrators.engine.rkhp_step`). The matrix is
+kept across steps: it goes stale by O(h) a step, which the first iteration of a step feels (its
+p-columns: measured 0.05 on nambu at h = 0.1 even just after a refresh), the later ones less."""
+HISTORY = 4
+"""Previous solutions of a substep kept for the extrapolated start (cubic: measured on the
+charged particle, h = 0.1, it halves the start's error against quadratic)."""
 
 
 class SprayTapes(NamedTuple):
@@ -77,14 +90,6 @@ class SprayTapes(NamedTuple):
 
     field: Tape
     hamiltonian: Tape
-
-
-class SpraySpaces(NamedTuple):
-    """Jet spaces: `field` (2n variables, degree 1: J and P), `hamiltonian` (n variables,
-    degree 2: grad H and Hess H)."""
-
-    field: JetSpace
-    hamiltonian: JetSpace
 
 
 class EulerWork(NamedTuple):
@@ -115,7 +120,9 @@ class SubstepMemory(NamedTuple):
     counts (s, 2) int64: how many of them are valid for p and for Z (Z's only with the same
     number of nodes, z_nodes (s,)); nodes (s,) int64: Q of the factorised chord matrix (0: none
     yet); LU (s, m, m), perm (s, m): its factors, m = (Q + 1) n used; J, P (s, n, n): d_y X and
-    pi at the refresh point; theta (s, 2): theta and |p|_inf at the refresh (`nodes_for`)."""
+    pi at the refresh point; rate (s,): the contraction of the first two iterations, last
+    measured (1: none yet); refreshes (s,) int64: how many times the matrix was built in this
+    run."""
 
     p_hist: np.ndarray
     z_hist: np.ndarray
@@ -126,12 +133,13 @@ class SubstepMemory(NamedTuple):
     perm: np.ndarray
     J: np.ndarray
     P: np.ndarray
-    theta: np.ndarray
+    rate: np.ndarray
+    refreshes: np.ndarray
 
 
-def euler_work(tapes: SprayTapes, spaces: SpraySpaces, n: int) -> EulerWork:
-    """The work arrays of one substep for dimension n."""
-    size = max(spaces.field.size, spaces.hamiltonian.size)
+def euler_work(tapes: SprayTapes, space: JetSpace, n: int) -> EulerWork:
+    """The work arrays of one substep for dimension n (`space`: `hessian_space`'s)."""
+    size = max(2 * n + 1, space.size)
     m = (MAX_NODES + 1) * n
 
     def vec():
@@ -147,7 +155,7 @@ def substep_memory(s: int, n: int) -> SubstepMemory:
     return SubstepMemory(np.zeros((s, HISTORY, n)), np.zeros((s, HISTORY, MAX_NODES, n)),
                          np.zeros((s, 2), np.int64), np.zeros(s, np.int64), np.zeros(s, np.int64),
                          np.zeros((s, m, m)), np.zeros((s, m), np.int64), np.zeros((s, n, n)),
-                         np.zeros((s, n, n)), np.zeros((s, 2)))
+                         np.zeros((s, n, n)), np.ones(s), np.zeros(s, np.int64))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -156,46 +164,49 @@ def substep_memory(s: int, n: int) -> SubstepMemory:
 
 @nb.njit(**NJIT_NORC)
 def nodes_for(theta):
-    """Q = Q0 + 1 (at least 2), Q0 the smallest with E_Q0 theta^(2 Q0) <= 8 SPRAY_AGREEMENT (see
-    the module); MAX_NODES + 1 when none up to MAX_NODES - 1 qualifies (or theta is not finite)."""
+    """The smallest Q >= 2 with E_Q theta^(2 Q) <= NODE_BOUND (see the module); MAX_NODES + 1
+    when none up to MAX_NODES qualifies (or theta is not finite)."""
     if not theta < np.inf:
         return MAX_NODES + 1
-    q = 1
-    while q < MAX_NODES and not TABLE_E[q] * theta ** (2 * q) <= 8.0 * SPRAY_AGREEMENT:
+    q = 2
+    while q <= MAX_NODES and not TABLE_E[q] * theta ** (2 * q) <= NODE_BOUND:
         q += 1
-    return max(q + 1, 2)
+    return q
 
 
-@nb.njit(**NJIT_NORC)
-def _field_at(tapes, spaces, work, y0, j, n):
+@nb.njit(inline="always", **NJIT_NORC)
+def _field_at(tapes, work, y0, j, n):
     """work.X[j] := X(y0 + work.Z[j], work.p) (values)."""
     W = work.tape.W
     for k in range(n):
         W[k, 0] = y0[k] + work.Z[j, k]
         W[n + k, 0] = work.p[k]
-    run_tape(tapes.field, np.int64(0), spaces.field, work.tape)
+    values(tapes.field, W)
     for k in range(n):
         work.X[j, k] = W[tapes.field.outputs[k], 0]
 
 
-@nb.njit(**NJIT_NORC)
-def _hamiltonian_jets(tapes, spaces, work, x, degree, n):
-    """H at x + dx as a jet of `degree` (1: grad H into work.g; 2: also Hess H into
-    work.hess)."""
+@nb.njit(inline="always", **NJIT_NORC)
+def _hamiltonian_jets(tapes, space, work, x, degree, n):
+    """H at x + dx to `degree` (1: grad H into work.g, by `rkhp.taylor.scalar.gradients`; 2: also
+    Hess H into work.hess, by the interpreter's jets)."""
     W = work.tape.W
-    M = spaces.hamiltonian.counts[degree]
+    M = space.counts[degree]
     for k in range(n):
         for m in range(M):
             W[k, m] = 0.0
             W[n + k, m] = 0.0
         W[k, 0] = x[k]
         W[k, 1 + k] = 1.0
-    run_tape(tapes.hamiltonian, np.int64(degree), spaces.hamiltonian, work.tape)
+    if degree == 1:
+        gradients(tapes.hamiltonian, W, n)
+    else:
+        run_tape(tapes.hamiltonian, np.int64(degree), space, work.tape)
     out = tapes.hamiltonian.outputs[0]
     for k in range(n):
         work.g[k] = W[out, 1 + k]
     if degree >= 2:
-        up = spaces.hamiltonian.up
+        up = space.up
         for k in range(n):
             for l in range(n):
                 c = W[out, up[1 + k, l]]
@@ -203,34 +214,28 @@ def _hamiltonian_jets(tapes, spaces, work, x, degree, n):
 
 
 @nb.njit(**NJIT_NORC)
-def _refresh(i, y0, hs, tapes, spaces, work, memory, n):
-    """Substep i's chord matrix at (y0, work.p) with step hs (see the module): J, P, theta, Q
-    into the memory and the factors of the matrix. Returns Failure.OK, STAGES_NO_CONVERGENCE when
-    no Q <= MAX_NODES suffices (the step is too large for the flow), or SINGULAR."""
-    W = work.tape.W
-    M = spaces.field.counts[1]
-    for k in range(2 * n):
-        for m in range(M):
-            W[k, m] = 0.0
-        W[k, 1 + k] = 1.0
-    for k in range(n):
-        W[k, 0] = y0[k]
-        W[n + k, 0] = work.p[k]
-    run_tape(tapes.field, np.int64(1), spaces.field, work.tape)
+def _refresh(i, y0, hs, tapes, space, work, memory, n, current):
+    """Substep i's chord matrix with step hs at (y0, work.p) (see the module): J, P, Q and the
+    factors of the matrix into the memory; the stages restarted by `_start_stages` when Q differs
+    from `current`, the number of nodes work.Z holds (0 for none). Returns Failure.OK,
+    STAGES_NO_CONVERGENCE when no Q <= MAX_NODES suffices (the step is too large for the flow),
+    or SINGULAR."""
+    memory.refreshes[i] += 1
     J, P = memory.J[i], memory.P[i]
+    W = work.tape.W
+    _field_derivatives(y0, np.int64(-1), tapes, work, n, np.int64(0), np.int64(2 * n))
     for a in range(n):
         o = tapes.field.outputs[a]
         for b in range(n):
             J[a, b] = W[o, 1 + b]
             P[a, b] = W[o, 1 + n + b]
-    _hamiltonian_jets(tapes, spaces, work, y0, np.int64(2), n)
-    theta = _norm_bound(J)
-    q = nodes_for(theta)
+    q = nodes_for(_norm_bound(J))
     if q > MAX_NODES:
         return Failure.STAGES_NO_CONVERGENCE
     memory.nodes[i] = q
-    memory.theta[i, 0] = theta
-    memory.theta[i, 1] = _max_abs(work.p)
+    if q != current:
+        _start_stages(i, q, memory, work, n)
+    _hamiltonian_jets(tapes, space, work, y0, np.int64(2), n)
     LU, H = memory.LU[i], work.hess
     m = (q + 1) * n
     for r in range(m):
@@ -262,6 +267,35 @@ def _refresh(i, y0, hs, tapes, spaces, work, memory, n):
 
 
 @nb.njit(**NJIT_NORC)
+def _field_derivatives(y0, j, tapes, work, n, first, nd):
+    """X(y, p) with its first derivatives in nd directions by forward mode
+    (`rkhp.taylor.scalar.gradients`), y = y0 + work.Z[j] (y0 for j < 0), p = work.p: input k
+    (y then p) moves along direction k - first when that is in 0..nd-1. So first = 0, nd = n:
+    W[output a, 1 + b] = (d_y X)_ab; first = 0, nd = 2 n: also W[a, 1 + n + b] = pi_ab(y);
+    first = n, nd = n: W[a, 1 + b] = pi_ab(y)."""
+    W = work.tape.W
+    for k in range(2 * n):
+        for m in range(1, nd + 1):
+            W[k, m] = 1.0 if m == 1 + k - first else 0.0
+    for k in range(n):
+        W[k, 0] = y0[k] + (work.Z[j, k] if j >= 0 else 0.0)
+        W[n + k, 0] = work.p[k]
+    gradients(tapes.field, W, nd)
+
+
+@nb.njit(**NJIT_NORC)
+def _theta(y0, tapes, work, n):
+    """`_norm_bound` of J = d_y X(y0, work.p) (>= |J|_2): what sets the number of nodes."""
+    _field_derivatives(y0, np.int64(-1), tapes, work, n, np.int64(0), np.int64(n))
+    W, J = work.tape.W, work.hess
+    for a in range(n):
+        o = tapes.field.outputs[a]
+        for b in range(n):
+            J[a, b] = W[o, 1 + b]
+    return _norm_bound(J)
+
+
+@nb.njit(**NJIT_NORC)
 def _max_abs(v):
     r = 0.0
     for k in range(v.shape[0]):
@@ -272,22 +306,31 @@ def _max_abs(v):
 
 
 @nb.njit(**NJIT_NORC)
-def _predict(i, y0, hs, tapes, spaces, work, memory, n):
-    """work.p from substep i's previous solutions (extrapolated: constant, linear or quadratic
-    in the step index), or hs grad H(y0) without any."""
+def _weight(count, r):
+    """The weight of the r-th newest of `count` equally spaced values in their polynomial
+    extrapolation one step ahead: (-1)^r binom(count, r + 1)."""
+    c = 1.0
+    for j in range(r + 1):
+        c = c * (count - j) / (j + 1)
+    return -c if r % 2 else c
+
+
+@nb.njit(**NJIT_NORC)
+def _predict(i, y0, hs, tapes, space, work, memory, n):
+    """work.p from substep i's previous solutions (their polynomial extrapolation in the step
+    index, `_weight`), or hs grad H(y0) without any."""
     count = memory.counts[i, 0]
     hist = memory.p_hist[i]
     if count == 0:
-        _hamiltonian_jets(tapes, spaces, work, y0, np.int64(1), n)
-    for k in range(n):
-        if count >= 3:
-            work.p[k] = 3.0 * (hist[0, k] - hist[1, k]) + hist[2, k]
-        elif count == 2:
-            work.p[k] = 2.0 * hist[0, k] - hist[1, k]
-        elif count == 1:
-            work.p[k] = hist[0, k]
-        else:
+        _hamiltonian_jets(tapes, space, work, y0, np.int64(1), n)
+        for k in range(n):
             work.p[k] = hs * work.g[k]
+        return
+    for k in range(n):
+        acc = 0.0
+        for r in range(count):
+            acc += _weight(count, r) * hist[r, k]
+        work.p[k] = acc
 
 
 @nb.njit(**NJIT_NORC)
@@ -302,12 +345,11 @@ def _start_stages(i, q, memory, work, n):
         for b in range(q):
             c += TABLE_A[q, j, b]
         for k in range(n):
-            if count >= 3:
-                work.Z[j, k] = 3.0 * (hist[0, j, k] - hist[1, j, k]) + hist[2, j, k]
-            elif count == 2:
-                work.Z[j, k] = 2.0 * hist[0, j, k] - hist[1, j, k]
-            elif count == 1:
-                work.Z[j, k] = hist[0, j, k]
+            if count > 0:
+                acc = 0.0
+                for r in range(count):
+                    acc += _weight(count, r) * hist[r, j, k]
+                work.Z[j, k] = acc
             else:
                 x0 = 0.0
                 jx = 0.0
@@ -339,19 +381,38 @@ def _remember(i, q, memory, work, n):
     memory.counts[i, 1] = min(memory.counts[i, 1] + 1, HISTORY)
 
 
-@nb.njit(**NJIT_NORC)
-def _sweep(i, q, y0, hs, tapes, spaces, work, memory, n):
+@nb.njit(inline="always", **NJIT_NORC)
+def _solve(LU, perm, i, m, b, tmp):
+    """b[:m] := M^-1 b[:m] from the factors of substep i's chord matrix M (`lu_factor` of
+    LU[i, :m, :m]; the solve of `rkhp.taylor.linalg.lu_solve`, reading the stacked factors in
+    place: a view of them would cost more than the solve)."""
+    for r in range(m):
+        acc = b[perm[i, r]]
+        for c in range(r):
+            acc -= LU[i, r, c] * tmp[c]
+        tmp[r] = acc
+    for r in range(m - 1, -1, -1):
+        acc = tmp[r]
+        for c in range(r + 1, m):
+            acc -= LU[i, r, c] * tmp[c]
+        tmp[r] = acc / LU[i, r, r]
+    for r in range(m):
+        b[r] = tmp[r]
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _sweep(i, q, y0, hs, tapes, space, work, memory, n):
     """One chord iteration of substep i: X at the stages, the residual of (Z, p), the correction
     by the stored factors (into work.res), applied to work.Z and work.p; returns its largest
     component (NaN-safe)."""
     for j in range(q):
-        _field_at(tapes, spaces, work, y0, j, n)
+        _field_at(tapes, work, y0, j, n)
     for k in range(n):
         acc = y0[k]
         for j in range(q):
             acc += TABLE_W[q, j] * work.X[j, k]
         work.xbar[k] = acc
-    _hamiltonian_jets(tapes, spaces, work, work.xbar, np.int64(1), n)
+    _hamiltonian_jets(tapes, space, work, work.xbar, np.int64(1), n)
     res = work.res
     for a in range(q):
         for k in range(n):
@@ -361,8 +422,7 @@ def _sweep(i, q, y0, hs, tapes, spaces, work, memory, n):
             res[a * n + k] = acc
     for k in range(n):
         res[q * n + k] = hs * work.g[k] - work.p[k]
-    m = (q + 1) * n
-    lu_solve(memory.LU[i, :m, :m], memory.perm[i, :m], res[:m], work.tmp[:m])
+    _solve(memory.LU, memory.perm, i, (q + 1) * n, res, work.tmp)
     size = 0.0
     for a in range(q):
         for k in range(n):
@@ -379,7 +439,7 @@ def _sweep(i, q, y0, hs, tapes, spaces, work, memory, n):
 
 
 @nb.njit(**NJIT_NORC)
-def euler_substep(i, y0, hs, tapes, spaces, work, memory, tol, max_iter):
+def euler_substep(i, y0, hs, tapes, space, work, memory, tol, max_iter):
     """One Euler substep of step hs in direct form (see the module) from y0 into work.y_next,
     substep i of the composition (its memory); returns (Failure, chord iterations).
 
@@ -391,46 +451,51 @@ def euler_substep(i, y0, hs, tapes, spaces, work, memory, tol, max_iter):
     y1 = y0 + sum_j b_j X_j."""
     n = y0.shape[0]
     scale = max(1.0, _max_abs(y0))
-    _predict(i, y0, hs, tapes, spaces, work, memory, n)
+    _predict(i, y0, hs, tapes, space, work, memory, n)
     fresh = False
     q = memory.nodes[i]
-    if q > 0 and memory.theta[i, 1] > 0.0:
-        q_now = nodes_for(memory.theta[i, 0] * _max_abs(work.p) / memory.theta[i, 1])
-        if q_now != q:
+    if q > 0:
+        needed = nodes_for(_theta(y0, tapes, work, n))
+        if needed > q or needed < q - 1:
             q = 0
     if q == 0:
-        cause = _refresh(i, y0, hs, tapes, spaces, work, memory, n)
+        cause = _refresh(i, y0, hs, tapes, space, work, memory, n, np.int64(0))
         if cause != Failure.OK:
             return cause, 0
         fresh = True
         q = memory.nodes[i]
-    _start_stages(i, q, memory, work, n)
+    else:
+        _start_stages(i, q, memory, work, n)
     previous = np.inf
+    since = 0
     converged = False
     it = 0
     size = 0.0
     while it < max_iter:
         it += 1
-        size = _sweep(i, q, y0, hs, tapes, spaces, work, memory, n)
+        since += 1
+        size = _sweep(i, q, y0, hs, tapes, space, work, memory, n)
         if not size < np.inf:
             return Failure.NEWTON_NON_FINITE, it
         if size > 1e8 * scale:
             return Failure.NEWTON_DIVERGED, it
-        theta = size / previous if previous < np.inf else 0.0
+        if since == 1:
+            theta = RATE_MARGIN * memory.rate[i]
+        else:
+            theta = size / previous
+            if since == 2:
+                memory.rate[i] = theta
         predicted = theta / (1.0 - theta) * size if theta < 0.5 else np.inf
-        if size <= tol * scale or (previous < np.inf and predicted <= tol * scale):
+        if size <= tol * scale or predicted <= tol * scale:
             converged = True
             break
-        if theta > SLOW_CONTRACTION and not fresh:
+        if since >= 2 and not fresh and theta > SLOW_CONTRACTION and size > 1e3 * tol * scale:
             fresh = True
-            cause = _refresh(i, y0, hs, tapes, spaces, work, memory, n)
+            cause = _refresh(i, y0, hs, tapes, space, work, memory, n, q)
             if cause != Failure.OK:
                 return cause, it
-            if memory.nodes[i] != q:
-                q = memory.nodes[i]
-                _start_stages(i, q, memory, work, n)
-            previous = np.inf
-            continue
+            q = memory.nodes[i]
+            since = 0
         previous = size
     if not converged:
         return Failure.NEWTON_NO_CONVERGENCE, it
@@ -448,14 +513,14 @@ def euler_substep(i, y0, hs, tapes, spaces, work, memory, tol, max_iter):
 
 
 @nb.njit(**NJIT_NORC)
-def run(y0, gammas, h, n_steps, tapes, spaces, work, memory, domain, tol, max_iter, states,
+def run(y0, gammas, h, n_steps, tapes, space, work, memory, domain, tol, max_iter, states,
         iterations, keep_all):
     """The composed loop: n_steps steps from y0, each the Euler substeps gammas[0] h,
     gammas[1] h, ... in direct form (`euler_substep`), substep i warm-started from substep i of
     the previous step (`memory`, emptied here first), all in compiled code.
 
     Arguments: y0 (n,); gammas (s,) the composition's coefficients; h the step (negative: a
-    backward run); tapes, spaces, work, memory from `spray_tapes`, `spray_spaces`, `euler_work`,
+    backward run); tapes, space, work, memory from `spray_tapes`, `hessian_space`, `euler_work`,
     `substep_memory`; domain the system's domain code (`state_failure`); tol, max_iter the chord
     iterations' tolerance (relative to max(1, |y|)) and limit per substep; states
     (n_steps + 1, n) when keep_all (states[k] = y_k), else (1, n) (the last state);
@@ -473,10 +538,12 @@ def run(y0, gammas, h, n_steps, tapes, spaces, work, memory, domain, tol, max_it
         memory.counts[i, 0] = 0
         memory.counts[i, 1] = 0
         memory.nodes[i] = 0
+        memory.rate[i] = 1.0
+        memory.refreshes[i] = 0
     for step in range(n_steps):
         total = 0
         for i in range(s):
-            cause, it = euler_substep(i, y, gammas[i] * h, tapes, spaces, work, memory, tol,
+            cause, it = euler_substep(i, y, gammas[i] * h, tapes, space, work, memory, tol,
                                       max_iter)
             total += it
             if cause != Failure.OK:
@@ -520,9 +587,6 @@ def field_tape(alpha_tape: Tape, n: int) -> Tape:
     if inputs != list(range(first, first + 2 * n)):
         raise not_spray
     rows = np.array(ops[lo:hi], dtype=np.int64)
-    for row in rows:
-        if row[0] == CRB or BY_CODE[int(row[0])].kind not in (FUNCTION, ARITHMETIC):
-            raise not_spray
     for col in (1, 2, 3):  # out, a, b: slots of the sub-program (or -1), shifted to start at 0
         rows[:, col] = np.where(rows[:, col] >= 0, rows[:, col] - first, rows[:, col])
     outputs = np.array([int(args[out0 + k]) - first for k in range(n)], dtype=np.int64)
@@ -538,15 +602,18 @@ def spray_tapes(system) -> SprayTapes:
         raise InputError(f"{system.name}: the direct Euler step is that of the Poisson-spray "
                          f"realisation (family general, realisation symmetric); this system is "
                          f"{system.family}, realisation {system.realisation}")
-    h = system.h_tape
-    if any(BY_CODE[int(code)].kind not in (FUNCTION, ARITHMETIC) for code in h.ops[:, 0]):
-        raise InputError(f"{system.name}: the Hamiltonian's tape holds a composite operation")
-    return SprayTapes(field_tape(system.alpha_tape, system.dim), Tape(*h))
+    field, h = field_tape(system.alpha_tape, system.dim), system.h_tape
+    for what, tape in (("Poisson matrix", field), ("Hamiltonian", h)):
+        if tape.main != 0 or any(int(code) not in SCALAR_CODES for code in tape.ops[:, 0]):
+            raise InputError(f"{system.name}: the direct Euler step evaluates + - * / and the "
+                             f"functions of mathematical text; the {what}'s tape holds another "
+                             f"operation")
+    return SprayTapes(shared(field), shared(Tape(*h)))
 
 
-def spray_spaces(n: int) -> SpraySpaces:
-    """The jet spaces of the direct form in dimension n."""
-    return SpraySpaces(jet_space(2 * n, 1), jet_space(n, 2))
+def hessian_space(n: int) -> JetSpace:
+    """The jets of H's Hessian (n variables, degree 2): the one jet space of the direct form."""
+    return jet_space(n, 2)
 
 
 def check_gammas(gammas) -> np.ndarray:
@@ -593,10 +660,10 @@ def integrate_spray_euler(system, gammas, h, n_steps, x0=None, keep_all: bool = 
     h, n_steps = check_signed_step(h, n_steps)
     n = system.dim
     y0 = start_state(system, x0)
-    spaces = spray_spaces(n)
-    work = euler_work(tapes, spaces, n)
+    space = hessian_space(n)
+    work = euler_work(tapes, space, n)
     memory = substep_memory(g.size, n)
-    rest = (tapes, spaces, work, memory, system.domain_code, float(tol), int(max_iter))
+    rest = (tapes, space, work, memory, system.domain_code, float(tol), int(max_iter))
     t0 = time.perf_counter()
     run(y0, g, h, 0, *rest, np.zeros((1, n)), np.zeros(1, np.int64), True)
     compile_seconds = time.perf_counter() - t0
@@ -619,4 +686,5 @@ def integrate_spray_euler(system, gammas, h, n_steps, x0=None, keep_all: bool = 
         run_seconds=run_seconds, method="spray-euler" if g.size == 1 else "spray-euler-composition",
         system=system.name,
         extra={"gammas": g.tolist(), "newton_tolerance": tol, "newton_max_iterations": max_iter,
-               "realisation": system.realisation, "nodes": memory.nodes.tolist()})
+               "realisation": system.realisation, "nodes": memory.nodes.tolist(),
+               "refreshes": memory.refreshes.tolist()})
