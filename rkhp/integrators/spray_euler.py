@@ -444,11 +444,11 @@ def euler_substep(i, y0, hs, tapes, space, work, memory, tol, max_iter):
     substep i of the composition (its memory); returns (Failure, chord iterations).
 
     Starts from the extrapolated (p, Z); refreshes the chord matrix at the first substep, when
-    the number of nodes that |p| asks for changes, and when an iteration contracts by more than
+    the number of nodes that theta asks for changes (`nodes_for`), and when an iteration contracts by more than
     SLOW_CONTRACTION (once per substep). Stops when the correction, or its predicted successor
-    theta / (1 - theta) |d| (theta the measured contraction), is at most tol max(1, |y0|); the
-    field values then take the last correction linearly (J dZ + P dp) and
-    y1 = y0 + sum_j b_j X_j."""
+    theta / (1 - theta) |d| (theta the measured contraction; after the first iteration, twice
+    the substep's last measured first contraction), is at most tol max(1, |y0|); then X is
+    evaluated at the final (Z, p) and y1 = y0 + sum_j b_j X_j."""
     n = y0.shape[0]
     scale = max(1.0, _max_abs(y0))
     _predict(i, y0, hs, tapes, space, work, memory, n)
@@ -499,14 +499,12 @@ def euler_substep(i, y0, hs, tapes, space, work, memory, tol, max_iter):
         previous = size
     if not converged:
         return Failure.NEWTON_NO_CONVERGENCE, it
-    J, P, res = memory.J[i], memory.P[i], work.res
+    for j in range(q):
+        _field_at(tapes, work, y0, j, n)
     for k in range(n):
         acc = y0[k]
         for j in range(q):
-            x = work.X[j, k]
-            for l in range(n):
-                x += J[k, l] * res[j * n + l] + P[k, l] * res[q * n + l]
-            acc += TABLE_B[q, j] * x
+            acc += TABLE_B[q, j] * work.X[j, k]
         work.y_next[k] = acc
     _remember(i, q, memory, work, n)
     return Failure.OK, it
