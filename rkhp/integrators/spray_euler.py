@@ -61,6 +61,7 @@ from ..taylor.tape import Tape
 from .engine import state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE
+from .rkhp_method import start_state
 from .trajectory import Trajectory
 
 MAX_NODES = 12
@@ -651,8 +652,6 @@ def integrate_spray_euler(system, gammas, h, n_steps, x0=None, keep_all: bool = 
     substeps); a failed run keeps the states before the failing step and names it.
     InputError for another family or realisation, or bad arguments.
     """
-    from .rkhp_method import start_state
-
     tapes = spray_tapes(system)
     g = check_gammas(gammas)
     h, n_steps = check_signed_step(h, n_steps)
