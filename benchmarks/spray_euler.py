@@ -42,9 +42,8 @@ def direct_loop(system, h: float, steps: int):
     """A call of the direct form's compiled loop (`spray_euler.run`), its arguments built once."""
     n = system.dim
     tapes = spray_euler.spray_tapes(system)
-    space = spray_euler.hessian_space(n)
-    args = (np.array(system.x0), np.ones(1), h, steps, tapes, space,
-            spray_euler.euler_work(tapes, space, n), spray_euler.substep_memory(1, n),
+    args = (np.array(system.x0), np.ones(1), h, steps, tapes, spray_euler.euler_work(tapes, n),
+            spray_euler.substep_memory(1, n),
             system.domain_code, NEWTON_TOLERANCE, NEWTON_MAX_ITERATIONS, np.zeros((steps + 1, n)),
             np.zeros(steps, np.int64), True)
     return lambda: spray_euler.run(*args)

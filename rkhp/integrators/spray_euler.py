@@ -9,9 +9,10 @@ means x = int_0^1 Phi_s^p(y0) ds, the step is
     y1 = Phi_1^p(y0),   p = h grad H(xbar(p)),   xbar(p) = int_0^1 Phi_s^p(y0) ds,
 
 one small system in p whose every evaluation integrates one short flow from the known start y0
-(|p| = O(h)): no solve for alpha, no jets above degree 2. The flow and its average are computed by
-Q-node Gauss collocation on [0, 1] (`rkhp.taylor.collocation`): stage increments Z_j with
-Y_j = y0 + Z_j, Z_i = sum_j A_ij X_p(Y_j), then y1 = y0 + sum_j b_j X_p(Y_j) and
+(|p| = O(h)): no solve for alpha, no jets: values and first derivatives of the tapes only
+(`rkhp.taylor.scalar`), Hess H for the chord matrix by differences of the gradient. The flow and
+its average are computed by Q-node Gauss collocation on [0, 1] (`rkhp.taylor.collocation`):
+stage increments Z_j with Y_j = y0 + Z_j, Z_i = sum_j A_ij X_p(Y_j), then y1 = y0 + sum_j b_j X_p(Y_j) and
 xbar = y0 + sum_j w_j X_p(Y_j) (w_j = b_j (1 - c_j): the average is the end value of the
 augmented equation z' = y, exact for the collocation polynomial). The unknowns (Z, p), (Q + 1) n
 numbers, solve by chord iterations with the frozen Jacobian
@@ -32,7 +33,7 @@ theta = `_norm_bound` of J >= |J|_2, computed at each substep from the derivativ
 matrix has, or two fewer, refreshes the matrix (one fewer keeps it: more nodes than needed only
 cost, and Q would otherwise toggle along an orbit).
 
-Compiled data: `SprayTapes` (X and H as plain tapes), the jet space of Hess H,
+Compiled data: `SprayTapes` (X and H as plain tapes),
 `EulerWork` (work arrays of one substep), `SubstepMemory` (what each substep keeps across steps).
 `run` is the compiled composed loop; `integrate_spray_euler` the Python entry.
 """
@@ -51,8 +52,6 @@ from ..taylor.collocation import TABLE_A, TABLE_B, TABLE_E, TABLE_W
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
 from ..taylor.composites import _norm_bound
-from ..taylor.interpreter import TapeWork, run_tape, tape_work
-from ..taylor.jets import JetSpace, jet_space
 from ..taylor.linalg import lu_factor
 from ..taylor.ops import SCRATCH_BASE, SPRAY
 from ..taylor.rows import subprogram_at
@@ -80,6 +79,8 @@ SLOW_CONTRACTION = 0.25
 substep; as the engine's Newton iteration, `rkhp.integrators.engine.rkhp_step`). The matrix is
 kept across steps: it goes stale by O(h) a step, which the first iteration of a step feels (its
 p-columns: measured 0.05 on nambu at h = 0.1 even just after a refresh), the later ones less."""
+HESSIAN_STEP = 2.0**-17
+"""Relative step of the central differences that give Hess H for the chord matrix."""
 HISTORY = 4
 """Previous solutions of a substep kept for the extrapolated start (cubic: measured on the
 charged particle, h = 0.1, it halves the start's error against quadratic)."""
@@ -96,12 +97,13 @@ class SprayTapes(NamedTuple):
 class EulerWork(NamedTuple):
     """Work arrays of one substep (n: dimension, m = (MAX_NODES + 1) n).
 
-    tape: the interpreter's; Z, X (MAX_NODES, n): stage increments and their field values; p, g,
+    W (slots, 2 n + 1): the tapes' slots, values and first derivatives (`rkhp.taylor.scalar`);
+    Z, X (MAX_NODES, n): stage increments and their field values; p, g,
     xbar, y, y_next (n): the momentum, grad H(xbar), the average, the state before and after the
     substep; hess (n, n): Hess H at the refresh point; res, tmp (m): the residual (then the
     correction) and lu_solve's work vector."""
 
-    tape: TapeWork
+    W: np.ndarray
     Z: np.ndarray
     X: np.ndarray
     p: np.ndarray
@@ -138,15 +140,15 @@ class SubstepMemory(NamedTuple):
     refreshes: np.ndarray
 
 
-def euler_work(tapes: SprayTapes, space: JetSpace, n: int) -> EulerWork:
-    """The work arrays of one substep for dimension n (`space`: `hessian_space`'s)."""
-    size = max(2 * n + 1, space.size)
+def euler_work(tapes: SprayTapes, n: int) -> EulerWork:
+    """The work arrays of one substep for dimension n."""
     m = (MAX_NODES + 1) * n
 
     def vec():
         return np.zeros(n)
 
-    return EulerWork(tape_work(tapes, size), np.zeros((MAX_NODES, n)), np.zeros((MAX_NODES, n)),
+    slots = max(tapes.field.n_slots, tapes.hamiltonian.n_slots)
+    return EulerWork(np.zeros((slots, 2 * n + 1)), np.zeros((MAX_NODES, n)), np.zeros((MAX_NODES, n)),
                      vec(), vec(), vec(), vec(), vec(), np.zeros((n, n)), np.zeros(m), np.zeros(m))
 
 
@@ -178,7 +180,7 @@ def nodes_for(theta):
 @nb.njit(inline="always", **NJIT_NORC)
 def _field_at(tapes, work, y0, j, n):
     """work.X[j] := X(y0 + work.Z[j], work.p) (values)."""
-    W = work.tape.W
+    W = work.W
     for k in range(n):
         W[k, 0] = y0[k] + work.Z[j, k]
         W[n + k, 0] = work.p[k]
@@ -188,34 +190,47 @@ def _field_at(tapes, work, y0, j, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _hamiltonian_jets(tapes, space, work, x, degree, n):
-    """H at x + dx to `degree` (1: grad H into work.g, by `rkhp.taylor.scalar.gradients`; 2: also
-    Hess H into work.hess, by the interpreter's jets)."""
-    W = work.tape.W
-    M = space.counts[degree]
+def _gradient(tapes, work, x, n):
+    """grad H(x) into work.g, by forward mode (`rkhp.taylor.scalar.gradients`)."""
+    W = work.W
     for k in range(n):
-        for m in range(M):
-            W[k, m] = 0.0
+        for m in range(1, n + 1):
+            W[k, m] = 1.0 if m == 1 + k else 0.0
             W[n + k, m] = 0.0
         W[k, 0] = x[k]
-        W[k, 1 + k] = 1.0
-    if degree == 1:
-        gradients(tapes.hamiltonian, W, n)
-    else:
-        run_tape(tapes.hamiltonian, np.int64(degree), space, work.tape)
+        W[n + k, 0] = 0.0
+    gradients(tapes.hamiltonian, W, n)
     out = tapes.hamiltonian.outputs[0]
     for k in range(n):
         work.g[k] = W[out, 1 + k]
-    if degree >= 2:
-        up = space.up
-        for k in range(n):
-            for l in range(n):
-                c = W[out, up[1 + k, l]]
-                work.hess[k, l] = 2.0 * c if k == l else c
 
 
 @nb.njit(**NJIT_NORC)
-def _refresh(i, y0, hs, tapes, space, work, memory, n, current):
+def _hessian(tapes, work, x, n):
+    """Hess H(x) into work.hess by central differences of the gradient, steps
+    HESSIAN_STEP max(1, |x_k|) (error about 1e-10 relative: the chord matrix needs no more), made
+    symmetric; work.xbar is overwritten."""
+    H, xs = work.hess, work.xbar
+    for k in range(n):
+        xs[k] = x[k]
+    for k in range(n):
+        step = HESSIAN_STEP * max(1.0, abs(x[k]))
+        xs[k] = x[k] + step
+        _gradient(tapes, work, xs, n)
+        for r in range(n):
+            H[r, k] = work.g[r]
+        xs[k] = x[k] - step
+        _gradient(tapes, work, xs, n)
+        for r in range(n):
+            H[r, k] = (H[r, k] - work.g[r]) / (2.0 * step)
+        xs[k] = x[k]
+    for k in range(n):
+        for r in range(k):
+            H[r, k] = H[k, r] = 0.5 * (H[r, k] + H[k, r])
+
+
+@nb.njit(**NJIT_NORC)
+def _refresh(i, y0, hs, tapes, work, memory, n, current):
     """Substep i's chord matrix with step hs at (y0, work.p) (see the module): J, P, Q and the
     factors of the matrix into the memory; the stages restarted by `_start_stages` when Q differs
     from `current`, the number of nodes work.Z holds (0 for none). Returns Failure.OK,
@@ -223,7 +238,7 @@ def _refresh(i, y0, hs, tapes, space, work, memory, n, current):
     or SINGULAR."""
     memory.refreshes[i] += 1
     J, P = memory.J[i], memory.P[i]
-    W = work.tape.W
+    W = work.W
     _field_derivatives(y0, np.int64(-1), tapes, work, n, np.int64(0), np.int64(2 * n))
     for a in range(n):
         o = tapes.field.outputs[a]
@@ -236,7 +251,7 @@ def _refresh(i, y0, hs, tapes, space, work, memory, n, current):
     memory.nodes[i] = q
     if q != current:
         _start_stages(i, q, memory, work, n)
-    _hamiltonian_jets(tapes, space, work, y0, np.int64(2), n)
+    _hessian(tapes, work, y0, n)
     LU, H = memory.LU[i], work.hess
     m = (q + 1) * n
     for r in range(m):
@@ -274,7 +289,7 @@ def _field_derivatives(y0, j, tapes, work, n, first, nd):
     (y then p) moves along direction k - first when that is in 0..nd-1. So first = 0, nd = n:
     W[output a, 1 + b] = (d_y X)_ab; first = 0, nd = 2 n: also W[a, 1 + n + b] = pi_ab(y);
     first = n, nd = n: W[a, 1 + b] = pi_ab(y)."""
-    W = work.tape.W
+    W = work.W
     for k in range(2 * n):
         for m in range(1, nd + 1):
             W[k, m] = 1.0 if m == 1 + k - first else 0.0
@@ -288,7 +303,7 @@ def _field_derivatives(y0, j, tapes, work, n, first, nd):
 def _theta(y0, tapes, work, n):
     """`_norm_bound` of J = d_y X(y0, work.p) (>= |J|_2): what sets the number of nodes."""
     _field_derivatives(y0, np.int64(-1), tapes, work, n, np.int64(0), np.int64(n))
-    W, J = work.tape.W, work.hess
+    W, J = work.W, work.hess
     for a in range(n):
         o = tapes.field.outputs[a]
         for b in range(n):
@@ -317,13 +332,13 @@ def _weight(count, r):
 
 
 @nb.njit(**NJIT_NORC)
-def _predict(i, y0, hs, tapes, space, work, memory, n):
+def _predict(i, y0, hs, tapes, work, memory, n):
     """work.p from substep i's previous solutions (their polynomial extrapolation in the step
     index, `_weight`), or hs grad H(y0) without any."""
     count = memory.counts[i, 0]
     hist = memory.p_hist[i]
     if count == 0:
-        _hamiltonian_jets(tapes, space, work, y0, np.int64(1), n)
+        _gradient(tapes, work, y0, n)
         for k in range(n):
             work.p[k] = hs * work.g[k]
         return
@@ -402,7 +417,7 @@ def _solve(LU, perm, i, m, b, tmp):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _sweep(i, q, y0, hs, tapes, space, work, memory, n):
+def _sweep(i, q, y0, hs, tapes, work, memory, n):
     """One chord iteration of substep i: X at the stages, the residual of (Z, p), the correction
     by the stored factors (into work.res), applied to work.Z and work.p; returns its largest
     component (NaN-safe)."""
@@ -413,7 +428,7 @@ def _sweep(i, q, y0, hs, tapes, space, work, memory, n):
         for j in range(q):
             acc += TABLE_W[q, j] * work.X[j, k]
         work.xbar[k] = acc
-    _hamiltonian_jets(tapes, space, work, work.xbar, np.int64(1), n)
+    _gradient(tapes, work, work.xbar, n)
     res = work.res
     for a in range(q):
         for k in range(n):
@@ -440,7 +455,7 @@ def _sweep(i, q, y0, hs, tapes, space, work, memory, n):
 
 
 @nb.njit(**NJIT_NORC)
-def euler_substep(i, y0, hs, tapes, space, work, memory, tol, max_iter):
+def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     """One Euler substep of step hs in direct form (see the module) from y0 into work.y_next,
     substep i of the composition (its memory); returns (Failure, chord iterations).
 
@@ -452,7 +467,7 @@ def euler_substep(i, y0, hs, tapes, space, work, memory, tol, max_iter):
     evaluated at the final (Z, p) and y1 = y0 + sum_j b_j X_j."""
     n = y0.shape[0]
     scale = max(1.0, _max_abs(y0))
-    _predict(i, y0, hs, tapes, space, work, memory, n)
+    _predict(i, y0, hs, tapes, work, memory, n)
     fresh = False
     q = memory.nodes[i]
     if q > 0:
@@ -460,7 +475,7 @@ def euler_substep(i, y0, hs, tapes, space, work, memory, tol, max_iter):
         if needed > q or needed < q - 1:
             q = 0
     if q == 0:
-        cause = _refresh(i, y0, hs, tapes, space, work, memory, n, np.int64(0))
+        cause = _refresh(i, y0, hs, tapes, work, memory, n, np.int64(0))
         if cause != Failure.OK:
             return cause, 0
         fresh = True
@@ -475,7 +490,7 @@ def euler_substep(i, y0, hs, tapes, space, work, memory, tol, max_iter):
     while it < max_iter:
         it += 1
         since += 1
-        size = _sweep(i, q, y0, hs, tapes, space, work, memory, n)
+        size = _sweep(i, q, y0, hs, tapes, work, memory, n)
         if not size < np.inf:
             return Failure.NEWTON_NON_FINITE, it
         if size > 1e8 * scale:
@@ -492,7 +507,7 @@ def euler_substep(i, y0, hs, tapes, space, work, memory, tol, max_iter):
             break
         if since >= 2 and not fresh and theta > SLOW_CONTRACTION and size > 1e3 * tol * scale:
             fresh = True
-            cause = _refresh(i, y0, hs, tapes, space, work, memory, n, q)
+            cause = _refresh(i, y0, hs, tapes, work, memory, n, q)
             if cause != Failure.OK:
                 return cause, it
             q = memory.nodes[i]
@@ -512,14 +527,14 @@ def euler_substep(i, y0, hs, tapes, space, work, memory, tol, max_iter):
 
 
 @nb.njit(**NJIT_NORC)
-def run(y0, gammas, h, n_steps, tapes, space, work, memory, domain, tol, max_iter, states,
+def run(y0, gammas, h, n_steps, tapes, work, memory, domain, tol, max_iter, states,
         iterations, keep_all):
     """The composed loop: n_steps steps from y0, each the Euler substeps gammas[0] h,
     gammas[1] h, ... in direct form (`euler_substep`), substep i warm-started from substep i of
     the previous step (`memory`, emptied here first), all in compiled code.
 
     Arguments: y0 (n,); gammas (s,) the composition's coefficients; h the step (negative: a
-    backward run); tapes, space, work, memory from `spray_tapes`, `hessian_space`, `euler_work`,
+    backward run); tapes, work, memory from `spray_tapes`, `euler_work`,
     `substep_memory`; domain the system's domain code (`state_failure`); tol, max_iter the chord
     iterations' tolerance (relative to max(1, |y|)) and limit per substep; states
     (n_steps + 1, n) when keep_all (states[k] = y_k), else (1, n) (the last state);
@@ -542,7 +557,7 @@ def run(y0, gammas, h, n_steps, tapes, space, work, memory, domain, tol, max_ite
     for step in range(n_steps):
         total = 0
         for i in range(s):
-            cause, it = euler_substep(i, y, gammas[i] * h, tapes, space, work, memory, tol,
+            cause, it = euler_substep(i, y, gammas[i] * h, tapes, work, memory, tol,
                                       max_iter)
             total += it
             if cause != Failure.OK:
@@ -610,11 +625,6 @@ def spray_tapes(system) -> SprayTapes:
     return SprayTapes(shared(field), shared(Tape(*h)))
 
 
-def hessian_space(n: int) -> JetSpace:
-    """The jets of H's Hessian (n variables, degree 2): the one jet space of the direct form."""
-    return jet_space(n, 2)
-
-
 def check_gammas(gammas) -> np.ndarray:
     """The composition's coefficients as a float array (InputError unless 1 to MAX_STAGES finite
     numbers)."""
@@ -657,10 +667,9 @@ def integrate_spray_euler(system, gammas, h, n_steps, x0=None, keep_all: bool = 
     h, n_steps = check_signed_step(h, n_steps)
     n = system.dim
     y0 = start_state(system, x0)
-    space = hessian_space(n)
-    work = euler_work(tapes, space, n)
+    work = euler_work(tapes, n)
     memory = substep_memory(g.size, n)
-    rest = (tapes, space, work, memory, system.domain_code, float(tol), int(max_iter))
+    rest = (tapes, work, memory, system.domain_code, float(tol), int(max_iter))
     t0 = time.perf_counter()
     run(y0, g, h, 0, *rest, np.zeros((1, n)), np.zeros(1, np.int64), True)
     compile_seconds = time.perf_counter() - t0
