@@ -83,7 +83,8 @@ HESSIAN_STEP = 2.0**-17
 """Relative step of the central differences that give Hess H for the chord matrix."""
 HISTORY = 4
 """Previous solutions of a substep kept for the extrapolated start (cubic: measured on the
-charged particle, h = 0.1, it halves the start's error against quadratic)."""
+charged particle at h = 0.1, step 11, the start's error is 8.3e-7 against 7.4e-6 with three,
+quadratic: one chord iteration fewer)."""
 
 
 class SprayTapes(NamedTuple):
