@@ -71,6 +71,8 @@ class Method:
     def integrate(self, system, h: float, n_steps: int, x0=None):
         """Run the method; returns a :class:`~rkhp.integrators.trajectory.Trajectory`."""
         if self.kind == "rkhp":
+            if direct_euler(system, self.tableau):
+                return _direct(system, (1.0,), h, n_steps, x0, self.name)
             from . import integrate
 
             return integrate(system, self.tableau, h, n_steps, x0)
@@ -87,6 +89,8 @@ class Method:
 
             return integrate_midpoint(system, h, n_steps, x0)
         if self.kind == "composition":
+            if direct_euler(system, self.tableau):
+                return _direct(system, self.composition.gamma_float, h, n_steps, x0, self.name)
             from .composed import integrate_composition
 
             return integrate_composition(system, self.composition, h, n_steps, x0)
@@ -133,6 +137,29 @@ def composed_order(composition, base, condition_class: str) -> int:
     from ..tableaux.compositions import class_composition_orders
 
     return class_composition_orders(composition, base)[condition_class].order
+
+
+def direct_euler(system, tableau) -> bool:
+    """Whether Euler substeps on `system` run in the direct form of the Poisson-spray realisation
+    (`rkhp.integrators.spray_euler`): the tableau is RKHP Euler and the system has the full spray
+    realisation (family general, symmetric), whose tapes the direct form evaluates."""
+    if tableau is None or tableau.stages != 1 or tableau.A_float[0][0] != 0.0 or tableau.b_float[0] != 1.0:
+        return False
+    if system.family != "general" or system.realisation != "symmetric":
+        return False
+    from .spray_euler import direct_form_available
+
+    return direct_form_available(system)
+
+
+def _direct(system, gammas, h, n_steps, x0, name: str):
+    """The run of `direct_euler`'s substeps gammas h, named `name` (docs/compositions.md)."""
+    from dataclasses import replace
+
+    from .spray_euler import integrate_spray_euler
+    from .trajectory import checked
+
+    return checked(replace(integrate_spray_euler(system, gammas, h, n_steps, x0), method=name), system)
 
 
 def condition_class(system) -> str:

@@ -40,13 +40,12 @@ Compiled data: `SprayTapes` (X and H as plain tapes),
 
 from __future__ import annotations
 
-import math
 import time
 from typing import NamedTuple
 
 import numpy as np
 
-from ..base.bounds import MAX_STAGES, MAX_STEPS
+from ..base.bounds import MAX_STAGES
 from ..base.errors import InputError
 from ..taylor.collocation import TABLE_A, TABLE_B, TABLE_E, TABLE_W
 from ..taylor.compiler import NJIT_NORC
@@ -59,8 +58,8 @@ from ..taylor.scalar import SCALAR_CODES, gradients, shared, values
 from ..taylor.tape import Tape
 from .engine import state_failure
 from .failure import Failure, failure_status
-from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE
-from .rkhp_method import start_state
+from .newton import NEWTON_MAX_ITERATIONS
+from .rkhp_method import check_step, start_state
 from .trajectory import Trajectory
 
 MAX_NODES = 12
@@ -81,6 +80,14 @@ kept across steps: it goes stale by O(h) a step, which the first iteration of a 
 p-columns: measured 0.05 on nambu at h = 0.1 even just after a refresh), the later ones less."""
 HESSIAN_STEP = 2.0**-17
 """Relative step of the central differences that give Hess H for the chord matrix."""
+STAGNATION = 64 * 2.0**-52
+"""Corrections at most this (relative to max(1, |y0|)) that no longer halve are round-off: the
+iterations have converged as far as float64 allows."""
+DIRECT_TOLERANCE = 2.0**-60
+"""The chord iterations' default tolerance (relative): below round-off, so that they run until
+the corrections stagnate (`STAGNATION`). Stopping at 1e-15 left the stages off the collocation
+solution by that much, which moves a non-quadratic Casimir systematically (docs/general-poisson.md
+"The Euler step in direct form")."""
 HISTORY = 4
 """Previous solutions of a substep kept for the extrapolated start (cubic: measured on the
 charged particle at h = 0.1, step 11, the start's error is 8.3e-7 against 7.4e-6 with three,
@@ -508,6 +515,9 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
         if size <= tol * scale or predicted <= tol * scale:
             converged = True
             break
+        if since >= 2 and size >= 0.5 * previous and size <= STAGNATION * scale:
+            converged = True  # the corrections stagnate at round-off
+            break
         if since >= 2 and not fresh and theta > SLOW_CONTRACTION and size > 1e3 * tol * scale:
             fresh = True
             cause = _refresh(i, y0, hs, tapes, work, memory, n, q)
@@ -638,6 +648,16 @@ def spray_tapes(system) -> SprayTapes:
     return SprayTapes(shared(field), shared(Tape(*h)))
 
 
+def direct_form_available(system) -> bool:
+    """Whether `spray_tapes` accepts `system` (the full spray realisation, tapes of plain
+    operations)."""
+    try:
+        spray_tapes(system)
+    except InputError:
+        return False
+    return True
+
+
 def check_gammas(gammas) -> np.ndarray:
     """The composition's coefficients as a float array (InputError unless 1 to MAX_STAGES finite
     numbers)."""
@@ -650,21 +670,8 @@ def check_gammas(gammas) -> np.ndarray:
     return np.ascontiguousarray(g)
 
 
-def check_signed_step(h, n_steps) -> tuple[float, int]:
-    """(h, n_steps): h finite (negative: backward), n_steps an integer in 0..MAX_STEPS."""
-    try:
-        h = float(h)
-    except (TypeError, ValueError):
-        raise InputError(f"step size h must be a number, got {h!r}") from None
-    if not math.isfinite(h):
-        raise InputError(f"step size h must be finite, got {h}")
-    if isinstance(n_steps, bool) or int(n_steps) != n_steps or not 0 <= n_steps <= MAX_STEPS:
-        raise InputError(f"number of steps must be an integer from 0 to {MAX_STEPS}, got {n_steps}")
-    return h, int(n_steps)
-
-
 def integrate_spray_euler(system, gammas, h, n_steps, x0=None, keep_all: bool = True, *,
-                          tol: float = NEWTON_TOLERANCE,
+                          tol: float = DIRECT_TOLERANCE,
                           max_iter: int = NEWTON_MAX_ITERATIONS) -> Trajectory:
     """Integrate `system` (family general, realisation symmetric) by n_steps steps of the
     composition of RKHP Euler steps gammas[0] h, gammas[1] h, ... (in that order), each in direct
@@ -677,7 +684,7 @@ def integrate_spray_euler(system, gammas, h, n_steps, x0=None, keep_all: bool = 
     """
     tapes = spray_tapes(system)
     g = check_gammas(gammas)
-    h, n_steps = check_signed_step(h, n_steps)
+    h, n_steps = check_step(h, n_steps, system.dim)
     n = system.dim
     y0 = start_state(system, x0)
     work = euler_work(tapes, n)
