@@ -20,7 +20,8 @@ numbers, solve by chord iterations with the frozen Jacobian
     [ I - A (x) J      -c (x) P         ]     J = d_y X_p(y0), P = pi(y0) = d_p X_p(y0),
     [ -h H w^T (x) J   I - (h/2) H P    ]     H = Hess H(y0), c_i = sum_j A_ij, sum_j w_j = 1/2,
 
-whose error is O(h^2) per iteration, factorised once and kept across steps for each substep of a
+which contracts the error by O(h^2) an iteration (by O(h) the first iteration of a step, when the
+matrix was built at an earlier step: `SLOW_CONTRACTION`), factorised once and kept across steps for each substep of a
 composition (refreshed when the iterations contract slowly or the number of nodes changes). Each
 substep starts from its own previous solutions, (p, Z) extrapolated (cubic) from the same
 substep of the four previous steps. On a constant pi, J = 0 and the step is the implicit
@@ -63,8 +64,8 @@ from .rkhp_method import check_step, start_state
 from .trajectory import Trajectory
 
 MAX_NODES = 12
-"""Collocation nodes of the direct form at most (E_12 theta^24 is below round-off for theta up to
-about 1.5, far beyond the steps at which the chord iterations converge); a substep needing more
+"""Collocation nodes of the direct form at most (E_12 theta^24 <= NODE_BOUND for theta up to
+about 4.5, far beyond the steps at which the chord iterations converge); a substep needing more
 fails with STAGES_NO_CONVERGENCE."""
 NODE_BOUND = 2.0**-53
 """The bound on E_Q theta^(2 Q), the relative error of the average for y' = lambda y,
