@@ -230,6 +230,7 @@ class SearchResult:
                 "engine": self.proof.engine, "variables": list(self.proof.variables),
                 "dimension": self.proof.dimension,
                 "complex_solutions": self.proof.complex_solutions,
+                "modular": [{"prime": p, "unit": unit} for p, unit in self.proof.modular],
                 "certificate": None if self.proof.check is None else {
                     "identity": "sum_i g_i f_i = 1", "cofactor_terms": self.proof.check.terms,
                     "checked": self.proof.check.valid,

@@ -8,10 +8,12 @@ A proper ideal (basis not [1]) proves that complex solutions exist; real ones ma
 
 Engines, chosen by measurement (docs/tableau-search.md, "Certificates of impossibility"):
 
-- ``singular`` (when the optional program is installed, :mod:`.singular`): the reduced standard
-  basis over Q (``std``, degree reverse lexicographic), then, when it is [1], the cofactors of
-  1 = sum g_i f_i (``liftstd``), checked here in exact arithmetic (:mod:`.certificates`) before
-  the problem is called proved with a certificate;
+- ``singular`` (when the optional program is installed, :mod:`.singular`): first a Groebner
+  basis modulo the primes of :data:`EVIDENCE_PRIMES` (a quarter of the time limit at most; fast,
+  and evidence only), then the reduced Groebner basis over Q (``slimgb``, degree reverse
+  lexicographic), which decides; when it is [1], the cofactors of 1 = sum g_i f_i (``liftstd``),
+  checked here in exact arithmetic (:mod:`.certificates`) before the problem is called proved
+  with a certificate;
 - ``sympy`` (always available): ``sympy.groebner`` (grevlex, over QQ) in a child process; a basis
   [1] proves impossibility but gives no cofactors.
 
@@ -32,6 +34,10 @@ from .system import ResidualSystem
 
 #: Engines accepted by :func:`prove_impossible`.
 ENGINES = ("auto", "singular", "sympy")
+#: Primes of the modular evidence (below 2^15, where Singular's arithmetic is fastest).
+EVIDENCE_PRIMES = (32003, 31991, 32749)
+#: Share of the time limit given to the modular evidence.
+EVIDENCE_SHARE = 0.25
 
 
 @dataclass(frozen=True)
@@ -50,6 +56,7 @@ class Proof:
         complex_solutions: number of complex solutions with multiplicity when finitely many.
         certificate: the checked cofactors (None without: sympy, or the time limit ran out).
         check: the exact check of the certificate.
+        modular: (prime, basis is [1]) for each prime whose basis was computed in time.
     """
 
     proved: bool
@@ -66,20 +73,36 @@ class Proof:
     complex_solutions: int | None = None
     certificate: Certificate | None = None
     check: CertificateCheck | None = None
+    modular: tuple[tuple[int, bool], ...] = ()
+
+    def modular_text(self) -> str:
+        """The modular evidence in words (empty when none)."""
+        if not self.modular:
+            return ""
+        units = [p for p, unit in self.modular if unit]
+        proper = [p for p, unit in self.modular if not unit]
+        parts = []
+        if units:
+            parts.append(f"the basis modulo {', '.join(map(str, units))} is [1] (no solution over "
+                         "the algebraic closure of F_p: evidence of impossibility, not a proof)")
+        if proper:
+            parts.append(f"the ideal modulo {', '.join(map(str, proper))} is proper (evidence "
+                         "that complex solutions exist, not a proof)")
+        return "; ".join(parts)
 
     def result_text(self, stages: int, order: int, cls: str) -> str:
         """One sentence stating exactly what was (or was not) decided."""
         what = f"{cls} order {order} with {stages} stages"
-        n = len(self.polynomials)
         if self.proved and self.certificate is not None:
-            return (f"proved impossible: 1 = sum g_i f_i over the {n} order-condition polynomials "
-                    f"f_i, with exact rational cofactors g_i ({self.check.terms} terms) checked "
-                    f"in exact arithmetic; the Groebner basis is [1]: no tableau for {what}, "
-                    f"real or complex ({self.seconds:.2f} s)")
+            return (f"proved impossible: 1 = sum g_i f_i with exact rational cofactors "
+                    f"({self.check.terms} terms), checked; no tableau for {what}, real or complex "
+                    f"({self.seconds:.2f} s)")
         if self.proved:
-            return (f"proved impossible: the Groebner basis of the {n} order-condition "
-                    f"polynomials is [1]: no tableau for {what}, real or complex (no cofactors "
-                    f"computed; {self.seconds:.2f} s)")
+            why = ("cofactors not computed within the time limit" if self.engine == "singular"
+                   else "no cofactors")
+            return (f"proved impossible: the Groebner basis of the {len(self.polynomials)} "
+                    f"order-condition polynomials is [1]; no tableau for {what}, real or complex "
+                    f"({why}; {self.seconds:.2f} s)")
         if self.status == "solutions-over-C":
             size = (f", {self.complex_solutions} complex solutions with multiplicity"
                     if self.complex_solutions is not None else
@@ -87,8 +110,9 @@ class Proof:
             return (f"not proved: the ideal of {what} is proper (basis of {len(self.basis)} "
                     f"polynomials{size}), so complex solutions exist; real ones were not "
                     f"examined ({self.seconds:.2f} s)")
-        return (f"not decided: no Groebner basis for {what} within {self.time_limit:g} s "
-                f"({self.engine})")
+        evidence = self.modular_text()
+        return (f"not decided: no Groebner basis over Q for {what} within {self.time_limit:g} s "
+                f"({self.engine})" + (f"; {evidence}" if evidence else ""))
 
 
 # ----------------------------------------------------------------------------- sympy
@@ -146,10 +170,19 @@ def _certificate(ideal: ConditionIdeal, lines, produced_by: str) -> Certificate 
 def _singular_proof(path, ideal, deadline, waiting, t0, time_limit) -> Proof:
     from .singular import singular_basis, singular_cofactors
 
-    method = ("Groebner basis over QQ (Singular std, degree reverse lexicographic); when [1], "
-              "cofactors of 1 = sum g_i f_i (Singular liftstd) checked in exact arithmetic")
+    method = ("Singular: slimgb over QQ, degrevlex (after bases modulo small primes, evidence "
+              "only); liftstd for the cofactors, checked exactly")
+    modular = []
+    for p in EVIDENCE_PRIMES:
+        short = min(deadline, t0 + EVIDENCE_SHARE * time_limit)
+        run = singular_basis(path, ideal.variables, ideal.generators, short,
+                             waiting(f"Groebner basis modulo {p} (Singular)"), p)
+        if not run.finished:
+            break
+        modular.append((p, run.lines[1:] == ("POLY 1",)))
     common = dict(method=method, polynomials=ideal.generators, time_limit=time_limit,
-                  engine="singular", variables=ideal.variables, substitution=ideal.substitution)
+                  engine="singular", variables=ideal.variables, substitution=ideal.substitution,
+                  modular=tuple(modular))
     run = singular_basis(path, ideal.variables, ideal.generators, deadline,
                          waiting("Groebner basis over Q (Singular)"))
     if not run.finished:
@@ -206,7 +239,7 @@ def prove_impossible(system: ResidualSystem, time_limit: float = 60.0, engine: s
     ideal = condition_ideal(system)
     if name == "singular":
         return _singular_proof(path, ideal, deadline, waiting, t0, time_limit)
-    method = "Groebner basis over QQ (sympy, grevlex): basis [1] means no complex solution"
+    method = "sympy: groebner over QQ, grevlex (no cofactors)"
     basis = _sympy_basis(ideal, deadline, waiting("Groebner basis over Q (sympy)"))
     seconds = time.monotonic() - t0
     common = dict(method=method, polynomials=ideal.generators, seconds=seconds,

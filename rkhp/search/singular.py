@@ -1,12 +1,15 @@
 """Groebner bases and cofactors by Singular (https://www.singular.uni-kl.de), when it is installed.
 
 Singular is optional: :func:`singular_path` finds the ``Singular`` program on PATH (or the one
-named by ``RKHP_SINGULAR``); without it the proofs fall back on sympy. Two computations over Q,
-each a child process stopped at its deadline:
+named by ``RKHP_SINGULAR``); without it the proofs fall back on sympy. Each computation is a
+child process stopped at its deadline:
 
-- :func:`singular_basis`: ``std`` (reduced standard basis, degree reverse lexicographic order),
-  with the Krull dimension ``dim`` and, when zero-dimensional, ``vdim`` (the number of complex
-  solutions counted with multiplicity);
+- :func:`singular_basis`: a Groebner basis by ``slimgb`` (degree reverse lexicographic order;
+  measured far faster than ``std`` on these systems: degenerate order 6 with 5 stages modulo 32003,
+  2.9 s against no basis within 180 s), made reduced by ``std``, with the Krull dimension ``dim``
+  and, when zero-dimensional, ``vdim`` (the number of complex solutions counted with
+  multiplicity); over Q, or modulo a prime ``characteristic`` (evidence only: a basis [1] modulo
+  p does not prove [1] over Q, the converse fails only for finitely many p);
 - :func:`singular_cofactors`: ``liftstd``, the standard basis G with the matrix T such that
   G = F T; when G contains a nonzero constant g_k, the cofactors T[i, k] / g_k give
   1 = sum_i cofactor_i f_i, checked afterwards in exact arithmetic (:mod:`.certificates`).
@@ -64,15 +67,15 @@ def singular_version(path: str) -> str:
     return first[0] if first else "Singular"
 
 
-def _script(variables, generators, body: str) -> str:
+def _script(variables, generators, body: str, characteristic: int = 0) -> str:
     rename = {v: f"x({k + 1})" for k, v in enumerate(variables)}
     pattern = re.compile(r"\b(" + "|".join(map(re.escape, variables)) + r")\b")
     polys = ",\n".join(pattern.sub(lambda m: rename[m.group(1)], g) for g in generators)
-    return (f"ring r = 0,(x(1..{len(variables)})),dp;\noption(redSB);\nideal I =\n{polys};\n"
+    return (f"ring r = {characteristic},(x(1..{len(variables)})),dp;\noption(redSB);\nideal I =\n{polys};\n"
             f"link out = \":w result.txt\";\n{body}\nclose(out);\nquit;\n")
 
 
-_BASIS = """ideal G = std(I);
+_BASIS = """ideal G = std(slimgb(I));
 int k;
 write(out, "BASIS " + string(size(G)) + " " + string(dim(G)) + " " + string(vdim(G)));
 for (k = 1; k <= ncols(G); k++) { write(out, "POLY " + string(G[k])); }
@@ -91,13 +94,14 @@ else {
 """
 
 
-def _run(path: str, variables, generators, body: str, deadline: float, on_wait=None) -> SingularRun:
+def _run(path: str, variables, generators, body: str, deadline: float, on_wait=None,
+         characteristic: int = 0) -> SingularRun:
     """Run the script until it ends or ``deadline`` (time.monotonic()); poll ``on_wait()``."""
     version = singular_version(path)
     t0 = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="rkhp-singular-") as tmp:
         script = Path(tmp) / "job.sing"
-        script.write_text(_script(variables, generators, body))
+        script.write_text(_script(variables, generators, body, characteristic))
         errors = open(Path(tmp) / "stderr.txt", "wb")  # closed in the finally clause
         proc = subprocess.Popen([path, "-q", "--no-rc", "--no-warn", str(script)], cwd=tmp,
                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=errors)
@@ -130,9 +134,11 @@ def _run(path: str, variables, generators, body: str, deadline: float, on_wait=N
     return SingularRun(True, lines, seconds, version)
 
 
-def singular_basis(path, variables, generators, deadline, on_wait=None) -> SingularRun:
-    """Reduced standard basis over Q: lines ``BASIS size dim vdim`` then ``POLY g`` each."""
-    return _run(path, variables, generators, _BASIS, deadline, on_wait)
+def singular_basis(path, variables, generators, deadline, on_wait=None,
+                   characteristic: int = 0) -> SingularRun:
+    """Reduced Groebner basis over Q (or modulo the prime ``characteristic``): lines
+    ``BASIS size dim vdim`` then ``POLY g`` each."""
+    return _run(path, variables, generators, _BASIS, deadline, on_wait, characteristic)
 
 
 def singular_cofactors(path, variables, generators, deadline, on_wait=None) -> SingularRun:
