@@ -19,7 +19,7 @@ import pytest
 
 from rkhp.base.errors import InputError
 from rkhp.search.certificates import Certificate, check_certificate, load_certificate, shipped_certificates
-from rkhp.search.ideal import condition_ideal, parse_polynomial, polynomial_text
+from rkhp.search.ideal import condition_ideal, eliminate_linear, parse_polynomial, polynomial_ring, polynomial_text
 from rkhp.search.prove import prove_impossible
 from rkhp.search.singular import singular_path
 from rkhp.search.system import ResidualSystem
@@ -142,14 +142,36 @@ def test_engines_decide_small_problems(engine):
 
 @pytest.mark.parametrize("engine", ["sympy"] + (["singular"] if HAS_SINGULAR else []))
 def test_time_limit_is_respected(engine):
+    # symmetric order 8 with 6 stages: 21 unknowns, 36 conditions, undecided (docs/tableau-search.md)
     steps = []
     t0 = time.monotonic()
-    proof = prove_impossible(ResidualSystem.build(5, 6, "degenerate"), 2.0, engine,
+    proof = prove_impossible(ResidualSystem.build(6, 8, "symmetric"), 2.0, engine,
                              on_progress=lambda step, done, limit: steps.append(step))
     assert time.monotonic() - t0 < 10
     assert proof.status == "timeout" and not proof.proved
-    assert "not decided" in proof.result_text(5, 6, "degenerate")
+    assert "not decided" in proof.result_text(6, 8, "symmetric")
     assert any("Groebner" in s for s in steps)
+
+
+def test_linear_elimination_is_a_combination_of_two_generators():
+    R = polynomial_ring(("x", "y", "z"))
+    x, y, z = R.gens
+    # (x z) (x y - 1) - (x y) (x z - 2) has x^2 terms; the gcd-reduced combination does not
+    assert eliminate_linear([x * y - 1, x * z - 2, y - z], x) == [y - z, -z + 2 * y]
+    assert eliminate_linear([x ** 2 - 1, x * y], x) is None
+    ideal = condition_ideal(ResidualSystem.build(5, 6, "degenerate"))
+    reduced = ideal.reduced(("b1", "b2", "b3"))
+    assert reduced.eliminated == ("b1", "b2", "b3")
+    assert all(not any(v in g for v in ("b1", "b2", "b3")) for g in reduced.generators)
+    assert ideal.reduced(("b1", "b2", "b3", "b4", "b5", "b6")).eliminated[-1] == "b5"
+
+
+@pytest.mark.skipif(not HAS_SINGULAR, reason="Singular is not installed")
+def test_singular_decides_degenerate_order_6_with_5_stages():
+    # docs/tableau-search.md: 5 stages cannot reach degenerate order 6 (basis [1] over Q)
+    proof = prove_impossible(ResidualSystem.build(5, 6, "degenerate"), 10.0, "singular")
+    assert proof.proved and proof.eliminated == ("b1", "b2", "b3")
+    assert all(unit for _, unit in proof.modular)
 
 
 @pytest.mark.skipif(not HAS_SINGULAR, reason="Singular is not installed")

@@ -1,15 +1,17 @@
 """Certificates of impossibility: 1 = sum_i g_i f_i with exact rational cofactors g_i.
 
 If polynomials g_i with rational coefficients satisfy sum_i g_i f_i = 1, where f_i are the
-condition polynomials of a search problem (:mod:`.ideal`), then no point, real or complex, makes
+condition polynomials of a search problem (:mod:`.ideal`), or the generators of the ideal J in
+which b_1 and b_2 are eliminated (each an explicit combination of two condition polynomials, so
+J is contained in the ideal of the conditions), then no point, real or complex, makes
 every f_i vanish (it would make 1 vanish): no tableau with that many stages meets the conditions
 (the weak Nullstellensatz says such g_i exist exactly when there is no complex solution).
 
 Checking a certificate needs nothing but exact polynomial arithmetic: :func:`check_certificate`
-rebuilds the f_i from the order conditions of this package (so the certificate must be about the
-problem it names), reads the stored g_i, and expands sum g_i f_i in QQ[variables] with sympy's
-sparse polynomials. The certificates shipped with rkhp live in ``rkhp/data/certificates/`` and
-are checked by the test suite.
+rebuilds the f_i from the order conditions of this package, eliminating the same variables (so
+the certificate must be about the problem it names), reads the stored g_i, and expands
+sum g_i f_i in QQ[variables] with sympy's sparse polynomials. The certificates shipped with
+rkhp live in ``rkhp/data/certificates/`` and are checked by the test suite.
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ class Certificate:
         variables, substitution, generators: the condition ideal (:mod:`.ideal`).
         cofactors: one polynomial per generator, as text.
         produced_by: the program and computation that found the cofactors.
+        eliminated: the variables eliminated from the generators (``ConditionIdeal.reduced``).
     """
 
     stages: int
@@ -50,6 +53,7 @@ class Certificate:
     generators: tuple[str, ...]
     cofactors: tuple[str, ...]
     produced_by: str
+    eliminated: tuple[str, ...] = ()
 
     @property
     def statement(self) -> str:
@@ -62,6 +66,7 @@ class Certificate:
                 "problem": {"stages": self.stages, "order": self.order, "class": self.cls,
                             "implicit": self.implicit},
                 "variables": list(self.variables), "substitution": self.substitution,
+                "eliminated": list(self.eliminated),
                 "identity": "sum_i cofactors[i] * generators[i] = 1",
                 "generators": list(self.generators), "cofactors": list(self.cofactors),
                 "produced_by": self.produced_by}
@@ -79,7 +84,8 @@ class Certificate:
             fields = [tuple(str(v) for v in data[k]) for k in ("variables", "generators",
                                                                  "cofactors")]
             cert = cls_(stages, order, str(klass), bool(implicit), fields[0],
-                        str(data["substitution"]), fields[1], fields[2], str(data["produced_by"]))
+                        str(data["substitution"]), fields[1], fields[2], str(data["produced_by"]),
+                        tuple(str(v) for v in data.get("eliminated", [])))
         except (KeyError, TypeError) as exc:
             raise InputError(f"malformed certificate: missing or wrong field {exc}") from None
         if len(cert.cofactors) != len(cert.generators):
@@ -107,10 +113,15 @@ def check_certificate(cert: Certificate) -> CertificateCheck:
     """Check ``cert`` exactly (module docstring)."""
     t0 = time.perf_counter()
     ideal = condition_ideal(ResidualSystem.build(cert.stages, cert.order, cert.cls, cert.implicit))
+    if cert.eliminated:
+        ideal = ideal.reduced(cert.eliminated)
 
     def fail(reason: str, terms: int = 0) -> CertificateCheck:
         return CertificateCheck(False, reason, terms, time.perf_counter() - t0)
 
+    if ideal.eliminated != cert.eliminated:
+        return CertificateCheck(False, "these variables cannot be eliminated", 0,
+                                time.perf_counter() - t0)
     if ideal.variables != cert.variables or ideal.substitution != cert.substitution:
         return fail("the variables are not those of the problem's condition ideal")
     R = ideal.ring()

@@ -9,7 +9,19 @@ Phi_1(t) or 1): the polynomials are sparser. Implicit tableaux keep the unknowns
 
 Each generator is the residual sum_k w_k (gamma(t_k) a(t_k) - 1) of one condition
 (:mod:`rkhp.search.system`), times the positive integer that makes its coefficients coprime
-integers. Polynomials travel as text in the usual notation (``3*c2^2*b2 - 1``), written and read
+integers.
+
+Linear elimination (:meth:`ConditionIdeal.reduced`): every b_i enters linearly, and (explicit
+tableaux) b_1 only through sum b_i = 1, b_2 only through the trees whose root has leaves only
+(Phi_2(t) = c_2^k for those, 0 for the others). For a variable x of degree one, write each
+generator containing it f_j = P_j x + Q_j; the consecutive combinations
+(P_{j+1}/h) f_j - (P_j/h) f_{j+1}, h = gcd(P_j, P_{j+1}), do not contain x, and with the generators
+free of x they generate an ideal J contained in the ideal I of the conditions. So 1 in J proves
+1 in I; the converse is not claimed (the proof falls back on I when J is proper). On degenerate
+order 6 with 5 stages, eliminating b_1, b_2 turns Singular's basis over Q from none in 180 s of
+CPU into 0.5 s.
+
+Polynomials travel as text in the usual notation (``3*c2^2*b2 - 1``), written and read
 here without any expression evaluator: a term is an optional sign, a rational coefficient and
 powers of known variable names joined by ``*``.
 """
@@ -24,6 +36,13 @@ import numpy as np
 
 from ..base.errors import InputError
 from .system import ResidualSystem
+
+#: Variables eliminated before the basis that decides (fastest measured: degenerate order 7 with
+#: 6 stages, basis [1] over Q in 23 s with b_1..b_3 eliminated, none in 20 s modulo 32003 with
+#: b_1, b_2 only) and before the cofactors (symmetric order 6 with 4 stages: liftstd 2.4 s with
+#: b_1, b_2 eliminated, none in 60 s with b_1..b_3).
+DECISION_ELIMINATION = ("b1", "b2", "b3")
+CERTIFICATE_ELIMINATION = ("b1", "b2")
 
 
 @dataclass(frozen=True)
@@ -44,6 +63,29 @@ class ConditionIdeal:
     variables: tuple[str, ...]
     generators: tuple[str, ...]
     substitution: str
+    eliminated: tuple[str, ...] = ()
+
+    def reduced(self, names=CERTIFICATE_ELIMINATION) -> ConditionIdeal:
+        """The ideal J of the module docstring, ``names`` eliminated in turn while they enter
+        linearly (explicit tableaux only; ``self`` when nothing can be eliminated)."""
+        if self.implicit or self.eliminated:
+            return self
+        R = self.ring()
+        polys = self.polynomials()
+        done = []
+        for name in names:
+            if name not in self.variables:
+                break
+            out = eliminate_linear(polys, R.gens[self.variables.index(name)])
+            if out is None:
+                break
+            polys = out
+            done.append(name)
+        if not done:
+            return self
+        return ConditionIdeal(self.stages, self.order, self.cls, self.implicit, self.variables,
+                              tuple(polynomial_text(p, self.variables) for p in polys),
+                              self.substitution, tuple(done))
 
     def ring(self):
         """The sympy polynomial ring QQ[variables] (grevlex) and its generators' polynomials."""
@@ -102,6 +144,24 @@ def integer_primitive(p):
     """p times the positive rational that makes its coefficients coprime integers (p != 0)."""
     _, q = p.clear_denoms()
     return q.primitive()[1]
+
+
+def eliminate_linear(polys, x):
+    """Generators free of ``x`` (module docstring), or None when x has degree > 1 somewhere."""
+    free, linear = [], []
+    for p in polys:
+        d = p.degree(x)
+        if d > 1:
+            return None
+        (linear if d == 1 else free).append(p)
+    combined = []
+    for f, g in zip(linear, linear[1:]):
+        pf, pg = f.diff(x), g.diff(x)
+        h = pf.gcd(pg)
+        new = pg.exquo(h) * f - pf.exquo(h) * g
+        if new:
+            combined.append(integer_primitive(new))
+    return free + combined
 
 
 def condition_ideal(system: ResidualSystem) -> ConditionIdeal:

@@ -27,9 +27,16 @@ import multiprocessing
 import time
 from dataclasses import dataclass
 
-from ..base.errors import InputError
+from ..base.errors import CheckFailed, InputError
 from .certificates import Certificate, CertificateCheck, check_certificate
-from .ideal import ConditionIdeal, condition_ideal, parse_polynomial, polynomial_text
+from .ideal import (
+    CERTIFICATE_ELIMINATION,
+    DECISION_ELIMINATION,
+    ConditionIdeal,
+    condition_ideal,
+    parse_polynomial,
+    polynomial_text,
+)
 from .system import ResidualSystem
 
 #: Engines accepted by :func:`prove_impossible`.
@@ -57,6 +64,7 @@ class Proof:
         certificate: the checked cofactors (None without: sympy, or the time limit ran out).
         check: the exact check of the certificate.
         modular: (prime, basis is [1]) for each prime whose basis was computed in time.
+        eliminated: the variables eliminated before the basis that decided (:mod:`.ideal`).
     """
 
     proved: bool
@@ -74,6 +82,7 @@ class Proof:
     certificate: Certificate | None = None
     check: CertificateCheck | None = None
     modular: tuple[tuple[int, bool], ...] = ()
+    eliminated: tuple[str, ...] = ()
 
     def modular_text(self) -> str:
         """The modular evidence in words (empty when none)."""
@@ -158,20 +167,33 @@ def _sympy_basis(ideal: ConditionIdeal, deadline: float, on_wait) -> tuple[str, 
 
 
 def _certificate(ideal: ConditionIdeal, lines, produced_by: str) -> Certificate | None:
+    """The certificate of Singular's ``UNIT`` output for the generators of ``ideal``."""
     if not lines or lines[0] != "UNIT":
         return None
     R = ideal.ring()
     cofactors = tuple(polynomial_text(parse_polynomial(line.removeprefix("POLY "), R),
                                       ideal.variables) for line in lines[1:])
     return Certificate(ideal.stages, ideal.order, ideal.cls, ideal.implicit, ideal.variables,
-                       ideal.substitution, ideal.generators, cofactors, produced_by)
+                       ideal.substitution, ideal.generators, cofactors, produced_by,
+                       ideal.eliminated)
 
 
-def _singular_proof(path, ideal, deadline, waiting, t0, time_limit) -> Proof:
+def _parse_basis(run) -> tuple[tuple[str, ...], int, int]:
+    """(basis, dim, vdim) of a finished :func:`rkhp.search.singular.singular_basis` run."""
+    head = run.lines[0].split()
+    size, dim, vdim = int(head[1]), int(head[2]), int(head[3])
+    return tuple(line.removeprefix("POLY ").strip() for line in run.lines[1:1 + size]), dim, vdim
+
+
+def _singular_proof(path, full: ConditionIdeal, deadline, waiting, t0, time_limit) -> Proof:
+    """Modular evidence, then the basis of J over Q, its cofactors when [1], else the basis of I."""
     from .singular import singular_basis, singular_cofactors
 
-    method = ("Singular: slimgb over QQ, degrevlex (after bases modulo small primes, evidence "
-              "only); liftstd for the cofactors, checked exactly")
+    ideal = full.reduced(DECISION_ELIMINATION)
+    method = ("Singular: slimgb over QQ, degrevlex, on the conditions with "
+              + (", ".join(ideal.eliminated) + " eliminated" if ideal.eliminated else "nothing "
+                 "eliminated") + " (after bases modulo small primes, evidence only); liftstd for "
+              "the cofactors, checked exactly")
     modular = []
     for p in EVIDENCE_PRIMES:
         short = min(deadline, t0 + EVIDENCE_SHARE * time_limit)
@@ -179,20 +201,29 @@ def _singular_proof(path, ideal, deadline, waiting, t0, time_limit) -> Proof:
                              waiting(f"Groebner basis modulo {p} (Singular)"), p)
         if not run.finished:
             break
-        modular.append((p, run.lines[1:] == ("POLY 1",)))
-    common = dict(method=method, polynomials=ideal.generators, time_limit=time_limit,
-                  engine="singular", variables=ideal.variables, substitution=ideal.substitution,
-                  modular=tuple(modular))
+        unit = run.lines[1:] == ("POLY 1",)
+        if unit or ideal is full:  # J proper modulo p says nothing about I
+            modular.append((p, unit))
+    common = dict(method=method, polynomials=full.generators, time_limit=time_limit,
+                  engine="singular", variables=full.variables, substitution=full.substitution,
+                  modular=tuple(modular), eliminated=ideal.eliminated)
     run = singular_basis(path, ideal.variables, ideal.generators, deadline,
                          waiting("Groebner basis over Q (Singular)"))
     if not run.finished:
         return Proof(False, "timeout", basis=(), seconds=time.monotonic() - t0, **common)
-    head = run.lines[0].split()
-    size, dim, vdim = int(head[1]), int(head[2]), int(head[3])
-    basis = tuple(line.removeprefix("POLY ").strip() for line in run.lines[1:1 + size])
+    basis, dim, vdim = _parse_basis(run)
     if basis != ("1",):
-        return Proof(False, "solutions-over-C", basis=basis, seconds=time.monotonic() - t0,
-                     dimension=dim, complex_solutions=vdim if dim == 0 else None, **common)
+        if ideal is not full:  # J proper says nothing about I: decide I itself
+            run = singular_basis(path, full.variables, full.generators, deadline,
+                                 waiting("Groebner basis over Q, nothing eliminated (Singular)"))
+            if not run.finished:
+                return Proof(False, "timeout", basis=(), seconds=time.monotonic() - t0, **common)
+            basis, dim, vdim = _parse_basis(run)
+        common["eliminated"] = ()
+        if basis != ("1",):
+            return Proof(False, "solutions-over-C", basis=basis, seconds=time.monotonic() - t0,
+                         dimension=dim, complex_solutions=vdim if dim == 0 else None, **common)
+    ideal = full.reduced(CERTIFICATE_ELIMINATION) if ideal is not full else full
     lift = singular_cofactors(path, ideal.variables, ideal.generators, deadline,
                               waiting("cofactors over Q (Singular liftstd)"))
     cert = check = None
@@ -202,7 +233,7 @@ def _singular_proof(path, ideal, deadline, waiting, t0, time_limit) -> Proof:
         waiting("checking the certificate")()
         check = check_certificate(cert)
         if not check.valid:
-            raise RuntimeError(f"Singular's cofactors do not check: {check.reason}")
+            raise CheckFailed(f"Singular's cofactors do not check: {check.reason}")
     return Proof(True, "proved", basis=("1",), seconds=time.monotonic() - t0, dimension=-1,
                  certificate=cert, check=check, **common)
 
@@ -240,11 +271,17 @@ def prove_impossible(system: ResidualSystem, time_limit: float = 60.0, engine: s
     if name == "singular":
         return _singular_proof(path, ideal, deadline, waiting, t0, time_limit)
     method = "sympy: groebner over QQ, grevlex (no cofactors)"
-    basis = _sympy_basis(ideal, deadline, waiting("Groebner basis over Q (sympy)"))
+    reduced = ideal.reduced(DECISION_ELIMINATION)
+    basis = _sympy_basis(reduced, deadline, waiting("Groebner basis over Q (sympy)"))
+    eliminated = reduced.eliminated
+    if basis is not None and basis != ("1",) and reduced is not ideal:
+        basis = _sympy_basis(ideal, deadline, waiting("Groebner basis over Q, nothing eliminated "
+                                                      "(sympy)"))
+        eliminated = ()
     seconds = time.monotonic() - t0
     common = dict(method=method, polynomials=ideal.generators, seconds=seconds,
                   time_limit=time_limit, engine="sympy", variables=ideal.variables,
-                  substitution=ideal.substitution)
+                  substitution=ideal.substitution, eliminated=eliminated)
     if basis is None:
         return Proof(False, "timeout", basis=(), **common)
     proved = basis == ("1",)

@@ -29,6 +29,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..base.errors import CheckFailed
+
 #: Environment variable naming the Singular executable (default: ``Singular`` on PATH).
 SINGULAR_ENV = "RKHP_SINGULAR"
 
@@ -126,7 +128,7 @@ def _run(path: str, variables, generators, body: str, deadline: float, on_wait=N
         result = Path(tmp) / "result.txt"
         if proc.returncode != 0 or not result.exists():
             err = (Path(tmp) / "stderr.txt").read_text(errors="replace").strip()
-            raise RuntimeError(f"Singular failed (exit {proc.returncode}): {err[-300:]}")
+            raise CheckFailed(f"Singular failed (exit {proc.returncode}): {err[-300:]}")
         text = result.read_text()
     back = {f"x({k + 1})": v for k, v in enumerate(variables)}
     lines = tuple(re.sub(r"x\((\d+)\)", lambda m: back[m.group(0)], line)
