@@ -84,7 +84,7 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
             if "proof" not in tasks:
                 tasks["proof"] = bar.add_task("proof", total=round(limit))
             bar.update(tasks["proof"], completed=min(round(elapsed), round(limit)),
-                       description=f"proof of order {n} (s of the time limit): {step}")
+                       description=f"proof, order {n}, seconds: {step}")
 
         result = run_search(stages, order, cls, implicit, options, on_progress, executor, on_proof)
     if save and result.found is not None:

@@ -150,7 +150,7 @@ def test_time_limit_is_respected(engine):
     assert time.monotonic() - t0 < 10
     assert proof.status == "timeout" and not proof.proved
     assert "not decided" in proof.result_text(6, 8, "symmetric")
-    assert any("Groebner" in s for s in steps)
+    assert any(s.startswith("basis") for s in steps)
 
 
 def test_linear_elimination_is_a_combination_of_two_generators():

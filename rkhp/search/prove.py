@@ -198,7 +198,7 @@ def _singular_proof(path, full: ConditionIdeal, deadline, waiting, t0, time_limi
     for p in EVIDENCE_PRIMES:
         short = min(deadline, t0 + EVIDENCE_SHARE * time_limit)
         run = singular_basis(path, ideal.variables, ideal.generators, short,
-                             waiting(f"Groebner basis modulo {p} (Singular)"), p)
+                             waiting(f"basis modulo {p}"), p)
         if not run.finished:
             break
         unit = run.lines[1:] == ("POLY 1",)
@@ -208,14 +208,14 @@ def _singular_proof(path, full: ConditionIdeal, deadline, waiting, t0, time_limi
                   engine="singular", variables=full.variables, substitution=full.substitution,
                   modular=tuple(modular), eliminated=ideal.eliminated)
     run = singular_basis(path, ideal.variables, ideal.generators, deadline,
-                         waiting("Groebner basis over Q (Singular)"))
+                         waiting("basis over Q"))
     if not run.finished:
         return Proof(False, "timeout", basis=(), seconds=time.monotonic() - t0, **common)
     basis, dim, vdim = _parse_basis(run)
     if basis != ("1",):
         if ideal is not full:  # J proper says nothing about I: decide I itself
             run = singular_basis(path, full.variables, full.generators, deadline,
-                                 waiting("Groebner basis over Q, nothing eliminated (Singular)"))
+                                 waiting("basis over Q, full ideal"))
             if not run.finished:
                 return Proof(False, "timeout", basis=(), seconds=time.monotonic() - t0, **common)
             basis, dim, vdim = _parse_basis(run)
@@ -225,12 +225,12 @@ def _singular_proof(path, full: ConditionIdeal, deadline, waiting, t0, time_limi
                          dimension=dim, complex_solutions=vdim if dim == 0 else None, **common)
     ideal = full.reduced(CERTIFICATE_ELIMINATION) if ideal is not full else full
     lift = singular_cofactors(path, ideal.variables, ideal.generators, deadline,
-                              waiting("cofactors over Q (Singular liftstd)"))
+                              waiting("cofactors over Q"))
     cert = check = None
     if lift.finished:
         cert = _certificate(ideal, lift.lines, f"{run.version}: liftstd over QQ, dp ordering")
     if cert is not None:
-        waiting("checking the certificate")()
+        waiting("checking cofactors")()
         check = check_certificate(cert)
         if not check.valid:
             raise CheckFailed(f"Singular's cofactors do not check: {check.reason}")
@@ -272,11 +272,10 @@ def prove_impossible(system: ResidualSystem, time_limit: float = 60.0, engine: s
         return _singular_proof(path, ideal, deadline, waiting, t0, time_limit)
     method = "sympy: groebner over QQ, grevlex (no cofactors)"
     reduced = ideal.reduced(DECISION_ELIMINATION)
-    basis = _sympy_basis(reduced, deadline, waiting("Groebner basis over Q (sympy)"))
+    basis = _sympy_basis(reduced, deadline, waiting("basis over Q (sympy)"))
     eliminated = reduced.eliminated
     if basis is not None and basis != ("1",) and reduced is not ideal:
-        basis = _sympy_basis(ideal, deadline, waiting("Groebner basis over Q, nothing eliminated "
-                                                      "(sympy)"))
+        basis = _sympy_basis(ideal, deadline, waiting("basis over Q, full ideal (sympy)"))
         eliminated = ()
     seconds = time.monotonic() - t0
     common = dict(method=method, polynomials=ideal.generators, seconds=seconds,

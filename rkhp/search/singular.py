@@ -63,8 +63,11 @@ def singular_path() -> str | None:
 @functools.lru_cache(maxsize=4)
 def singular_version(path: str) -> str:
     """Singular's own version line (e.g. ``Singular ... version 4.3.1``)."""
-    out = subprocess.run([path, "--version"], capture_output=True, text=True, timeout=30,
-                         check=False)
+    try:
+        out = subprocess.run([path, "--version"], stdin=subprocess.DEVNULL, capture_output=True,
+                             text=True, timeout=30, check=False)
+    except (OSError, subprocess.TimeoutExpired):
+        return "Singular (version unknown)"
     first = (out.stdout or out.stderr).strip().splitlines()
     return first[0] if first else "Singular"
 
