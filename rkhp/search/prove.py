@@ -37,6 +37,7 @@ from .ideal import (
     parse_polynomial,
     polynomial_text,
 )
+from .singular import singular_basis, singular_cofactors, singular_path
 from .system import ResidualSystem
 
 #: Engines accepted by :func:`prove_impossible`.
@@ -187,8 +188,6 @@ def _parse_basis(run) -> tuple[tuple[str, ...], int, int]:
 
 def _singular_proof(path, full: ConditionIdeal, deadline, waiting, t0, time_limit) -> Proof:
     """Modular evidence, then the basis of J over Q, its cofactors when [1], else the basis of I."""
-    from .singular import singular_basis, singular_cofactors
-
     ideal = full.reduced(DECISION_ELIMINATION)
     method = ("Singular: slimgb over QQ, degrevlex, on the conditions with "
               + (", ".join(ideal.eliminated) + " eliminated" if ideal.eliminated else "nothing "
@@ -243,8 +242,6 @@ def _singular_proof(path, full: ConditionIdeal, deadline, waiting, t0, time_limi
 
 def choose_engine(engine: str = "auto") -> tuple[str, str | None]:
     """(engine, Singular's path or None): ``auto`` is Singular when installed, else sympy."""
-    from .singular import singular_path
-
     if engine not in ENGINES:
         raise InputError(f"unknown proof engine {engine!r}; expected one of {', '.join(ENGINES)}")
     path = singular_path() if engine in ("auto", "singular") else None
