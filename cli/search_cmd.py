@@ -50,19 +50,25 @@ def _class_of(degenerate: bool, symmetric: bool) -> str:
               help="Digits D of the mpmath polishing and verification (20..500).")
 @click.option("--prove", is_flag=True,
               help="When an order is not reached, try to prove that no tableau exists (Groebner).")
+@click.option("--prove-engine", type=click.Choice(["auto", "singular", "sympy"]), default="auto",
+              show_default=True, help="Groebner engine of --prove: Singular when installed (with "
+              "checked cofactors), else sympy.")
+@click.option("--certificate", type=output_path(".json"), default=None,
+              help="With --prove: write the certificate 1 = sum g_i f_i to this .json file.")
 @click.option("--save", type=output_path(".toml", ".json"), default=None,
               help="Write the tableau found to a .toml or .json file (loadable by verify).")
 @force_option()
 @format_option("table", "json")
 def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit, seed, workers,
-           scheduler, optimize, digits, prove, save, force, fmt):
+           scheduler, optimize, digits, prove, prove_engine, certificate, save, force, fmt):
     """Search Runge–Kutta tableaux meeting the RKHP order conditions (paper §5).
 
     Solves the order conditions over T (general), T_0 (--degenerate) or the symmetric class from
     seeded random starts (scipy least squares, exact Jacobian), polishes each success by Newton's
     method in mpmath to D digits, recognises closed forms (kept only when exactly verified) and
     verifies the result with the verify engine. --prove looks for a Groebner certificate that
-    the first order not reached is impossible.
+    the first order not reached is impossible (Singular when installed: exact cofactors of
+    1 = sum g_i f_i, checked; else sympy).
     """
     from rkhp.base.executors import open_executor
     from rkhp.search.driver import SearchOptions
@@ -74,8 +80,10 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
     if optimize and prove and order is not None:
         raise click.UsageError("--optimize needs --order N to be reached while --prove needs it "
                                "to fail: give one of them")
+    if certificate and not prove:
+        raise click.UsageError("--certificate needs --prove")
     options = SearchOptions(restarts=restarts, seed=seed, time_limit=time_limit,
-                            digits=digits, optimize=optimize, prove=prove)
+                            digits=digits, optimize=optimize, prove=prove, proof_engine=prove_engine)
     options.check()
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         tasks: dict[int, int] = {}
@@ -85,13 +93,23 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
                 tasks[n] = bar.add_task(f"order {n}", total=total)
             bar.update(tasks[n], completed=done)
 
-        result = run_search(stages, order, cls, implicit, options, on_progress, executor)
+        def on_proof(n, step, elapsed, limit):
+            if "proof" not in tasks:
+                tasks["proof"] = bar.add_task("proof", total=round(limit))
+            bar.update(tasks["proof"], completed=min(round(elapsed), round(limit)),
+                       description=f"proof, order {n}, seconds: {step}")
+
+        result = run_search(stages, order, cls, implicit, options, on_progress, executor, on_proof)
     if save and result.found is not None and not result.interrupted:
         _save(result, save, force)
+    if certificate and result.proof is not None and result.proof.certificate is not None:
+        from rkhp.search.certificates import save_certificate
+
+        save_certificate(result.proof.certificate, certificate, force)
     if fmt == "json":
         emit_json(result.to_json())
     else:
-        _render(result, save)
+        _render(result, save, certificate)
     if result.interrupted:
         click.echo("rkhp: interrupted: the best found so far is shown", err=True)
         raise click.exceptions.Exit(130)
@@ -124,7 +142,7 @@ def _count(n: int, one: str, many: str | None = None) -> str:
     return f"{n} {one if n == 1 else many or one + 's'}"
 
 
-def _render(result, save) -> None:
+def _render(result, save, certificate=None) -> None:
     from rich.table import Table
 
     con = console()
@@ -171,8 +189,16 @@ def _render(result, save) -> None:
     if result.proof is not None:
         con.print(f"proof (order {result.proof_order}): {data['proof']['result']}")
         con.print(f"  method: {data['proof']['method']}")
-        if result.proof.proved:
+        proof = result.proof
+        con.print(f"  unknowns: {', '.join(proof.variables)} ({proof.substitution})")
+        if proof.modular and not proof.proved:
+            con.print(f"  modular evidence: {proof.modular_text()}")
+        if proof.proved:
             con.print("  certificate: the ideal generated by")
-            for p in result.proof.polynomials:
+            for p in proof.polynomials:
                 con.print(f"    {p}")
             con.print("  has reduced Groebner basis [1]")
+            if proof.certificate is not None:
+                where = f"saved to {certificate}" if certificate else "--certificate FILE saves them"
+                con.print(f"  cofactors g_i with 1 = sum g_i f_i: {proof.check.terms} terms, checked "
+                          f"exactly ({where})")

@@ -9,14 +9,27 @@ negative substep is never predicted from a positive one.
 
 from __future__ import annotations
 
+import time
 from typing import NamedTuple
 
 import numpy as np
 
+from ..base.errors import InputError
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
-from .engine import rkhp_step, state_failure
-from .failure import Failure
+from .engine import rkhp_step, state_failure, step_buffers
+from .failure import Failure, failure_status
+from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE
+from .rkhp_method import (
+    check_step,
+    engine_data,
+    is_implicit,
+    resolve_tableau,
+    stage_solve,
+    start_state,
+    tableau_arrays,
+)
+from .trajectory import Trajectory, checked
 
 
 class Substeps(NamedTuple):
@@ -110,22 +123,6 @@ def integrate_composition(system, composition, h, n_steps, x0=None, *, keep_all:
     """Integrate `system` with a :class:`~rkhp.tableaux.compositions.Composition` of an explicit
     RKHP base method: n_steps steps of size h (negative h runs backwards). Returns a Trajectory
     whose Newton iterations are summed over the substeps of each step."""
-    import time
-
-    from ..base.errors import InputError
-    from .failure import failure_status
-    from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE
-    from .rkhp_method import (
-        check_step,
-        engine_data,
-        is_implicit,
-        resolve_tableau,
-        stage_solve,
-        start_state,
-        tableau_arrays,
-    )
-    from .trajectory import Trajectory, checked
-
     base = resolve_tableau(composition.base)
     h, n_steps = check_step(h, n_steps, system.dim)
     A, b = tableau_arrays(base)
@@ -136,8 +133,6 @@ def integrate_composition(system, composition, h, n_steps, x0=None, *, keep_all:
     max_iter = NEWTON_MAX_ITERATIONS if max_iter is None else int(max_iter)
     y0 = start_state(system, x0)
     tapes, space = engine_data(system, len(b), stage_solve(base, A))
-    from .engine import step_buffers
-
     buf = step_buffers(tapes, system.dim, len(b), space)
     method = Substeps(A, b, h * np.asarray(composition.gamma_float, dtype=np.float64))
     memory = substep_memory(composition.substeps, system.dim)

@@ -30,7 +30,7 @@ RKHP method is (:func:`rkhp.tableaux.symmetry.rkhp_symmetry`).
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ..base.errors import InputError
 from ..trees.conditions import conditions_of_order
@@ -154,8 +154,6 @@ def direct_euler(system, tableau) -> bool:
 
 def _direct(system, gammas, h, n_steps, x0, name: str):
     """The run of `direct_euler`'s substeps gammas h, named `name` (docs/compositions.md)."""
-    from dataclasses import replace
-
     from .spray_euler import integrate_spray_euler
     from .trajectory import checked
 

@@ -41,6 +41,7 @@ import mpmath
 from ..base.bounds import MAX_CLAIMED_ORDER, MAX_STAGES
 from ..base.documents import parse_document, read_text
 from ..base.errors import InputError
+from .files import load_tableau
 from .tableau import GivenDecimal, entry_text, is_exact, parse_entry, to_float
 
 KIND = "composition"
@@ -400,7 +401,6 @@ def class_composition_orders(comp: Composition, base) -> dict[str, CompositionOr
 def verify_composition(comp: Composition) -> CompositionVerification:
     """The orders of a composition (its own with a symmetric base of order 2, and with its base on
     each realisation class), its symmetry, and its claimed order checked."""
-    from .files import load_tableau
     from .symmetry import rkhp_symmetry
 
     base = load_tableau(comp.base)
