@@ -110,3 +110,33 @@ def plot_stress(stress, path) -> Path:
     fig.suptitle(f"long run, {stress.system}, h = {stress.long_run.h:g}", fontsize=9)
     _save(fig, path)
     return path
+
+
+def plot_phase(tableaux, realisation: str, z_max: float, path) -> Path:
+    """theta(z) (with the exact flow's z, wrapped to (-pi, pi]) and |theta(z) - z| on a log scale,
+    one line per method, over 0 < z <= z_max (docs/stability.md)."""
+    import math
+
+    import numpy as np
+
+    from ..tableaux.stability import rotation_angle
+
+    path = check_plot_path(path)
+    plt = _pyplot()
+    zs = np.linspace(z_max / 400, z_max, 400)
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(6.4, 7.2), sharex=True)
+    top.plot(zs, [math.remainder(z, 2 * math.pi) for z in zs], "k:", label="exact flow (z mod 2 pi)")
+    for t in tableaux:
+        theta = np.array([np.nan if (v := rotation_angle(t, float(z), realisation)) is None else v for z in zs])
+        line, = top.plot(zs, theta, label=t.name)
+        with np.errstate(invalid="ignore"):
+            bottom.semilogy(zs, np.abs(theta - zs), color=line.get_color(), label=t.name)
+    top.set_ylabel("theta(z), rotation per step")
+    top.set_title(f"phase of RKHP steps on the harmonic oscillator ({realisation} realisation)", fontsize=9)
+    bottom.set_ylabel("|theta(z) - z|")
+    bottom.set_xlabel("z = h omega")
+    for ax in (top, bottom):
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    _save(fig, path)
+    return path

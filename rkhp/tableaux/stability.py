@@ -787,9 +787,28 @@ def analyse(tableau: Tableau, order: int = 9, realisation: str = "symmetric") ->
                      branch.wrap_limit, branch.existence_limit, None, None)
 
 
-def rotation_angle(tableau: Tableau, z: float) -> float | None:
-    """theta(z) = 2 arctan(m(z)/2) in float64 (symmetric realisation), None where an implicit
-    tableau's branch has no solution at z."""
+def step_matrix_shifted(tableau: Tableau, z: float):
+    """R(z) of an explicit tableau with the shifted realisation, in float64 (see shifted_trace)."""
+    import numpy as np
+
+    Q = np.array(SHIFT_Q.tolist(), dtype=float)
+    Jf = np.array(J.tolist(), dtype=float)
+    D, Dp, eye = Q - Jf / 2, Q + Jf / 2, np.eye(2)
+    A, b = tableau.A_float, tableau.b_float
+    grads = []
+    for i in range(tableau.stages):
+        Mi = z * sum((A[i][j] * grads[j] for j in range(i)), np.zeros((2, 2)))
+        grads.append((eye + D @ Mi).T @ (eye + D @ Mi))
+    P = z * sum(b[i] * grads[i] for i in range(tableau.stages))
+    return (eye + Dp @ P) @ np.linalg.inv(eye + D @ P)
+
+
+def rotation_angle(tableau: Tableau, z: float, realisation: str = "symmetric") -> float | None:
+    """theta(z) in float64: 2 arctan(m(z)/2) (symmetric realisation; None where an implicit
+    tableau's branch has no solution at z), arccos(tr R/2) (shifted; None where |tr R| > 2)."""
+    if realisation == "shifted":
+        tr = float(step_matrix_shifted(tableau, z).trace())
+        return math.acos(tr / 2) if abs(tr) <= 2 else None
     A, b = tableau.A_float, tableau.b_float
     s = tableau.stages
     if tableau.is_explicit:
