@@ -36,6 +36,8 @@ COMMANDS = [
     ["relations", "--order", "4"],
     ["modified", "--method", "euler", "--order", "3", "--symmetric"],
     ["compose", "euler,euler", "--order", "4", "--symmetric"],
+    ["stability", "paper-two-stage,paper-implicit", "--order", "5"],
+    ["stability", "euler", "--realisation", "shifted", "--order", "3"],
     ["integrate", "pendulum", "--method", "euler", "--steps", "10", "--modified", "3"],
 ]
 

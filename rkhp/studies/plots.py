@@ -6,6 +6,7 @@ before a study runs, so a bad path costs nothing.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from ..base.bounds import check_output_path
@@ -115,8 +116,6 @@ def plot_stress(stress, path) -> Path:
 def plot_phase(tableaux, realisation: str, z_max: float, path) -> Path:
     """theta(z) (with the exact flow's z, wrapped to (-pi, pi]) and |theta(z) - z| on a log scale,
     one line per method, over 0 < z <= z_max (docs/stability.md)."""
-    import math
-
     import numpy as np
 
     from ..tableaux.stability import rotation_angle

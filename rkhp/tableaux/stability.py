@@ -516,6 +516,28 @@ def _dm_dz(A, b, m, z):
     return sum(b[i] * (w[i] + z * m[i] * dms[i] / 2) for i in range(s))
 
 
+def branch_point(A, z_target):
+    """The point m(z_target) of the branch through m(0) = 0 (predictor along the tangent, Newton
+    corrector, step halved where the corrector fails or jumps); None where the branch has ended
+    (past its fold) before z_target, or z_target is within about 1e-8 of the fold. Call under mpmath.workdps(DIGITS)."""
+    s = A.rows
+    m, z = mpmath.matrix([0] * s), mpmath.mpf(0)
+    dz = min(mpmath.mpf(1) / 16, z_target)
+    while z < z_target:
+        dz = min(dz, z_target - z)
+        predicted = m + dz * _tangent(A, m, z)
+        trial = _solve_at(A, predicted, z + dz, iterations=12)
+        if trial is None or mpmath.norm(trial - predicted) > dz * (1 + mpmath.norm(m)) \
+                or abs(_det(_jacobian(A, trial, z + dz))) < mpmath.mpf(10) ** -4:
+            if dz < mpmath.mpf(10) ** -9 * (1 + z_target):
+                return None  # within about 1e-8 of the fold (det J ~ sqrt(z* - z)): the branch ends
+            dz /= 2
+            continue
+        m, z = trial, z + dz
+        dz *= 2
+    return m
+
+
 def implicit_branch(tableau: Tableau) -> Branch:
     """Follow the branch through m(0) = 0 in z (Newton continuation, DIGITS digits) up to its fold
     z*, refine the fold (F = 0, det J = 0) and write it exactly where the elimination is in reach
@@ -530,7 +552,7 @@ def implicit_branch(tableau: Tableau) -> Branch:
         last_slope = _dm_dz(A, b, m, z)
         wrap = None
         while z < MAX_CONTINUATION_Z:
-            trial = _solve_at(A, m + dz * _tangent(A, m, z), z + dz)
+            trial = _solve_at(A, m + dz * _tangent(A, m, z), z + dz, iterations=12)
             if trial is None or mpmath.norm(trial - m) > 4 * dz * (1 + mpmath.norm(m)) \
                     or abs(_det(_jacobian(A, trial, z + dz))) < mpmath.mpf(10) ** -12:
                 if dz < mpmath.mpf(10) ** -25:
@@ -816,13 +838,50 @@ def rotation_angle(tableau: Tableau, z: float, realisation: str = "symmetric") -
         for i in range(s):
             ms[i] = z * sum(A[i][j] * (1 + ms[j] ** 2 / 4) for j in range(i))
     else:
-        with mpmath.workdps(20):
-            Am, _ = _mp_tableau(tableau)
-            m = mpmath.matrix([0] * s)
-            steps = max(1, math.ceil(abs(z) / 0.05))
-            for k in range(1, steps + 1):
-                m = _solve_at(Am, m, mpmath.mpf(z) * k / steps, iterations=40)
-                if m is None:
-                    return None
-            ms = [float(x) for x in m]
+        with mpmath.workdps(25):
+            point = branch_point(_mp_tableau(tableau)[0], mpmath.mpf(z))
+        if point is None:
+            return None
+        ms = [float(x) for x in point]
     return 2.0 * math.atan(z * sum(b[i] * (1 + ms[i] ** 2 / 4) for i in range(s)) / 2)
+
+
+def phase_coefficients_numeric(A, b, n: int):
+    """theta(z) - z to z^n for numeric A, b (float64, or mpmath numbers in object arrays): the series
+    of m from n + 2 applications of the stage map, explicit and implicit alike; a numpy array,
+    index = power of z."""
+    import numpy as np
+
+    dtype = np.asarray(b).dtype
+    zero = np.zeros(n + 1, dtype=dtype) * b[0]
+
+    def mul(u, v):
+        out = zero.copy()
+        for i in range(n + 1):
+            if u[i]:
+                out[i:] += u[i] * v[: n + 1 - i]
+        return out
+
+    def shift(u):
+        out = zero.copy()
+        out[1:] = u[:n]
+        return out
+
+    s = len(b)
+    ms = [zero.copy() for _ in range(s)]
+    m = zero.copy()
+    for _ in range(n + 2):
+        w = [mul(mi, mi) / 4 for mi in ms]
+        for wi in w:
+            wi[0] += 1
+        ms = [shift(sum((A[i][j] * w[j] for j in range(s)), zero.copy())) for i in range(s)]
+        m = shift(sum((b[i] * w[i] for i in range(s)), zero.copy()))
+    u = m / 2
+    u2 = mul(u, u)
+    total, power, k = zero.copy(), u, 0
+    while k <= n:
+        total = total + power * (2 * (-1) ** k) / (2 * k + 1)
+        power = mul(power, u2)
+        k += 1
+    total[1] -= 1
+    return total
