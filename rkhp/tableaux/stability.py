@@ -232,6 +232,7 @@ def _phase(F: Field, series_of, order: int) -> Phase:
     """The Phase from `series_of(n)` (theta - z to z^n), growing n until a non-zero coefficient
     shows (at most PHASE_SEARCH_ORDER)."""
     n = order
+    K0 = F.K.zero
     series = series_of(n)
     while True:
         nonzero = [k for k in range(n + 1) if not F.is_zero(series[k])]
@@ -239,7 +240,8 @@ def _phase(F: Field, series_of, order: int) -> Phase:
             break
         n = min(n + 8, max(PHASE_SEARCH_ORDER, order))
         series = series_of(n)
-    coefficients = tuple((k, F.number(series[k])) for k in range(1, order + 1))
+    coefficients = tuple((k, F.number(series[k]) if not F.is_zero(series[k]) else Number(F.text(K0), 0.0))
+                         for k in range(1, order + 1))
     if not nonzero:
         return Phase(order, coefficients, None, None, n)
     k = nonzero[0]
