@@ -85,7 +85,7 @@ def _value(x) -> str:
         return f"{x['float']:.15g}"
     if len(exact) > 40:
         return f"{x['float']:.15g} (exact: an algebraic number, see --format json)"
-    return exact if exact == repr(x["float"]) else f"{exact} = {x['float']:.15g}"
+    return exact if exact.lstrip("-").isdigit() else f"{exact} = {x['float']:.15g}"
 
 
 def _render(doc, plot) -> None:
