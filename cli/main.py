@@ -27,6 +27,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "relations": ("rkhp_cli.relations_cmd", "relations", "Relations of symmetric birealisations (docs/theory.md §8)."),
     "converge": ("rkhp_cli.studies_cmd", "converge", "Convergence study: error against h, observed orders."),
     "bench": ("rkhp_cli.studies_cmd", "bench", "Work-precision: wall time against error, with scipy peers."),
+    "long-time": ("rkhp_cli.studies_cmd", "long_time", "Long-time energy error growth, fitted as C t^k."),
     "stress": ("rkhp_cli.studies_cmd", "stress", "Stress tests: Newton failure, long-run drift, round-off."),
 }
 

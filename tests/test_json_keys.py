@@ -38,6 +38,7 @@ COMMANDS = [
     ["compose", "euler,euler", "--order", "4", "--symmetric"],
     ["stability", "paper-two-stage,paper-implicit", "--order", "5"],
     ["stability", "euler", "--realisation", "shifted", "--order", "3"],
+    ["long-time", "rigid-body", "--steps", "200", "--method", "euler"],
     ["integrate", "pendulum", "--method", "euler", "--steps", "10", "--modified", "3"],
 ]
 

@@ -283,3 +283,53 @@ def test_cli_plot_and_bad_input(run_cli, tmp_path):
     assert status == 2 and err.count("\n") == 1
     status, _, err = run_cli("stability", "classical:rk4")
     assert status == 2 and "RKHP method" in err
+
+
+# ----------------------------------------------------------------------------- long-time behaviour
+
+
+def _growth(system, steps, method, tolerance=1e-8):
+    from rkhp.studies.longtime import energy_growth
+
+    return energy_growth(system, method, 0.1, steps, tolerance)
+
+
+def test_long_time_short_version():
+    """2 10^4 steps on the rigid body: the RKHP energy error stays bounded (exponent about 0), DOP853's
+    drifts (about 1)."""
+    from rkhp.systems import get_system
+
+    system = get_system("rigid-body")
+    assert abs(_growth(system, 20_000, "paper-three-stage").exponent) < 0.1
+    assert _growth(system, 20_000, "scipy:dop853").exponent > 0.8
+
+
+def test_growth_fit_recovers_a_power():
+    from rkhp.studies.longtime import fit_exponent
+
+    t = np.geomspace(1, 1e5, 50)
+    assert fit_exponent(t, 3e-9 * t**0.5, 1e5) == pytest.approx(0.5, abs=1e-12)
+    assert fit_exponent(t, np.zeros(50), 1e5) is None
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("system_name,tolerance", [("rigid-body", 1e-8), ("volterra-lattice:5", 1e-6)])
+def test_long_time_million_steps(system_name, tolerance):
+    """10^6 steps (t = 10^5): RKHP methods bounded, DOP853 drifting (docs/stability.md)."""
+    from rkhp.systems import get_system
+
+    system = get_system(system_name)
+    for method in ("paper-three-stage", "euler"):
+        assert abs(_growth(system, 10**6, method).exponent) < 0.1
+    assert _growth(system, 10**6, "scipy:dop853", tolerance).exponent > 0.7
+
+
+def test_long_time_cli(run_cli, tmp_path):
+    path = tmp_path / "long.png"
+    status, out, _ = run_cli("long-time", "rigid-body", "--steps", "2000", "--method", "euler",
+                             "--plot", str(path), "--format", "json")
+    assert status == 0 and path.stat().st_size > 1000
+    run = json.loads(out)["runs"][0]
+    assert run["method"] == "euler" and run["status"] == "ok" and len(run["times"]) == len(run["energy_errors"])
+    status, _, err = run_cli("long-time", "rigid-body", "--steps", "10")
+    assert status == 2 and err.count("\n") == 1

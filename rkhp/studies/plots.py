@@ -139,3 +139,23 @@ def plot_phase(tableaux, realisation: str, z_max: float, path) -> Path:
         ax.legend(fontsize=7)
     _save(fig, path)
     return path
+
+
+def plot_long_time(system: str, runs, path) -> Path:
+    """Log-log running maximum of |H(y_n) - H(y_0)| against t, one line per method, with its fitted
+    exponent (rkhp.studies.longtime)."""
+    path = check_plot_path(path)
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    for r in runs:
+        if not r.times:
+            continue
+        k = "n/a" if r.exponent is None else f"{r.exponent:.2f}"
+        ax.loglog(r.times, [max(e, 1e-17) for e in r.errors], label=f"{r.method} (growth t^{k})")
+    ax.set_xlabel("t")
+    ax.set_ylabel("max over [0, t] of |H(y_n) - H(y_0)|")
+    ax.set_title(f"{system}: long-time energy error", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    _save(fig, path)
+    return path
