@@ -109,8 +109,9 @@ def _render(doc, plot) -> None:
         rows.append(("phase order", "—" if r["phase_order"] is None else str(r["phase_order"])))
         rows.append(("phase constant", _value(r["phase_constant"])))
         if real == "symmetric":
-            rows.append(("wrap limit", "none: theta increases with z" if r["wrap_limit"] is None
-                         else _value(r["wrap_limit"])))
+            none = "none: theta increases with z" if r["m"] is not None or r["kind"] != "explicit" \
+                else "none: theta increases on (0, 20]"
+            rows.append(("wrap limit", none if r["wrap_limit"] is None else _value(r["wrap_limit"])))
         if r["kind"] == "implicit":
             rows.append(("existence limit z*", "none below z = 64" if r["existence_limit"] is None
                          else _value(r["existence_limit"])))

@@ -196,6 +196,12 @@ def test_wrap_limit_where_theta_turns():
     system = oscillator()
     angle = [clockwise_angle(integrate(system, NEGATIVE_WEIGHT, z, 1).final_state) for z in (z0 - 0.1, z0, z0 + 0.1)]
     assert angle[0] < angle[1] and angle[2] < angle[1]
+    # without an exact m(z) (35 stages): found numerically, and the integrator turns there too
+    feagin = load_tableau("feagin14")
+    z1 = analyse(feagin).wrap_limit.value
+    assert 2.12 < z1 < 2.15
+    angle = [clockwise_angle(integrate(system, feagin, z, 1).final_state) for z in (z1 - 0.02, z1, z1 + 0.02)]
+    assert angle[0] < angle[1] and angle[2] < angle[1]
 
 
 # ----------------------------------------------------------------------------- shifted realisation

@@ -427,6 +427,34 @@ def wrap_limit_explicit(m) -> Number | None:
     return first_positive_root(odd.as_expr(), K)
 
 
+#: the numerical wrap limit (tableaux without an exact m(z)) is looked for on (0, WRAP_SCAN_Z]
+WRAP_SCAN_Z = 20.0
+
+
+def wrap_limit_numeric(tableau: Tableau) -> Number | None:
+    """The wrap limit of an explicit tableau without an exact m(z) (more than MAX_POLYNOMIAL_STAGES
+    stages, or decimals): the first z on a grid of step 10^-3 over (0, WRAP_SCAN_Z] where
+    theta(z) = 2 arctan(m(z)/2) (float64) stops increasing, refined by bisection; None when theta
+    increases over the whole scan."""
+    import numpy as np
+
+    zs = np.arange(1, int(WRAP_SCAN_Z * 1000) + 1) / 1000.0
+    with np.errstate(all="ignore"):
+        theta = np.array([rotation_angle(tableau, float(z)) for z in zs])
+    falls = np.nonzero(np.diff(theta) < -1e-10)[0]  # a fall beyond round-off near theta = pi
+    if not len(falls):
+        return None
+    lo, hi = float(zs[max(falls[0] - 1, 0)]), float(zs[falls[0] + 1])
+
+    def slope(z):
+        return rotation_angle(tableau, z + 1e-7) - rotation_angle(tableau, z - 1e-7)
+
+    for _ in range(60):
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if slope(mid) > 0 else (lo, mid)
+    return Number(None, (lo + hi) / 2)
+
+
 # ----------------------------------------------------------------------------- implicit branch
 
 
@@ -803,7 +831,7 @@ def analyse(tableau: Tableau, order: int = 9, realisation: str = "symmetric") ->
     ph = phase(tableau, order)
     if tableau.is_explicit:
         m = m_polynomial(tableau)
-        wrap = wrap_limit_explicit(m) if m is not None else None
+        wrap = wrap_limit_explicit(m) if m is not None else wrap_limit_numeric(tableau)
         return Stability(tableau.name, "explicit", realisation, None if m is None else poly_text(m),
                          None if m is None else m.degree(), None, ph, wrap, None, None, None)
     branch = implicit_branch(tableau)
