@@ -92,6 +92,20 @@ def test_series_of_an_implicit_method_matches_its_root():
     assert series == pytest.approx(theta, abs=1e-10)
 
 
+def test_min_phase_table_beats_the_paper():
+    """The shipped --optimize phase result: degenerate order 4 (verified at its 60 digits), phase
+    order 8, so its phase error is below the paper's -z^5/1920 for every z up to 1."""
+    from rkhp.tableaux.verification import verify
+
+    tableau = load_tableau("search-degenerate-o4-s3-min-phase")
+    assert verify(tableau).orders["degenerate"] == 4
+    r = analyse(tableau)
+    assert r.phase.phase_order == 8 and abs(r.phase.phase_constant.value) < 1 / 1920
+    paper = load_tableau("paper-three-stage")
+    for z in (0.1, 0.5, 1.0):
+        assert abs(predicted_theta(tableau, z) - z) < abs(predicted_theta(paper, z) - z)
+
+
 # ----------------------------------------------------------------------------- against the integrator
 
 
