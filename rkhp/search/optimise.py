@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .polish import to_mp
+from .polish import Polished, newton_step, to_mp
 from .system import ResidualSystem
 
 
@@ -146,8 +146,6 @@ def polish_phase(system: ResidualSystem, optimum: PhaseOptimum, digits: int, max
     """Newton in mpmath (minimum-norm steps) on the conditions and the annihilated phase powers
     together, until every residual is below 10^-digits: a :class:`~rkhp.search.polish.Polished`."""
     import mpmath
-
-    from .polish import Polished, newton_step
 
     zeros = list(optimum.zeros)
     top = max(zeros, default=system.order + 1)

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..base.errors import InputError
 from ..integrators.methods import Method, resolve_method
+from .bench import _solve_ivp
 
 #: samples of the running maximum, log-spaced in t
 SAMPLES = 60
@@ -74,8 +75,6 @@ def energy_growth(system, method, h: float, steps: int, tolerance: float = 1e-10
     times = sample_times(t_final, h)
     H0 = system.hamiltonian(np.asarray(system.x0, dtype=float))
     if m.kind == "scipy":
-        from .bench import _solve_ivp
-
         sol = _solve_ivp(system, m.solver, np.asarray(system.x0, dtype=float), t_final, tolerance)
         if not sol.success:
             return Growth(m.name, None, None, tolerance, (), (), None, f"failed: {sol.message}")
