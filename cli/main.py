@@ -23,9 +23,11 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "integrate": ("rkhp_cli.systems_cmd", "integrate", "Integrate a Poisson system with a method (docs/methods.md)."),
     "compose": ("rkhp_cli.compose_cmd", "compose", "Composition of RKHP steps against the Butcher product."),
     "modified": ("rkhp_cli.modified_cmd", "modified", "Modified Hamiltonian of a method (backward error analysis)."),
+    "stability": ("rkhp_cli.stability_cmd", "stability", "Linear phase and stability of RKHP methods."),
     "relations": ("rkhp_cli.relations_cmd", "relations", "Relations of symmetric birealisations (docs/theory.md §8)."),
     "converge": ("rkhp_cli.studies_cmd", "converge", "Convergence study: error against h, observed orders."),
     "bench": ("rkhp_cli.studies_cmd", "bench", "Work-precision: wall time against error, with scipy peers."),
+    "long-time": ("rkhp_cli.studies_cmd", "long_time", "Long-time energy error growth, fitted as C t^k."),
     "stress": ("rkhp_cli.studies_cmd", "stress", "Stress tests: Newton failure, long-run drift, round-off."),
 }
 

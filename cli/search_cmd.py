@@ -44,8 +44,9 @@ def _class_of(degenerate: bool, symmetric: bool) -> str:
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Seed: restart k of order N "
               "starts from numpy default_rng([seed, S, N, k]).")
 @executor_options("restarts")
-@click.option("--optimize", type=click.Choice(["error"]), default=None,
-              help="Minimise the principal error norm at order N+1 on the solution family.")
+@click.option("--optimize", type=click.Choice(["error", "phase"]), default=None,
+              help="Minimise on the solution family the principal error norm at order N+1 (error) or "
+                   "the phase error theta(z) - z on the oscillator (phase: docs/stability.md).")
 @click.option("--digits", type=integer(1, name="D"), default=30, show_default=True,
               help="Digits D of the mpmath polishing and verification (20..500).")
 @click.option("--prove", is_flag=True,
@@ -180,6 +181,10 @@ def _render(result, save, certificate=None) -> None:
         for k in opt.known:
             rows.add_row(k.name, f"{k.error_norm:.6g}")
         print_table(con, rows)
+        if opt.objective == "phase":
+            con.print("phase of the tableau found: " + ("not verified" if opt.phase_order is None else
+                      f"order {opt.phase_order}, theta(z) - z = {opt.phase_constant:.6g} "
+                      f"z^{opt.phase_order + 1} + ..."))
         if opt.kkt_residual is not None:
             con.print(f"optimum stationary to D digits: max |KKT residual| {opt.kkt_residual:.2g}")
     ev = data["evidence_next_order"]

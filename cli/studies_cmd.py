@@ -24,6 +24,7 @@ from .options import (
     output_path,
     parse_x0,
     progress,
+    real,
     reals,
     x0_option,
 )
@@ -394,3 +395,56 @@ def _render_round_off(out, ro, verdicts) -> None:
     out.print(table)
     out.print("marks: pre = pre-asymptotic, floor = round-off floor, drift = order drift (left out of the fit)")
     out.print(f"verdict (d): {plain(verdicts['d'])}")
+
+
+# ----------------------------------------------------------------------------------------------
+# long-time
+
+
+@click.command("long-time")
+@_common
+@click.option("--h", "h", type=POSITIVE, default=0.1, show_default=True, help="Step size h.")
+@click.option("--steps", type=integer(100, 10**8, "steps"), default=10**6, show_default=True,
+              help="Number of steps (the run goes to t = h * steps).")
+@click.option("--tolerance", type=real(1e-14, 1e-2, name="RTOL"), default=1e-8, show_default=True,
+              help="Relative tolerance of scipy methods (scipy:dop853) over the same time.")
+@click.option("--plot", type=PLOT_FILE, help="Log-log plot of the energy error against t (.png, .svg, .pdf).")
+@force_option()
+@format_option("table", "json")
+def long_time(system, methods, x0, realisation, h, steps, tolerance, plot, force, fmt):
+    """Long-time energy behaviour: the running maximum of |H(y_n) - H(y_0)| over `--steps` steps,
+    fitted as C t^k over the last three decades (k about 0: bounded; 1: a drift). Default methods:
+    paper-three-stage, euler and scipy:dop853 (docs/stability.md)."""
+    from rkhp.integrators.methods import resolve_system
+    from rkhp.studies.longtime import check_long_time, energy_growth
+
+    check_long_time(h, steps)
+    sys_ = resolve_system(system, realisation, parse_x0(x0))
+    names = _names(methods) or ("paper-three-stage", "euler", "scipy:dop853")
+    compile_notice(("rkhp", "invariants"), fmt != "json", sys_)
+    runs = []
+    with progress(fmt != "json") as bar:
+        task = bar.add_task("long runs", total=len(names))
+        for name in names:
+            runs.append(energy_growth(sys_, name, h, steps, tolerance))
+            bar.advance(task)
+    if plot:
+        from rkhp.studies.plots import plot_long_time
+
+        plot_long_time(sys_.name, runs, plot, force)
+    doc = {"system": sys_.name, "realisation": sys_.realisation, "h": h, "steps": steps,
+           "t_final": h * steps, "runs": [r.to_json() for r in runs]}
+    if fmt == "json":
+        emit_json(doc)
+        return
+    out = console()
+    out.print(f"{sys_.name}: |H(y_n) - H(y_0)| up to t = {h * steps:g} (h = {h:g}, {steps} steps)", markup=False)
+    for r in runs:
+        what = f"rtol {r.tolerance:g}" if r.tolerance is not None else f"h = {r.h:g}"
+        if r.status != "ok":
+            out.print(f"  {r.method} ({what}): {r.status}", markup=False)
+            continue
+        k = "—" if r.exponent is None else f"{r.exponent:.2f}"
+        out.print(f"  {r.method} ({what}): final error {r.errors[-1]:.2e}, growth exponent {k}", markup=False)
+    if plot:
+        out.print(f"plot written to {plot}", markup=False)

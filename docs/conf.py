@@ -23,7 +23,7 @@ extensions = [
 ]
 
 # Pages whose blocks run at build time so that the figures they make exist (docs/CONTRIBUTING-DOCS.md).
-rkhp_run_at_build = ["tutorials/convergence-study", "implicit"]
+rkhp_run_at_build = ["tutorials/convergence-study", "implicit", "stability"]
 
 source_suffix = {".md": "markdown"}
 root_doc = "index"

@@ -36,6 +36,9 @@ COMMANDS = [
     ["relations", "--order", "4"],
     ["modified", "--method", "euler", "--order", "3", "--symmetric"],
     ["compose", "euler,euler", "--order", "4", "--symmetric"],
+    ["stability", "paper-two-stage,paper-implicit", "--order", "5"],
+    ["stability", "euler", "--realisation", "shifted", "--order", "3"],
+    ["long-time", "rigid-body", "--steps", "200", "--method", "euler"],
     ["integrate", "pendulum", "--method", "euler", "--steps", "10", "--modified", "3"],
 ]
 

@@ -335,7 +335,8 @@ def test_symmetric_class_needs_fewer_stages():
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["search-degenerate-o3-s2", "search-degenerate-o4-s3",
                                   "search-degenerate-o5-s4", "search-degenerate-o4-s3-min-error",
-                                  "search-degenerate-o5-s4-min-error", "search-degenerate-o6-s6",
+                                  "search-degenerate-o4-s3-min-phase", "search-degenerate-o5-s4-min-error",
+                                  "search-degenerate-o6-s6",
                                   "search-symmetric-o4-s3", "search-symmetric-o5-s4",
                                   "search-symmetric-o6-s5", "search-symmetric-o7-s6",
                                   "search-general-o6-s7", "search-degenerate-o7-s7",

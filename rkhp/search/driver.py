@@ -21,7 +21,7 @@ from ..base import bounds
 from ..base.errors import InputError
 from ..trees.conditions import check_class
 from .multistart import Problem, Restarts, run_restarts
-from .optimise import KnownMethod, known_methods, minimise_error, refine_optimum
+from .optimise import KnownMethod, known_methods, minimise_error, minimise_phase, polish_phase, refine_optimum
 from .polish import polish
 from .prove import Proof, choose_engine, prove_impossible
 from .recognise import closed_form, recognise_point
@@ -32,7 +32,7 @@ DEFAULT_DIGITS = 30
 MIN_DIGITS, MAX_DIGITS = 20, 500
 #: Proof time limit when no --time-limit is given (seconds).
 DEFAULT_PROOF_SECONDS = 60.0
-#: Solutions collected as starting points for --optimize error.
+#: Solutions collected as starting points for --optimize error and --optimize phase.
 OPTIMISATION_STARTS = 8
 
 
@@ -61,8 +61,8 @@ class SearchOptions:
         if not MIN_DIGITS <= self.digits <= MAX_DIGITS:
             raise InputError(f"--digits must be between {MIN_DIGITS} and {MAX_DIGITS}, "
                              f"got {self.digits}")
-        if self.optimize not in (None, "error"):
-            raise InputError(f"--optimize must be 'error', got {self.optimize!r}")
+        if self.optimize not in (None, "error", "phase"):
+            raise InputError(f"--optimize must be 'error' or 'phase', got {self.optimize!r}")
         if self.prove:
             choose_engine(self.proof_engine)
 
@@ -92,12 +92,18 @@ class Found:
 @dataclass(frozen=True)
 class Optimisation:
     """--optimize error: the optimum's principal error norm beside known methods' norms, and the
-    KKT residual of the D-digit refinement (None when the refinement did not converge)."""
+    KKT residual of the D-digit refinement (None when the refinement did not converge).
+    --optimize phase (``objective`` "phase"): also the phase order and constant of the tableau
+    found (theta(z) - z = constant z^(p+1) + ..., docs/stability.md; None when no optimum was
+    verified)."""
 
     error_norm: float
     starts: int
     known: tuple[KnownMethod, ...]
     kkt_residual: float | None
+    objective: str = "error"
+    phase_order: int | None = None
+    phase_constant: float | None = None
 
 
 @dataclass(frozen=True)
@@ -153,7 +159,7 @@ class SearchResult:
         return (f"rkhp search --stages {self.stages} --order {self.found.order}{flags}"
                 f"{' --implicit' if self.implicit else ''} --seed {opts.seed} "
                 f"--restarts {opts.restarts} --digits {opts.digits}"
-                f"{' --optimize error' if opts.optimize else ''}")
+                f"{' --optimize ' + opts.optimize if opts.optimize else ''}")
 
     def tableau_to_save(self):
         """The reported tableau as a file would hold it: named by its content (its class, order,
@@ -221,6 +227,9 @@ class SearchResult:
             "optimization": None if self.optimisation is None else {
                 "error_norm": self.optimisation.error_norm, "starts": self.optimisation.starts,
                 "kkt_residual": self.optimisation.kkt_residual,
+                "objective": self.optimisation.objective,
+                "phase_order": self.optimisation.phase_order,
+                "phase_constant": self.optimisation.phase_constant,
                 "known": [{"name": k.name, "principal_error": k.error_norm}
                           for k in self.optimisation.known]},
             "proof_detail": None if self.proof is None else {
@@ -337,11 +346,11 @@ def search(stages: int, order: int | None = None, cls: str = "general", implicit
             run = next(r for r in runs if r.problem.order == best.order)
             best = verified(problem, run.first.x, run.first.polished, options.digits, True,
                             method_name(problem), run.first.index) or best
-        if best is not None and options.optimize == "error" and not interrupted and (
-                left is None or left > 0.0):
-            best, optimisation = _optimise(Problem(stages, best.order, cls, implicit),
-                                           runs[[r.problem.order for r in runs].index(best.order)],
-                                           options, best)
+        if best is not None and options.optimize and not interrupted and (left is None or left > 0.0):
+            optimise = _optimise if options.optimize == "error" else _optimise_phase
+            best, optimisation = optimise(Problem(stages, best.order, cls, implicit),
+                                          runs[[r.problem.order for r in runs].index(best.order)],
+                                          options, best)
     except KeyboardInterrupt:
         interrupted = True
     proof = proof_order = None
@@ -387,3 +396,23 @@ def _optimise(problem: Problem, run: Restarts, options: SearchOptions, found: Fo
     norm = best.verification.principal_error.get(problem.cls)
     kkt = refined.kkt_residual if candidate is not None and refined.converged else None
     return best, Optimisation(norm, len(starts), known, kkt)
+
+
+def _optimise_phase(problem: Problem, run: Restarts, options: SearchOptions, found: Found):
+    """Minimise the phase error from the run's successes (`minimise_phase`), polish the optimum
+    with its annihilated powers at D digits; the optimum (verified) if it verifies."""
+    system = problem.system()
+    starts = [a.x for a in run.successes]
+    opt = minimise_phase(system, starts)
+    known = tuple(known_methods(system))
+    candidate = None
+    if opt is not None:
+        pol = polish_phase(system, opt, options.digits)
+        if pol.converged:
+            candidate = verified(problem, opt.x, pol, options.digits, False,
+                                 method_name(problem) + "-min-phase", None)
+    best = candidate or found
+    norm = best.verification.principal_error.get(problem.cls)
+    if candidate is None:
+        return best, Optimisation(norm, len(starts), known, None, "phase")
+    return best, Optimisation(norm, len(starts), known, None, "phase", opt.phase_order, opt.phase_constant)

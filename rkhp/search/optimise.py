@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .polish import to_mp
+from .polish import Polished, newton_step, to_mp
 from .system import ResidualSystem
 
 
@@ -60,6 +60,116 @@ def minimise_error(system: ResidualSystem, starts, max_iterations: int = 500) ->
         if best is None or norm < best.error_norm:
             best = Optimum(tuple(float(v) for v in x), norm, residual, len(starts))
     return best
+
+
+@dataclass(frozen=True)
+class PhaseOptimum:
+    """--optimize phase: unknowns (float64), the phase order reached and the leading phase constant
+    (theta(z) - z = constant z^(p+1) + ..., docs/stability.md), the powers of z annihilated, the max
+    residual of the conditions and of those powers, the number of starts."""
+
+    x: tuple[float, ...]
+    phase_order: int
+    phase_constant: float
+    zeros: tuple[int, ...]
+    residual: float
+    starts: int
+
+
+#: a phase coefficient below this (float64) is taken as annihilated: the next one is minimised
+PHASE_ZERO = 1e-13
+
+
+def _phase_equations(system: ResidualSystem, top: int):
+    from ..tableaux.stability import phase_coefficients_numeric
+
+    def coefficients(x):
+        A, b = system.unpack(np.asarray(x))
+        return phase_coefficients_numeric(A, b, top)
+
+    return coefficients
+
+
+def minimise_phase(system: ResidualSystem, starts, max_iterations: int = 500) -> PhaseOptimum | None:
+    """Lexicographic minimisation of the phase error theta(z) - z on the solution family (docs/
+    stability.md): from each start, the coefficient of z^(N+1) is annihilated with the conditions
+    (least squares, a solution of the enlarged system) while the family has room, then the next odd
+    power, and so on; the first power that cannot be annihilated is minimised in square (SLSQP, the
+    conditions and the annihilated powers as equality constraints). The best optimum over the
+    starts (highest phase order, then smallest constant) or None."""
+    from scipy.optimize import least_squares, minimize
+
+    top = system.order + 2 + 2 * max(1, system.n_unknowns - system.n_conditions)
+    coefficients = _phase_equations(system, top)
+
+    def equations(x, zeros):
+        return np.concatenate([system.residuals(np.asarray(x, dtype=float), jacobian=False)[0],
+                               coefficients(np.asarray(x, dtype=float))[zeros]])
+
+    def feasible(x, zeros):
+        return (bool(np.all(np.isfinite(x))) and np.max(np.abs(x)) <= 20
+                and np.max(np.abs(equations(x, zeros))) <= PHASE_ZERO)
+
+    best = None
+    for x in (np.asarray(s, dtype=float) for s in starts):
+        zeros, power = [], system.order + 1
+        while power <= top:
+            if system.n_conditions + len(zeros) < system.n_unknowns:
+                with np.errstate(all="ignore"):
+                    res = least_squares(equations, x, args=(zeros + [power],), xtol=1e-15, ftol=1e-15,
+                                        gtol=1e-15)
+                if feasible(res.x, zeros + [power]):
+                    x, zeros, power = res.x, zeros + [power], power + 2
+                    continue
+            constraints = [{"type": "eq", "fun": lambda x, z=tuple(zeros): equations(x, list(z))}]
+            with np.errstate(all="ignore"):
+                res = minimize(lambda x, k=power: coefficients(x)[k] ** 2 * 1e8, x, method="SLSQP",
+                               constraints=constraints, options={"maxiter": max_iterations, "ftol": 1e-30})
+            if feasible(res.x, zeros) and abs(coefficients(res.x)[power]) < abs(coefficients(x)[power]):
+                x = res.x
+            break
+        if not feasible(x, zeros):
+            continue
+        c = coefficients(x)
+        k = next((j for j in range(system.order + 1, top + 1) if abs(c[j]) > PHASE_ZERO), None)
+        if k is None:
+            continue
+        candidate = PhaseOptimum(tuple(float(v) for v in x), k - 1, float(c[k]), tuple(zeros),
+                                 float(np.max(np.abs(equations(x, zeros)))), len(starts))
+        if best is None or (candidate.phase_order, -abs(candidate.phase_constant)) > \
+                (best.phase_order, -abs(best.phase_constant)):
+            best = candidate
+    return best
+
+
+def polish_phase(system: ResidualSystem, optimum: PhaseOptimum, digits: int, max_iterations: int = 40):
+    """Newton in mpmath (minimum-norm steps) on the conditions and the annihilated phase powers
+    together, until every residual is below 10^-digits: a :class:`~rkhp.search.polish.Polished`."""
+    import mpmath
+
+    zeros = list(optimum.zeros)
+    top = max(zeros, default=system.order + 1)
+    coefficients = _phase_equations(system, top)
+    with mpmath.workdps(2 * digits + 20):
+        x = to_mp(optimum.x)
+        tol = mpmath.mpf(10) ** (-digits)
+        eps = mpmath.mpf(10) ** (-(digits + 10))
+        size = mpmath.inf
+        for iterations in range(max_iterations + 1):
+            r, J = system.residuals(x)
+            c = coefficients(x)[zeros]
+            rows = []
+            for k in range(len(x)):
+                step = np.zeros(len(x), dtype=object) + mpmath.mpf(0)
+                step[k] = eps
+                rows.append((coefficients(x + step)[zeros] - coefficients(x - step)[zeros]) / (2 * eps))
+            Jp = np.array(rows, dtype=object).T.reshape(len(zeros), len(x))
+            size = max(abs(v) for v in list(r) + list(c))
+            if size < tol or iterations == max_iterations:
+                break
+            x = x + newton_step(np.vstack([J, Jp]), np.concatenate([r, c]))
+        text = tuple(mpmath.nstr(v, digits, strip_zeros=False) for v in x)
+        return Polished(text, digits, float(size), bool(size < tol), iterations)
 
 
 @dataclass(frozen=True)

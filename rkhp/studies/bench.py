@@ -166,7 +166,9 @@ def _keep_points(exc: BaseException, curve: BenchCurve) -> None:
         raise Interrupted(curve) from exc
 
 
-def _solve_ivp(system, solver: str, x0, t_final: float, rtol: float):
+def solve_peer(system, solver: str, x0, t_final: float, rtol: float):
+    """scipy's solve_ivp(solver) from x0 to t_final at rtol (atol = 1e-3 rtol) on the system's
+    compiled vector field."""
     from scipy.integrate import solve_ivp
 
     from ..integrators.classical import vector_field
@@ -178,11 +180,11 @@ def _solve_ivp(system, solver: str, x0, t_final: float, rtol: float):
 def _scipy_curve(method: Method, system, ref: Reference, tolerances, t_final: float, repeats: int) -> BenchCurve:
     solver = method.solver
     x0 = np.asarray(system.x0, dtype=float)
-    _solve_ivp(system, solver, x0, t_final, max(tolerances))  # warm-up: loads the compiled vector field
+    solve_peer(system, solver, x0, t_final, max(tolerances))  # warm-up: loads the compiled vector field
     points = []
     try:
         for rtol in tolerances:
-            seconds, sol = _median_seconds(lambda rtol=rtol: _solve_ivp(system, solver, x0, t_final, rtol),
+            seconds, sol = _median_seconds(lambda rtol=rtol: solve_peer(system, solver, x0, t_final, rtol),
                                            repeats)
             ok = sol.success and np.all(np.isfinite(sol.y[:, -1]))
             measured = float(np.linalg.norm(sol.y[:, -1] - ref.state)) if ok else None
@@ -278,11 +280,11 @@ def _final_states(result):
 def _ensemble_scipy_curve(method, system, refs, floor, starts, tolerances, t_final, repeats) -> BenchCurve:
     solver = method.solver
     count = min(len(starts), ENSEMBLE_TIMED)
-    _solve_ivp(system, solver, starts[0], t_final, max(tolerances))  # warm-up, untimed
+    solve_peer(system, solver, starts[0], t_final, max(tolerances))  # warm-up, untimed
     points = []
     for rtol in tolerances:
         def run(rtol=rtol):
-            sols = [_solve_ivp(system, solver, x, t_final, rtol) for x in starts[:count]]
+            sols = [solve_peer(system, solver, x, t_final, rtol) for x in starts[:count]]
             return np.array([s.y[:, -1] for s in sols]), sum(int(s.nfev) for s in sols)
 
         seconds, (finals, nfev) = _median_seconds(run, repeats)

@@ -6,6 +6,7 @@ before a study runs, so a bad path costs nothing.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from ..base.bounds import check_output_path
@@ -109,5 +110,53 @@ def plot_stress(stress, path, force: bool = False) -> Path:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
     fig.suptitle(f"long run, {stress.system}, h = {stress.long_run.h:g}", fontsize=9)
+    _save(fig, path, force)
+    return path
+
+
+def plot_phase(tableaux, realisation: str, z_max: float, path, force: bool = False) -> Path:
+    """theta(z) (with the exact flow's z, wrapped to (-pi, pi]) and |theta(z) - z| on a log scale,
+    one line per method, over 0 < z <= z_max (docs/stability.md)."""
+    import numpy as np
+
+    from ..tableaux.stability import rotation_angle
+
+    path = check_plot_path(path, force)
+    plt = _pyplot()
+    zs = np.linspace(z_max / 400, z_max, 400)
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(6.4, 7.2), sharex=True)
+    top.plot(zs, [math.remainder(z, 2 * math.pi) for z in zs], "k:", label="exact flow (z mod 2 pi)")
+    for t in tableaux:
+        theta = np.array([np.nan if (v := rotation_angle(t, float(z), realisation)) is None else v for z in zs])
+        line, = top.plot(zs, theta, label=t.name)
+        with np.errstate(invalid="ignore"):
+            bottom.semilogy(zs, np.abs(theta - zs), color=line.get_color(), label=t.name)
+    top.set_ylabel("theta(z), rotation per step")
+    top.set_title(f"phase of RKHP steps on the harmonic oscillator ({realisation} realisation)", fontsize=9)
+    bottom.set_ylabel("|theta(z) - z|")
+    bottom.set_xlabel("z = h omega")
+    for ax in (top, bottom):
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    _save(fig, path, force)
+    return path
+
+
+def plot_long_time(system: str, runs, path, force: bool = False) -> Path:
+    """Log-log running maximum of |H(y_n) - H(y_0)| against t, one line per method, with its fitted
+    exponent (rkhp.studies.longtime)."""
+    path = check_plot_path(path, force)
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    for r in runs:
+        if not r.times:
+            continue
+        k = "n/a" if r.exponent is None else f"{r.exponent:.2f}"
+        ax.loglog(r.times, [max(e, 1e-17) for e in r.errors], label=f"{r.method} (growth t^{k})")
+    ax.set_xlabel("t")
+    ax.set_ylabel("max over [0, t] of |H(y_n) - H(y_0)|")
+    ax.set_title(f"{system}: long-time energy error", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
     _save(fig, path, force)
     return path

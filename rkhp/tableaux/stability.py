@@ -1,0 +1,917 @@
+"""Linear stability and phase of RKHP methods (docs/theory.md §13, docs/stability.md).
+
+On the harmonic oscillator pi = [[0, 1], [-1, 0]], H = (x1^2 + x2^2)/2 (any constant-pi system with
+a quadratic Hamiltonian is a sum of such oscillators after a linear symplectic change of variables),
+z = h omega, with the symmetric birealisation alpha, beta = x -/+ pi p/2, every stage of the RKHP
+step (paper §5.2) is a multiple of x: Z_i(x) = m_i x with
+
+    m_i = z sum_j a_ij (1 + m_j^2/4),        m = z sum_i b_i (1 + m_i^2/4),
+
+and the step is the Cayley transform (I + m J/2)(I - m J/2)^-1: an exact rotation by
+theta(z) = 2 arctan(m(z)/2). The exact flow has m = 2 tan(z/2). Amplitude is exact for every z; what
+a method changes is the phase theta(z) - z (its order p and leading constant), where theta stops
+growing with z (the wrap limit), and for an implicit tableau whether the stage equations have a
+solution at all (the existence limit z*, a fold of the branch through m(0) = 0).
+
+With the ``shifted`` realisation (alpha, beta = x + Q p -/+ pi p/2, Q symmetric) the stages are
+symmetric matrices M_i = z sum_j a_ij (I + D M_j)^T (I + D M_j), D = Q - pi/2, the step matrix is
+R = (I + D' P)(I + D P)^-1 (D' = Q + pi/2, P the same sum with b), and the trace of R decides: |tr R| < 2 is an elliptic
+(bounded) step, a rotation by arccos(tr R / 2) in a skew frame; |tr R| > 2 is hyperbolic.
+
+Everything here is exact (sympy, in the number field of the tableau's entries) where the tableau is
+exact; a tableau given by decimals is read at its digits and its values have no exact text.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from fractions import Fraction
+
+import mpmath
+import sympy
+from sympy.polys.constructor import construct_domain
+
+from ..base.errors import InputError, NumericalFailure
+from .tableau import Tableau, as_sympy, is_exact, to_fraction
+
+Z = sympy.Symbol("z")
+#: the explicit m(z) is written out exactly up to this many stages (its degree is 2^s - 1)
+MAX_POLYNOMIAL_STAGES = 8
+#: largest order of the series of theta(z) - z
+MAX_SERIES_ORDER = 41
+#: the phase order is looked for up to this power of z (beyond the series order asked for)
+PHASE_SEARCH_ORDER = 25
+#: stage equations are eliminated exactly (Groebner bases) up to this many stages
+MAX_ELIMINATION_STAGES = 2
+#: the continuation of an implicit branch stops beyond this z (the branch then exists up to it)
+MAX_CONTINUATION_Z = 64.0
+#: working digits of the numerical continuation and root refinement
+DIGITS = 40
+#: the shifted realisation's Q (docs/theory.md §4; `rkhp.systems.core.shift_matrix` for n = 2)
+SHIFT_Q = sympy.Matrix([[sympy.Rational(1, 2), sympy.Rational(1, 4)],
+                        [sympy.Rational(1, 4), sympy.Rational(1, 2)]])
+#: the oscillator's Poisson matrix, dynamics xdot = J grad H
+J = sympy.Matrix([[0, 1], [-1, 0]])
+REALISATIONS = ("symmetric", "shifted")
+
+
+@dataclass(frozen=True)
+class Number:
+    """A real number: its exact text (sympy's, None where only a value is known) and its value."""
+
+    exact: str | None
+    value: float
+
+    def json(self) -> dict:
+        """``{"exact": ..., "float": ...}``; an unbounded limit is ``{"exact": "oo", "float": null}``."""
+        return {"exact": self.exact, "float": self.value if math.isfinite(self.value) else None}
+
+
+#: the stability interval of a step that is elliptic for every z > 0
+UNBOUNDED = Number("oo", math.inf)
+
+
+@dataclass(frozen=True)
+class Field:
+    """The number field K of a tableau's entries (sympy domain QQ or QQ<alpha>), the entries as
+    elements of K, and whether they are exact (False: decimals read at their digits)."""
+
+    K: object
+    A: tuple
+    b: tuple
+    exact: bool
+    digits: int | None
+
+    def is_zero(self, x) -> bool:
+        """Whether a value of K is zero: exactly, or at the tableau's digits (10^(3-D))."""
+        if self.exact:
+            return not x
+        return abs(float(self.K.to_sympy(x))) <= 10.0 ** (3 - self.digits)
+
+    def text(self, x) -> str | None:
+        return exact_text(self.K.to_sympy(x)) if self.exact else None
+
+    def number(self, x) -> Number:
+        return Number(self.text(x), float(self.K.to_sympy(x).evalf(30)))
+
+
+def exact_text(expr) -> str:
+    """A sympy number or expression as text (``^`` for powers, as rkhp writes formulas)."""
+    return str(expr).replace("**", "^")
+
+
+def tableau_field(tableau: Tableau, extra=()) -> Field:
+    """The field of the entries of A and b (and of `extra` sympy numbers, e.g. composition
+    coefficients): decimals known to D digits enter as the rationals they spell."""
+    values = [as_sympy(x) if is_exact(x) else sympy.Rational(*_pair(to_fraction(x, 0)))
+              for x in tableau.entries()]
+    values += [sympy.sympify(g) for g in extra]
+    K, elements = construct_domain(values, extension=True)
+    K, elements = K.get_field(), [K.get_field().convert_from(e, K) for e in elements]
+    s = tableau.stages
+    A = tuple(tuple(elements[i * s + j] for j in range(s)) for i in range(s))
+    b = tuple(elements[s * s: s * s + s])
+    return Field(K, A, b, tableau.is_exact, tableau.digits)
+
+
+def _pair(q: Fraction) -> tuple[int, int]:
+    return q.numerator, q.denominator
+
+
+# ----------------------------------------------------------------------------- truncated series
+
+
+def _mul(K, u, v, n):
+    """Product of two series (lists of K elements, index = power of z) truncated after z^n."""
+    out = [K.zero] * (n + 1)
+    for i, ui in enumerate(u[: n + 1]):
+        if not ui:
+            continue
+        for j, vj in enumerate(v[: n + 1 - i]):
+            if vj:
+                out[i + j] += ui * vj
+    return out
+
+
+def _add(K, u, v, n):
+    u = list(u) + [K.zero] * (n + 1 - len(u))
+    v = list(v) + [K.zero] * (n + 1 - len(v))
+    return [x + y for x, y in zip(u[: n + 1], v[: n + 1], strict=True)]
+
+
+def _scale(c, u):
+    return [c * x for x in u]
+
+
+def _shift(K, u, n):
+    """z u(z), truncated after z^n."""
+    return ([K.zero] + list(u))[: n + 1]
+
+
+def _stage_map(F: Field, ms, n):
+    """One application of m_i <- z sum_j a_ij (1 + m_j^2/4) to series ms (truncated after z^n)."""
+    K = F.K
+    quarter = K.one / K.convert(4)
+    w = [_add(K, [K.one], _scale(quarter, _mul(K, m, m, n)), n) for m in ms]
+    out = []
+    for row in F.A:
+        acc = [K.zero] * (n + 1)
+        for a, wj in zip(row, w, strict=True):
+            if a:
+                acc = _add(K, acc, _scale(a, wj), n)
+        out.append(_shift(K, acc, n))
+    total = [K.zero] * (n + 1)
+    for bi, wi in zip(F.b, w, strict=True):
+        if bi:
+            total = _add(K, total, _scale(bi, wi), n)
+    return out, _shift(K, total, n)
+
+
+def m_series(F: Field, n: int) -> list:
+    """The series of m(z) to z^n on the branch through m(0) = 0 (explicit or implicit): each
+    application of the stage map gains one power of z, so n + 1 applications from 0 suffice."""
+    K = F.K
+    ms = [[K.zero] * (n + 1) for _ in F.b]
+    m = [K.zero] * (n + 1)
+    for _ in range(n + 2):
+        ms, m = _stage_map(F, ms, n)
+    return m
+
+
+def theta_minus_z(K, m, n: int) -> list:
+    """Series of 2 arctan(m/2) - z to z^n, m = O(z) (arctan u = sum (-1)^k u^(2k+1)/(2k+1))."""
+    half = K.one / K.convert(2)
+    u = _scale(half, m)
+    u2 = _mul(K, u, u, n)
+    power = u
+    total = [K.zero] * (n + 1)
+    k = 0
+    while any(power):
+        coef = K.convert(2 * (-1) ** k) / K.convert(2 * k + 1)
+        total = _add(K, total, _scale(coef, power), n)
+        power = _mul(K, power, u2, n)
+        k += 1
+    if n >= 1:
+        total[1] -= K.one
+    return total
+
+
+# ----------------------------------------------------------------------------- phase
+
+
+@dataclass(frozen=True)
+class Phase:
+    """theta(z) - z to z^order (coefficients by power), the phase order p (theta - z = O(z^(p+1)),
+    None when no power up to `searched` has a non-zero coefficient) and its leading constant."""
+
+    order: int
+    coefficients: tuple[tuple[int, Number], ...]
+    phase_order: int | None
+    phase_constant: Number | None
+    searched: int
+
+    def series_text(self) -> str | None:
+        """``-z^5/1920 + ...`` (exact), None for a tableau known to its digits only."""
+        terms = [(k, c) for k, c in self.coefficients if c.exact is not None and c.exact != "0"]
+        if any(c.exact is None for _, c in self.coefficients):
+            return None
+        return polynomial_text([(k, sympy.sympify(c.exact.replace("^", "**"))) for k, c in terms])
+
+
+def polynomial_text(terms) -> str:
+    """sum c_k z^k in increasing powers (``z + z^3/12 + 3*z^7/16384``), ``0`` for none."""
+    expr = sum((c * Z**k for k, c in terms), sympy.Integer(0))
+    if expr == 0:
+        return "0"
+    text = sympy.sstr(expr, order="rev-lex")
+    return text.replace("**", "^")
+
+
+def _phase(F: Field, series_of, order: int) -> Phase:
+    """The Phase from `series_of(n)` (theta - z to z^n), growing n until a non-zero coefficient
+    shows (at most PHASE_SEARCH_ORDER)."""
+    n = order
+    K0 = F.K.zero
+    series = series_of(n)
+    while True:
+        nonzero = [k for k in range(n + 1) if not F.is_zero(series[k])]
+        if nonzero or n >= max(PHASE_SEARCH_ORDER, order):
+            break
+        n = min(n + 8, max(PHASE_SEARCH_ORDER, order))
+        series = series_of(n)
+    coefficients = tuple((k, F.number(series[k]) if not F.is_zero(series[k]) else Number(F.text(K0), 0.0))
+                         for k in range(1, order + 1))
+    if not nonzero:
+        return Phase(order, coefficients, None, None, n)
+    k = nonzero[0]
+    return Phase(order, coefficients, k - 1, F.number(series[k]), n)
+
+
+def phase(tableau: Tableau, order: int = 9) -> Phase:
+    """Phase of an RKHP tableau on the oscillator with the symmetric realisation: theta(z) - z to
+    z^order, the phase order and constant (docs/theory.md §13)."""
+    _check_order(order)
+    F = tableau_field(tableau)
+    return _phase(F, lambda n: theta_minus_z(F.K, m_series(F, n), n), order)
+
+
+def composition_phase(tableau: Tableau, gammas, order: int = 9) -> Phase:
+    """Phase of the composition of the RKHP step of `tableau` with substeps gamma_1 h, ...,
+    gamma_s h (sympy numbers): the substeps are rotations about the same centre, so
+    theta(z) = sum_i theta_base(gamma_i z) and the coefficient of z^k is theta_base's times
+    sum_i gamma_i^k (docs/stability.md, "Compositions")."""
+    _check_order(order)
+    gammas = [sympy.nsimplify(g) if isinstance(g, float) else sympy.sympify(g) for g in gammas]
+    if not gammas:
+        raise InputError("a composition needs at least one substep")
+    for g in gammas:
+        if not (g.is_number and g.is_real and g.is_algebraic):
+            raise InputError(f"substep coefficient {g}: not a real algebraic number")
+    F = tableau_field(tableau, gammas)
+    K = F.K
+    G = [K.from_sympy(g) for g in gammas]
+
+    def series_of(n):
+        base = theta_minus_z(K, m_series(F, n), n)
+        base[1] += K.one  # theta_base itself
+        out = [K.zero] * (n + 1)
+        for k in range(1, n + 1):
+            if base[k]:
+                out[k] = base[k] * sum((g**k for g in G), K.zero)
+        out[1] -= K.one
+        return out
+
+    return _phase(F, series_of, order)
+
+
+def _check_order(order: int) -> None:
+    if not 1 <= order <= MAX_SERIES_ORDER:
+        raise InputError(f"the order of the phase series must be from 1 to {MAX_SERIES_ORDER}, got {order}")
+
+
+# ----------------------------------------------------------------------------- explicit m(z)
+
+
+def m_polynomial(tableau: Tableau):
+    """m(z) of an explicit tableau exactly (a sympy polynomial in z, degree at most 2^s - 1), or
+    None for more than MAX_POLYNOMIAL_STAGES stages or a tableau known to its digits only."""
+    if not tableau.is_explicit:
+        raise InputError(f"{tableau.name} is {tableau.kind}: m(z) is a root of the stage equations")
+    if tableau.stages > MAX_POLYNOMIAL_STAGES or not tableau.is_exact:
+        return None
+    F = tableau_field(tableau)
+    K = F.K
+
+    def const(x):
+        return sympy.Poly.from_list([x], Z, domain=K)
+
+    one, quarter, z = const(K.one), const(K.one / K.convert(4)), sympy.Poly(Z, Z, domain=K)
+    ws = []
+    for i in range(tableau.stages):
+        mi = const(K.zero)
+        for j in range(i):
+            if F.A[i][j]:
+                mi += ws[j] * const(F.A[i][j])
+        mi = mi * z
+        ws.append(one + mi * mi * quarter)
+    m = const(K.zero)
+    for bi, wi in zip(F.b, ws, strict=True):
+        if bi:
+            m += wi * const(bi)
+    return m * sympy.Poly(Z, Z, domain=K)
+
+
+def poly_text(p) -> str:
+    """A polynomial in z in increasing powers."""
+    return polynomial_text([(k[0], sympy.radsimp(c)) for k, c in zip(p.monoms(), p.coeffs(), strict=True)])
+
+
+# ----------------------------------------------------------------------------- exact roots
+
+
+def _norm_over_q(expr, K):
+    """A polynomial over QQ in z vanishing wherever the K-polynomial `expr` (in z) does: its norm
+    (the resultant with the generator's minimal polynomial); `expr` itself over QQ."""
+    if K == sympy.QQ:
+        return sympy.Poly(expr, Z, domain=sympy.QQ)
+    r = sympy.Dummy("r")
+    generic = _in_generator(expr, K, r)
+    minpoly = sympy.Poly(K.mod.to_list(), r)
+    return sympy.Poly(sympy.resultant(generic, minpoly.as_expr(), r), Z, domain=sympy.QQ)
+
+
+def _in_generator(expr, K, r):
+    """`expr` (polynomial in z with coefficients in K) with K's generator written as the symbol r."""
+    poly = sympy.Poly(expr, Z, domain=K)
+    out = sympy.Integer(0)
+    for (k,), c in zip(poly.monoms(), poly.rep.coeffs(), strict=True):
+        coeffs = c.to_list()
+        value = sum(sympy.Rational(int(q.numerator), int(q.denominator)) * r**(len(coeffs) - 1 - i)
+                    for i, q in enumerate(coeffs))
+        out += value * Z**k
+    return sympy.expand(out)
+
+
+def exact_root(poly_q, value) -> str | None:
+    """The exact text of the real root of `poly_q` (over QQ, in z) nearest `value` (an mpf):
+    radicals up to degree 2, else ``CRootOf(...)``; None if no root matches to 20 digits."""
+    with mpmath.workdps(DIGITS):
+        value = mpmath.mpf(value)
+        for factor, _ in sympy.factor_list(poly_q.as_expr(), Z)[1]:
+            f = sympy.Poly(factor, Z)
+            if f.degree() < 1:
+                continue
+            for index, (low, high) in enumerate(iv for iv, _ in f.intervals()):
+                if not low - 1 <= value <= high + 1:
+                    continue
+                root = _refine(f, low, high)
+                if abs(root - value) > mpmath.mpf(10) ** -20 * (1 + abs(value)):
+                    continue
+                if f.degree() <= 2:
+                    candidates = [x for x in sympy.solve(f.as_expr(), Z) if x.is_real]
+                    best = min(candidates, key=lambda x: abs(mpmath.mpf(str(x.evalf(DIGITS))) - value))
+                    return exact_text(sympy.radsimp(best))
+                return exact_text(sympy.CRootOf(f.as_expr(), index))
+    return None
+
+
+def _refine(f, low, high) -> mpmath.mpf:
+    """A real root of f isolated in [low, high], to DIGITS digits (exact rational refinement)."""
+    eps = sympy.Rational(1, 10 ** (DIGITS + 5))
+    a, b = f.refine_root(low, high, eps=eps) if low != high else (low, high)
+    return (mpmath.mpf(int(a.p)) / int(a.q) + mpmath.mpf(int(b.p)) / int(b.q)) / 2
+
+
+def first_positive_root(expr, K) -> Number | None:
+    """The smallest positive real root of a polynomial in z with coefficients in K, exactly: the
+    positive roots of its norm over QQ are isolated exactly (sympy's real-root isolation) and the
+    first one where the polynomial itself vanishes is taken; None when there is none."""
+    poly = sympy.Poly(expr, Z, domain=K)
+    if poly.degree() < 1:
+        return None
+    q = _norm_over_q(poly.as_expr(), K).sqf_part()
+    with mpmath.workdps(DIGITS):
+        for (low, high), _ in sorted(q.intervals(), key=lambda iv: iv[0][0]):
+            if high <= 0:
+                continue
+            root = _refine(q, low, high)
+            if root <= 0 or not _vanishes(poly, K, root):
+                continue
+            return Number(exact_root(q, root), float(root))
+    return None
+
+
+def _vanishes(poly, K, root) -> bool:
+    """Whether a K-polynomial vanishes at `root` (relative to its coefficients' size there)."""
+    coeffs = [mpmath.mpf(str(sympy.N(K.to_sympy(c), DIGITS))) for c in poly.rep.to_list()]
+    value = mpmath.polyval(coeffs, root)
+    scale = sum(abs(c) * abs(root) ** k for k, c in enumerate(reversed(coeffs)))
+    return abs(value) <= mpmath.mpf(10) ** (10 - DIGITS) * scale
+
+
+# ----------------------------------------------------------------------------- explicit limits
+
+
+def wrap_limit_explicit(m) -> Number | None:
+    """The largest z0 with theta = 2 arctan(m/2) strictly increasing on [0, z0]: the first positive
+    root of odd multiplicity of m'(z); None when m increases on all of (0, oo) (theta then tends to
+    +-pi without reaching it)."""
+    K = m.get_domain()
+    dm = m.diff(Z)
+    sqf = sympy.Poly(dm.as_expr(), Z, domain=K).sqf_list()[1]
+    odd = sympy.Poly(1, Z, domain=K)
+    for factor, multiplicity in sqf:
+        if multiplicity % 2:
+            odd *= factor
+    return first_positive_root(odd.as_expr(), K)
+
+
+#: the numerical wrap limit (tableaux without an exact m(z)) is looked for on (0, WRAP_SCAN_Z]
+WRAP_SCAN_Z = 20.0
+
+
+def wrap_limit_numeric(tableau: Tableau) -> Number | None:
+    """The wrap limit of an explicit tableau without an exact m(z) (more than MAX_POLYNOMIAL_STAGES
+    stages, or decimals): the first z on a grid of step 10^-3 over (0, WRAP_SCAN_Z] where
+    theta(z) = 2 arctan(m(z)/2) (float64) stops increasing, refined by bisection; None when theta
+    increases over the whole scan."""
+    import numpy as np
+
+    zs = np.arange(1, int(WRAP_SCAN_Z * 1000) + 1) / 1000.0
+    with np.errstate(all="ignore"):
+        theta = np.array([rotation_angle(tableau, float(z)) for z in zs])
+    falls = np.nonzero(np.diff(theta) < -1e-10)[0]  # a fall beyond round-off near theta = pi
+    if not len(falls):
+        return None
+    lo, hi = float(zs[max(falls[0] - 1, 0)]), float(zs[falls[0] + 1])
+
+    def slope(z):
+        return rotation_angle(tableau, z + 1e-7) - rotation_angle(tableau, z - 1e-7)
+
+    for _ in range(60):
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if slope(mid) > 0 else (lo, mid)
+    return Number(None, (lo + hi) / 2)
+
+
+# ----------------------------------------------------------------------------- implicit branch
+
+
+@dataclass(frozen=True)
+class Branch:
+    """The branch through m(0) = 0 of an implicit tableau's stage equations: the existence limit
+    z* (a fold, where the Jacobian I - z A diag(m/2) is singular; None when the branch goes on past
+    MAX_CONTINUATION_Z), the wrap limit (where m'(z) first vanishes or m escapes to infinity), and
+    the equations as text."""
+
+    equations: tuple[str, ...]
+    existence_limit: Number | None
+    wrap_limit: Number | None
+
+
+def stage_equations(tableau: Tableau) -> tuple[str, ...]:
+    """``m_i = z (a_i1 (1 + m_1^2/4) + ...)`` for each stage, then ``m = z (...)``."""
+    F = tableau_field(tableau)
+    ms = sympy.symbols(f"m1:{tableau.stages + 1}")
+    w = [1 + mj**2 / 4 for mj in ms]
+    out = []
+    for i, row in enumerate(F.A):
+        rhs = sum((F.K.to_sympy(a) * wj for a, wj in zip(row, w, strict=True) if a), sympy.Integer(0))
+        out.append(f"m{i + 1} = z*({exact_text(rhs)})")
+    total = sum((F.K.to_sympy(bi) * wi for bi, wi in zip(F.b, w, strict=True) if bi), sympy.Integer(0))
+    out.append(f"m = z*({exact_text(total)})")
+    return tuple(out)
+
+
+def _mp_tableau(tableau: Tableau):
+    with mpmath.workdps(DIGITS):
+        A = mpmath.matrix([[mpmath.mpf(to_fraction(x, 4 * DIGITS).numerator) / to_fraction(x, 4 * DIGITS).denominator
+                            for x in row] for row in tableau.A])
+        b = [mpmath.mpf(to_fraction(x, 4 * DIGITS).numerator) / to_fraction(x, 4 * DIGITS).denominator
+             for x in tableau.b]
+    return A, b
+
+
+def _residual(A, m, z):
+    s = len(m)
+    return mpmath.matrix([m[i] - z * sum(A[i, j] * (1 + m[j] ** 2 / 4) for j in range(s)) for i in range(s)])
+
+
+def _jacobian(A, m, z):
+    s = len(m)
+    return mpmath.matrix([[(1 if i == j else 0) - z * A[i, j] * m[j] / 2 for j in range(s)] for i in range(s)])
+
+
+def _det(M):
+    """det M by elimination with partial pivoting (0 for a singular M)."""
+    M = M.copy()
+    n, det = M.rows, mpmath.mpf(1)
+    for k in range(n):
+        p = max(range(k, n), key=lambda i: abs(M[i, k]))
+        if M[p, k] == 0:
+            return mpmath.mpf(0)
+        if p != k:
+            for j in range(n):
+                M[k, j], M[p, j] = M[p, j], M[k, j]
+            det = -det
+        det *= M[k, k]
+        for i in range(k + 1, n):
+            f = M[i, k] / M[k, k]
+            for j in range(k, n):
+                M[i, j] -= f * M[k, j]
+    return det
+
+
+def _solve_at(A, m, z, iterations=60):
+    """Newton on the stage equations at fixed z from m; None when it does not converge."""
+    m = mpmath.matrix(m)
+    for _ in range(iterations):
+        r = _residual(A, m, z)
+        try:
+            dm = mpmath.lu_solve(_jacobian(A, m, z), r)
+        except ZeroDivisionError:
+            return None
+        m = m - dm
+        if mpmath.norm(dm) <= mpmath.mpf(10) ** (5 - DIGITS) * (1 + mpmath.norm(m)):
+            return m
+    return None
+
+
+def _dm_dz(A, b, m, z):
+    """d m/dz along the branch: dm_i/dz from J dm = A w, then the total."""
+    s = len(m)
+    w = mpmath.matrix([1 + m[j] ** 2 / 4 for j in range(s)])
+    dms = mpmath.lu_solve(_jacobian(A, m, z), A * w)
+    return sum(b[i] * (w[i] + z * m[i] * dms[i] / 2) for i in range(s))
+
+
+def branch_point(A, z_target):
+    """The point m(z_target) of the branch through m(0) = 0 (predictor along the tangent, Newton
+    corrector, step halved where the corrector fails or jumps); None where the branch has ended
+    (past its fold) before z_target, or z_target is within about 1e-8 of the fold. Call under mpmath.workdps(DIGITS)."""
+    s = A.rows
+    m, z = mpmath.matrix([0] * s), mpmath.mpf(0)
+    dz = min(mpmath.mpf(1) / 16, z_target)
+    while z < z_target:
+        dz = min(dz, z_target - z)
+        predicted = m + dz * _tangent(A, m, z)
+        trial = _solve_at(A, predicted, z + dz, iterations=12)
+        if trial is None or mpmath.norm(trial - predicted) > dz * (1 + mpmath.norm(m)) \
+                or abs(_det(_jacobian(A, trial, z + dz))) < mpmath.mpf(10) ** -4:
+            if dz < mpmath.mpf(10) ** -9 * (1 + z_target):
+                return None  # within about 1e-8 of the fold (det J ~ sqrt(z* - z)): the branch ends
+            dz /= 2
+            continue
+        m, z = trial, z + dz
+        dz *= 2
+    return m
+
+
+def implicit_branch(tableau: Tableau) -> Branch:
+    """Follow the branch through m(0) = 0 in z (Newton continuation, DIGITS digits) up to its fold
+    z*, refine the fold (F = 0, det J = 0) and write it exactly where the elimination is in reach
+    (Groebner basis, at most MAX_ELIMINATION_STAGES stages; docs/stability.md)."""
+    equations = stage_equations(tableau)
+    with mpmath.workdps(DIGITS):
+        A, b = _mp_tableau(tableau)
+        s = tableau.stages
+        m = mpmath.matrix([0] * s)
+        z = mpmath.mpf(0)
+        dz = mpmath.mpf(1) / 16
+        last_slope = _dm_dz(A, b, m, z)
+        wrap = None
+        while z < MAX_CONTINUATION_Z:
+            trial = _solve_at(A, m + dz * _tangent(A, m, z), z + dz, iterations=12)
+            if trial is None or mpmath.norm(trial - m) > 4 * dz * (1 + mpmath.norm(m)) \
+                    or abs(_det(_jacobian(A, trial, z + dz))) < mpmath.mpf(10) ** -12:
+                if dz < mpmath.mpf(10) ** -25:
+                    break
+                dz /= 4
+                continue
+            m, z = trial, z + dz
+            slope = _dm_dz(A, b, m, z)
+            if wrap is None and slope * last_slope < 0:
+                wrap = _refine_wrap(A, b, m, z - dz, z)
+            last_slope = slope
+            if mpmath.norm(m) > 10**8:
+                wrap = wrap or Number(None, float(z))
+                return Branch(equations, None, wrap)
+            dz = min(dz * 2, mpmath.mpf(1) / 4)
+        if z >= MAX_CONTINUATION_Z:
+            return Branch(equations, None, wrap)
+        zf = _refine_fold(A, m, z)
+    text = _exact_fold(tableau, zf) if s <= MAX_ELIMINATION_STAGES and tableau.is_exact else None
+    return Branch(equations, Number(text, float(zf)), wrap)
+
+
+def _tangent(A, m, z):
+    s = len(m)
+    w = mpmath.matrix([1 + m[j] ** 2 / 4 for j in range(s)])
+    return mpmath.lu_solve(_jacobian(A, m, z), A * w)
+
+
+def _refine_fold(A, m, z):
+    """Newton on (F(m, z) = 0, det(I - z A diag(m/2)) = 0) from a point just before the fold."""
+    s = len(m)
+
+    def equations(*u):
+        mm, zz = mpmath.matrix(u[:s]), u[s]
+        r = _residual(A, mm, zz)
+        return [r[i] for i in range(s)] + [_det(_jacobian(A, mm, zz))]
+
+    try:
+        root = mpmath.findroot(equations, [m[i] for i in range(s)] + [z], tol=mpmath.mpf(10) ** (10 - 2 * DIGITS),
+                               maxsteps=200)
+    except (ValueError, ZeroDivisionError) as exc:
+        raise NumericalFailure(f"the fold of the stage equations near z = {float(z):.6g} did not converge: "
+                               f"{exc}") from None
+    return root[s]
+
+
+def _refine_wrap(A, b, m, z0, z1) -> Number:
+    """Bisection in z for dm/dz = 0 between z0 and z1 (the branch solved at each z)."""
+    lo, hi = z0, z1
+    m_lo = _solve_at(A, m, lo)
+    s_lo = _dm_dz(A, b, m_lo, lo)
+    for _ in range(120):
+        mid = (lo + hi) / 2
+        mm = _solve_at(A, m_lo, mid)
+        if _dm_dz(A, b, mm, mid) * s_lo > 0:
+            lo, m_lo = mid, mm
+        else:
+            hi = mid
+    return Number(None, float((lo + hi) / 2))
+
+
+def _exact_fold(tableau: Tableau, z_fold) -> str | None:
+    """The fold written exactly: eliminate m_1..m_s from the stage equations and det J = 0
+    (lex Groebner basis over QQ, the entries' field generator as one more unknown), then the root
+    of the eliminant at z_fold."""
+    F = tableau_field(tableau)
+    K = F.K
+    s = tableau.stages
+    ms = sympy.symbols(f"m1:{s + 1}")
+    r = sympy.Dummy("r")
+
+    def entry(x):
+        if K == sympy.QQ:
+            return K.to_sympy(x)
+        coeffs = x.to_list()
+        return sum(sympy.Rational(int(q.numerator), int(q.denominator)) * r**(len(coeffs) - 1 - i)
+                   for i, q in enumerate(coeffs))
+
+    Ar = sympy.Matrix(s, s, lambda i, j: entry(F.A[i][j]))
+    eqs = [ms[i] - Z * sum(Ar[i, j] * (1 + ms[j] ** 2 / 4) for j in range(s)) for i in range(s)]
+    jac = sympy.Matrix(s, s, lambda i, j: sympy.diff(eqs[i], ms[j]))
+    polys = [sympy.expand(e * 4) for e in eqs] + [sympy.expand(jac.det() * 2**s)]
+    gens = list(ms)
+    if K != sympy.QQ:
+        polys.append(sympy.Poly(K.mod.to_list(), r).as_expr())
+        gens.append(r)
+    basis = sympy.groebner(polys, *gens, Z, order="lex")
+    univariate = [g for g in basis.exprs if g.free_symbols <= {Z}]
+    if not univariate:
+        return None
+    return exact_root(sympy.Poly(univariate[-1], Z, domain=sympy.QQ), z_fold)
+
+
+# ----------------------------------------------------------------------------- shifted realisation
+
+
+def shifted_trace(tableau: Tableau):
+    """tr R(z) of the explicit RKHP step on the unit oscillator with the shifted realisation
+    (alpha, beta = x + Q p -/+ J p/2, Q = SHIFT_Q): a rational function of z, exactly.
+
+    Stages Z_i(x) = M_i x, M_i = z sum_j a_ij (I + D M_j)^T (I + D M_j), D = Q - J/2; psi = P x with P
+    the same sum with b; alpha(x, psi) = y gives x = (I + D P)^-1 y and the step is
+    R = (I + D' P)(I + D P)^-1, D' = Q + J/2 (paper §5.2, docs/stability.md)."""
+    if not tableau.is_explicit:
+        raise InputError(f"{tableau.name} is {tableau.kind}: --realisation shifted is computed for explicit "
+                         "tableaux")
+    F = tableau_field(tableau)
+    K = F.K
+    D, Dp = SHIFT_Q - J / 2, SHIFT_Q + J / 2
+    eye = sympy.eye(2)
+    grads = []
+    for i in range(tableau.stages):
+        Mi = sympy.zeros(2, 2)
+        for j in range(i):
+            if F.A[i][j]:
+                Mi += K.to_sympy(F.A[i][j]) * grads[j]
+        Mi = (Z * Mi).applyfunc(sympy.expand)
+        G = (eye + D * Mi).T * (eye + D * Mi)
+        grads.append(G.applyfunc(sympy.expand))
+    P = sympy.zeros(2, 2)
+    for bi, G in zip(F.b, grads, strict=True):
+        if bi:
+            P += K.to_sympy(bi) * G
+    P = (Z * P).applyfunc(sympy.expand)
+    left, right = eye + Dp * P, eye + D * P
+    # R = left right^-1: tr R = tr(left adj(right)) / det(right)
+    num = sympy.expand((left * right.adjugate()).trace())
+    den = sympy.expand(right.det())
+    return sympy.cancel(num / den)
+
+
+def stability_interval(trace, K) -> Number | None:
+    """The largest z0 with an elliptic step (|tr R| < 2) on (0, z0): the first positive root of
+    the numerator of tr^2 - 4, or of the denominator (where the step stops being defined);
+    UNBOUNDED when there is none. K: the field of the tableau's entries.
+
+    With P = z sum_i b_i G_i invertible, R = (S + J/2)(S - J/2)^-1, S = P^-1 + Q: when S is positive
+    definite (P and Q positive definite: positive weights and rkhp's SHIFT_Q) R is similar to a
+    Cayley transform of an antisymmetric matrix, a rotation: the interval is then unbounded
+    (docs/stability.md)."""
+    num, den = sympy.fraction(sympy.together(trace))
+    num, den = sympy.Poly(num, Z, domain=K), sympy.Poly(den, Z, domain=K)
+    f = num**2 - den**2 * 4
+    f = sympy.Poly(sympy.cancel(f.as_expr() / Z ** _zero_multiplicity(f)), Z, domain=K)
+    roots = [r for r in (first_positive_root(f.as_expr(), K), first_positive_root(den.as_expr(), K))
+             if r is not None]
+    return min(roots, key=lambda r: r.value) if roots else UNBOUNDED
+
+
+def _zero_multiplicity(p) -> int:
+    coeffs = p.all_coeffs()[::-1]
+    k = 0
+    while k < len(coeffs) and not coeffs[k]:
+        k += 1
+    return k
+
+
+def trace_phase(F: Field, trace, order: int) -> Phase:
+    """The rotation number of an elliptic step, theta = arccos(tr R/2) = 2 arcsin(z sqrt(v)) with
+    (2 - tr)/4 = z^2 v(z), as a series: theta - z to z^order."""
+    K = F.K
+    num, den = sympy.fraction(sympy.together(trace))
+    num = [K.from_sympy(c) for c in sympy.Poly(num, Z, domain=K).all_coeffs()[::-1]]
+    den = [K.from_sympy(c) for c in sympy.Poly(den, Z, domain=K).all_coeffs()[::-1]]
+
+    def series_of(n):
+        tr = _divide(K, num, den, n + 2)
+        u = [-x / K.convert(4) for x in tr]
+        u[0] += K.one / K.convert(2)
+        if u[0] or u[1]:
+            raise NumericalFailure("tr R(z) is not 2 - O(z^2): the step is not consistent")
+        v = u[2:] + [K.zero, K.zero]
+        w = _shift(K, _sqrt(K, v, n), n)
+        w2 = _mul(K, w, w, n)
+        total, power, k = [K.zero] * (n + 1), w, 0
+        while any(power):
+            coef = K.convert(2 * math.comb(2 * k, k)) / K.convert(4**k * (2 * k + 1))
+            total = _add(K, total, _scale(coef, power), n)
+            power = _mul(K, power, w2, n)
+            k += 1
+        total[1] -= K.one
+        return total
+
+    return _phase(F, series_of, order)
+
+
+def _divide(K, num, den, n):
+    """The series of num/den (coefficient lists, den[0] != 0) to z^n."""
+    num = list(num) + [K.zero] * (n + 1)
+    out = []
+    for k in range(n + 1):
+        acc = num[k] - sum((out[j] * den[k - j] for j in range(max(0, k - len(den) + 1), k)), K.zero)
+        out.append(acc / den[0])
+    return out
+
+
+def _sqrt(K, v, n):
+    """The series of sqrt(v) to z^n, v[0] a square in K (here 1/4)."""
+    root0 = sympy.sqrt(K.to_sympy(v[0]))
+    if not root0.is_Rational:
+        raise NumericalFailure(f"tr R(z) = 2 - {4 * K.to_sympy(v[0])} z^2 + ...: sum b_i != 1")
+    out = [K.from_sympy(root0)]
+    for k in range(1, n + 1):
+        acc = v[k] - sum((out[j] * out[k - j] for j in range(1, k)), K.zero)
+        out.append(acc / (K.convert(2) * out[0]))
+    return out
+
+
+# ----------------------------------------------------------------------------- the report
+
+
+@dataclass(frozen=True)
+class Stability:
+    """What `rkhp stability` reports for one method (docs/stability.md, docs/json.md).
+
+    kind: ``explicit``, ``implicit`` or ``composition``; m: the exact polynomial m(z) as text
+    (explicit, symmetric realisation, at most MAX_POLYNOMIAL_STAGES stages; else None);
+    stage_equations: implicit tableaux; trace: tr R(z) (shifted realisation).
+    """
+
+    name: str
+    kind: str
+    realisation: str
+    m: str | None
+    m_degree: int | None
+    stage_equations: tuple[str, ...] | None
+    phase: Phase
+    wrap_limit: Number | None
+    existence_limit: Number | None
+    trace: str | None
+    stability_interval: Number | None
+
+
+def analyse(tableau: Tableau, order: int = 9, realisation: str = "symmetric") -> Stability:
+    """The linear stability and phase of an RKHP tableau (see the module)."""
+    _check_order(order)
+    if realisation not in REALISATIONS:
+        raise InputError(f"unknown realisation {realisation!r} for the linear analysis; choose one of "
+                         f"{', '.join(REALISATIONS)}")
+    if realisation == "shifted":
+        trace = shifted_trace(tableau)
+        F = tableau_field(tableau)
+        return Stability(tableau.name, "explicit", realisation, None, None, None, trace_phase(F, trace, order),
+                         None, None, exact_text(trace) if tableau.is_exact else None,
+                         stability_interval(trace, F.K))
+    ph = phase(tableau, order)
+    if tableau.is_explicit:
+        m = m_polynomial(tableau)
+        wrap = wrap_limit_explicit(m) if m is not None else wrap_limit_numeric(tableau)
+        return Stability(tableau.name, "explicit", realisation, None if m is None else poly_text(m),
+                         None if m is None else m.degree(), None, ph, wrap, None, None, None)
+    branch = implicit_branch(tableau)
+    return Stability(tableau.name, "implicit", realisation, None, None, branch.equations, ph,
+                     branch.wrap_limit, branch.existence_limit, None, None)
+
+
+def step_matrix_shifted(tableau: Tableau, z: float):
+    """R(z) of an explicit tableau with the shifted realisation, in float64 (see shifted_trace)."""
+    import numpy as np
+
+    Q = np.array(SHIFT_Q.tolist(), dtype=float)
+    Jf = np.array(J.tolist(), dtype=float)
+    D, Dp, eye = Q - Jf / 2, Q + Jf / 2, np.eye(2)
+    A, b = tableau.A_float, tableau.b_float
+    grads = []
+    for i in range(tableau.stages):
+        Mi = z * sum((A[i][j] * grads[j] for j in range(i)), np.zeros((2, 2)))
+        grads.append((eye + D @ Mi).T @ (eye + D @ Mi))
+    P = z * sum(b[i] * grads[i] for i in range(tableau.stages))
+    return (eye + Dp @ P) @ np.linalg.inv(eye + D @ P)
+
+
+def rotation_angle(tableau: Tableau, z: float, realisation: str = "symmetric") -> float | None:
+    """theta(z) in float64: 2 arctan(m(z)/2) (symmetric realisation; None where an implicit
+    tableau's branch has no solution at z), arccos(tr R/2) (shifted; None where |tr R| > 2)."""
+    if realisation == "shifted":
+        tr = float(step_matrix_shifted(tableau, z).trace())
+        return math.acos(tr / 2) if abs(tr) <= 2 else None
+    A, b = tableau.A_float, tableau.b_float
+    s = tableau.stages
+    if tableau.is_explicit:
+        ms = [0.0] * s
+        for i in range(s):
+            ms[i] = z * sum(A[i][j] * (1 + ms[j] ** 2 / 4) for j in range(i))
+    else:
+        with mpmath.workdps(25):
+            point = branch_point(_mp_tableau(tableau)[0], mpmath.mpf(z))
+        if point is None:
+            return None
+        ms = [float(x) for x in point]
+    return 2.0 * math.atan(z * sum(b[i] * (1 + ms[i] ** 2 / 4) for i in range(s)) / 2)
+
+
+def phase_coefficients_numeric(A, b, n: int):
+    """theta(z) - z to z^n for numeric A, b (float64, or mpmath numbers in object arrays): the series
+    of m from n + 2 applications of the stage map, explicit and implicit alike; a numpy array,
+    index = power of z."""
+    import numpy as np
+
+    dtype = np.asarray(b).dtype
+    zero = np.zeros(n + 1, dtype=dtype) * b[0]
+
+    def mul(u, v):
+        out = zero.copy()
+        for i in range(n + 1):
+            if u[i]:
+                out[i:] += u[i] * v[: n + 1 - i]
+        return out
+
+    def shift(u):
+        out = zero.copy()
+        out[1:] = u[:n]
+        return out
+
+    s = len(b)
+    ms = [zero.copy() for _ in range(s)]
+    m = zero.copy()
+    for _ in range(n + 2):
+        w = [mul(mi, mi) / 4 for mi in ms]
+        for wi in w:
+            wi[0] += 1
+        ms = [shift(sum((A[i][j] * w[j] for j in range(s)), zero.copy())) for i in range(s)]
+        m = shift(sum((b[i] * w[i] for i in range(s)), zero.copy()))
+    u = m / 2
+    u2 = mul(u, u)
+    total, power, k = zero.copy(), u, 0
+    while k <= n:
+        total = total + power * (2 * (-1) ** k) / (2 * k + 1)
+        power = mul(power, u2)
+        k += 1
+    total[1] -= 1
+    return total

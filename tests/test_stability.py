@@ -1,0 +1,353 @@
+"""`rkhp stability` and rkhp.tableaux.stability against the theory (docs/theory.md §13) and against
+rkhp's own integrator on linear systems (docs/stability.md)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import mpmath
+import numpy as np
+import pytest
+import sympy
+
+from rkhp.integrators import integrate
+from rkhp.systems.families import family_system
+from rkhp.tableaux.files import builtin_names, load_tableau
+from rkhp.tableaux.stability import (
+    Z,
+    analyse,
+    composition_phase,
+    m_polynomial,
+    rotation_angle,
+    shifted_trace,
+    step_matrix_shifted,
+)
+from rkhp.tableaux.tableau import Tableau
+
+GAUSS1 = Tableau.from_arrays([["1/2"]], [1], name="gauss1")
+#: b has a negative weight: P = z sum b_i G_i becomes indefinite, the shifted step hyperbolic
+NEGATIVE_WEIGHT = Tableau.from_arrays([[0, 0], [1, 0]], ["3/2", "-1/2"], name="negative-weight")
+EXPLICIT = [n for n in builtin_names() if load_tableau(n).is_explicit]
+
+
+def oscillator(realisation="symmetric", omega=1.0):
+    """H = omega |x|^2/2, pi = [[0, 1], [-1, 0]]: xdot = omega (x2, -x1), a clockwise rotation."""
+    return family_system("constant", np.array(((0.0, 1.0), (-1.0, 0.0))),
+                         lambda x: (0.5 * omega) * (x[0] * x[0] + x[1] * x[1]), name="oscillator",
+                         x0=(1.0, 0.0), t_final=1.0, realisation=realisation)
+
+
+def clockwise_angle(x) -> float:
+    return math.atan2(-x[1], x[0])
+
+
+def predicted_theta(tableau, z) -> float:
+    """2 arctan(m(z)/2) from the exact polynomial m(z) where there is one (evaluated in mpmath),
+    else from the stage recursion in float64."""
+    m = m_polynomial(tableau)
+    if m is None:
+        return rotation_angle(tableau, z)
+    with mpmath.workdps(40):
+        value = sympy.N(m.as_expr().subs(Z, sympy.Rational(str(z))), 40)
+        return float(2 * mpmath.atan(mpmath.mpf(str(value)) / 2))
+
+
+# ----------------------------------------------------------------------------- acceptance values
+
+
+def test_paper_three_stage():
+    r = analyse(load_tableau("paper-three-stage"))
+    assert r.m == "z + z^3/12 + z^5/128 + 3*z^7/16384"  # docs/theory.md §13
+    assert r.phase.phase_order == 4
+    # theta - z = (m - 2 tan(z/2)) cos^2(z/2) + ...: 1/128 - 1/120 = -1/1920
+    assert r.phase.phase_constant.exact == "-1/1920"
+    assert r.existence_limit is None and r.stability_interval is None
+
+
+def test_euler_is_the_cayley_transform():
+    r = analyse(load_tableau("euler"), order=11)
+    assert r.m == "z" and r.phase.phase_order == 2
+    exact = sympy.series(2 * sympy.atan(Z / 2) - Z, Z, 0, 12).removeO()
+    for k, c in r.phase.coefficients:
+        assert sympy.Rational(c.exact) == exact.coeff(Z, k)
+
+
+@pytest.mark.parametrize("tableau,barrier", [(load_tableau("paper-implicit"), "sqrt(3)"), (GAUSS1, "2")])
+def test_one_stage_barrier_is_the_discriminant(tableau, barrier):
+    # m = z a (1 + m^2/4) has a real root iff 1 - z^2 a^2 >= 0: z* = 1/a
+    r = analyse(tableau)
+    assert r.existence_limit.exact == barrier
+    a = float(tableau.A_float[0][0])
+    assert r.existence_limit.value == pytest.approx(1 / a, rel=1e-15)
+
+
+def test_series_of_an_implicit_method_matches_its_root():
+    """The series of the branch through m(0) = 0 agrees with the root of the quadratic."""
+    r = analyse(GAUSS1, order=15)
+    z = sympy.Rational(1, 3)
+    m = (1 - sympy.sqrt(1 - z**2 / 4)) / (z / 8)  # root of (z/8) m^2 - m + z/2 = 0 through 0
+    theta = float(2 * sympy.atan(m / 2))
+    series = float(z) + sum(c.value * float(z) ** k for k, c in r.phase.coefficients)
+    assert series == pytest.approx(theta, abs=1e-10)
+
+
+def test_min_phase_table_beats_the_paper():
+    """The shipped --optimize phase result: degenerate order 4 (verified at its 60 digits), phase
+    order 8, so its phase error is below the paper's -z^5/1920 for every z up to 1."""
+    from rkhp.tableaux.verification import verify
+
+    tableau = load_tableau("search-degenerate-o4-s3-min-phase")
+    assert verify(tableau).orders["degenerate"] == 4
+    r = analyse(tableau)
+    assert r.phase.phase_order == 8 and abs(r.phase.phase_constant.value) < 1 / 1920
+    paper = load_tableau("paper-three-stage")
+    for z in (0.1, 0.5, 1.0):
+        assert abs(predicted_theta(tableau, z) - z) < abs(predicted_theta(paper, z) - z)
+
+
+# ----------------------------------------------------------------------------- against the integrator
+
+
+@pytest.fixture(scope="module")
+def symmetric_oscillator():
+    return oscillator()
+
+
+@pytest.mark.parametrize("name", EXPLICIT)
+def test_one_step_rotation_equals_the_integrator(name, symmetric_oscillator):
+    tableau = load_tableau(name)
+    for z in (0.3, 1.0, 2.5):
+        run = integrate(symmetric_oscillator, tableau, z, 1)
+        assert run.status == "ok"
+        x = run.final_state
+        assert math.hypot(*x) == pytest.approx(1.0, abs=1e-13)  # amplitude is exact
+        difference = math.remainder(clockwise_angle(x) - predicted_theta(tableau, z), 2 * math.pi)
+        assert abs(difference) <= 1e-13, (name, z, difference)
+
+
+@pytest.mark.parametrize("name", ["gauss2", "radau-iia3", "paper-implicit"])
+def test_implicit_rotation_equals_the_integrator(name, symmetric_oscillator):
+    tableau = load_tableau(name)
+    for z in (0.3, 1.0):
+        x = integrate(symmetric_oscillator, tableau, z, 1).final_state
+        assert clockwise_angle(x) == pytest.approx(rotation_angle(tableau, z), abs=1e-12)
+
+
+def test_two_frequencies_angle_per_mode():
+    """pi = [[0, I], [-I, 0]] on R^4, H = (w1 (x1^2 + x3^2) + w2 (x2^2 + x4^2))/2: the modes (x1, x3)
+    and (x2, x4) rotate by theta(h w1) and theta(h w2) per step."""
+    w1, w2, h, steps = 1.0, 7.3, 0.3, 5
+    pi = np.zeros((4, 4))
+    pi[0, 2] = pi[1, 3] = 1.0
+    pi[2, 0] = pi[3, 1] = -1.0
+
+    def hamiltonian(x):
+        return (0.5 * w1) * (x[0] * x[0] + x[2] * x[2]) + (0.5 * w2) * (x[1] * x[1] + x[3] * x[3])
+
+    system = family_system("constant", pi, hamiltonian,
+                           name="two-frequencies", x0=(1.0, 1.0, 0.0, 0.0), t_final=h * steps)
+    tableau = load_tableau("paper-three-stage")
+    x = integrate(system, tableau, h, steps).final_state
+    for (i, j), w in (((0, 2), w1), ((1, 3), w2)):
+        expected = math.remainder(steps * predicted_theta(tableau, h * w), 2 * math.pi)
+        assert math.atan2(-x[j], x[i]) == pytest.approx(expected, abs=1e-12)
+        assert math.hypot(x[i], x[j]) == pytest.approx(1.0, abs=1e-13)
+
+
+def _run_oscillator(run_cli, tmp_path, method, h, steps=1, realisation="symmetric"):
+    spec = tmp_path / "oscillator.toml"
+    spec.write_text('family = "constant"\npoisson = [[0, 1], [-1, 0]]\nhamiltonian = "(x1^2 + x2^2)/2"\n'
+                    "x0 = [1, 0]\n", encoding="utf-8")
+    return run_cli("integrate", str(spec), "--method", method, "--h", repr(h), "--t-final", repr(h * steps),
+                   "--realisation", realisation, "--format", "json")
+
+
+@pytest.fixture
+def gauss1_file(tmp_path):
+    path = tmp_path / "gauss1.toml"
+    path.write_text('name = "gauss1"\nA = [["1/2"]]\nb = ["1"]\n', encoding="utf-8")
+    return str(path)
+
+
+def test_barrier_existence_of_the_branch():
+    """Below z* the branch through 0 has a real point (Newton continuation), above it has none; for
+    one stage, the quadratic's discriminant decides independently."""
+    for tableau in (GAUSS1, load_tableau("paper-implicit"), load_tableau("gauss2")):
+        z_star = analyse(tableau).existence_limit.value
+        assert rotation_angle(tableau, 0.999 * z_star) is not None
+        assert rotation_angle(tableau, 1.001 * z_star) is None
+    for z, real in ((1.99, True), (2.01, False)):
+        roots = np.roots([z / 8, -1.0, z / 2])
+        assert bool(np.all(np.abs(roots.imag) < 1e-12)) is real
+
+
+@pytest.mark.parametrize("method,z_star", [("paper-implicit", math.sqrt(3)), ("gauss1", 2.0)])
+def test_barrier_integrator_above_fails(run_cli, tmp_path, gauss1_file, method, z_star):
+    method = gauss1_file if method == "gauss1" else method
+    status, out, _ = _run_oscillator(run_cli, tmp_path, method, 1.02 * z_star)
+    assert status == 1 and json.loads(out)["status"].startswith("failed")
+    status, out, _ = _run_oscillator(run_cli, tmp_path, method, 0.5 * z_star)
+    assert status == 0, out
+
+
+@pytest.mark.parametrize("method,z_star", [("paper-implicit", math.sqrt(3)), ("gauss1", 2.0)])
+def test_barrier_integrator_just_below_integrates(run_cli, tmp_path, gauss1_file, method, z_star):
+    method = gauss1_file if method == "gauss1" else method
+    status, out, _ = _run_oscillator(run_cli, tmp_path, method, 0.98 * z_star)
+    assert status == 0, out
+
+
+def test_wrap_limit_where_theta_turns():
+    """m = z - z^3/8: m' = 0 at z = 2 sqrt(6)/3; the integrator's rotation grows below and falls above."""
+    r = analyse(NEGATIVE_WEIGHT)
+    assert r.m == "z - z^3/8"
+    assert r.wrap_limit.exact == "2*sqrt(6)/3"
+    z0 = r.wrap_limit.value
+    system = oscillator()
+    angle = [clockwise_angle(integrate(system, NEGATIVE_WEIGHT, z, 1).final_state) for z in (z0 - 0.1, z0, z0 + 0.1)]
+    assert angle[0] < angle[1] and angle[2] < angle[1]
+    # without an exact m(z) (35 stages): found numerically, and the integrator turns there too
+    feagin = load_tableau("feagin14")
+    z1 = analyse(feagin).wrap_limit.value
+    assert 2.12 < z1 < 2.15
+    angle = [clockwise_angle(integrate(system, feagin, z, 1).final_state) for z in (z1 - 0.02, z1, z1 + 0.02)]
+    assert angle[0] < angle[1] and angle[2] < angle[1]
+
+
+# ----------------------------------------------------------------------------- shifted realisation
+
+
+def test_shifted_trace_equals_the_integrator_step_matrix():
+    system = oscillator("shifted")
+    for name in ("euler", "paper-three-stage", "rk4"):
+        tableau = load_tableau(name)
+        trace = shifted_trace(tableau)
+        for z in (0.3, 1.0, 2.5):
+            columns = [integrate(system, tableau, z, 1, x0=e).final_state for e in ((1.0, 0.0), (0.0, 1.0))]
+            R = np.array(columns).T
+            assert np.trace(R) == pytest.approx(float(trace.subs(Z, sympy.Rational(str(z)))), abs=1e-13)
+            assert np.allclose(R, step_matrix_shifted(tableau, z), atol=1e-13)
+            assert np.linalg.det(R) == pytest.approx(1.0, abs=1e-13)
+
+
+def test_shifted_interval_by_integration():
+    """Just inside the interval the run stays bounded (elliptic), just outside it grows."""
+    r = analyse(NEGATIVE_WEIGHT, realisation="shifted")
+    z0 = r.stability_interval.value
+    assert z0 == pytest.approx(0.887236173133650, rel=1e-14)
+    system = oscillator("shifted")
+    inside = integrate(system, NEGATIVE_WEIGHT, 0.97 * z0, 2000)
+    outside = integrate(system, NEGATIVE_WEIGHT, 1.03 * z0, 2000)
+    assert inside.ok and np.linalg.norm(inside.final_state) < 10
+    # the growth is a divergence: the run ends when the energy error passes 1e8 (docs/exit-status.md)
+    assert outside.cause.name == "DIVERGED" and np.linalg.norm(outside.final_state) > 1e3
+
+
+def test_shifted_positive_weights_are_elliptic_for_every_z():
+    """Positive weights and rkhp's positive definite Q: R is similar to a rotation (docs/stability.md);
+    at z = 20 the run stays bounded."""
+    r = analyse(load_tableau("rk4"), realisation="shifted")
+    assert r.stability_interval.exact == "oo"
+    x = integrate(oscillator("shifted"), load_tableau("rk4"), 20.0, 500).final_state
+    assert np.linalg.norm(x) < 10
+
+
+# ----------------------------------------------------------------------------- compositions
+
+
+def test_triple_jump_of_euler_has_phase_order_4():
+    g = 1 / (2 - sympy.root(2, 3))
+    ph = composition_phase(load_tableau("euler"), [g, 1 - 2 * g, g])
+    assert ph.phase_order == 4
+    # theta = sum 2 arctan(gamma_i z/2): the z^5 coefficient is (1/80) sum gamma_i^5
+    expected = sympy.Rational(1, 80) * (2 * g**5 + (1 - 2 * g) ** 5)
+    assert ph.phase_constant.value == pytest.approx(float(expected), rel=1e-14)
+    # against three Euler substeps of the integrator (a step -h on H is a step h on -H)
+    h = 0.4
+    x = (1.0, 0.0)
+    for gamma in (g, 1 - 2 * g, g):
+        system = oscillator(omega=float(np.sign(float(gamma))))
+        x = integrate(system, "euler", abs(float(gamma)) * h, 1, x0=x).final_state
+    long = composition_phase(load_tableau("euler"), [g, 1 - 2 * g, g], order=31)
+    series = h + sum(c.value * h**k for k, c in long.coefficients)
+    assert clockwise_angle(x) == pytest.approx(series, abs=1e-13)
+
+
+# ----------------------------------------------------------------------------- the command
+
+
+def test_cli_json(run_cli):
+    status, out, _ = run_cli("stability", "paper-three-stage,euler,paper-implicit", "--format", "json")
+    assert status == 0
+    doc = json.loads(out)
+    keys = {"m", "theta_series", "phase_order", "phase_constant", "wrap_limit", "existence_limit",
+            "stability_interval"}
+    for r in doc["methods"]:
+        assert keys <= set(r)
+    p3, euler, implicit = doc["methods"]
+    assert p3["m"] == "z + z^3/12 + z^5/128 + 3*z^7/16384"
+    assert (p3["phase_order"], p3["phase_constant"]["exact"]) == (4, "-1/1920")
+    assert euler["phase_order"] == 2
+    assert implicit["existence_limit"]["exact"] == "sqrt(3)"
+    assert implicit["existence_limit"]["float"] == pytest.approx(math.sqrt(3), rel=1e-15)
+
+
+def test_cli_plot_and_bad_input(run_cli, tmp_path):
+    path = tmp_path / "phase.png"
+    status, _, _ = run_cli("stability", "euler,rk4", "--plot", str(path))
+    assert status == 0 and path.stat().st_size > 1000
+    status, _, err = run_cli("stability", "no-such-method")
+    assert status == 2 and err.count("\n") == 1
+    status, _, err = run_cli("stability", "classical:rk4")
+    assert status == 2 and "RKHP method" in err
+
+
+# ----------------------------------------------------------------------------- long-time behaviour
+
+
+def _growth(system, steps, method, tolerance=1e-8):
+    from rkhp.studies.longtime import energy_growth
+
+    return energy_growth(system, method, 0.1, steps, tolerance)
+
+
+def test_long_time_short_version():
+    """2 10^4 steps on the rigid body: the RKHP energy error stays bounded (exponent about 0), DOP853's
+    drifts (about 1)."""
+    from rkhp.systems import get_system
+
+    system = get_system("rigid-body")
+    assert abs(_growth(system, 20_000, "paper-three-stage").exponent) < 0.1
+    assert _growth(system, 20_000, "scipy:dop853").exponent > 0.8
+
+
+def test_growth_fit_recovers_a_power():
+    from rkhp.studies.longtime import fit_exponent
+
+    t = np.geomspace(1, 1e5, 50)
+    assert fit_exponent(t, 3e-9 * t**0.5, 1e5) == pytest.approx(0.5, abs=1e-12)
+    assert fit_exponent(t, np.zeros(50), 1e5) is None
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("system_name,tolerance", [("rigid-body", 1e-8), ("lotka-volterra", 1e-6)])
+def test_long_time_million_steps(system_name, tolerance):
+    """10^6 steps (t = 10^5): RKHP methods bounded, DOP853 drifting (docs/stability.md)."""
+    from rkhp.systems import get_system
+
+    system = get_system(system_name)
+    for method in ("paper-three-stage", "euler"):
+        assert abs(_growth(system, 10**6, method).exponent) < 0.1
+    assert _growth(system, 10**6, "scipy:dop853", tolerance).exponent > 0.7
+
+
+def test_long_time_cli(run_cli, tmp_path):
+    path = tmp_path / "long.png"
+    status, out, _ = run_cli("long-time", "rigid-body", "--steps", "2000", "--method", "euler",
+                             "--plot", str(path), "--format", "json")
+    assert status == 0 and path.stat().st_size > 1000
+    run = json.loads(out)["runs"][0]
+    assert run["method"] == "euler" and run["status"] == "ok" and len(run["times"]) == len(run["energy_errors"])
+    status, _, err = run_cli("long-time", "rigid-body", "--steps", "10")
+    assert status == 2 and err.count("\n") == 1
