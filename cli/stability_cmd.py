@@ -25,13 +25,13 @@ PLOT_FILE = output_path(".png", ".svg", ".pdf")
 @force_option()
 @format_option("table", "json")
 def stability(methods, order, realisation, plot, z_max, force, fmt):
-    """Linear stability and phase of RKHP methods (tableau names or files) on the harmonic oscillator,
+    """Linear stability and phase of RKHP methods (tableau names or files, compositions) on the harmonic oscillator,
     z = h omega: m(z), theta(z) - z as a series, the phase order and constant, the wrap limit, the
     existence barrier of implicit stages, and with --realisation shifted the trace of the step
     matrix and the stability interval (docs/stability.md)."""
     from rkhp.base.errors import InputError
     from rkhp.integrators.methods import check_distinct, resolve_method
-    from rkhp.tableaux.stability import analyse
+    from rkhp.tableaux.stability import analyse, analyse_composition
 
     names = [m.strip() for m in methods.split(",")]
     if not all(names):
@@ -39,8 +39,14 @@ def stability(methods, order, realisation, plot, z_max, force, fmt):
     if len(names) > 12:
         raise InputError(f"at most 12 methods, got {len(names)}")
     resolved = check_distinct([resolve_method(n) for n in names])
-    tableaux = [m.rkhp_tableau("rkhp stability") for m in resolved]
-    results = [analyse(t, order, realisation) for t in tableaux]
+    compositions = [m for m in resolved if m.kind == "composition"]
+    if compositions and (plot or realisation != "symmetric"):
+        raise InputError(f"{compositions[0].name} is a composition: its phase is given on the symmetric "
+                         "realisation, without --plot")
+    tableaux = [m.rkhp_tableau("rkhp stability") for m in resolved if m.kind != "composition"]
+    results = [analyse_composition(m.name, m.tableau, _exact_gammas(m.composition), order, m.composition.digits)
+               if m.kind == "composition" else analyse(m.rkhp_tableau("rkhp stability"), order, realisation)
+               for m in resolved]
     if plot:
         from rkhp.studies.plots import plot_phase
 
@@ -50,6 +56,15 @@ def stability(methods, order, realisation, plot, z_max, force, fmt):
         emit_json(doc)
     else:
         _render(doc, plot)
+
+
+def _exact_gammas(composition) -> list:
+    """A composition's coefficients as exact sympy numbers (decimals by their digits)."""
+    import sympy
+
+    from rkhp.tableaux.tableau import GivenDecimal, as_sympy
+
+    return [sympy.Rational(g.text) if isinstance(g, GivenDecimal) else as_sympy(g) for g in composition.gamma]
 
 
 def stability_json(results, order: int, realisation: str) -> dict:
@@ -109,7 +124,9 @@ def _render(doc, plot) -> None:
         rows.append((f"theta(z) - z to z^{doc['order']}", series))
         rows.append(("phase order", "—" if r["phase_order"] is None else str(r["phase_order"])))
         rows.append(("phase constant", _value(r["phase_constant"])))
-        if real == "symmetric":
+        if r["kind"] == "composition":
+            rows.append(("wrap limit", "— (the substeps turn back and forth)"))
+        elif real == "symmetric":
             none = "none: theta increases with z" if r["m"] is not None or r["kind"] != "explicit" \
                 else "none: theta increases on (0, 20]"
             rows.append(("wrap limit", none if r["wrap_limit"] is None else _value(r["wrap_limit"])))

@@ -192,3 +192,13 @@ def test_negative_steps_in_the_cli(run_cli):
 def test_the_library_refuses_a_zero_step():
     with pytest.raises(InputError):
         integrate("rigid-body", "tj4", 0.0, 10)
+
+
+def test_the_phase_of_a_composition_has_its_order(run_cli):
+    """On the oscillator a composition of order p turns by theta(z) = z + O(z^(p+1)) (its phase is
+    the sum over the substeps, docs/stability.md); decimal coefficients count to their digits."""
+    code, out, err = run_cli("stability", "tj4,kahan-li6,sofroniou-spaletta10", "--order", "12", "--format", "json")
+    assert code == 0, err
+    orders = {m["method"]: (m["kind"], m["phase_order"]) for m in json.loads(out)["methods"]}
+    assert orders == {"tj4": ("composition", 4), "kahan-li6": ("composition", 6),
+                      "sofroniou-spaletta10": ("composition", 10)}

@@ -839,6 +839,30 @@ def analyse(tableau: Tableau, order: int = 9, realisation: str = "symmetric") ->
                      branch.wrap_limit, branch.existence_limit, None, None)
 
 
+def analyse_composition(name: str, tableau: Tableau, gammas, order: int = 9,
+                        digits: int | None = None) -> Stability:
+    """The phase of a composition of the RKHP step of `tableau` with substeps gamma_i h
+    (`composition_phase`; symmetric realisation). Its substeps turn back and forth, so theta is not
+    monotone and no wrap limit is given. Coefficients known to `digits` digits (decimals read
+    exactly) leave residues of that size: those coefficients of theta - z count as zero."""
+    ph = composition_phase(tableau, gammas, order)
+    return Stability(name, "composition", "symmetric", None, None, None,
+                     ph if digits is None else _within_digits(ph, digits), None, None, None, None)
+
+
+def _within_digits(ph: Phase, digits: int) -> Phase:
+    """`ph` with the coefficients below 10^-(digits - 5) as zeros and the others by their values
+    (the exact decimals' long rationals say no more than their digits)."""
+    tol = 10.0 ** -(digits - 5)
+    coefficients = tuple((k, Number(None, c.value) if abs(c.value) > tol else Number("0", 0.0))
+                         for k, c in ph.coefficients)
+    nonzero = [(k, c) for k, c in coefficients if c.value != 0.0]
+    if not nonzero:
+        return Phase(ph.order, coefficients, None, None, ph.searched)
+    k, c = nonzero[0]
+    return Phase(ph.order, coefficients, k - 1, c, ph.searched)
+
+
 def step_matrix_shifted(tableau: Tableau, z: float):
     """R(z) of an explicit tableau with the shifted realisation, in float64 (see shifted_trace)."""
     import numpy as np
