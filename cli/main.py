@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib
 import sys
+from typing import NamedTuple
 
 import click
 
@@ -51,6 +52,8 @@ class LazyGroup(click.Group):
         from rkhp.base.errors import CheckFailed, InputError, NumericalFailure
 
         kwargs["standalone_mode"] = False
+        given = args[0] if args else kwargs.get("args")
+        kwargs.setdefault("obj", Invocation(tuple(sys.argv[1:] if given is None else given)))
         try:
             rv = super().main(*args, **kwargs)
         except click.exceptions.Exit as exc:
@@ -79,6 +82,13 @@ class LazyGroup(click.Group):
         except BrokenPipeError:
             sys.exit(0)
         sys.exit(rv if isinstance(rv, int) else 0)
+
+
+class Invocation(NamedTuple):
+    """What the root command was given (the context's ``obj``): the arguments after ``rkhp``,
+    recorded in the provenance of every output (rkhp.base.provenance)."""
+
+    args: tuple[str, ...]
 
 
 def one_line(message: str) -> str:

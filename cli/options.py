@@ -182,9 +182,31 @@ def json_text(obj, indent: int = 2) -> str:
     return json.dumps(json_ready(obj), indent=indent, ensure_ascii=False, allow_nan=False)
 
 
-def emit_json(obj) -> None:
-    """Write a JSON document to stdout (stable key order as given; non-finite values as NON_FINITE)."""
-    click.echo(json_text(obj))
+def run_provenance() -> dict:
+    """The provenance record of the running command (rkhp.base.provenance): its command line as
+    given to ``rkhp``, and the value of its --seed option when it has one."""
+    import shlex
+
+    from rkhp.base.provenance import provenance
+
+    ctx = click.get_current_context(silent=True)
+    if ctx is None:
+        return provenance()
+    given = getattr(ctx.find_root().obj, "args", None)
+    command = None if given is None else shlex.join(["rkhp", *given])
+    seed = ctx.params.get("seed") if isinstance(ctx.params.get("seed"), int) else None
+    return provenance(command, seed)
+
+
+def with_provenance(document: dict) -> dict:
+    """The document with the running command's ``provenance`` object as its last key."""
+    return {**document, "provenance": run_provenance()}
+
+
+def emit_json(document: dict) -> None:
+    """Write a JSON document to stdout (stable key order as given, then ``provenance``; non-finite
+    values as NON_FINITE)."""
+    click.echo(json_text(with_provenance(document)))
 
 
 def console():

@@ -15,6 +15,7 @@ from .options import (
     json_text,
     output_path,
     progress,
+    with_provenance,
 )
 
 
@@ -49,15 +50,11 @@ def relations(order, regenerate, seed, output, workers, scheduler, fmt):
     doc = data.to_json()
     doc["source"] = "regenerated" if regenerate else "shipped"
     if output:
-        from rkhp.base.errors import InputError
+        from rkhp.base.provenance import write_output
 
         document = data.to_json()
         document["method"]["regenerate"] += f" --output {output}"
-        try:
-            with open(output, "w", encoding="utf-8") as fh:
-                fh.write(json_text(document, indent=1) + "\n")
-        except OSError as exc:
-            raise InputError(f"--output {output}: cannot write the file ({exc.strerror or exc})") from None
+        write_output(output, json_text(with_provenance(document), indent=1) + "\n", "--output")
     if fmt == "json":
         emit_json(doc)
         return

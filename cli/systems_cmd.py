@@ -52,7 +52,7 @@ def systems(fmt):
                      "casimirs": list(s.casimir_names), "exact_solution": s.exact_solution
                      is not None, "description": s.description})
     if fmt == "json":
-        emit_json(rows)
+        emit_json({"systems": rows})
         return
     table = compact_table("Built-in Poisson systems (realisations: symmetric, shifted, quartic, "
                           "truncated:K)")

@@ -149,7 +149,7 @@ def tables(precision, fmt, name):
             rows.append((tab, result))
             bar.advance(task)
     if fmt == "json":
-        emit_json([tables_row(tab, r) for tab, r in rows])
+        emit_json({"tables": [tables_row(tab, r) for tab, r in rows]})
     else:
         _render_tables(rows, precision)
     fail_on_overstated([r for _, r in rows])
