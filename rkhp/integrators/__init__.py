@@ -2,7 +2,7 @@
 
 Names load lazily (numba is imported only when an integrator runs):
 `integrate`, `integrate_ensemble` (RKHP, explicit tableaux), `integrate_taylor` (THP, paper
-Thm 5.1), `integrate_classical`, `integrate_midpoint` (peers), `Trajectory`.
+Thm 5.1), `integrate_classical`, `integrate_midpoint` (peers), `Trajectory`, `states_at` (states at chosen times).
 """
 
 from __future__ import annotations
@@ -16,6 +16,8 @@ _LAZY = {
     "integrate_classical": "rkhp.integrators.classical",
     "integrate_midpoint": "rkhp.integrators.classical",
     "Trajectory": "rkhp.integrators.trajectory",
+    "states_at": "rkhp.integrators.output_times",
+    "TimedStates": "rkhp.integrators.output_times",
 }
 
 __all__ = sorted(_LAZY)

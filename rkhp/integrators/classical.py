@@ -270,7 +270,7 @@ def _trajectory(system, method, h, k_done, cause, states, newton, started, compi
                       status=failure_status(cause, k_done, h, system.domain) if failed else "ok",
                       failed_step=k_done if failed else None, cause=cause,
                       compile_seconds=compile_s, run_seconds=time.perf_counter() - started - compile_s,
-                      method=method, system=system.name, extra=extra or {})
+                      method=method, system=system.name, extra=extra or {}, poisson=system)
 
 
 def _warm_up(kernel, args_of_one_step) -> float:

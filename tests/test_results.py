@@ -1,0 +1,154 @@
+"""Results a researcher keeps (docs/results.md): trajectory files, states at chosen times,
+provenance."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from rkhp_cli.main import rkhp as cli
+
+import rkhp
+from rkhp.base.provenance import KEYS, read_provenance_line
+from rkhp.systems import get_system
+
+RUN = ["integrate", "rigid-body", "--method", "paper-three-stage", "--steps", "100"]
+
+
+def _invoke(*args):
+    result = CliRunner().invoke(cli, list(args))
+    return result.exit_code, result.stdout, result.stderr
+
+
+def _read_csv(path):
+    lines = path.read_text().splitlines()
+    record = read_provenance_line(lines[0])
+    rows = list(csv.reader(lines[1:]))
+    return record, rows[0], rows[1:]
+
+
+def test_csv_trajectory_has_every_step_and_the_json_final_state_bit_for_bit(tmp_path):
+    out = tmp_path / "t.csv"
+    code, stdout, _ = _invoke(*RUN, "--output", str(out), "--format", "json")
+    assert code == 0
+    doc = json.loads(stdout)
+    record, header, rows = _read_csv(out)
+    assert header == ["t", "x1", "x2", "x3", "energy", "casimir1", "newton_iterations", "stage_sweeps"]
+    assert len(rows) == 101 and doc["output"] == {"file": str(out), "rows": 101}
+    last = [float(v) for v in rows[-1][1:4]]
+    assert [v.hex() for v in last] == [v.hex() for v in doc["x_final"]]
+    assert float(rows[-1][0]) == pytest.approx(10.0, abs=1e-12)
+    # energy and Casimir columns are H and |x|^2/2 of the states (rigid body, docs/theory.md §6)
+    x = np.array([[float(v) for v in r[1:4]] for r in rows])
+    casimir = np.array([float(r[5]) for r in rows])
+    assert np.allclose(casimir, 0.5 * (x ** 2).sum(axis=1), rtol=0, atol=1e-15)
+    energy = np.array([float(r[4]) for r in rows])
+    assert np.allclose(energy, x[:, 0] ** 2 / 4 + x[:, 1] ** 2 / 2 + 3 * x[:, 2] ** 2 / 4, rtol=0, atol=1e-15)
+    newton = [int(r[6]) for r in rows]
+    assert newton[0] == 0 and all(k >= 1 for k in newton[1:])  # the first row has no step
+    assert list(record) == list(KEYS) and record["command"].startswith("rkhp integrate rigid-body")
+    assert record["numpy"] == np.__version__
+
+
+def test_npz_trajectory_and_every(tmp_path):
+    code, stdout, _ = _invoke(*RUN, "--output", str(tmp_path / "t.npz"), "--format", "json")
+    assert code == 0
+    doc = json.loads(stdout)
+    data = np.load(tmp_path / "t.npz")  # no pickle needed
+    assert data.files[:4] == ["t", "x1", "x2", "x3"] and len(data["t"]) == 101
+    assert [data[f"x{i}"][-1].hex() for i in (1, 2, 3)] == [v.hex() for v in doc["x_final"]]
+    assert json.loads(str(data["provenance"]))["rkhp_version"] == rkhp.__version__
+    code, _, _ = _invoke(*RUN, "--output", str(tmp_path / "e.csv"), "--every", "10")
+    assert code == 0
+    _, _, rows = _read_csv(tmp_path / "e.csv")
+    assert len(rows) == 11 and [round(float(r[0]), 9) for r in rows] == [float(k) for k in range(11)]
+
+
+def test_python_trajectory_gives_the_same_columns_and_files(tmp_path):
+    run = rkhp.integrate("rigid-body", "paper-three-stage", 0.1, 100)
+    columns = run.columns(every=7)
+    assert len(columns["t"]) == 16  # rows 0, 7, ..., 98 and the last, 100
+    run.write(tmp_path / "p.csv", every=7)
+    _, header, rows = _read_csv(tmp_path / "p.csv")
+    assert header == list(columns)
+    for k, name in enumerate(header):
+        assert [float(r[k]) for r in rows] == columns[name].tolist()
+    assert np.array_equal(columns["x2"], run.states[[*range(0, 100, 7), 100], 1])
+
+
+def test_t_eval_has_the_method_order_and_stays_on_the_leaf():
+    """Seven times off the grid: the error against the exact solution falls as h^4 for the
+    fourth-order method (an interpolation between grid points would give h^2), and the Casimir
+    keeps its value to round-off (a step of size t - t_n is a Poisson map)."""
+    system = get_system("rigid-body")
+    times = [0.37, 1.234, 2.61, 3.33, 5.1, 7.77, 9.2]
+    errors = []
+    for n in (20, 40, 80, 160):
+        run = rkhp.integrate(system, "paper-three-stage", 10.0 / n, n)
+        timed = rkhp.states_at(run, "paper-three-stage", times)
+        assert np.all(timed.substeps > 0) and np.all(timed.substeps < 10.0 / n)
+        errors.append(max(np.abs(system.exact_solution(t) - x).max() for t, x in zip(times, timed.states,
+                                                                                      strict=True)))
+        casimir = np.abs(0.5 * (timed.states ** 2).sum(axis=1) - 0.5 * (system.x0 ** 2).sum()).max()
+        assert casimir < 5e-15
+    orders = [math.log2(a / b) for a, b in zip(errors, errors[1:], strict=False)]
+    assert all(3.8 < p < 4.3 for p in orders), orders
+
+
+def test_t_eval_on_a_non_quadratic_casimir(tmp_path):
+    """The README's Nambu system (Casimir |x|^2/2 + x1^4/4): at chosen times off the grid the
+    Casimir holds to round-off with the paper's method."""
+    spec = tmp_path / "nambu.toml"
+    spec.write_text(NAMBU)
+    code, stdout, _ = _invoke("integrate", str(spec), "--method", "paper-three-stage", "--steps", "40",
+                              "--t-eval", "0.33,1.7,4.05,9.99", "--format", "json")
+    assert code == 0
+    timed = json.loads(stdout)["t_eval"]
+    x = np.array(timed["states"])
+    start = np.array([0.45359612142557731, 0.0, 0.89120736006143542])
+
+    def casimir(v):
+        return (v ** 2).sum(axis=-1) / 2 + v[..., 0] ** 4 / 4
+
+    assert np.abs(casimir(x) - casimir(start)).max() < 5e-15
+    assert timed["casimir_error"] < 5e-15 and timed["times"] == [0.33, 1.7, 4.05, 9.99]
+
+
+def test_t_eval_count_and_file(tmp_path):
+    code, stdout, _ = _invoke(*RUN, "--t-eval-count", "7", "--output", str(tmp_path / "c.csv"),
+                              "--format", "json")
+    assert code == 0
+    doc = json.loads(stdout)
+    assert doc["t_eval"]["times"] == np.linspace(0, 10, 7).tolist()
+    _, _, rows = _read_csv(tmp_path / "c.csv")
+    assert len(rows) == 7 and [float(r[0]) for r in rows] == doc["t_eval"]["times"]
+    assert [float(v) for v in rows[-1][1:4]] == doc["t_eval"]["states"][-1]
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--t-eval", "11"], "outside the run"),
+    (["--t-eval", "2,1"], "increasing"),
+    (["--t-eval", "1", "--t-eval-count", "3"], "at most one"),
+    (["--every", "3"], "--every"),
+    (["--output", "t.txt"], "extension"),
+])
+def test_bad_output_options_are_input_errors(extra, message, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, _, stderr = _invoke(*RUN, *extra)
+    assert code == 2 and message in stderr and len(stderr.strip().splitlines()) == 1
+
+
+NAMBU = """name = "my-nambu"
+family = "general"
+poisson = [["0",  "-x3",          "x2"],
+           ["x3", "0",            "-(x1 + x1^3)"],
+           ["-x2", "x1 + x1^3",   "0"]]
+hamiltonian = "x1^2/4 + x2^2/2 + 3*x3^2/4"
+casimirs = ["(x1^2 + x2^2 + x3^2)/2 + x1^4/4"]
+x0 = [0.45359612142557731, 0.0, 0.89120736006143542]
+t_final = 10.0
+"""
