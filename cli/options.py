@@ -103,12 +103,29 @@ X0 = reals(lambda x, label: x, "X1,X2,...", distinct=False)
 
 
 
+FORMAT_HELP = {"table": "rich table for people", "json": "json with stable keys for programs",
+               "latex": "LaTeX", "csv": "csv for spreadsheets and data frames (docs/results.md)"}
+
+
 def format_option(*choices: str, default: str = "table"):
     """The `--format` option every command has."""
     return click.option(
         "--format", "fmt", type=click.Choice(choices), default=default, show_default=True,
-        help="Output format: rich table for people, json with stable keys for programs.",
+        help="Output format: " + ", ".join(FORMAT_HELP[c] for c in choices) + ".",
     )
+
+
+def emit_table(fmt: str, header, rows, latex_tables) -> None:
+    """Write a study's table to stdout as CSV (``header`` and ``rows`` of values) or LaTeX (the
+    booktabs ``latex_tables``, cells as the terminal shows them), each after the provenance line
+    of the running command (rkhp.base.tables; docs/results.md)."""
+    from rkhp.base.tables import csv_text, latex_text
+
+    record = run_provenance()
+    if fmt == "csv":
+        click.echo(csv_text(header, rows, record), nl=False)
+    else:
+        click.echo(latex_text(latex_tables, record), nl=False)
 
 
 def executor_options(what: str):

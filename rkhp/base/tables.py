@@ -58,6 +58,8 @@ def booktabs(header: Sequence[str], rows, caption: str = "", align: str | None =
     shows them; ``align`` is the column spec (default: first column left, the others right);
     ``groups`` are the row indices before which a ``\\midrule`` separates groups of rows."""
     align = align or "l" + "r" * (len(header) - 1)
+    if len(align) != len(header):
+        raise ValueError(f"column spec {align!r} for {len(header)} columns")
     lines = ["\\begin{table}[htbp]", "\\centering"]
     if caption:
         lines.append(f"\\caption{{{latex_cell(caption)}}}")
