@@ -6,6 +6,7 @@ import click
 
 from rkhp.base import bounds
 from rkhp.base.tables import booktabs
+from rkhp.studies.plots import check_plot_path, data_path
 
 from .options import (
     METHOD_HELP,
@@ -13,6 +14,7 @@ from .options import (
     SEED,
     STEPS,
     T_FINAL,
+    Checked,
     compile_notice,
     console,
     emit_json,
@@ -22,10 +24,10 @@ from .options import (
     integer,
     integers,
     names,
-    output_path,
     parse_x0,
     progress,
     reals,
+    run_provenance,
     x0_option,
 )
 from .render import compact_table
@@ -33,7 +35,7 @@ from .render import compact_table
 #: the steps of one run, listed
 STEP_LIST = integers(1, bounds.MAX_STEPS)
 #: a plot to write (checked before the study)
-PLOT_FILE = output_path(".png", ".svg", ".pdf")
+PLOT_FILE = Checked("FILE", lambda text, label: str(check_plot_path(text, label)))
 
 METHODS_HELP = (METHOD_HELP + " Repeat or separate by commas. Default: euler, paper-two-stage, "
                 "paper-three-stage, rk4.")
@@ -117,7 +119,7 @@ def converge(system, methods, x0, realisation, t_final, steps, refinements, plot
     if plot:
         from rkhp.studies.plots import plot_convergence
 
-        plot_convergence(study, plot)
+        plot_convergence(study, plot, run_provenance())
     if fmt == "json":
         emit_json(study.to_json())
     elif fmt in ("csv", "latex"):
@@ -216,7 +218,7 @@ def _render_converge(study, plot) -> None:
                   f"{','.join(map(str, m.fit.fit_rows)) or '—'} (left out: {left}); expected {m.expected_order} "
                   f"({basis}): {m.verdict}")
     if plot:
-        out.print(f"plot written to {plot}")
+        out.print(f"plot written to {plot} (its data: {data_path(plot)})")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -262,7 +264,7 @@ def bench(system, methods, x0, realisation, peers, t_final, steps, tolerances, r
     if plot:
         from rkhp.studies.plots import plot_work_precision
 
-        plot_work_precision(study, plot)
+        plot_work_precision(study, plot, run_provenance())
     if fmt == "json":
         emit_json(study.to_json())
     elif fmt in ("csv", "latex"):
@@ -334,7 +336,7 @@ def _render_bench(study, plot) -> None:
         else:
             out.print(f"error <= {c.target:.0e}: {c.method} ({c.setting}), {c.seconds:.2e} s")
     if plot:
-        out.print(f"plot written to {plot}")
+        out.print(f"plot written to {plot} (its data: {data_path(plot)})")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -371,7 +373,7 @@ def stress(system, methods, x0, realisation, t_final, long_steps, long_h, sweep_
     if plot:
         from rkhp.studies.plots import plot_stress
 
-        plot_stress(study, plot)
+        plot_stress(study, plot, run_provenance())
     if fmt == "json":
         emit_json(study.to_json())
     elif fmt in ("csv", "latex"):
@@ -523,4 +525,4 @@ def _render_stress(study, plot) -> None:
     out.print("marks: pre = pre-asymptotic, floor = round-off floor, drift = order drift (left out of the fit)")
     out.print(f"verdict (d): {verdicts['d']}")
     if plot:
-        out.print(f"plot written to {plot}")
+        out.print(f"plot written to {plot} (its data: {data_path(plot)})")
