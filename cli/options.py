@@ -104,14 +104,15 @@ X0 = reals(lambda x, label: x, "X1,X2,...", distinct=False)
 
 
 FORMAT_HELP = {"table": "rich table for people", "json": "json with stable keys for programs",
-               "latex": "LaTeX", "csv": "csv for spreadsheets and data frames (docs/results.md)"}
+               "latex": "LaTeX", "markdown": "markdown",
+               "csv": "csv for spreadsheets and data frames (docs/results.md)"}
 
 
 def format_option(*choices: str, default: str = "table"):
     """The `--format` option every command has."""
     return click.option(
         "--format", "fmt", type=click.Choice(choices), default=default, show_default=True,
-        help="Output format: " + ", ".join(FORMAT_HELP[c] for c in choices) + ".",
+        help="Output format: " + ", ".join(FORMAT_HELP.get(c, c) for c in choices) + ".",
     )
 
 

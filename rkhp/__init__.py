@@ -26,6 +26,7 @@ _LAZY = {
     "verify": "rkhp.tableaux.verification",
     "get_system": "rkhp.systems",
     "states_at": "rkhp.integrators.output_times",
+    "system": "rkhp.systems.spec",
 }
 
 __all__ = sorted(_LAZY)
