@@ -304,7 +304,7 @@ def _emit_bench(study, fmt) -> None:
     points = booktabs(("method", "kind", "setting", "error", "seconds", "f evals", "status"), cells, caption,
                       "llrrrrl", groups)
     cheapest = booktabs(("error at most", "cheapest", "setting", "seconds"),
-                        [(f"{c.target:.0e}", c.method or "none reached it", c.setting or "—",
+                        [(f"{c.target:.0e}", c.method or "no method reached it", c.setting or "—",
                           "—" if c.seconds is None else f"{c.seconds:.2e}") for c in study.cheapest],
                         f"Cheapest method per error target on {study.system}.", "rllr")
     emit_table(fmt, BENCH_CSV, rows, [points, cheapest])

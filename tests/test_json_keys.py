@@ -46,6 +46,7 @@ COMMANDS = [
     ["modified", "--method", "euler", "--order", "3", "--symmetric"],
     ["compose", "euler,euler", "--order", "4", "--symmetric"],
     ["integrate", "pendulum", "--method", "euler", "--steps", "10", "--modified", "3"],
+    ["integrate", "rigid-body", "--method", "rk4", "--steps", "10", "--t-eval", "0.5,1.25"],
 ]
 
 
