@@ -189,7 +189,8 @@ def _run(args):
     return result
 
 
-CONVERGE_KEYS = {"system", "realisation", "degenerate", "symmetric", "x0", "t_final", "reference", "methods"}
+CONVERGE_KEYS = {"system", "realisation", "degenerate", "symmetric", "x0", "t_final", "reference", "methods",
+                 "provenance"}
 METHOD_KEYS = {"method", "expected_order", "observed_order", "verdict", "fit_rows", "rows",
                "realisation_bound"}
 ROW_KEYS = {"h", "steps", "error", "local_order", "casimir_error", "energy_error", "newton_mean", "newton_max",
@@ -289,7 +290,7 @@ def test_bench_error_falls_as_cost_rises(tmp_path):
                         "--tolerances", "1e-4,1e-6,1e-8", "--repeats", "1", "--plot", str(plot)])
     assert plot.read_bytes().startswith(b"\x89PNG")
     assert set(data) == {"system", "realisation", "x0", "t_final", "reference", "repeats", "ensemble", "curves",
-                         "cheapest"}
+                         "cheapest", "provenance"}
     kinds = {c["method"]: c["kind"] for c in data["curves"]}
     assert kinds == {"paper-three-stage": "rkhp", "classical:rk4": "classical", "scipy:dop853": "scipy"}
     for c in data["curves"]:
@@ -345,7 +346,8 @@ def test_stress_cli_parts_end_with_verdicts(tmp_path):
     assert result.exit_code == 0, result.output
     assert plot.read_bytes().startswith(b"%PDF-")
     data = json.loads(result.output)
-    assert set(data) == {"system", "realisation", "x0", "t_final", "sweep", "long_run", "near_singular", "round_off"}
+    assert set(data) == {"system", "realisation", "x0", "t_final", "sweep", "long_run", "near_singular", "round_off",
+                         "provenance"}
     for part in ("sweep", "long_run", "near_singular", "round_off"):
         assert data[part]["verdict"]
     runs = data["long_run"]["runs"]

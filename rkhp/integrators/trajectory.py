@@ -124,7 +124,7 @@ def kept_rows(count: int, every: int) -> np.ndarray:
 def energies(system, states) -> np.ndarray:
     """H at every row of ``states`` (the compiled loop for long runs)."""
     if len(states) >= COMPILED_ENERGY_FROM:
-        from .classical import hamiltonian_values
+        from .energy import hamiltonian_values
 
         return hamiltonian_values(system, states)
     return np.fromiter((system.hamiltonian(x) for x in states), dtype=float, count=len(states))

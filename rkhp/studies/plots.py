@@ -9,6 +9,7 @@ the provenance record of the run (rkhp.base.provenance).
 from __future__ import annotations
 
 import io
+import json
 from pathlib import Path
 
 from ..base.bounds import check_output_path
@@ -50,8 +51,6 @@ def _pyplot():
 def _save(fig, path: Path, rows, record: dict | None) -> None:
     """Write the figure and, beside it, its data (``rows`` of :data:`DATA_COLUMNS`), both with the
     provenance ``record`` (default: this process's)."""
-    import json
-
     record = provenance() if record is None else record
     fmt = path.suffix.lower().lstrip(".")
     # matplotlib's metadata keys per format: the record as the file's description
