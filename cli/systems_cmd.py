@@ -230,7 +230,11 @@ def _states_at(trajectory, method, times):
     """The states at the chosen times reached by the run (all of them when it succeeded)."""
     from rkhp.integrators.output_times import states_at
 
-    reached = times[times <= trajectory.times[-1]] if not trajectory.ok else times
+    if trajectory.ok:
+        reached = times
+    else:  # in either direction of the run
+        start, last = trajectory.times[0], trajectory.times[-1]
+        reached = times[abs(times - start) <= abs(last - start)]
     if not reached.size:
         return None
     return states_at(trajectory, method, reached)

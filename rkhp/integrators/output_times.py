@@ -53,10 +53,10 @@ class TimedStates:
         return write_columns(path, self.columns(), record)
 
 
-def check_output_times(times, start: float, end: float, what: str = "t_eval") -> np.ndarray:
+def check_output_times(times, start: float, end: float, what: str = "t_eval", slack: float = 0.0) -> np.ndarray:
     """The chosen times as floats if each is finite and between ``start`` and ``end`` (either
-    order: a backward run has end < start) and they run strictly from ``start`` towards ``end``;
-    InputError naming ``what`` otherwise."""
+    order: a backward run has end < start; ``slack`` widens the interval) and they run strictly
+    from ``start`` towards ``end``; InputError naming ``what`` otherwise."""
     try:
         values = np.asarray(times, dtype=np.float64).reshape(-1)
     except (TypeError, ValueError):
@@ -67,7 +67,7 @@ def check_output_times(times, start: float, end: float, what: str = "t_eval") ->
         raise InputError(f"{what}: {values.size} times; at most {MAX_OUTPUT_TIMES}")
     if not np.all(np.isfinite(values)):
         raise InputError(f"{what}: every time must be finite")
-    low, high = min(start, end), max(start, end)
+    low, high = min(start, end) - slack, max(start, end) + slack
     outside = values[(values < low) | (values > high)]
     if outside.size:
         raise InputError(f"{what}: time {outside[0]:g} lies outside the run [{low:g}, {high:g}]")
@@ -91,7 +91,9 @@ def states_at(trajectory, method, times, system=None) -> TimedStates:
     if system is None:
         raise InputError("this trajectory does not hold its system: pass system=")
     grid = np.asarray(trajectory.times, dtype=np.float64)
-    values = check_output_times(times, float(grid[0]), float(grid[-1]))
+    # the last grid time N h may miss the run's end T by round-off: T counts as inside
+    slack = 4 * np.finfo(float).eps * max(abs(float(grid[0])), abs(float(grid[-1])))
+    values = check_output_times(times, float(grid[0]), float(grid[-1]), slack=slack)
     direction = 1.0 if grid[-1] >= grid[0] else -1.0
     # n: the last grid point not past t in the direction of the run
     index = np.searchsorted(direction * grid, direction * values, side="right") - 1
