@@ -197,13 +197,13 @@ def integrate(system, method, steps, h, t_final, x0, modified_order, realisation
     if times is not None:
         timed = _states_at(trajectory, chosen, times)
         report["t_eval"] = timed_report(poisson, timed)
-    if output is not None:
+    if output is not None and times is None:
         from rkhp.integrators.trajectory import kept_rows
 
-        record = run_provenance()
-        written = timed.write(output, record) if timed is not None else trajectory.write(output, every or 1, record)
-        report["output"] = {"file": str(written), "rows": len(timed.times) if timed is not None
-                            else len(kept_rows(len(trajectory.states), every or 1))}
+        written = trajectory.write(output, every or 1, run_provenance())
+        report["output"] = {"file": str(written), "rows": len(kept_rows(len(trajectory.states), every or 1))}
+    elif output is not None and timed is not None:  # a failed run may reach none of the chosen times
+        report["output"] = {"file": str(timed.write(output, run_provenance())), "rows": len(timed.times)}
     if fmt == "json":
         emit_json(report)
     else:
