@@ -76,8 +76,9 @@ def _render(series, doc) -> None:
     from rich.text import Text
 
     from .render import print_table
+    from .terminal import plain
 
-    names = " then ".join(series.names)
+    names = plain(" then ".join(series.names))
     table = Table(title=f"{names}: steps of size h, {series.cls} class, c(t) in S = sum h^|t| c(t) F(t)")
     for col in ("tree", "composed steps", "Hamilton–Jacobi", "a1*...*ak", "ak*...*a1"):
         table.add_column(col)

@@ -51,37 +51,98 @@ class LazyGroup(click.Group):
     def main(self, *args, **kwargs):
         from rkhp.base.errors import CheckFailed, InputError, NumericalFailure
 
+        from .terminal import install_interrupt_handler
+
+        install_interrupt_handler()
         kwargs["standalone_mode"] = False
         given = args[0] if args else kwargs.get("args")
         kwargs.setdefault("obj", Invocation(tuple(sys.argv[1:] if given is None else given)))
         try:
             rv = super().main(*args, **kwargs)
+            sys.stdout.flush()
         except click.exceptions.Exit as exc:
-            sys.exit(exc.exit_code)
+            _exit(exc.exit_code)
         except click.exceptions.NoArgsIsHelpError as exc:  # bare `rkhp`: the help, on stdout
             click.echo(exc.ctx.get_help())
-            sys.exit(0)
+            _exit(0)
         except click.exceptions.Abort:
-            sys.stderr.write("rkhp: aborted\n")
-            sys.exit(130)
+            _interrupted()
         except click.UsageError as exc:
-            sys.stderr.write(f"rkhp: error: {one_line(exc.format_message())}\n")
-            sys.exit(2)
+            _fail(f"rkhp: error: {one_line(exc.format_message())}", 2)
         except click.ClickException as exc:
-            sys.stderr.write(f"rkhp: error: {one_line(exc.format_message())}\n")
-            sys.exit(exc.exit_code if exc.exit_code else 1)
+            _fail(f"rkhp: error: {one_line(exc.format_message())}", exc.exit_code if exc.exit_code else 1)
         except InputError as exc:
-            sys.stderr.write(f"rkhp: error: {one_line(str(exc))}\n")
-            sys.exit(2)
+            _fail(f"rkhp: error: {one_line(str(exc))}", 2)
         except NumericalFailure as exc:
-            sys.stderr.write(f"rkhp: numerical failure: {one_line(str(exc))}\n")
-            sys.exit(1)
+            _fail(f"rkhp: numerical failure: {one_line(str(exc))}", 1)
         except CheckFailed as exc:
-            sys.stderr.write(f"rkhp: check failed: {one_line(str(exc))}\n")
-            sys.exit(1)
-        except BrokenPipeError:
-            sys.exit(0)
-        sys.exit(rv if isinstance(rv, int) else 0)
+            _fail(f"rkhp: check failed: {one_line(str(exc))}", 1)
+        except BrokenPipeError:  # the reader went away (`rkhp ... | head`): nothing more to say
+            from .terminal import silence_stdout
+
+            silence_stdout()
+            _exit(0)
+        except BaseException as exc:
+            from rkhp.base.interrupts import is_interrupt
+
+            if is_interrupt(exc):
+                _interrupted()
+            if isinstance(exc, OSError) and _is_stdout_error(exc):
+                from .terminal import silence_stdout
+
+                silence_stdout()
+                _fail(f"rkhp: error: cannot write the output: {exc.strerror or exc}", 1)
+            raise
+        _exit(rv if isinstance(rv, int) else 0)
+
+
+def _exit(status: int):
+    """Exit with `status`, stdout flushed first (a failed flush: one line, status 1)."""
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        from .terminal import silence_stdout
+
+        silence_stdout()
+    except OSError as exc:
+        from .terminal import silence_stdout
+
+        silence_stdout()
+        _fail(f"rkhp: error: cannot write the output: {exc.strerror or exc}", 1)
+    sys.exit(status)
+
+
+def _fail(line: str, status: int):
+    """One line on stderr (control characters escaped), then exit with `status`."""
+    from .terminal import printable
+
+    sys.stderr.write(printable(line) + "\n")
+    try:
+        sys.stdout.flush()
+    except OSError:
+        from .terminal import silence_stdout
+
+        silence_stdout()
+    sys.exit(status)
+
+
+def _interrupted():
+    """The one line and status of an interrupt (docs/exit-status.md)."""
+    from .terminal import INTERRUPT_STATUS, INTERRUPTED, silence_stdout
+
+    try:
+        sys.stdout.flush()
+    except (OSError, ValueError, KeyboardInterrupt):
+        silence_stdout()
+    sys.stderr.write(INTERRUPTED + "\n")
+    sys.exit(INTERRUPT_STATUS)
+
+
+def _is_stdout_error(exc: OSError) -> bool:
+    """Whether writing stdout raised `exc` (a full or failing device): the errors of a write."""
+    import errno
+
+    return exc.errno in (errno.ENOSPC, errno.EIO, errno.EDQUOT, errno.EFBIG, errno.EPIPE) and exc.filename is None
 
 
 class Invocation(NamedTuple):

@@ -89,7 +89,9 @@ def _render(series, method: str) -> None:
     from .render import print_table
 
     symbol = _SYMBOL[series.kind]
-    table = Table(title=f"{series.kind.capitalize()} Hamiltonian of {method}, {series.cls} class, to order "
+    from .terminal import plain
+
+    table = Table(title=f"{series.kind.capitalize()} Hamiltonian of {plain(method)}, {series.cls} class, to order "
                         f"{series.order}",
                   caption=f"{symbol} = sum over t of h^(|t|-1) c(t) F(t); zero terms not shown")
     for col, justify in (("h^", "right"), ("Tree t", "left"), ("c(t) = beta(t)/sigma(t)", "left"),

@@ -84,9 +84,42 @@ def names(name: str = "NAME,...") -> Checked:
     return Checked(name, read)
 
 
-def output_path(*suffixes: str) -> Checked:
-    """A file to write, checked before the work (`rkhp.base.bounds.check_output_path`); returns the text."""
-    return Checked("FILE", lambda text, label: str(bounds.check_output_path(text, suffixes, label)))
+class OutputPath(Checked):
+    """A file to write, checked before the work by ``check(text, label, force)`` (default:
+    `rkhp.base.bounds.check_output_path` for ``suffixes``, then `rkhp.base.files.check_target`: an
+    existing file or a symbolic link only with the command's `--force`, an eager option, so
+    already read); returns the text."""
+
+    def __init__(self, suffixes: tuple[str, ...] = (), check=None):
+        super().__init__("FILE", lambda text, label: text)
+        self.check = check or (lambda text, label, force: _checked_target(text, suffixes, label, force))
+
+    def convert(self, value, param, ctx):
+        if not isinstance(value, str):
+            return value
+        force = bool(ctx is not None and ctx.params.get("force"))
+        label = (param.opts[0] if param is not None and param.opts else "output file")
+        try:
+            return str(self.check(value, label, force))
+        except InputError as exc:
+            raise click.UsageError(str(exc), ctx) from None
+
+
+def _checked_target(text, suffixes, label, force):
+    from rkhp.base.files import check_target
+
+    return check_target(bounds.check_output_path(text, suffixes, label), label, force)
+
+
+def output_path(*suffixes: str, check=None) -> Checked:
+    """A file to write (:class:`OutputPath`)."""
+    return OutputPath(suffixes, check)
+
+
+def force_option():
+    """`--force`: replace an existing output file (read before the other options: eager)."""
+    return click.option("--force", is_flag=True, is_eager=True,
+                        help="Replace an existing output file (or a symbolic link, itself; docs/input.md).")
 
 
 #: a seed: 0 .. 2^64 - 1
@@ -95,6 +128,8 @@ SEED = integer(0, bounds.MAX_SEED, "seed")
 POSITIVE = real(0.0, low_open=True, name="positive number")
 #: the final time T
 T_FINAL = real(0.0, low_open=True, name="T", label="--t-final (final time T)")
+#: a signed step or final time of one run (negative: backwards; zero is refused by the step plan)
+SIGNED = real(name="number")
 #: the number of steps of one run
 STEPS = integer(1, bounds.MAX_STEPS, "steps")
 #: an initial state: finite numbers

@@ -10,6 +10,7 @@ from .options import (
     console,
     emit_json,
     executor_options,
+    force_option,
     format_option,
     integer,
     json_text,
@@ -28,9 +29,10 @@ from .options import (
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Seed of the random instances (--regenerate).")
 @click.option("--output", type=output_path(".json"),
               help="Write the relations document (the shipped format) to this JSON file.")
+@force_option()
 @executor_options("evaluations of --regenerate (one task per prime)")
 @format_option("table", "json")
-def relations(order, regenerate, seed, output, workers, scheduler, fmt):
+def relations(order, regenerate, seed, output, force, workers, scheduler, fmt):
     """Relations among F(t), t in T_0, valid for every symmetric birealisation, per order.
 
     For each order: the number of T_0 trees, of relations and of symmetric order conditions, the
@@ -54,7 +56,7 @@ def relations(order, regenerate, seed, output, workers, scheduler, fmt):
 
         document = data.to_json()
         document["method"]["regenerate"] += f" --output {output}"
-        write_output(output, json_text(with_provenance(document), indent=1) + "\n", "--output")
+        write_output(output, json_text(with_provenance(document), indent=1) + "\n", "--output", force)
     if fmt == "json":
         emit_json(doc)
         return

@@ -6,9 +6,21 @@ import click
 
 from rkhp.base import bounds
 
-from .options import SEED, console, emit_json, executor_options, format_option, integer, output_path, progress, real
+from .options import (
+    SEED,
+    console,
+    emit_json,
+    executor_options,
+    force_option,
+    format_option,
+    integer,
+    output_path,
+    progress,
+    real,
+)
 from .render import print_table
 from .show_cmd import print_array
+from .terminal import plain
 
 
 def _class_of(degenerate: bool, symmetric: bool) -> str:
@@ -27,8 +39,8 @@ def _class_of(degenerate: bool, symmetric: bool) -> str:
 @click.option("--restarts", type=integer(1, bounds.MAX_RESTARTS, "N"), default=50, show_default=True,
               help="Restart budget per order (random starts).")
 @click.option("--time-limit", type=real(0.0, bounds.MAX_SECONDS, low_open=True, name="SECONDS"), default=None,
-              help="Seconds allowed to the restarts of each order and to the proof (default: "
-                   "no limit for restarts, 60 s for --prove).")
+              help="Seconds allowed to the whole search, every order, restarts (checked inside each "
+                   "one) and proof included (default: no limit for restarts, 60 s for --prove).")
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Seed: restart k of order N "
               "starts from numpy default_rng([seed, S, N, k]).")
 @executor_options("restarts")
@@ -38,18 +50,25 @@ def _class_of(degenerate: bool, symmetric: bool) -> str:
               help="Digits D of the mpmath polishing and verification (20..500).")
 @click.option("--prove", is_flag=True,
               help="When an order is not reached, try to prove that no tableau exists (Groebner).")
+@click.option("--prove-engine", type=click.Choice(["auto", "singular", "sympy"]), default="auto",
+              show_default=True, help="Groebner engine of --prove: Singular when installed (with "
+              "checked cofactors), else sympy.")
+@click.option("--certificate", type=output_path(".json"), default=None,
+              help="With --prove: write the certificate 1 = sum g_i f_i to this .json file.")
 @click.option("--save", type=output_path(".toml", ".json"), default=None,
               help="Write the tableau found to a .toml or .json file (loadable by verify).")
+@force_option()
 @format_option("table", "json")
 def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit, seed, workers,
-           scheduler, optimize, digits, prove, save, fmt):
+           scheduler, optimize, digits, prove, prove_engine, certificate, save, force, fmt):
     """Search Runge–Kutta tableaux meeting the RKHP order conditions (paper §5).
 
     Solves the order conditions over T (general), T_0 (--degenerate) or the symmetric class from
     seeded random starts (scipy least squares, exact Jacobian), polishes each success by Newton's
     method in mpmath to D digits, recognises closed forms (kept only when exactly verified) and
     verifies the result with the verify engine. --prove looks for a Groebner certificate that
-    the first order not reached is impossible.
+    the first order not reached is impossible (Singular when installed: exact cofactors of
+    1 = sum g_i f_i, checked; else sympy).
     """
     from rkhp.base.executors import open_executor
     from rkhp.search.driver import SearchOptions
@@ -61,8 +80,10 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
     if optimize and prove and order is not None:
         raise click.UsageError("--optimize needs --order N to be reached while --prove needs it "
                                "to fail: give one of them")
+    if certificate and not prove:
+        raise click.UsageError("--certificate needs --prove")
     options = SearchOptions(restarts=restarts, seed=seed, time_limit=time_limit,
-                            digits=digits, optimize=optimize, prove=prove)
+                            digits=digits, optimize=optimize, prove=prove, proof_engine=prove_engine)
     options.check()
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         tasks: dict[int, int] = {}
@@ -72,13 +93,23 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
                 tasks[n] = bar.add_task(f"order {n}", total=total)
             bar.update(tasks[n], completed=done)
 
-        result = run_search(stages, order, cls, implicit, options, on_progress, executor)
-    if save and result.found is not None:
-        _save(result, save)
+        def on_proof(n, step, elapsed, limit):
+            if "proof" not in tasks:
+                tasks["proof"] = bar.add_task("proof", total=round(limit))
+            bar.update(tasks["proof"], completed=min(round(elapsed), round(limit)),
+                       description=f"proof, order {n}, seconds: {step}")
+
+        result = run_search(stages, order, cls, implicit, options, on_progress, executor, on_proof)
+    if save and result.found is not None and not result.interrupted:
+        _save(result, save, force)
+    if certificate and result.proof is not None and result.proof.certificate is not None:
+        from rkhp.search.certificates import save_certificate
+
+        save_certificate(result.proof.certificate, certificate, force)
     if fmt == "json":
         emit_json(result.to_json())
     else:
-        _render(result, save)
+        _render(result, save, certificate)
     if result.interrupted:
         click.echo("rkhp: interrupted: the best found so far is shown", err=True)
         raise click.exceptions.Exit(130)
@@ -91,12 +122,12 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
                           + (f"; nothing was saved to {save}" if save else ""))
 
 
-def _save(result, path) -> None:
+def _save(result, path, force) -> None:
     from rkhp.tableaux.files import save_tableau
 
     from .options import run_provenance
 
-    save_tableau(result.tableau_to_save(), path, run_provenance())
+    save_tableau(result.tableau_to_save(), path, run_provenance(), force)
 
 
 SHOWN_DIGITS = 12
@@ -113,7 +144,7 @@ def _count(n: int, one: str, many: str | None = None) -> str:
     return f"{n} {one if n == 1 else many or one + 's'}"
 
 
-def _render(result, save) -> None:
+def _render(result, save, certificate=None) -> None:
     from rich.table import Table
 
     con = console()
@@ -142,7 +173,7 @@ def _render(result, save) -> None:
                            for cls, n in ver.orders.items())
         con.print(f"verified orders: {orders}; decided by: {data['decided_by']}")
         if save:
-            con.print(f"saved to {save}")
+            con.print(f"saved to {plain(save)}")
     if result.optimisation is not None:
         opt = result.optimisation
         rows = Table("method", "principal error norm", title="Error norms at order N+1")
@@ -160,8 +191,16 @@ def _render(result, save) -> None:
     if result.proof is not None:
         con.print(f"proof (order {result.proof_order}): {data['proof']['result']}")
         con.print(f"  method: {data['proof']['method']}")
-        if result.proof.proved:
+        proof = result.proof
+        con.print(f"  unknowns: {', '.join(proof.variables)} ({proof.substitution})")
+        if proof.modular and not proof.proved:
+            con.print(f"  modular evidence: {proof.modular_text()}")
+        if proof.proved:
             con.print("  certificate: the ideal generated by")
-            for p in result.proof.polynomials:
+            for p in proof.polynomials:
                 con.print(f"    {p}")
             con.print("  has reduced Groebner basis [1]")
+            if proof.certificate is not None:
+                where = f"saved to {certificate}" if certificate else "--certificate FILE saves them"
+                con.print(f"  cofactors g_i with 1 = sum g_i f_i: {proof.check.terms} terms, checked "
+                          f"exactly ({where})")

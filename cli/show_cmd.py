@@ -16,8 +16,14 @@ _CLASS_NAMES = {"general": "general", "degenerate": "degenerate", "symmetric": "
 def show(tableau, fmt):
     """Show a tableau: the Butcher array c | A / b (exact entries and decimals), its source and
     the orders it claims (check them with `rkhp verify`)."""
+    from rkhp.tableaux.compositions import is_composition_name
     from rkhp.tableaux.files import load_tableau
 
+    if is_composition_name(tableau):
+        from .composition_views import show_composition
+
+        show_composition(tableau, fmt)
+        return
     tab = load_tableau(tableau)
     if fmt == "json":
         emit_json(tableau_json(tab))
@@ -62,16 +68,16 @@ def claims_text(tab) -> str:
 
 
 def _render(tab) -> None:
-    from rich.markup import escape
-
     from rkhp.tableaux.tableau import entry_decimal, entry_text
 
+    from .terminal import plain
+
     out = console()
-    out.print(f"[bold]{escape(tab.name)}[/bold]: {tab.stages} stages, {tab.kind}")
+    out.print(f"[bold]{plain(tab.name)}[/bold]: {tab.stages} stages, {tab.kind}")
     for label, value in (("aliases", ", ".join(tab.aliases)), ("source", tab.source),
                          ("reference", tab.reference), ("notes", tab.notes)):
         if value:
-            out.print(f"{label}: {escape(value)}")
+            out.print(f"{label}: {plain(value)}")
     out.print(f"claimed orders: {claims_text(tab)} (check them with `rkhp verify`)")
     import mpmath
 

@@ -14,16 +14,17 @@ from .options import (
     SEED,
     STEPS,
     T_FINAL,
-    Checked,
     compile_notice,
     console,
     emit_json,
     emit_table,
     executor_options,
+    force_option,
     format_option,
     integer,
     integers,
     names,
+    output_path,
     parse_x0,
     progress,
     reals,
@@ -31,11 +32,12 @@ from .options import (
     x0_option,
 )
 from .render import compact_table
+from .terminal import plain, stop_interrupted
 
 #: the steps of one run, listed
 STEP_LIST = integers(1, bounds.MAX_STEPS)
 #: a plot to write (checked before the study)
-PLOT_FILE = Checked("FILE", lambda text, label: str(check_plot_path(text, label)))
+PLOT_FILE = output_path(check=check_plot_path)
 
 METHODS_HELP = (METHOD_HELP + " Repeat or separate by commas. Default: euler, paper-two-stage, "
                 "paper-three-stage, rk4.")
@@ -101,9 +103,10 @@ def _f(x, digits=2) -> str:
 @click.option("--refinements", type=integer(0, bounds.MAX_REFINEMENTS, "K"),
               help="Halvings of h after the coarsest step (default 6, from N = 20).")
 @click.option("--plot", type=PLOT_FILE, help="Log-log plot of error against h (.png, .svg, .pdf).")
+@force_option()
 @executor_options("runs")
 @format_option("table", "json", "csv", "latex")
-def converge(system, methods, x0, realisation, t_final, steps, refinements, plot, workers, scheduler, fmt):
+def converge(system, methods, x0, realisation, t_final, steps, refinements, plot, force, workers, scheduler, fmt):
     """Empirical convergence: global error at T against h, observed and expected orders, verdicts."""
     from rkhp.base.executors import open_executor
     from rkhp.studies.converge import converge as run
@@ -116,16 +119,18 @@ def converge(system, methods, x0, realisation, t_final, steps, refinements, plot
         task = bar.add_task("converge", total=len(resolved) * len(counts))
         study = run(sys_, resolved, counts, t_final, executor=executor,
                     on_run=lambda done, _: bar.update(task, completed=done))
-    if plot:
+    if plot and not study.interrupted:
         from rkhp.studies.plots import plot_convergence
 
-        plot_convergence(study, plot, run_provenance())
+        plot_convergence(study, plot, run_provenance(), force)
     if fmt == "json":
         emit_json(study.to_json())
     elif fmt in ("csv", "latex"):
         _emit_converge(study, fmt)
     else:
-        _render_converge(study, plot)
+        _render_converge(study, plot if not study.interrupted else None)
+    if study.interrupted:
+        stop_interrupted()
 
 
 SHORT_ROLES = {"pre-asymptotic": "pre", "round-off floor": "floor", "order drift": "drift",
@@ -152,8 +157,8 @@ def _converge_cells(study, m, i, r) -> list[str]:
 
 
 def _verdict_basis(study, m) -> str:
-    kind = {"rkhp": study.condition_class, "taylor": "THP", "implicit-midpoint": "midpoint rule"}.get(
-        m.kind, "general")
+    kind = {"rkhp": study.condition_class, "taylor": "THP", "implicit-midpoint": "midpoint rule",
+            "composition": f"composition, {study.condition_class}"}.get(m.kind, "general")
     basis = f"{kind} order"
     if m.realisation_bound is not None:
         basis += f", at most {m.realisation_bound} with {study.realisation}"
@@ -190,23 +195,25 @@ def _emit_converge(study, fmt) -> None:
 
 
 def _render_converge(study, plot) -> None:
+    from rkhp.studies.fit import drift
+
     out = console()
     ref = study.reference
-    out.print(f"[bold]{study.system}[/] ({study.realisation} realisation, "
+    out.print(f"[bold]{plain(study.system)}[/] ({plain(study.realisation)} realisation, "
               f"{'degenerate' if study.degenerate else 'not degenerate'}), x0 = {_vector(study.x0)}, "
               f"T = {study.t_final:g}")
     out.print(f"reference: {ref.kind}, estimated error {ref.error_estimate:.1e} ({ref.detail}); "
               f"errors <= {ref.floor:.1e} are not reported as measurements")
     for m in study.methods:
-        table = compact_table(f"{m.method} ({m.kind})")
+        table = compact_table(f"{plain(m.method)} ({m.kind})")
         for col in ("h", "steps", "error", "order", "Casimir", "energy", "Newton", "s", "fit"):
             table.add_column(col, justify="right" if col != "fit" else "left", no_wrap=True)
         for i, r in enumerate(m.rows):
-            table.add_row(*_converge_cells(study, m, i, r))
+            table.add_row(*map(plain, _converge_cells(study, m, i, r)))
         out.print(table)
         failed = [r.status for r in m.rows if r.status != "ok"]
         if failed:
-            out.print(f"  failed runs: {'; '.join(failed)}")
+            out.print(f"  failed runs: {plain('; '.join(failed))}")
     out.print("columns: global error at T (2-norm), local order, max Casimir and energy errors over the run, "
               "Newton iterations mean/max, run seconds (compile apart), role in the fit (pre = pre-asymptotic, "
               "floor = round-off floor, drift = order drift, <ref = below the reference's accuracy)")
@@ -214,11 +221,15 @@ def _render_converge(study, plot) -> None:
     for m in study.methods:
         left = ", ".join(f"row {i} {why}" for i, why in m.fit.excluded) or "none"
         basis = _verdict_basis(study, m)
-        out.print(f"{m.method}: observed order {_f(m.observed_order)} over rows "
+        moving = drift(m.fit) if m.verdict == "inconclusive" and m.observed_order is not None else None
+        trend = "" if moving is None else (
+            f" (local orders {moving} steadily over the fit: {_f(m.fit.local_orders[m.fit.fit_rows[1]])} to "
+            f"{_f(m.fit.local_orders[m.fit.fit_rows[-1]])}, not yet asymptotic)")
+        out.print(f"{plain(m.method)}: observed order {_f(m.observed_order)} over rows "
                   f"{','.join(map(str, m.fit.fit_rows)) or '—'} (left out: {left}); expected {m.expected_order} "
-                  f"({basis}): {m.verdict}")
+                  f"({plain(basis)}): {m.verdict}{trend}")
     if plot:
-        out.print(f"plot written to {plot} (its data: {data_path(plot)})")
+        out.print(f"plot written to {plain(plot)} (its data: {plain(data_path(plot))})")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -243,10 +254,11 @@ def _render_converge(study, plot) -> None:
               help="Time K initial conditions near x0 at once (per-trajectory times).")
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Seed of the ensemble's starts.")
 @click.option("--plot", type=PLOT_FILE, help="Log-log plot of time against error (.png, .svg, .pdf).")
+@force_option()
 @executor_options("curves (with --ensemble: the trajectories)")
 @format_option("table", "json", "csv", "latex")
 def bench(system, methods, x0, realisation, peers, t_final, steps, tolerances, repeats, ensemble, seed, plot,
-          workers, scheduler, fmt):
+          force, workers, scheduler, fmt):
     """Work-precision: wall time (median of repeats) against error, methods and peers."""
     from rkhp.base.executors import open_executor
     from rkhp.studies import bench as B
@@ -261,16 +273,18 @@ def bench(system, methods, x0, realisation, peers, t_final, steps, tolerances, r
         task = bar.add_task("bench", total=len(resolved) + len(peer_list))
         study = B.bench(sys_, resolved, peer_list, step_list, tol_list, t_final, repeats, ensemble, seed,
                         on_curve=lambda done, _: bar.update(task, completed=done), executor=executor)
-    if plot:
+    if plot and not study.interrupted:
         from rkhp.studies.plots import plot_work_precision
 
-        plot_work_precision(study, plot, run_provenance())
+        plot_work_precision(study, plot, run_provenance(), force)
     if fmt == "json":
         emit_json(study.to_json())
     elif fmt in ("csv", "latex"):
         _emit_bench(study, fmt)
     else:
-        _render_bench(study, plot)
+        _render_bench(study, plot if not study.interrupted else None)
+    if study.interrupted:
+        stop_interrupted("the points finished so far are shown")
 
 
 def _bench_cells(study, p) -> list[str]:
@@ -315,28 +329,28 @@ def _render_bench(study, plot) -> None:
     ref = study.reference
     mode = (f"ensemble of {study.ensemble} starts, seconds per trajectory" if study.ensemble
             else "one trajectory")
-    out.print(f"[bold]{study.system}[/] ({study.realisation} realisation), x0 = {_vector(study.x0)}, "
+    out.print(f"[bold]{plain(study.system)}[/] ({plain(study.realisation)} realisation), x0 = {_vector(study.x0)}, "
               f"T = {study.t_final:g}, {mode}; "
               f"median of {study.repeats} repeats")
     out.print(f"reference: {ref.kind}, estimated error {ref.error_estimate:.1e}")
     for c in study.curves:
         extra = f", compile {c.compile_seconds:.2f} s apart" if c.kind == "rkhp" else ""
         timed = f", {c.trajectories} trajectories timed" if study.ensemble else ""
-        out.print(f"[bold]{c.method}[/] ({c.kind}{extra}{timed})")
+        out.print(f"[bold]{plain(c.method)}[/] ({c.kind}{extra}{timed})")
         table = compact_table(None)
         for col in ("steps" if c.kind != "scipy" else "rtol", "error", "seconds", "f evals", "status"):
             table.add_column(col, justify="right")
         for p in c.points:
-            table.add_row(*_bench_cells(study, p))
+            table.add_row(*map(plain, _bench_cells(study, p)))
         out.print(table)
     out.print("[bold]cheapest[/]")
     for c in study.cheapest:
         if c.method is None:
             out.print(f"error <= {c.target:.0e}: no method reached it")
         else:
-            out.print(f"error <= {c.target:.0e}: {c.method} ({c.setting}), {c.seconds:.2e} s")
+            out.print(f"error <= {c.target:.0e}: {plain(c.method)} ({plain(c.setting)}), {c.seconds:.2e} s")
     if plot:
-        out.print(f"plot written to {plot} (its data: {data_path(plot)})")
+        out.print(f"plot written to {plain(plot)} (its data: {plain(data_path(plot))})")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -352,10 +366,11 @@ def _render_bench(study, plot) -> None:
               help="Part (a) sweeps h = T/N upward from N = this down to 1.")
 @click.option("--round-off-steps", type=STEP_LIST, help="Numbers of steps of part (d) over T (default 32 to 10^5).")
 @click.option("--plot", type=PLOT_FILE, help="Plot of the long run's drift (.png, .svg, .pdf).")
+@force_option()
 @executor_options("runs of each part")
 @format_option("table", "json", "csv", "latex")
 def stress(system, methods, x0, realisation, t_final, long_steps, long_h, sweep_coarsest, round_off_steps, plot,
-           workers, scheduler, fmt):
+           force, workers, scheduler, fmt):
     """Stress tests: (a) step sweep to Newton failure, (b) long-run drift, (c) near-singular starts,
     (d) round-off floor; each part ends with a verdict."""
     from rkhp.base.executors import open_executor
@@ -370,16 +385,18 @@ def stress(system, methods, x0, realisation, t_final, long_steps, long_h, sweep_
         task = bar.add_task("stress", total=4)
         study = S.stress(sys_, resolved, t_final, long_steps, long_h, sweep_coarsest, ro,
                          on_part=lambda *_: bar.advance(task), executor=executor)
-    if plot:
+    if plot and not study.interrupted:
         from rkhp.studies.plots import plot_stress
 
-        plot_stress(study, plot, run_provenance())
+        plot_stress(study, plot, run_provenance(), force)
     if fmt == "json":
         emit_json(study.to_json())
     elif fmt in ("csv", "latex"):
         _emit_stress(study, fmt)
     else:
-        _render_stress(study, plot)
+        _render_stress(study, plot if not study.interrupted else None)
+    if study.interrupted:
+        stop_interrupted("the parts finished so far are shown")
 
 
 SWEEP_COLUMNS = ("h", "steps", "ok", "Newton max", "rel. error", "rel. energy err")
@@ -425,23 +442,23 @@ STRESS_CSV = ("part", "method", "h", "steps", "start", "quantity", "value")
 
 
 def _stress_rows(study, verdicts):
-    """The long-form rows of `stress --format csv`."""
+    """The long-form rows of `stress --format csv` (a part an interrupt left out: its verdict only)."""
     for s in study.sweep:
         for r in s.rows:
             for key in ("ok", "newton_max", "relative_error", "relative_energy_error", "status"):
                 yield ("a", s.method, r.h, r.steps, None, key, getattr(r, key))
     lr = study.long_run
-    for r in (*lr.runs, lr.peer):
+    for r in () if lr is None else (*lr.runs, lr.peer):
         values = {"casimir_max": r.casimir_max, "energy_first_window": r.energy_windows[0],
                   "energy_last_window": r.energy_windows[-1], "energy_growth": r.energy_growth,
                   "modified_energy_max": None if r.modified is None else r.modified.max,
                   "seconds": r.seconds, "status": r.status}
         for key, value in values.items():
             yield ("b", r.method, lr.h, lr.steps, None, key, value)
-    for r in study.near_singular.runs:
+    for r in () if study.near_singular is None else study.near_singular.runs:
         for key in ("status", "min_component", "casimir_error", "kept"):
             yield ("c", r.method, None, None, r.first_species, key, getattr(r, key))
-    for m in study.round_off.studies:
+    for m in () if study.round_off is None else study.round_off.studies:
         for r in m.rows:
             for key in ("error", "energy_error", "status"):
                 yield ("d", m.method, r.h, r.steps, None, key, getattr(r, key))
@@ -460,69 +477,85 @@ def _emit_stress(study, fmt) -> None:
     tables = [booktabs(("method", *SWEEP_COLUMNS), cells,
                        f"(a) Step-size sweep on {where}, T = {study.t_final:g}: {verdicts['a']}", "lrrlrrr", groups)]
     lr = study.long_run
-    tables.append(booktabs(LONG_RUN_COLUMNS, [_long_run_cells(r) for r in (*lr.runs, lr.peer)],
-                           f"(b) Long run on {where}, {lr.steps} steps of h = {lr.h:g}, max error per window "
-                           f"({lr.windows} windows): {verdicts['b']}", "lrrrrrr"))
-    if study.near_singular.applicable:
+    if lr is not None:
+        tables.append(booktabs(LONG_RUN_COLUMNS, [_long_run_cells(r) for r in (*lr.runs, lr.peer)],
+                               f"(b) Long run on {where}, {lr.steps} steps of h = {lr.h:g}, max error per window "
+                               f"({lr.windows} windows): {verdicts['b']}", "lrrrrrr"))
+    if study.near_singular is not None and study.near_singular.applicable:
         tables.append(booktabs(SINGULAR_COLUMNS, [_singular_cells(r) for r in study.near_singular.runs],
                                f"(c) Near-singular starts on {where}: {verdicts['c']}", "lrlrrl"))
     ro = study.round_off
-    tables.append(booktabs(("steps", *(m.method for m in ro.studies)),
-                           [_round_off_cells(ro, i, r) for i, r in enumerate(ro.studies[0].rows)],
-                           f"(d) Tiny steps on {where}, T = {ro.t_final:g}: error at T | max energy error "
-                           f"(pre = pre-asymptotic, floor = round-off floor, drift = order drift): {verdicts['d']}",
-                           "r" * (1 + len(ro.studies))))
+    if ro is not None:
+        tables.append(booktabs(("steps", *(m.method for m in ro.studies)),
+                               [_round_off_cells(ro, i, r) for i, r in enumerate(ro.studies[0].rows)],
+                               f"(d) Tiny steps on {where}, T = {ro.t_final:g}: error at T | max energy error "
+                               f"(pre = pre-asymptotic, floor = round-off floor, drift = order drift): {verdicts['d']}",
+                               "r" * (1 + len(ro.studies))))
     emit_table(fmt, STRESS_CSV, _stress_rows(study, verdicts), tables)
 
 
 def _render_stress(study, plot) -> None:
     out = console()
     verdicts = study.verdicts()
-    out.print(f"[bold]{study.system}[/] ({study.realisation} realisation), x0 = {_vector(study.x0)}, "
+    out.print(f"[bold]{plain(study.system)}[/] ({plain(study.realisation)} realisation), x0 = {_vector(study.x0)}, "
               f"T = {study.t_final:g}")
     out.print("[bold](a) step-size sweep[/]")
     for s in study.sweep:
-        table = compact_table(s.method)
+        table = compact_table(plain(s.method))
         for col in ("h", "steps", "ok", "Newton max", "rel. error", "rel. energy err"):
             table.add_column(col, justify="right")
         for r in s.rows:
-            table.add_row(*_sweep_cells(r))
+            table.add_row(*map(plain, _sweep_cells(r)))
         out.print(table)
     for s in study.sweep:
-        out.print(f"verdict (a): {s.verdict()}")
-    lr = study.long_run
+        out.print(f"verdict (a): {plain(s.verdict())}")
+    for part, name, render in ((study.long_run, "(b) long run", _render_long_run),
+                               (study.near_singular, "(c) near-singular starts", _render_near_singular),
+                               (study.round_off, "(d) tiny steps", _render_round_off)):
+        if part is None:
+            out.print(f"[bold]{name}[/]: not run (interrupted)")
+        else:
+            render(out, part, verdicts)
+    if plot:
+        out.print(f"plot written to {plain(plot)} (its data: {plain(data_path(plot))})")
+
+
+def _render_long_run(out, lr, verdicts) -> None:
     out.print(f"[bold](b) long run[/]: {lr.steps} steps of h = {lr.h:g}, max error per window ({lr.windows} windows)")
     table = compact_table(None)
     table.add_column("method", no_wrap=True)
     for col in ("Casimir max", "energy, 1st window", "last window", "growth", "modified energy max", "seconds"):
         table.add_column(col, justify="right")
     for r in (*lr.runs, lr.peer):
-        table.add_row(*_long_run_cells(r))
+        table.add_row(*map(plain, _long_run_cells(r)))
     out.print(table)
     for r in (*lr.runs, lr.peer):
         if r.status != "ok":
-            out.print(f"  {r.method}: {r.status}")
-    out.print(f"verdict (b): {verdicts['b']}")
+            out.print(f"  {plain(r.method)}: {plain(r.status)}")
+    out.print(f"verdict (b): {plain(verdicts['b'])}")
+
+
+def _render_near_singular(out, near_singular, verdicts) -> None:
     out.print("[bold](c) near-singular starts[/]")
-    if study.near_singular.applicable:
+    if near_singular.applicable:
         table = compact_table(None)
         for col in ("method", "x1(0)", "status", "min component", "Casimir err", "kept"):
             table.add_column(col)
-        for r in study.near_singular.runs:
-            table.add_row(*_singular_cells(r))
+        for r in near_singular.runs:
+            table.add_row(*map(plain, _singular_cells(r)))
         out.print(table)
-    out.print(f"verdict (c): {verdicts['c']}")
-    ro = study.round_off
+    out.print(f"verdict (c): {plain(verdicts['c'])}")
+
+
+def _render_round_off(out, ro, verdicts) -> None:
     out.print(f"[bold](d) tiny steps[/]: T = {ro.t_final:g}, reference {ro.reference_kind} "
               f"(errors <= {ro.reference_floor:.1e} not measured); error at T and max energy error")
     table = compact_table(None)
     table.add_column("steps", justify="right")
     for m in ro.studies:
-        table.add_column(m.method, justify="right")
+        table.add_column(plain(m.method), justify="right")
     for i, r in enumerate(ro.studies[0].rows):
-        table.add_row(*_round_off_cells(ro, i, r))
+        table.add_row(*map(plain, _round_off_cells(ro, i, r)))
     out.print(table)
     out.print("marks: pre = pre-asymptotic, floor = round-off floor, drift = order drift (left out of the fit)")
-    out.print(f"verdict (d): {verdicts['d']}")
-    if plot:
-        out.print(f"plot written to {plot} (its data: {data_path(plot)})")
+    out.print(f"verdict (d): {plain(verdicts['d'])}")

@@ -8,13 +8,13 @@ from rkhp.base import bounds
 
 from .options import (
     METHOD_HELP,
-    POSITIVE,
     SEED,
+    SIGNED,
     STEPS,
-    T_FINAL,
     compile_notice,
     console,
     emit_json,
+    force_option,
     format_option,
     integer,
     output_path,
@@ -24,6 +24,7 @@ from .options import (
     x0_option,
 )
 from .render import compact_table, print_table
+from .terminal import plain
 
 
 def realisation_option():
@@ -62,9 +63,9 @@ def systems(fmt):
     for col in ("name", "family", "n", "domain", "x0", "t_final", "Casimirs", "exact"):
         table.add_column(col, no_wrap=col in ("name", "family"))
     for r in rows:
-        table.add_row(r["name"], r["family"], str(r["dim"]), r["domain"],
+        table.add_row(plain(r["name"]), r["family"], str(r["dim"]), r["domain"],
                       ", ".join(f"{v:.4g}" for v in r["x0"]), _fmt(r["t_final"]),
-                      "; ".join(r["casimirs"]) or "-", "yes" if r["exact_solution"] else "no")
+                      plain("; ".join(r["casimirs"])) or "-", "yes" if r["exact_solution"] else "no")
     print_table(console(), table)
 
 
@@ -89,7 +90,7 @@ def check(system, realisation, samples, seed, fmt):
     else:
         from rich.table import Table
 
-        table = Table(title=f"{result.system} ({result.realisation}): {samples} samples, "
+        table = Table(title=f"{plain(result.system)} ({plain(result.realisation)}): {samples} samples, "
                             f"seed {seed}")
         table.add_column("axiom")
         table.add_column("max deviation", justify="right")
@@ -142,9 +143,10 @@ def integration_report(system, trajectory, method: str, h: float, steps: int) ->
 @click.argument("system")
 @click.option("--method", "method", required=True, metavar="METHOD", help=METHOD_HELP)
 @click.option("--steps", type=STEPS, default=None, help="Number of steps over [0, T].")
-@click.option("--h", "h", type=POSITIVE, default=None,
-              help="Step size; it must divide T (steps = T / h; docs/input.md).")
-@click.option("--t-final", type=T_FINAL, default=None, help="Final time T (default: the system's).")
+@click.option("--h", "h", type=SIGNED, default=None,
+              help="Step size; it must divide T (steps = T / h; docs/input.md); negative runs backwards.")
+@click.option("--t-final", type=SIGNED, default=None,
+              help="Final time T (default: the system's, negated for a negative --h); negative runs backwards.")
 @x0_option()
 @click.option("--modified", "modified_order", type=integer(1, name="N"), default=None, metavar="N",
               help="Also report max over the run of |H~_N(y_n) - H~_N(y_0)|, H~_N the method's modified "
@@ -156,14 +158,15 @@ def integration_report(system, trajectory, method: str, h: float, steps: int) ->
 @click.option("--every", type=integer(1, bounds.MAX_STEPS, "K"), default=None,
               help="With --output: keep every K-th state (and the last).")
 @click.option("--t-eval", "t_eval", type=reals(lambda x, label: x, "T1,T2,..."), default=None,
-              help="States at these times of [0, T], each one step of the method of size t - t_n from the "
+              help="States at these times between 0 and T, each one step of the method of size t - t_n from the "
                    "last grid point t_n (a Poisson map: on the leaf, of the method's order); with "
                    "--output, the file holds these states.")
 @click.option("--t-eval-count", type=integer(2, bounds.MAX_OUTPUT_TIMES, "N"), default=None,
               help="As --t-eval, at N equally spaced times from 0 to T (numpy's linspace).")
+@force_option()
 @format_option("table", "json")
 def integrate(system, method, steps, h, t_final, x0, modified_order, realisation, output, every, t_eval,
-              t_eval_count, fmt):
+              t_eval_count, force, fmt):
     """Integrate SYSTEM (built-in or spec file) with METHOD (docs/methods.md)."""
     from rkhp.base.errors import InputError, NumericalFailure
     from rkhp.integrators.methods import resolve_method, resolve_system
@@ -177,7 +180,10 @@ def integrate(system, method, steps, h, t_final, x0, modified_order, realisation
         raise InputError("--every thins the states written by --output (not those of --t-eval)")
     poisson = resolve_system(system, realisation, parse_x0(x0))
     chosen = resolve_method(method)
-    end = poisson.t_final if t_final is None else t_final
+    _warn_c(chosen)
+    end = t_final
+    if end is None:
+        end = -poisson.t_final if h is not None and h < 0 else poisson.t_final
     n, step = bounds.step_plan(end, steps, h)
     bounds.check_trajectory(n, poisson.dim)
     times = _output_times(t_eval, t_eval_count, end)
@@ -200,10 +206,10 @@ def integrate(system, method, steps, h, t_final, x0, modified_order, realisation
     if output is not None and times is None:
         from rkhp.integrators.trajectory import kept_rows
 
-        written = trajectory.write(output, every or 1, run_provenance())
+        written = trajectory.write(output, every or 1, run_provenance(), force=force)
         report["output"] = {"file": str(written), "rows": len(kept_rows(len(trajectory.states), every or 1))}
     elif output is not None and timed is not None:  # a failed run may reach none of the chosen times
-        report["output"] = {"file": str(timed.write(output, run_provenance())), "rows": len(timed.times)}
+        report["output"] = {"file": str(timed.write(output, run_provenance(), force)), "rows": len(timed.times)}
     if fmt == "json":
         emit_json(report)
     else:
@@ -258,6 +264,19 @@ def timed_report(system, timed) -> dict | None:
             "casimir_error": casimir, "exact_error": exact}
 
 
+def _warn_c(method) -> None:
+    """The warning `rkhp verify` gives for a given c that differs from A's row sums, on stderr: the
+    integrators, like the order conditions, use c = A 1 and never the file's c."""
+    tableau = method.tableau if method.kind in ("rkhp", "classical") else None
+    mismatch = tableau.c_mismatch() if tableau is not None else []
+    if mismatch:
+        from .terminal import printable
+
+        stages = ", ".join(str(k + 1) for k, _ in mismatch)
+        click.echo(printable(f"rkhp: warning: {tableau.name}: the given c of stage {stages} (counting from 1) "
+                             "differs from the row sum of A; the integrator uses the row sums"), err=True)
+
+
 def _modified_rows(r: dict) -> list[tuple[str, str]]:
     if "modified_energy_error" not in r:
         return []
@@ -269,7 +288,7 @@ def _modified_rows(r: dict) -> list[tuple[str, str]]:
 def _print_integration(r: dict) -> None:
     from rich.table import Table
 
-    table = Table(title=f"{r['system']} ({r['realisation']}) with {r['method']}: "
+    table = Table(title=f"{plain(r['system'])} ({plain(r['realisation'])}) with {plain(r['method'])}: "
                         f"{r['steps']} steps of h = {r['h']:.6g}")
     table.add_column("quantity")
     table.add_column("value", justify="right")
@@ -280,7 +299,7 @@ def _print_integration(r: dict) -> None:
             ("energy error", _fmt(r["energy_error"], 3)),
             *_modified_rows(r),
             ("Newton iterations (mean, max)", f"{r['newton_mean']:.2f}, {r['newton_max']}"),
-            ("status", r["status"]),
+            ("status", plain(r["status"])),
             ("compile seconds", f"{r['compile_seconds']:.3f}"),
             ("run seconds", f"{r['run_seconds']:.4f}")]
     if r.get("output") is not None:

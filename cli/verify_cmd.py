@@ -25,10 +25,17 @@ _CLASS_SETS = {"general": "general (T)", "degenerate": "degenerate (T_0)"}
 @format_option("table", "json", "csv", "latex")
 def verify(tableau, max_order, precision, show, fmt):
     """Verify the order of a tableau over T (general) and T_0 (degenerate), exactly or at a
-    stated tolerance, with the failing trees and the principal error (paper §5)."""
+    stated tolerance, with the failing trees and the principal error (paper §5); or the order and
+    symmetry of a composition (docs/compositions.md)."""
+    from rkhp.tableaux.compositions import is_composition_name
     from rkhp.tableaux.files import load_tableau
     from rkhp.tableaux.verification import verify as run_verify
 
+    if is_composition_name(tableau):
+        from .composition_views import verify_composition
+
+        verify_composition(tableau, fmt)
+        return
     tab = load_tableau(tableau)
     with progress(fmt != "json") as bar:
         task = bar.add_task(f"verifying {tab.name}", total=None)
@@ -84,13 +91,14 @@ def fail_on_overstated(results) -> None:
 
 
 def _render(result, tab, show: int) -> None:
-    from rich.markup import escape
     from rich.table import Table
 
+    from .terminal import plain
+
     out = console()
-    out.print(f"[bold]{escape(result.name)}[/bold]: {result.stages} stages, {result.kind}"
-              + (f" — {escape(tab.reference)}" if tab.reference else ""))
-    out.print(f"precision: {result.precision}; {escape(result.tolerance_rule)}")
+    out.print(f"[bold]{plain(result.name)}[/bold]: {result.stages} stages, {result.kind}"
+              + (f" — {plain(tab.reference)}" if tab.reference else ""))
+    out.print(f"precision: {result.precision}; {plain(result.tolerance_rule)}")
     for stage, diff in result.c_mismatch:
         out.print(f"[yellow]warning:[/yellow] the given c of stage {stage + 1} (counting from 1) "
                   f"differs from the row sum of A by {diff:.3g}; the row sums are used")
@@ -98,9 +106,7 @@ def _render(result, tab, show: int) -> None:
     for col in ORDER_COLUMNS:
         table.add_column(col, justify="left" if col in ("class", "claimed") else "right")
     for cls, order in result.orders.items():
-        cells = _order_cells(result, cls, order)
-        cells[3] = escape(cells[3])
-        table.add_row(*cells)
+        table.add_row(*map(plain, _order_cells(result, cls, order)))
     print_table(out, table)
     for cls, failures in result.failing.items():
         if not len(failures):
@@ -113,9 +119,9 @@ def _render(result, tab, show: int) -> None:
         if exact:
             t.add_column("exact")
         for k, f in enumerate(failures[:show]):
-            row = [escape(f.label), f"{f.residual:.6e}"]
+            row = [plain(f.label), f"{f.residual:.6e}"]
             if exact:
-                row.append(escape(_exact_cell(exact[k])))
+                row.append(plain(_exact_cell(exact[k])))
             t.add_row(*row)
         if len(failures) > show:
             t.caption = f"... and {len(failures) - show} more (--show N, or --format json)"
@@ -157,7 +163,8 @@ def _exact_cell(text: str) -> str:
 @format_option("table", "json")
 @click.argument("name", required=False, metavar="")
 def tables(precision, fmt, name):
-    """List the built-in tableaux with stages, kind, verified and claimed orders."""
+    """List the built-in tableaux with stages, kind, verified and claimed orders, and the built-in
+    compositions with their orders."""
     if name is not None:  # one tableau is `rkhp show`'s (issue 15: `rkhp tables rk4` said only "extra argument")
         from rkhp.base.errors import InputError
 
@@ -178,11 +185,21 @@ def tables(precision, fmt, name):
             result = run_verify(tab, precision=chosen)
             rows.append((tab, result))
             bar.advance(task)
+    from .composition_views import composition_rows, render_composition_table
+
+    compositions = composition_rows()
     if fmt == "json":
-        emit_json({"tables": [tables_row(tab, r) for tab, r in rows]})
+        emit_json({"tables": [tables_row(tab, r) for tab, r in rows],
+                   "compositions": [c.to_json() for c in compositions]})
     else:
         _render_tables(rows, precision)
+        render_composition_table(compositions)
     fail_on_overstated([r for _, r in rows])
+    bad = [c.composition.name for c in compositions if c.claim == "overstated"]
+    if bad:
+        from rkhp.base.errors import CheckFailed
+
+        raise CheckFailed(f"claimed order overstated: {', '.join(bad)}")
 
 
 _CLASSES = ("general", "degenerate", "symmetric")

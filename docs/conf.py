@@ -15,7 +15,7 @@ copyright = "the rkhp authors"
 extensions = [
     "myst_parser",
     "sphinx.ext.autodoc",
-    "sphinx.ext.mathjax",
+    "mathml",
     "sphinx_click",
     "apigen",
     "docstrings",
@@ -28,6 +28,9 @@ rkhp_run_at_build = ["tutorials/convergence-study", "implicit"]
 source_suffix = {".md": "markdown"}
 root_doc = "index"
 exclude_patterns = ["_build", "_generated"]
+
+# Formulas as MathML written at build time (_ext/mathml.py): rendered offline, no MathJax.
+html_math_renderer = "mathml"
 
 # MyST: $...$ and $$...$$ math, anchors for headings down to ### (links such as theory.md#4-...).
 myst_enable_extensions = ["dollarmath", "colon_fence"]

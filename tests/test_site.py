@@ -107,3 +107,34 @@ def test_cli_reference_documents_every_command(site):
     ids = parse(site / "reference" / "cli.html").ids
     missing = [name for name in COMMANDS if f"rkhp-{name}" not in ids]
     assert not missing, f"commands missing from the CLI reference: {missing}"
+
+
+@pytest.mark.slow
+def test_formulas_are_rendered_offline(site):
+    """Every formula is MathML written at build time (docs/_ext/mathml.py): the theory page shows
+    rendered mathematics, and no page loads a script from elsewhere (MathJax from a CDN) or keeps
+    raw LaTeX delimiters."""
+    theory = (site / "theory.html").read_text(encoding="utf-8")
+    assert theory.count("<math") > 100
+    for path in site.rglob("*.html"):
+        page = parse(path)
+        remote = [link for link in page.links if urlsplit(link).scheme in ("http", "https")
+                  and link.endswith(".js")]
+        assert not remote, f"{path.relative_to(site)} loads {remote}"
+        assert not [link for link in page.links if "mathjax" in link.lower()], f"{path.relative_to(site)} loads MathJax"
+        text = path.read_text(encoding="utf-8")
+        assert '<span class="math' not in text, f"{path.relative_to(site)} keeps raw LaTeX for a script"
+
+
+def test_every_formula_of_the_pages_converts():
+    """The converter of the build reads every $...$ and $$...$$ formula of the pages (fast: no build)."""
+    converter = pytest.importorskip("latex2mathml.converter", reason="the docs extra")
+    formulas = []
+    for path in sorted((ROOT / "docs").rglob("*.md")):
+        text = re.sub(r"```.*?```", "", path.read_text(encoding="utf-8"), flags=re.S)
+        text = re.sub(r"`[^`\n]*`", "", text)
+        formulas += [(path.name, m.group(1) or m.group(2)) for m in
+                     re.finditer(r"\$\$(.+?)\$\$|(?<![\\$])\$([^$\n]+?)\$", text, flags=re.S)]
+    assert len(formulas) > 1000
+    bad = [(name, tex[:60]) for name, tex in formulas if "<math" not in converter.convert(tex)]
+    assert not bad, bad

@@ -11,6 +11,7 @@ it before importing anything heavy.
 from __future__ import annotations
 
 import math
+import numbers
 import os
 import re
 import stat
@@ -110,6 +111,14 @@ def positive(value, what: str) -> float:
     return number(value, what, 0.0, low_open=True)
 
 
+def nonzero(value, what: str) -> float:
+    """A finite, non-zero number (a signed step size or time: negative runs backwards)."""
+    x = number(value, what)
+    if x == 0.0:
+        raise InputError(f"{what} must be non-zero, got 0")
+    return x
+
+
 def seed(value, what: str = "seed") -> int:
     """A seed: an integer from 0 to MAX_SEED."""
     return integer(value, what, 0, MAX_SEED)
@@ -130,10 +139,14 @@ def parse_list(text: str, what: str, convert) -> tuple:
     return tuple(convert(t) for t in items if t)
 
 
+MAX_INT_DIGITS = 30
+"""Most decimal digits of an integer read from text, a flag or a document (TOML and JSON alike)."""
+
+
 def parse_int(text: str, what: str) -> int:
-    """An integer written in decimal (at most 30 digits, so that no bignum is ever parsed)."""
+    """An integer written in decimal (at most MAX_INT_DIGITS digits, so that no bignum is ever parsed)."""
     s = text.strip()
-    if not re.fullmatch(r"[+-]?[0-9]{1,30}", s):
+    if not re.fullmatch(rf"[+-]?[0-9]{{1,{MAX_INT_DIGITS}}}", s):
         raise InputError(f"{what}: {_shown(s)} is not a valid integer")
     return int(s)
 
@@ -156,12 +169,15 @@ def parse_float(text: str, what: str) -> float:
 def steps_for_h(t_final: float, h: float) -> int:
     """The number of steps N = T/h when h divides T, else InputError.
 
-    h divides T when T/h is within DIVIDES_TOLERANCE (relative) of an integer N >= 1: the run
-    then reaches t = N h = T up to rounding. Otherwise it is refused, naming the nearest step
-    sizes that divide T (never a run that stops short of T or overshoots it).
+    T and h are non-zero and of one sign (negative: a backward run). h divides T when T/h is
+    within DIVIDES_TOLERANCE (relative) of an integer N >= 1: the run then reaches t = N h = T up
+    to rounding. Otherwise it is refused, naming the nearest step sizes that divide T (never a run
+    that stops short of T or overshoots it).
     """
-    t_final = positive(t_final, "T (--t-final)")
-    h = positive(h, "--h")
+    t_final = nonzero(t_final, "T (--t-final)")
+    h = nonzero(h, "--h")
+    if (t_final > 0) != (h > 0):
+        raise InputError(f"--h {h:g} and T = {t_final:g} have opposite signs: a run goes from 0 to T")
     ratio = t_final / h
     if ratio > MAX_STEPS:
         raise InputError(f"--h {h:g} over T = {t_final:g} means {ratio:.3g} steps; at most {MAX_STEPS}")
@@ -175,14 +191,40 @@ def steps_for_h(t_final: float, h: float) -> int:
 
 
 def step_plan(t_final, steps: int | None, h: float | None) -> tuple[int, float]:
-    """(N, h) from exactly one of --steps N (h = T/N) and --h (N = T/h, h must divide T)."""
+    """(N, h) from exactly one of --steps N (h = T/N) and --h (N = T/h, h must divide T); T and h
+    may be negative (a backward run), of one sign."""
     if (steps is None) == (h is None):
         raise InputError("give exactly one of --steps and --h")
-    t_final = positive(t_final, "T (--t-final)")
+    t_final = nonzero(t_final, "T (--t-final)")
     if steps is not None:
         n = integer(steps, "--steps", 1, MAX_STEPS)
         return n, t_final / n
     return steps_for_h(t_final, h), float(h)
+
+
+def real_vector(values, what: str = "x0") -> list[float]:
+    """A state from Python: a list, tuple or 1-d array of real numbers (int, float, Fraction, numpy
+    reals), each finite; text, a mapping, a bool, a complex number or a nested list is refused
+    (InputError), never converted silently."""
+    if isinstance(values, (str, bytes, dict)) or not hasattr(values, "__iter__"):
+        raise InputError(f"{what} must be a list of numbers, got {type(values).__name__}")
+    shape = getattr(values, "shape", None)
+    if shape is not None and len(shape) != 1:
+        raise InputError(f"{what} must be a list of numbers, got an array of shape {tuple(shape)}")
+    out = []
+    for k, v in enumerate(values):
+        if len(out) >= MAX_LIST:
+            raise InputError(f"{what} has more than {MAX_LIST} components")
+        if isinstance(v, bool) or not isinstance(v, numbers.Real):
+            raise InputError(f"{what}[{k}] must be a real number, got {type(v).__name__} {_shown(v)}")
+        try:
+            x = float(v)
+        except OverflowError:
+            raise InputError(f"{what}[{k}] is too large for a float") from None
+        if not math.isfinite(x):
+            raise InputError(f"{what}[{k}] must be finite, got {x}")
+        out.append(x)
+    return out
 
 
 # ----------------------------------------------------------------------------- memory
@@ -254,9 +296,11 @@ def check_output_path(path, suffixes: tuple[str, ...] = (), what: str = "output 
         raise InputError(f"{what} {path}: the folder {folder} {reason}")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise InputError(f"{what} {path}: the folder {folder} is not writable")
+    if path.is_symlink():
+        return path  # never followed: rkhp.base.files refuses it or replaces the link itself
     if path.is_dir():
         raise InputError(f"{what} {path}: is a folder")
-    if path.exists() or path.is_symlink():
+    if path.exists():
         try:
             mode = path.stat().st_mode
         except OSError as exc:

@@ -9,7 +9,8 @@ A spec file or a tableau file comes from elsewhere, so before any parser sees it
 - its arrays and tables may nest at most :data:`rkhp.base.bounds.MAX_NESTING` deep (counted by an
   iterative scan, so the recursive parsers never see deeper text);
 - JSON objects may not repeat a key, and JSON's non-standard ``NaN``/``Infinity``, numbers that
-  overflow a float and integers of more than 30 digits are refused (TOML refuses repeated keys
+  overflow a float and integers of more than 30 digits are refused (the field readers refuse such
+  integers from TOML too; TOML refuses repeated keys
   itself; its ``nan`` and ``inf`` are refused by :func:`number`).
 
 The field readers (:func:`number`, :func:`integer`, :func:`string`, :func:`number_list`,
@@ -126,7 +127,7 @@ def _json_constant(name):
 
 
 def _json_int(text: str) -> int:
-    if len(text.lstrip("-")) > 30:
+    if len(text.lstrip("-")) > bounds.MAX_INT_DIGITS:
         raise InputError(f"integer of {len(text)} digits")
     return int(text)
 
@@ -180,6 +181,8 @@ def number(value, where: str, low: float | None = None, high: float | None = Non
     """A finite number (int or float, not a boolean, not text) within the bounds."""
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise InputError(f"{where} must be a number, got {_type(value)} {_short(value)}")
+    if isinstance(value, int) and abs(value) >= 10**bounds.MAX_INT_DIGITS:
+        raise InputError(f"{where}: an integer of more than {bounds.MAX_INT_DIGITS} digits (TOML and JSON alike)")
     return bounds.number(value, where, low, high, low_open=low_open)
 
 

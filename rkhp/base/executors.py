@@ -27,6 +27,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -35,16 +36,20 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from .errors import InputError
+from .interrupts import is_interrupt
 
 #: The environment variable Dask itself reads for the scheduler's address.
 SCHEDULER_VARIABLE = "DASK_SCHEDULER_ADDRESS"
 #: Seconds allowed to reach a scheduler before giving up with one line.
 CONNECT_SECONDS = 10
+#: Seconds a Dask cluster may be without workers (at the start, or during a run) before the
+#: command ends with one line: its tasks would never run.
+WORKERS_SECONDS = 30
 #: How often a Dask executor asks the scheduler how many worker threads it has (seconds).
 SLOTS_SECONDS = 5.0
 #: Largest --workers accepted (a local pool; a larger run belongs on a cluster).
 MAX_LOCAL_WORKERS = 256
-_ADDRESS = re.compile(r"((tcp|tls|ws|wss|ucx|inproc)://)?[A-Za-z0-9_.\-\[\]:]{1,200}")
+_ADDRESS = re.compile(r"((tcp|tls|ws|wss|ucx)://)?(\[[0-9A-Fa-f:.]{2,60}\]|[A-Za-z0-9_.\-]{1,200}):([0-9]{1,5})")
 
 
 class Task(Protocol):
@@ -85,6 +90,19 @@ def run_all(executor: Executor, fn: Callable, argument_tuples: Iterable[tuple], 
     """``[fn(*args) for args in argument_tuples]`` on the executor, results in the given order;
     ``on_done(done, total)`` after each completion (progress from the workers' finished tasks).
     On an error or Ctrl-C the unfinished tasks are cancelled and the exception goes on."""
+    results, finished = _run(executor, fn, argument_tuples, on_done, keep_on_interrupt=False)
+    return results
+
+
+def run_until_interrupted(executor: Executor, fn: Callable, argument_tuples: Iterable[tuple],
+                          on_done=None) -> tuple[list, bool]:
+    """As :func:`run_all`, but an interrupt (`rkhp.base.interrupts.is_interrupt`) cancels the
+    unfinished tasks and returns what finished: (results in the given order, None where a task did
+    not finish; whether the run was interrupted)."""
+    return _run(executor, fn, argument_tuples, on_done, keep_on_interrupt=True)
+
+
+def _run(executor, fn, argument_tuples, on_done, keep_on_interrupt: bool) -> tuple[list, bool]:
     tasks = [executor.submit(fn, *args) for args in argument_tuples]
     order = {id(t): k for k, t in enumerate(tasks)}
     results: list = [None] * len(tasks)
@@ -93,10 +111,16 @@ def run_all(executor: Executor, fn: Callable, argument_tuples: Iterable[tuple], 
             results[order[id(task)]] = task.result()
             if on_done is not None:
                 on_done(count, len(tasks))
-    except BaseException:
+    except BaseException as exc:
         executor.cancel(tasks)
+        if keep_on_interrupt and is_interrupt(exc):
+            partial = getattr(exc, "partial", None)
+            running = next((k for k, t in enumerate(tasks) if not t.done()), None)
+            if partial is not None and executor.kind == "in-process" and running is not None:
+                results[running] = partial  # the task that was running here, as far as it got
+            return results, True
         raise
-    return results
+    return results, False
 
 
 # ----------------------------------------------------------------------------- in this process
@@ -208,18 +232,36 @@ class DaskCluster:
 
     kind = "dask"
 
-    def __init__(self, address: str, connect_seconds: float = CONNECT_SECONDS):
+    def __init__(self, address: str, connect_seconds: float = CONNECT_SECONDS,
+                 workers_seconds: float = WORKERS_SECONDS):
         try:
-            from distributed import Client
+            import distributed  # noqa: F401
         except ImportError:
             raise InputError("--scheduler needs Dask: pip install 'rkhp[distributed]'") from None
-        try:
-            self._client = Client(address, timeout=connect_seconds, set_as_default=False)
-        except (OSError, TimeoutError) as exc:
-            raise InputError(f"cannot reach the Dask scheduler at {address} within {connect_seconds:g} s "
-                             f"({type(exc).__name__})") from None
+        self._client = _connect(address, connect_seconds)
         self.address = address
+        self.workers_seconds = workers_seconds
         self._slots = (0.0, 1)
+        self._wait_for_workers()
+
+    def _wait_for_workers(self) -> None:
+        """At least one worker within workers_seconds, else InputError (a scheduler without workers
+        would run nothing and the command would wait for ever)."""
+        deadline = time.monotonic() + self.workers_seconds
+        while not self._worker_count():
+            if time.monotonic() > deadline:
+                self._client.close()
+                raise InputError(f"the Dask scheduler at {self.address} has no workers (waited "
+                                 f"{self.workers_seconds:g} s; start some with `dask worker {self.address}`)")
+            time.sleep(0.2)
+
+    def _worker_count(self) -> int:
+        try:
+            return len(self._client.scheduler_info(n_workers=-1).get("workers", {}))
+        except TypeError:  # older distributed: no n_workers argument
+            return len(self._client.scheduler_info().get("workers", {}))
+        except Exception as exc:  # noqa: BLE001 - the scheduler went away: one line
+            raise InputError(f"lost the Dask scheduler at {self.address} ({type(exc).__name__})") from None
 
     @property
     def slots(self) -> int:
@@ -235,9 +277,26 @@ class DaskCluster:
         return self._client.submit(fn, *args, pure=False)
 
     def as_completed(self, tasks):
-        from distributed import as_completed
+        """The tasks as they finish; InputError when the cluster has had no worker for
+        workers_seconds (nothing would ever finish)."""
+        from distributed import wait
 
-        yield from as_completed(list(tasks), loop=self._client.loop)
+        left = list(tasks)
+        idle_since = None
+        while left:
+            done, _ = wait(left, timeout=1.0, return_when="FIRST_COMPLETED")
+            if not done:
+                if self._worker_count():
+                    idle_since = None
+                elif idle_since is None:
+                    idle_since = time.monotonic()
+                elif time.monotonic() - idle_since > self.workers_seconds:
+                    raise InputError(f"the Dask cluster at {self.address} has had no workers for "
+                                     f"{self.workers_seconds:g} s: its tasks cannot run")
+                continue
+            for task in [t for t in left if t in done]:
+                left.remove(task)
+                yield task
 
     def cancel(self, tasks) -> None:
         tasks = [t for t in tasks if not t.done()]
@@ -248,14 +307,48 @@ class DaskCluster:
         self._client.close()
 
 
+def _connect(address: str, seconds: float):
+    """A distributed Client of the scheduler at ``address``, or InputError in one line within
+    about ``seconds``: an address Dask cannot use (no port, an unknown scheme), a refused or
+    unanswered connection, a server that is not a Dask scheduler. The connection runs in a thread
+    that is abandoned if it has not answered after 1.5 ``seconds`` (some failures never answer:
+    a server that accepts and is silent)."""
+    from distributed import Client
+
+    outcome: dict = {}
+
+    def connect():
+        try:
+            outcome["client"] = Client(address, timeout=seconds, set_as_default=False)
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller as one line
+            outcome["error"] = exc
+
+    thread = threading.Thread(target=connect, name="rkhp-dask-connect", daemon=True)
+    thread.start()
+    thread.join(1.5 * seconds)  # distributed's own timeout, then half as long again
+    if thread.is_alive():
+        raise InputError(f"no answer from a Dask scheduler at {address} within {seconds:g} s")
+    error = outcome.get("error")
+    if error is not None:
+        if isinstance(error, KeyboardInterrupt):
+            raise error
+        detail = " ".join(str(error).split())[:120]
+        raise InputError(f"cannot use the Dask scheduler at {address} ({type(error).__name__}"
+                         + (f": {detail}" if detail else "") + ")") from None
+    return outcome["client"]
+
+
 # ----------------------------------------------------------------------------- choosing one
 
 
 def check_scheduler(address: str, source: str = "--scheduler") -> str:
-    """A scheduler address (``tcp://host:port``, ``host:port``...), stripped; InputError otherwise."""
+    """A scheduler address (``tcp://host:port``, ``host:port``, ``tls://[::1]:8786``: a scheme Dask
+    connects with, a host and a port 1..65535), stripped; InputError otherwise."""
     text = str(address).strip()
-    if not _ADDRESS.fullmatch(text):
-        raise InputError(f"{source} must be a Dask scheduler address such as tcp://host:8786, got {address!r}")
+    match = _ADDRESS.fullmatch(text)
+    if not match or not 1 <= int(match.group(4)) <= 65535:
+        raise InputError(f"{source} must be a Dask scheduler address with a port, such as tcp://host:8786, "
+                         f"got {address!r}")
     return text
 
 

@@ -166,6 +166,14 @@ _FLOAT_FUNCTIONS = {name: value for name, (_, value) in _TAPE_FUNCTIONS.items()}
 _CONSTANT_VALUES = {"pi": math.pi, "E": math.e}
 
 
+def _float(value) -> float:
+    """A literal's float value, +-inf beyond the float range (an int of 310 digits or more)."""
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
+
+
 def _approx(function, *args) -> float:
     try:
         return float(function(*args))
@@ -195,7 +203,7 @@ def _sizes(node: ast.expr, text: str, where: str, limits: Limits, variables) -> 
             size = None if current.id in variables else _Size(1.0, _CONSTANT_VALUES[current.id])
         elif isinstance(current, ast.Constant):
             literal = ast.get_source_segment(source, current) or ""
-            size = _Size(_literal_digits(literal), float(current.value))
+            size = _Size(_literal_digits(literal), _float(current.value))
         elif None in sub:
             size = None
         elif isinstance(current, ast.Call):

@@ -18,6 +18,7 @@ from importlib import metadata
 from pathlib import Path
 
 from .errors import InputError
+from .files import write_atomic
 
 #: the libraries whose versions decide a result's digits, in the record's order
 LIBRARIES = ("numpy", "scipy", "sympy", "numba")
@@ -67,13 +68,10 @@ def read_provenance_line(line: str) -> dict:
     return json.loads(body)
 
 
-def write_output(path, payload: str | bytes, what: str = "output file") -> Path:
+def write_output(path, payload: str | bytes, what: str = "output file", force: bool = False) -> Path:
     """Write ``payload`` (text as UTF-8, or bytes) to ``path``: every file rkhp writes goes through
-    here. InputError naming ``what`` when the file cannot be written."""
+    here, atomically and never over an existing file (or a symbolic link) unless ``force``
+    (rkhp.base.files.write_atomic). InputError naming ``what`` when the file cannot be written."""
     path = Path(path)
-    data = payload.encode("utf-8") if isinstance(payload, str) else bytes(payload)
-    try:
-        path.write_bytes(data)
-    except OSError as exc:
-        raise InputError(f"{what} {path}: cannot write the file ({exc.strerror or exc})") from None
+    write_atomic(path, payload, what, force)
     return path

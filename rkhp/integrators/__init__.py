@@ -2,7 +2,9 @@
 
 Names load lazily (numba is imported only when an integrator runs):
 `integrate`, `integrate_ensemble` (RKHP, explicit tableaux), `integrate_taylor` (THP, paper
-Thm 5.1), `integrate_classical`, `integrate_midpoint` (peers), `Trajectory`, `states_at` (states at chosen times).
+Thm 5.1), `integrate_classical`, `integrate_midpoint` (peers), `integrate_spray_euler` (RKHP
+Euler and its compositions on the spray realisation, direct form), `Trajectory`, `states_at`
+(states at chosen times).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ _LAZY = {
     "integrate_taylor": "rkhp.integrators.taylor",
     "integrate_classical": "rkhp.integrators.classical",
     "integrate_midpoint": "rkhp.integrators.classical",
+    "integrate_spray_euler": "rkhp.integrators.spray_euler",
     "Trajectory": "rkhp.integrators.trajectory",
     "states_at": "rkhp.integrators.output_times",
     "TimedStates": "rkhp.integrators.output_times",

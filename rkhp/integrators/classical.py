@@ -35,7 +35,8 @@ from ..taylor.jets import jet_space
 from .engine import state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_TOLERANCE
-from .trajectory import Trajectory
+from .rkhp_method import check_step
+from .trajectory import Trajectory, checked
 
 MIDPOINT_MAX_ITERATIONS = 30
 """Newton iterations after which a step of the implicit midpoint rule is declared failed."""
@@ -177,19 +178,6 @@ def _midpoint_loop(htape, atape, space, h, n_steps, x0, domain, tol, max_it, sta
 # Python API
 
 
-def check_step(h, n_steps) -> tuple[float, int]:
-    """Validate a step size and a number of steps (InputError naming the bad value)."""
-    try:
-        h = float(h)
-    except (TypeError, ValueError):
-        raise InputError(f"step size h must be a number, got {h!r}") from None
-    if not math.isfinite(h) or h <= 0:
-        raise InputError(f"step size h must be positive and finite, got {h}")
-    if int(n_steps) != n_steps or n_steps < 1:
-        raise InputError(f"number of steps must be a positive integer, got {n_steps}")
-    return h, int(n_steps)
-
-
 def initial_state(system, x0) -> np.ndarray:
     """``x0`` as a float64 vector of the system's dimension (the system's default when None)."""
     x = np.array(system.x0 if x0 is None else x0, dtype=np.float64).reshape(-1)
@@ -252,12 +240,12 @@ def _compiled(kernel) -> bool:
 def _trajectory(system, method, h, k_done, cause, states, newton, started, compile_s, extra=None):
     failed = cause != Failure.OK
     n = k_done + 1
-    return Trajectory(times=h * np.arange(n, dtype=np.float64), states=states[:n].copy(),
-                      newton_iterations=newton[:k_done + failed].copy(),
-                      status=failure_status(cause, k_done, h, system.domain) if failed else "ok",
-                      failed_step=k_done if failed else None, cause=cause,
-                      compile_seconds=compile_s, run_seconds=time.perf_counter() - started - compile_s,
-                      method=method, system=system.name, extra=extra or {}, poisson=system)
+    return checked(Trajectory(times=h * np.arange(n, dtype=np.float64), states=states[:n].copy(),
+                              newton_iterations=newton[:k_done + failed].copy(),
+                              status=failure_status(cause, k_done, h, system.domain) if failed else "ok",
+                              failed_step=k_done if failed else None, cause=cause,
+                              compile_seconds=compile_s, run_seconds=time.perf_counter() - started - compile_s,
+                              method=method, system=system.name, extra=extra or {}, poisson=system), system)
 
 
 def _warm_up(kernel, args_of_one_step) -> float:
@@ -281,7 +269,7 @@ def integrate_classical(system, tableau, h, n_steps, x0=None) -> Trajectory:
         domain ends the run with a failure status. ``compile_seconds`` is the first call's
         compilation (or cache load), apart from ``run_seconds``.
     """
-    h, n_steps = check_step(h, n_steps)
+    h, n_steps = check_step(h, n_steps, system.dim)
     if not tableau.is_explicit:
         raise InputError(f"tableau {tableau.name} is {tableau.kind}; the classical peer needs an explicit one")
     A = np.ascontiguousarray(tableau.A_float, dtype=np.float64)
@@ -316,7 +304,7 @@ def integrate_midpoint(system, h, n_steps, x0=None) -> Trajectory:
     Returns:
         A Trajectory with the Newton iterations of every step and a status naming any failure.
     """
-    h, n_steps = check_step(h, n_steps)
+    h, n_steps = check_step(h, n_steps, system.dim)
     x = initial_state(system, x0)
     ws = _workspace(system)
     ht, at, space, wh, wa = ws

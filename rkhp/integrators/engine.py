@@ -66,16 +66,19 @@ class StepBuffers(NamedTuple):
     work: the interpreter's; G (s, n, jet size): gradients of the stage functions; psi, Jpsi,
     alpha, Jalpha: the tower's results; x, delta, res (n): Newton's iterate, correction and
     residual; LU (n, n), perm (n,) int64, v (n): the linear solve's (`solve_small`); hist (3, n):
-    psi of the three previous steps; memo (8,): how many of them there are, Newton's measured
+    psi of the three previous steps; memo (10,): how many of them there are, Newton's measured
     quadratic constant L, the implicit stages' rate h |c|_1 and effect factor (`_stage_measure`),
     then (`implicit_tower`) inf at the start of a step, the Taylor shifts before the last sweep of
-    every degree and since, the number of sweeps of this step (from its first tower on); y,
-    y_next (n): the state before and after the step; Gx (n): the point where G is expanded
+    every degree and since, the number of sweeps of this step (from its first tower on), and 1
+    once the sweeps have stalled in this run (every tower then solves the stages by
+    `_stage_newton`), and 1 while stage_newton holds a factorised Jacobian; y, y_next (n): the
+    state before and after the step; Gx (n): the point where G is expanded
     (implicit stages); changes (jet degree + 1,): per degree k of G, the weighted change of its
     coefficients at their last sweep (`_stage`, `implicit_tower`); weights (s, jet size): the
     weight of a change of each coefficient of G[i] in that measure (`_stage_weights`); defect
     (s, n, jet size): what the first sweep of a step is predicted to add to G, and defects (jet
-    degree + 1,): its measure per degree (`_predict`, `_learn`).
+    degree + 1,): its measure per degree (`_predict`, `_learn`); stage_newton: the work arrays of
+    `_stage_newton`.
     """
 
     work: TapeWork
@@ -99,6 +102,7 @@ class StepBuffers(NamedTuple):
     weights: np.ndarray
     defect: np.ndarray
     defects: np.ndarray
+    stage_newton: StageNewtonWork
 
 
 class StageSolve(NamedTuple):
@@ -114,9 +118,54 @@ class StageSolve(NamedTuple):
     max_sweeps: int
 
 
-def step_buffers(tapes: SystemTapes, n: int, s: int, space) -> StepBuffers:
-    """The work arrays of the step loop for dimension n, s stages and a jet space."""
+STAGE_NEWTON_ITERATIONS = 30
+"""Most iterations of one `_stage_newton` solve of the stage equations."""
+STAGE_NEWTON_MAX_UNKNOWNS = 1500
+"""Most coefficients (stages x components x monomials of degree < D) that `_stage_newton` solves
+for: its Jacobian takes 8 N^2 bytes (18 MB) and its factorisation N^3 / 3 operations (about a
+second); beyond, stalled sweeps end the step as they did (STAGES_NO_CONVERGENCE)."""
+STAGE_NEWTON_DONE = 1e-14
+"""`_stage_newton` has converged when a full correction is at most this times the coefficients'
+size (max(1, max-norm)): 45 eps, the round-off of a sweep of the stage polynomials."""
+STAGE_NEWTON_ROUND_OFF = 1e-12
+"""A correction of `_stage_newton` that no halving makes decrease the residual is round-off (the
+iteration has converged) when at most this times the coefficients' size: the forward-difference
+Jacobian (step sqrt(eps)) is accurate to about sqrt(eps), so the residual's noise of a few eps
+times the coefficients, divided by that accuracy, is below it."""
+STAGE_NEWTON_HALVINGS = 30
+"""Most halvings of a correction of `_stage_newton` before it gives up (no decrease of the
+residual along the correction: no solution near the iterate)."""
+STAGE_NEWTON_CONTRACTION = 0.5
+"""A correction of `_stage_newton` with a kept (earlier) Jacobian larger than this times the
+previous one refreshes the Jacobian (the chord iteration converges too slowly)."""
+
+
+class StageNewtonWork(NamedTuple):
+    """The work arrays of `_stage_newton` for N unknowns (N = 0: none, the fallback is off): the
+    factorised Jacobian J (N, N) and its row order perm, kept between calls (memo[9] says whether
+    it holds one); u, r, trial, rt, tmp (N,): iterate, residual, correction, trial point and its
+    residual."""
+
+    J: np.ndarray
+    perm: np.ndarray
+    u: np.ndarray
+    r: np.ndarray
+    trial: np.ndarray
+    rt: np.ndarray
+    tmp: np.ndarray
+
+
+def stage_newton_work(unknowns: int) -> StageNewtonWork:
+    """Work arrays for `unknowns` coefficients (none above STAGE_NEWTON_MAX_UNKNOWNS)."""
+    N = unknowns if 0 < unknowns <= STAGE_NEWTON_MAX_UNKNOWNS else 0
+    return StageNewtonWork(np.zeros((N, N)), np.zeros(N, np.int64), *(np.zeros(N) for _ in range(5)))
+
+
+def step_buffers(tapes: SystemTapes, n: int, s: int, space, stage_degree: int = 0) -> StepBuffers:
+    """The work arrays of the step loop for dimension n, s stages and a jet space; with an implicit
+    tableau's `stage_degree` D, also those of `_stage_newton` (s n counts[D - 1] unknowns)."""
     size = space.size
+    unknowns = s * n * int(space.counts[stage_degree - 1]) if stage_degree > 0 else 0
 
     def vec():
         return np.zeros(n)
@@ -126,8 +175,9 @@ def step_buffers(tapes: SystemTapes, n: int, s: int, space) -> StepBuffers:
 
     return StepBuffers(tape_work(tapes, size), np.zeros((s, n, size)), vec(), mat(), vec(), mat(),
                        vec(), vec(), vec(), mat(), np.zeros(n, np.int64), vec(), np.zeros((3, n)),
-                       np.zeros(8), vec(), vec(), vec(), np.zeros(space.degree + 1),
-                       np.zeros((s, size)), np.zeros((s, n, size)), np.zeros(space.degree + 1))
+                       np.zeros(10), vec(), vec(), vec(), np.zeros(space.degree + 1),
+                       np.zeros((s, size)), np.zeros((s, n, size)), np.zeros(space.degree + 1),
+                       stage_newton_work(unknowns))
 
 
 @nb.njit(inline="always", **NJIT_NORC)
@@ -491,6 +541,145 @@ def _psi_at(b, h, space, buf, top):
 
 
 @nb.njit(**NJIT_NORC)
+def _sweep_residual(u, r, x0, A, h, D, tapes, space, buf, M):
+    """r = P(u) - u, P one Gauss-Seidel sweep of every stage at degree D (`_stage`) of the
+    coefficients u of the stage polynomials G (degree < D, M = counts[D - 1] each, flattened over
+    (stage, component, coefficient)); G := P(u). Returns the max-norm of r (inf if non-finite).
+    P and the Picard sweeps of `implicit_tower` have the same fixed points: the stage equations."""
+    G = buf.G
+    s, n = G.shape[0], G.shape[1]
+    q = 0
+    for j in range(s):
+        for k in range(n):
+            for m in range(M):
+                G[j, k, m] = u[q]
+                q += 1
+    for i in range(s):
+        _stage(i, x0, A, h, D, s, tapes, space, buf, 1.0)
+    size = 0.0
+    q = 0
+    for j in range(s):
+        for k in range(n):
+            for m in range(M):
+                r[q] = G[j, k, m] - u[q]
+                a = abs(r[q])
+                if not a <= size:  # also catches NaN
+                    size = a
+                q += 1
+    return size
+
+
+@nb.njit(**NJIT_NORC)
+def _sweep_jacobian(x0, A, h, D, tapes, space, buf, M):
+    """work.J := the Jacobian of `_sweep_residual` at work.u (whose residual is work.r) by forward
+    differences, step sqrt(eps) times max(1, |u_c|), factorised in place; False if singular."""
+    work = buf.stage_newton
+    u, r, rt, J = work.u, work.r, work.rt, work.J
+    N = u.shape[0]
+    for c in range(N):
+        e = 1.4901161193847656e-08 * max(1.0, abs(u[c]))
+        keep = u[c]
+        u[c] = keep + e
+        _sweep_residual(u, rt, x0, A, h, D, tapes, space, buf, M)
+        u[c] = keep
+        for q in range(N):
+            J[q, c] = (rt[q] - r[q]) / e
+    return lu_factor(J, work.perm)
+
+
+@nb.njit(**NJIT_NORC)
+def _stage_newton(x0, A, h, D, tapes, space, buf):
+    """Solve the stage equations (the fixed point of the sweeps) for the coefficients of the stage
+    polynomials G by Newton's method, when the Picard sweeps stall (h beyond their contraction
+    radius, where a solution may still exist; docs/implicit.md "When the sweeps stall").
+
+    Simplified Newton: the forward-difference Jacobian (`_sweep_jacobian`) is kept between calls
+    (the stage equations change little from one Newton iterate or step to the next) and refreshed
+    when a correction is not below STAGE_NEWTON_CONTRACTION times the previous one, or when it
+    does not decrease the residual; each correction is halved until the residual decreases. From
+    the polynomials in G (G = 0 if they are not finite). Converged when a correction is at
+    round-off of the coefficients (`STAGE_NEWTON_DONE`, `STAGE_NEWTON_ROUND_OFF`); returns whether
+    it did, G holding the solution (buf.changes reset). False at once when the work arrays hold
+    fewer than the unknowns (`STAGE_NEWTON_MAX_UNKNOWNS`).
+    """
+    G, memo, work = buf.G, buf.memo, buf.stage_newton
+    s, n = G.shape[0], G.shape[1]
+    M = space.counts[D - 1]
+    N = s * n * M
+    if work.u.shape[0] != N:
+        return False
+    u, r, trial, rt, tmp = work.u, work.r, work.trial, work.rt, work.tmp
+    q = 0
+    finite = True
+    for j in range(s):
+        for k in range(n):
+            for m in range(M):
+                u[q] = G[j, k, m]
+                if not np.isfinite(u[q]):
+                    finite = False
+                q += 1
+    if not finite:
+        for q in range(N):
+            u[q] = 0.0
+    size = _sweep_residual(u, r, x0, A, h, D, tapes, space, buf, M)
+    fresh = memo[9] == 0.0
+    previous = np.inf
+    converged = False
+    for _ in range(STAGE_NEWTON_ITERATIONS):
+        if not np.isfinite(size):
+            break
+        if fresh:
+            if not _sweep_jacobian(x0, A, h, D, tapes, space, buf, M):
+                memo[9] = 0.0
+                break
+            memo[9] = 1.0
+        for q in range(N):
+            trial[q] = -r[q]
+        lu_solve(work.J, work.perm, trial, tmp)
+        correction = _max_abs(trial)
+        scale = max(1.0, _max_abs(u))
+        if not fresh and not correction < STAGE_NEWTON_CONTRACTION * previous:
+            fresh = True  # the kept Jacobian no longer serves: refresh it
+            continue
+        step = 1.0
+        accepted = False
+        for _h in range(STAGE_NEWTON_HALVINGS):
+            for q in range(N):
+                rt[q] = u[q] + step * trial[q]
+            new = _sweep_residual(rt, tmp, x0, A, h, D, tapes, space, buf, M)
+            if new < size:
+                accepted = True
+                break
+            step *= 0.5
+        if not accepted:
+            if correction <= STAGE_NEWTON_ROUND_OFF * scale:
+                converged = True  # the residual's own noise
+                break
+            if fresh:
+                break
+            fresh = True
+            continue
+        for q in range(N):
+            u[q] = rt[q]
+            r[q] = tmp[q]
+        size = new
+        previous = step * correction
+        fresh = False
+        if step * correction <= STAGE_NEWTON_DONE * scale:
+            converged = True
+            break
+    q = 0
+    for j in range(s):
+        for k in range(n):
+            for m in range(M):
+                G[j, k, m] = u[q]
+                q += 1
+    for k in range(D + 1):
+        buf.changes[k] = 0.0
+    return converged
+
+
+@nb.njit(**NJIT_NORC)
 def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, scale):
     """The implicit tower (docs/theory.md §10, docs/implicit.md): psi and alpha(x0, psi) (with
     `jacobian`, their Jacobians) as `tower`, the stage polynomials G (degree D - 1,
@@ -516,8 +705,13 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     `_stale_factor` for the Taylor shifts since their last sweep. The stages have converged when
     that is at most Newton's tolerance `tol` times `scale`.
 
-    Returns (Failure, sweeps, converged): STAGES_NO_CONVERGENCE for a non-finite sweep or more
-    than stage.max_sweeps sweeps in one tower.
+    When the sweeps stall (a non-finite one, stage.max_sweeps of them while settling, or half as
+    many in one step without converging), the stages are solved by `_stage_newton`,
+    and from then on in the run every tower solves them so (memo[8]; docs/implicit.md "When the
+    sweeps stall").
+
+    Returns (Failure, sweeps, converged): STAGES_NO_CONVERGENCE when the sweeps stalled and
+    `_stage_newton` found no solution.
 
     Not inlined (unlike `tower`): numba's inlining copies a callee's whole inlined subtree at every
     site, and the loop of explicit tableaux, where this call sits in a pruned branch, would pay
@@ -543,7 +737,9 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     shift = 0.0 if settle else _max_abs(buf.delta)
     since = memo[6] + shift
     stale = _stale_factor(since, memo[5])
-    top = D if jacobian else _value_degree(changes, buf.defects, factor, stale, D, bound)
+    # once the sweeps have stalled in a run, every tower solves its stages by Newton (`_stage_newton`)
+    newton = memo[8] > 0.0 and not settle
+    top = D if jacobian or newton else _value_degree(changes, buf.defects, factor, stale, D, bound)
     memo[5], memo[6] = (since, 0.0) if top == D else (memo[5], since)
     if settle:
         for k in range(n):
@@ -556,6 +752,8 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
         for k in range(D + 1):
             buf.defects[k] = 0.0
         memo[7] = 0.0
+        memo[8] = 0.0
+        memo[9] = 0.0
         _stage_weights(A, b, space, buf.weights)
     elif top > 0:
         if predict:
@@ -565,6 +763,11 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
         _shift(G, buf.delta, D - 1, space)
         if learn:
             _predict(G, buf.defect, D, space, np.bool_(False), predict)
+    if newton:
+        if not _stage_newton(x0, A, h, D, tapes, space, buf):
+            return Failure.STAGES_NO_CONVERGENCE, 0, False
+        _psi_alpha(x0, b, h, tapes, space, buf, jacobian)
+        return Failure.OK, 0, True
     sweeps = 0
     converged = False
     if top == 0:
@@ -595,8 +798,6 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
             memo[7] += 1.0
         kept = _kept(changes, buf.defects, factor, stale, top, D)
         effect = swept + kept
-        if not np.isfinite(effect):
-            return Failure.STAGES_NO_CONVERGENCE, sweeps, False
         tail = _tail_factor(swept, previous)
         if settle:
             tail = max(1.0, tail)
@@ -604,10 +805,22 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
         # a sweep that did not contract proves nothing, unless its changes are already far below
         # the tolerance (round-off: the measure then no longer decreases)
         converged = swept * tail + kept <= bound or effect <= ROUND_OFF_SHARE * bound
-        if converged or not settle:
+        if converged:
             break
-        if sweeps >= stage.max_sweeps:
-            return Failure.STAGES_NO_CONVERGENCE, sweeps, False
+        # the sweeps stall: not finite, stage.max_sweeps of them while settling, or half as many
+        # in one step without converging; Newton on the stage equations instead (`_stage_newton`).
+        # (A sweep larger than the previous one is no stall by itself: after a Taylor shift it
+        # also measures what the shift moved.)
+        stalled = not np.isfinite(effect) or (
+            sweeps >= stage.max_sweeps if settle else memo[7] >= stage.max_sweeps // 2)
+        if stalled:
+            if not _stage_newton(x0, A, h, D, tapes, space, buf):
+                return Failure.STAGES_NO_CONVERGENCE, sweeps, False
+            memo[8] = 1.0
+            converged = True
+            break
+        if not settle:
+            break
     _psi_alpha(x0, b, h, tapes, space, buf, jacobian)
     return Failure.OK, sweeps, converged
 

@@ -26,6 +26,7 @@ class Failure(IntEnum):
     NEWTON_DIVERGED = 5
     SINGULAR = 6
     STAGES_NO_CONVERGENCE = 7
+    DIVERGED = 8
 
     @property
     def text(self) -> str:
@@ -42,6 +43,8 @@ _TEXT = {
     Failure.NEWTON_DIVERGED: "Newton diverged (the step h may be too large)",
     Failure.SINGULAR: "singular Newton matrix",
     Failure.STAGES_NO_CONVERGENCE: "the implicit stages did not converge (the step h may be too large)",
+    Failure.DIVERGED: "diverged: the state grew past 100 times its start and the energy error past 1e8 "
+                      "times max(1, |H(x0)|) (docs/exit-status.md; the step h may be too large)",
 }
 
 

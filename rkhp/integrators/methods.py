@@ -13,19 +13,24 @@ A method is named by a string (or given as a :class:`Method` or a
   ``xdot = pi(x) grad H(x)``;
 - ``implicit-midpoint``: the implicit midpoint rule (Newton per step);
 - ``scipy:NAME``: scipy's adaptive ``solve_ivp`` method NAME (dop853, rk45, rk23, radau, bdf,
-  lsoda), run by tolerance: a peer of ``rkhp bench`` only.
+  lsoda), run by tolerance: a peer of ``rkhp bench`` only;
+- a composition (built-in name such as ``kahan-li8``, or a composition file): substeps
+  gamma_1 h, ..., gamma_s h of an RKHP base method (:mod:`rkhp.tableaux.compositions`,
+  docs/compositions.md).
 
 The expected order comes from the verify engine: for RKHP, the symmetric order (the reduced
 conditions of docs/theory.md §8) on a symmetric realisation, the degenerate order (over T_0) on
 a degenerate one and the general order (over T) otherwise (paper, Theorems 4.4 and 5.1); for THP
 the same classes applied to its B-series (:func:`taylor_orders`); for a classical method its
-order over T; 2 for the midpoint rule.
+order over T; 2 for the midpoint rule; for a composition, the order its coefficients give with
+the base's order in the class, the base counted symmetric when the class is symmetric and the base
+RKHP method is (:func:`rkhp.tableaux.symmetry.rkhp_symmetry`).
 """
 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ..base.errors import InputError
 from ..trees.conditions import conditions_of_order
@@ -37,7 +42,7 @@ MIDPOINT = "implicit-midpoint"
 SCIPY_METHODS = {"dop853": "DOP853", "rk45": "RK45", "rk23": "RK23", "radau": "Radau", "bdf": "BDF",
                  "lsoda": "LSODA"}
 _TAYLOR = re.compile(r"thp([0-9]+)(-t0)?")
-KINDS = ("rkhp", "taylor", "classical", "implicit-midpoint", "scipy")
+KINDS = ("rkhp", "taylor", "classical", "implicit-midpoint", "scipy", "composition")
 
 
 @dataclass(frozen=True)
@@ -51,6 +56,8 @@ class Method:
         order: the THP order N (taylor kind), else None.
         degenerate: THP over T_0 (``thpN-t0``).
         solver: scipy's name of the method (scipy kind), else None.
+        composition: the :class:`~rkhp.tableaux.compositions.Composition` (composition kind; its
+            base tableau is `tableau`), else None.
     """
 
     name: str
@@ -59,10 +66,13 @@ class Method:
     order: int | None = None
     degenerate: bool = False
     solver: str | None = None
+    composition: object = None
 
     def integrate(self, system, h: float, n_steps: int, x0=None):
         """Run the method; returns a :class:`~rkhp.integrators.trajectory.Trajectory`."""
         if self.kind == "rkhp":
+            if direct_euler(system, self.tableau):
+                return _direct(system, (1.0,), h, n_steps, x0, self.name)
             from . import integrate
 
             return integrate(system, self.tableau, h, n_steps, x0)
@@ -78,6 +88,12 @@ class Method:
             from .classical import integrate_midpoint
 
             return integrate_midpoint(system, h, n_steps, x0)
+        if self.kind == "composition":
+            if direct_euler(system, self.tableau):
+                return _direct(system, self.composition.gamma_float, h, n_steps, x0, self.name)
+            from .composed import integrate_composition
+
+            return integrate_composition(system, self.composition, h, n_steps, x0)
         raise InputError(f"{self.name} is scipy's adaptive {self.solver}: it runs by tolerance, not "
                          "by steps (a peer of `rkhp bench`, --peers)")
 
@@ -98,19 +114,50 @@ class Method:
             raise InputError(f"{self.name} is adaptive: it has no order in h")
         from ..tableaux.verification import class_orders
 
+        if self.kind == "composition":
+            return composed_order(self.composition, self.tableau, condition_class)
         return class_orders(self.tableau)[condition_class if self.kind == "rkhp" else "general"]
 
 
     def realisation_bound(self, system) -> int | None:
         """The order the system's realisation allows a method that runs through it (RKHP and THP;
         ``truncated:K``: docs/theory.md §9), or None when it sets no bound."""
-        return system.realisation_order if self.kind in ("rkhp", "taylor") else None
+        return system.realisation_order if self.kind in ("rkhp", "taylor", "composition") else None
 
     def expected_order_on(self, system) -> int:
         """Order expected on `system`: the class's order, bounded by :meth:`realisation_bound`."""
         order = self.expected_order(condition_class(system))
         bound = self.realisation_bound(system)
         return order if bound is None else min(order, bound)
+
+
+def composed_order(composition, base, condition_class: str) -> int:
+    """The order of a composition of the RKHP method `base` on a realisation of `condition_class`
+    (:func:`rkhp.tableaux.compositions.class_composition_orders`)."""
+    from ..tableaux.compositions import class_composition_orders
+
+    return class_composition_orders(composition, base)[condition_class].order
+
+
+def direct_euler(system, tableau) -> bool:
+    """Whether Euler substeps on `system` run in the direct form of the Poisson-spray realisation
+    (`rkhp.integrators.spray_euler`): the tableau is RKHP Euler and the system has the full spray
+    realisation (family general, symmetric), whose tapes the direct form evaluates."""
+    if tableau is None or tableau.stages != 1 or tableau.A_float[0][0] != 0.0 or tableau.b_float[0] != 1.0:
+        return False
+    if system.family != "general" or system.realisation != "symmetric":
+        return False
+    from .spray_euler import direct_form_available
+
+    return direct_form_available(system)
+
+
+def _direct(system, gammas, h, n_steps, x0, name: str):
+    """The run of `direct_euler`'s substeps gammas h, named `name` (docs/compositions.md)."""
+    from .spray_euler import integrate_spray_euler
+    from .trajectory import checked
+
+    return checked(replace(integrate_spray_euler(system, gammas, h, n_steps, x0), method=name), system)
 
 
 def condition_class(system) -> str:
@@ -182,6 +229,11 @@ def resolve_method(spec) -> Method:
         return Method(spec, "scipy", solver=SCIPY_METHODS[key])
     if spec.startswith(CLASSICAL_PREFIX):
         return Method(spec, "classical", load_tableau(spec[len(CLASSICAL_PREFIX):]))
+    from ..tableaux.compositions import is_composition_name, load_composition
+
+    if is_composition_name(spec):
+        composition = load_composition(spec)
+        return Method(spec, "composition", load_tableau(composition.base), composition=composition)
     return Method(spec, "rkhp", load_tableau(spec))
 
 
@@ -197,7 +249,8 @@ def resolve_methods(specs) -> tuple[Method, ...]:
 def check_distinct(methods) -> tuple[Method, ...]:
     """The methods, if no two are the same method under two names (an alias, a file: ``rk4`` and
     ``classical``); InputError naming both otherwise (docs/input.md)."""
-    keys = [(m.kind, getattr(m.tableau, "name", None), m.order, m.degenerate, m.solver) for m in methods]
+    keys = [(m.kind, getattr(m.tableau, "name", None), m.order, m.degenerate, m.solver,
+             getattr(m.composition, "gamma", None)) for m in methods]
     for i, key in enumerate(keys):
         if key in keys[:i]:
             raise InputError(f"{methods[keys.index(key)].name} and {methods[i].name} are the same method")

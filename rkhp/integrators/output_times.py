@@ -48,9 +48,10 @@ class TimedStates:
         """The columns of a trajectory file (rkhp.integrators.trajectory.state_columns)."""
         return state_columns(self.poisson, self.times, self.states, self.newton_iterations, self.stage_sweeps)
 
-    def write(self, path, record: dict | None = None) -> Path:
-        """Write :meth:`columns` as CSV or NPZ by the suffix of ``path`` (as a Trajectory)."""
-        return write_columns(path, self.columns(), record)
+    def write(self, path, record: dict | None = None, force: bool = False) -> Path:
+        """Write :meth:`columns` as CSV or NPZ by the suffix of ``path`` (as a Trajectory); an
+        existing file only with ``force``."""
+        return write_columns(path, self.columns(), record, force)
 
 
 def check_output_times(times, start: float, end: float, what: str = "t_eval", slack: float = 0.0) -> np.ndarray:

@@ -11,17 +11,19 @@ time.
 from __future__ import annotations
 
 import math
+import numbers
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from ..base.bounds import MAX_STEPS, check_trajectory
 from ..base.errors import InputError, NumericalFailure
 from ..base.executors import run_all
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE, STAGE_MAX_SWEEPS
-from .trajectory import Trajectory
+from .trajectory import Trajectory, checked
 
 MAX_PRODUCT_PAIRS = 2_000_000
 """Largest product table the Taylor tower accepts (n variables, degree s + 1 for an explicit
@@ -86,16 +88,26 @@ def implicit_degree(order: int) -> int:
     return max(order + 1, 2)
 
 
-def check_step(h, n_steps) -> tuple[float, int]:
+def check_step(h, n_steps, dim: int | None = None) -> tuple[float, int]:
+    """(h, n_steps) of a run, checked as the command line checks them: h a finite non-zero real
+    number (not text, not a bool; negative h integrates backwards, docs/compositions.md "Backward
+    steps"), n_steps an integer 1..MAX_STEPS (an integral float too); with the dimension, the
+    stored trajectory within the memory limit (`rkhp.base.bounds`)."""
+    if isinstance(h, bool) or not isinstance(h, numbers.Real):
+        raise InputError(f"step size h must be a number, got {type(h).__name__} {h!r:.40}")
     try:
         h = float(h)
-    except (TypeError, ValueError):
-        raise InputError(f"step size h must be a number, got {h!r}") from None
-    if not math.isfinite(h) or h <= 0.0:
-        raise InputError(f"step size h must be positive and finite, got {h}")
-    if int(n_steps) != n_steps or n_steps < 0:
-        raise InputError(f"number of steps must be a non-negative integer, got {n_steps}")
-    return h, int(n_steps)
+    except OverflowError:
+        raise InputError("step size h is too large for a float") from None
+    if not math.isfinite(h) or h == 0.0:
+        raise InputError(f"step size h must be finite and non-zero, got {h}")
+    if isinstance(n_steps, bool) or not isinstance(n_steps, numbers.Real) or not (
+            math.isfinite(n_steps) and int(n_steps) == n_steps and 1 <= n_steps <= MAX_STEPS):
+        raise InputError(f"number of steps must be an integer 1..{MAX_STEPS}, got {n_steps!r:.40}")
+    n_steps = int(n_steps)
+    if dim is not None:
+        check_trajectory(n_steps, dim)
+    return h, n_steps
 
 
 def start_state(system, x0) -> np.ndarray:
@@ -132,12 +144,12 @@ def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLER
     from .engine import rkhp_run, step_buffers
 
     tableau = resolve_tableau(tableau)
-    h, n_steps = check_step(h, n_steps)
+    h, n_steps = check_step(h, n_steps, system.dim)
     y0 = start_state(system, x0)
     A, b = tableau_arrays(tableau)
     stage = stage_solve(tableau, A, stage_degree)
     tapes, space = engine_data(system, len(b), stage)
-    buf = step_buffers(tapes, system.dim, len(b), space)
+    buf = step_buffers(tapes, system.dim, len(b), space, stage.degree)
     rest = (tapes, space, buf, system.domain_code, float(tol), int(max_iter), compiled_stage(stage))
     t0 = time.perf_counter()
     rkhp_run(y0, A, b, h, 0, *rest, np.zeros((1, y0.size)), np.zeros(1, np.int64),
@@ -150,14 +162,14 @@ def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLER
     done, cause = rkhp_run(y0, A, b, h, n_steps, *rest, states, iterations, sweeps, True)
     run_seconds = time.perf_counter() - t0
     failed = cause != Failure.OK
-    return Trajectory(
+    return checked(Trajectory(
         times=h * np.arange(done + 1), states=states[: done + 1],
         newton_iterations=iterations[: done + failed], stage_sweeps=sweeps[: done + failed],
         cause=cause, status=failure_status(cause, done, h, system.domain) if failed else "ok",
         failed_step=done if failed else None, compile_seconds=compile_seconds,
         run_seconds=run_seconds, method=getattr(tableau, "name", "custom"), system=system.name,
         extra={"newton_tolerance": tol, "newton_max_iterations": max_iter,
-               "realisation": system.realisation, "stage_degree": stage.degree}, poisson=system)
+               "realisation": system.realisation, "stage_degree": stage.degree}, poisson=system), system)
 
 
 def integrate_ensemble(system, tableau, h, n_steps, x0s, *, tol: float = NEWTON_TOLERANCE,
@@ -208,7 +220,7 @@ def _ensemble_chunk(system, A, b, h, n_steps, x0s, tol, max_iter, stage, threads
         last = np.zeros((1, system.dim))
         iterations = np.zeros(max(n_steps, 1), dtype=np.int64)
         sweeps = np.zeros(max(n_steps, 1), dtype=np.int64)
-        buf = step_buffers(tapes, system.dim, len(b), space)
+        buf = step_buffers(tapes, system.dim, len(b), space, stage.degree)
         for t in range(lo, hi):
             done[t], codes[t] = rkhp_run(x0s[t], A, b, h, n_steps, tapes, space, buf,
                                          system.domain_code, tol, max_iter, compiled_stage(stage), last,

@@ -29,7 +29,7 @@ from .engine import state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE
 from .rkhp_method import check_step, start_state
-from .trajectory import Trajectory
+from .trajectory import Trajectory, checked
 
 
 @lru_cache(maxsize=256)
@@ -187,7 +187,7 @@ def integrate_taylor(system, order: int, degenerate: bool, h, n_steps, x0=None, 
     """THP of order `order` over T_0 (`degenerate`) or T, as a Trajectory (paper Thm 5.1)."""
     if not isinstance(order, int) or not 1 <= order <= 8:
         raise InputError(f"THP order must be an integer from 1 to 8, got {order!r}")
-    h, n_steps = check_step(h, n_steps)
+    h, n_steps = check_step(h, n_steps, system.dim)
     y = start_state(system, x0)
     t0 = time.perf_counter()
     tower = _Tower(system, order, degenerate)
@@ -205,9 +205,9 @@ def integrate_taylor(system, order: int, degenerate: bool, h, n_steps, x0=None, 
             break
         states.append(y_next)
     run_seconds = time.perf_counter() - t0
-    return Trajectory(times=h * np.arange(len(states)), states=np.array(states),
-                      newton_iterations=np.array(iterations, dtype=np.int64), status=status,
-                      failed_step=failed, cause=cause, compile_seconds=compile_seconds,
-                      run_seconds=run_seconds,
-                      method=f"THP{order}" + (" (T_0)" if degenerate else " (T)"),
-                      system=system.name, extra={"realisation": system.realisation}, poisson=system)
+    return checked(Trajectory(times=h * np.arange(len(states)), states=np.array(states),
+                              newton_iterations=np.array(iterations, dtype=np.int64), status=status,
+                              failed_step=failed, cause=cause, compile_seconds=compile_seconds,
+                              run_seconds=run_seconds,
+                              method=f"THP{order}" + (" (T_0)" if degenerate else " (T)"),
+                              system=system.name, extra={"realisation": system.realisation}, poisson=system), system)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import io
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +18,12 @@ import numpy as np
 from ..base.errors import InputError, NumericalFailure
 from ..base.provenance import provenance, write_output
 from ..base.tables import csv_text
-from .failure import Failure
+from .failure import Failure, failure_status
+
+GROWTH = 100.0
+"""A state counts as grown when its max-norm exceeds this times max(1, |y_0|) (`divergence`)."""
+DIVERGENCE = 1e8
+"""A grown state whose energy error exceeds this times max(1, |H(y_0)|) ends the run (`divergence`)."""
 
 #: the file formats of a trajectory, by the file's suffix (docs/results.md)
 FILE_SUFFIXES = (".csv", ".npz")
@@ -99,10 +104,11 @@ class Trajectory:
         return state_columns(self._system(system), self.times[rows], self.states[rows], newton[rows],
                              sweeps[rows])
 
-    def write(self, path, every: int = 1, record: dict | None = None, system=None) -> Path:
+    def write(self, path, every: int = 1, record: dict | None = None, system=None, force: bool = False) -> Path:
         """Write :meth:`columns` to ``path``, CSV or NPZ by its suffix, with the provenance
-        ``record`` (default: this process's, rkhp.base.provenance). Returns the path."""
-        return write_columns(path, self.columns(every, system), record)
+        ``record`` (default: this process's, rkhp.base.provenance); an existing file only with
+        ``force``. Returns the path."""
+        return write_columns(path, self.columns(every, system), record, force)
 
     def _system(self, system):
         system = self.poisson if system is None else system
@@ -144,7 +150,7 @@ def state_columns(system, times, states, newton, sweeps) -> dict[str, np.ndarray
     return columns
 
 
-def write_columns(path, columns: dict[str, np.ndarray], record: dict | None = None) -> Path:
+def write_columns(path, columns: dict[str, np.ndarray], record: dict | None = None, force: bool = False) -> Path:
     """Write named columns as CSV (a provenance line, a header, one row per state; floats by repr,
     read back bit for bit) or NPZ (one array per column and ``provenance``, the record as a JSON
     string; np.load needs no pickle), chosen by the suffix of ``path``."""
@@ -153,10 +159,60 @@ def write_columns(path, columns: dict[str, np.ndarray], record: dict | None = No
     suffix = path.suffix.lower()
     if suffix == ".csv":
         rows = zip(*(column.tolist() for column in columns.values()), strict=True)
-        return write_output(path, csv_text(list(columns), rows, record), "trajectory file")
+        return write_output(path, csv_text(list(columns), rows, record), "trajectory file", force)
     if suffix == ".npz":
         buffer = io.BytesIO()
         np.savez(buffer, **columns, provenance=np.array(json.dumps(record, ensure_ascii=False)))
-        return write_output(path, buffer.getvalue(), "trajectory file")
+        return write_output(path, buffer.getvalue(), "trajectory file", force)
     raise InputError(f"trajectory file {path}: unknown extension {suffix or '(none)'}; the name must end in "
                      f"{' or '.join(FILE_SUFFIXES)}")
+
+
+
+def divergence(system, states) -> int | None:
+    """The index k of the first state y_k that has left every sane range, or None.
+
+    The rule (docs/exit-status.md "Divergence"): y_k is non-finite, or it grew (|y_k| > GROWTH
+    max(1, |y_0|), max-norms) and its energy error exceeds DIVERGENCE max(1, |H(y_0)|). The exact
+    flow keeps H; a run that still approximates it, however coarsely, keeps its energy error
+    near the energy's own size (`rkhp stress` calls a relative error above 1 "not bounded"), far
+    below 1e8 times it, while a blow-up passes that within a few steps (H grows like a power of
+    |y|). Growth alone is no divergence (a hyperbolic flow grows like e^t with H conserved), and
+    requiring it first keeps H's evaluation to the few grown states.
+    """
+    states = np.asarray(states, dtype=float)
+    finite = np.isfinite(states).all(axis=1)
+    bad = np.flatnonzero(~finite)
+    first_bad = int(bad[0]) if bad.size else None
+    size = np.abs(np.where(finite[:, None], states, 0.0)).max(axis=1, initial=0.0)
+    grown = np.flatnonzero(finite & (size > GROWTH * max(1.0, size[0])))
+    if grown.size:
+        h0 = float(system.hamiltonian(states[0]))
+        bound = DIVERGENCE * max(1.0, abs(h0))
+        for k in grown:
+            if first_bad is not None and k > first_bad:
+                break
+            try:
+                with np.errstate(all="ignore"):
+                    energy = float(system.hamiltonian(states[k]))
+            except (OverflowError, FloatingPointError, ValueError, ZeroDivisionError):
+                return int(k)  # H cannot even be evaluated there
+            if not abs(energy - h0) <= bound:  # also catches an energy that overflows
+                return int(k)
+    return first_bad
+
+
+def checked(trajectory: Trajectory, system) -> Trajectory:
+    """The trajectory, or when it diverged (`divergence`), the same run ended before the state
+    that diverged: cause Failure.DIVERGED (or NON_FINITE for a non-finite state) at the step that
+    produced it."""
+    k = divergence(system, trajectory.states)
+    if k is None or k == 0:
+        return trajectory
+    cause = Failure.NON_FINITE if not np.isfinite(trajectory.states[k]).all() else Failure.DIVERGED
+    step = k - 1
+    h = float(trajectory.times[1] - trajectory.times[0]) if len(trajectory.times) > 1 else 0.0
+    return replace(trajectory, times=trajectory.times[:k], states=trajectory.states[:k],
+                   newton_iterations=trajectory.newton_iterations[:k],
+                   stage_sweeps=trajectory.stage_sweeps[:k], cause=cause, failed_step=step,
+                   status=failure_status(cause, step, h, system.domain))

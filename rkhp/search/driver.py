@@ -23,7 +23,7 @@ from ..trees.conditions import check_class
 from .multistart import Problem, Restarts, run_restarts
 from .optimise import KnownMethod, known_methods, minimise_error, refine_optimum
 from .polish import polish
-from .prove import Proof, prove_impossible
+from .prove import Proof, choose_engine, prove_impossible
 from .recognise import closed_form, recognise_point
 from .system import MAX_SEARCH_ORDER, check_problem
 
@@ -38,9 +38,10 @@ OPTIMISATION_STARTS = 8
 
 @dataclass(frozen=True)
 class SearchOptions:
-    """How to search: restart budget, seed, time limit (per order and for the proof), digits D,
-    ``optimize`` ("error" or None), ``prove``, ``closed_form`` (recognition). Where the restarts
-    run is not an option of the search: it is the executor handed to :func:`search`."""
+    """How to search: restart budget, seed, time limit (of the whole search: every order and the
+    proof), digits D, ``optimize`` ("error" or None), ``prove``, ``proof_engine`` ("auto",
+    "singular" or "sympy": :mod:`.prove`), ``closed_form`` (recognition). Where the restarts run is
+    not an option of the search: it is the executor handed to :func:`search`."""
 
     restarts: int = 50
     seed: int = 0
@@ -49,6 +50,7 @@ class SearchOptions:
     optimize: str | None = None
     prove: bool = False
     closed_form: bool = True
+    proof_engine: str = "auto"
 
     def check(self) -> None:
         bounds.integer(self.restarts, "--restarts", 1, bounds.MAX_RESTARTS)
@@ -61,6 +63,8 @@ class SearchOptions:
                              f"got {self.digits}")
         if self.optimize not in (None, "error"):
             raise InputError(f"--optimize must be 'error', got {self.optimize!r}")
+        if self.prove:
+            choose_engine(self.proof_engine)
 
 
 @dataclass(frozen=True)
@@ -222,7 +226,15 @@ class SearchResult:
             "proof_detail": None if self.proof is None else {
                 "order": self.proof_order, "status": self.proof.status,
                 "seconds": round(self.proof.seconds, 3), "time_limit": self.proof.time_limit,
-                "polynomials": list(self.proof.polynomials), "basis": list(self.proof.basis)},
+                "polynomials": list(self.proof.polynomials), "basis": list(self.proof.basis),
+                "engine": self.proof.engine, "variables": list(self.proof.variables),
+                "dimension": self.proof.dimension,
+                "complex_solutions": self.proof.complex_solutions,
+                "modular": [{"prime": p, "unit": unit} for p, unit in self.proof.modular],
+                "certificate": None if self.proof.check is None else {
+                    "identity": "sum_i g_i f_i = 1", "cofactor_terms": self.proof.check.terms,
+                    "checked": self.proof.check.valid,
+                    "check_seconds": round(self.proof.check.seconds, 3)}},
         }
         return out
 
@@ -278,10 +290,12 @@ def content_name(tableau, base: str) -> str:
 
 
 def search(stages: int, order: int | None = None, cls: str = "general", implicit: bool = False,
-           options: SearchOptions = SearchOptions(), on_progress=None, executor=None) -> SearchResult:
+           options: SearchOptions = SearchOptions(), on_progress=None, executor=None,
+           on_proof_progress=None) -> SearchResult:
     """Search tableaux (see the module docstring). ``on_progress(order, done, total)``; the
     restarts run on ``executor`` (:mod:`rkhp.base.executors`; default: in this process), with the same
-    result whatever the executor."""
+    result whatever the executor. ``on_proof_progress(order, step, elapsed, limit)`` follows
+    the proof (:func:`rkhp.search.prove.prove_impossible`)."""
     check_problem(stages, order)
     check_class(cls)
     options.check()
@@ -296,8 +310,11 @@ def search(stages: int, order: int | None = None, cls: str = "general", implicit
         for n in orders:
             problem = Problem(stages, n, cls, implicit)
             want_many = options.optimize and (order is None or n == order)
+            left = _time_left(options, t0)
+            if left is not None and left <= 0.0:
+                break  # the limit is for the whole search, every order included
             run = run_restarts(
-                problem, options.restarts, options.seed, executor, options.time_limit,
+                problem, options.restarts, options.seed, executor, left,
                 options.digits, stop_after=OPTIMISATION_STARTS if want_many else 1,
                 on_progress=None if on_progress is None else
                 (lambda d, tot, n=n: on_progress(n, d, tot)))
@@ -313,12 +330,15 @@ def search(stages: int, order: int | None = None, cls: str = "general", implicit
                 break
             firsts[n] = time.perf_counter() - t0
             best = found
-        if best is not None and order is None and options.closed_form and not interrupted:
+        left = _time_left(options, t0)
+        if best is not None and order is None and options.closed_form and not interrupted and (
+                left is None or left > 0.0):
             problem = Problem(stages, best.order, cls, implicit)
             run = next(r for r in runs if r.problem.order == best.order)
             best = verified(problem, run.first.x, run.first.polished, options.digits, True,
                             method_name(problem), run.first.index) or best
-        if best is not None and options.optimize == "error" and not interrupted:
+        if best is not None and options.optimize == "error" and not interrupted and (
+                left is None or left > 0.0):
             best, optimisation = _optimise(Problem(stages, best.order, cls, implicit),
                                            runs[[r.problem.order for r in runs].index(best.order)],
                                            options, best)
@@ -330,13 +350,23 @@ def search(stages: int, order: int | None = None, cls: str = "general", implicit
     if options.prove and failed is not None and not interrupted:
         proof_order = failed.problem.order
         try:
-            proof = prove_impossible(failed.problem.system(),
-                                     options.time_limit or DEFAULT_PROOF_SECONDS)
+            left = _time_left(options, t0)
+            proof = prove_impossible(
+                failed.problem.system(), DEFAULT_PROOF_SECONDS if left is None else max(left, 0.0),
+                options.proof_engine, None if on_proof_progress is None else
+                (lambda step, done, limit, n=proof_order: on_proof_progress(n, step, done, limit)))
         except KeyboardInterrupt:
             interrupted = True
     return SearchResult(stages, cls, implicit, order, best, result_runs,
                         time.perf_counter() - t0, options, proof, proof_order, optimisation,
                         interrupted, firsts)
+
+
+def _time_left(options: SearchOptions, t0: float) -> float | None:
+    """Seconds left of --time-limit (the whole search's), None without one."""
+    if options.time_limit is None:
+        return None
+    return options.time_limit - (time.perf_counter() - t0)
 
 
 def _optimise(problem: Problem, run: Restarts, options: SearchOptions, found: Found):

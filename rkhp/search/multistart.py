@@ -63,6 +63,7 @@ class Attempt:
     x: tuple[float, ...]
     polished: Polished | None
     seconds: float
+    timed_out: bool = False
 
     @property
     def success(self) -> bool:
@@ -72,12 +73,15 @@ class Attempt:
 class _Cached:
     """Residuals and Jacobian at the last point, so least_squares' fun and jac share one pass."""
 
-    def __init__(self, system: ResidualSystem):
+    def __init__(self, system: ResidualSystem, deadline: float | None = None):
         self.system = system
+        self.deadline = deadline
         self.x = None
         self.value = None
 
     def _eval(self, x):
+        if self.deadline is not None and time.time() > self.deadline:
+            raise TimeLimitReached
         if self.x is None or not np.array_equal(x, self.x):
             self.x = x.copy()
             self.value = self.system.residuals(x)
@@ -96,11 +100,16 @@ def start_point(problem: Problem, seed: int, index: int) -> np.ndarray:
     return problem.system().random_start(rng)
 
 
-def solve_float(system: ResidualSystem, x0: np.ndarray, max_nfev: int = 200):
-    """scipy least_squares (trf, exact Jacobian) from x0: (end point, max |residual|)."""
+class TimeLimitReached(Exception):
+    """The search's time limit passed during a restart (raised by its residual evaluations)."""
+
+
+def solve_float(system: ResidualSystem, x0: np.ndarray, max_nfev: int = 200, deadline: float | None = None):
+    """scipy least_squares (trf, exact Jacobian) from x0: (end point, max |residual|).
+    TimeLimitReached when the clock (time.time()) passes ``deadline`` during the solve."""
     from scipy.optimize import least_squares
 
-    cached = _Cached(system)
+    cached = _Cached(system, deadline)
     with np.errstate(all="ignore"):
         sol = least_squares(cached.fun, x0, jac=cached.jac, method="trf", xtol=1e-12, ftol=1e-12,
                             gtol=1e-12, max_nfev=max_nfev)
@@ -110,14 +119,23 @@ def solve_float(system: ResidualSystem, x0: np.ndarray, max_nfev: int = 200):
     return sol.x, residual
 
 
-def attempt(problem: Problem, seed: int, index: int, digits: int = 30) -> Attempt:
-    """Run restart ``index``: float64 least squares, then mpmath polishing of a candidate."""
+def attempt(problem: Problem, seed: int, index: int, digits: int = 30, deadline: float | None = None) -> Attempt:
+    """Run restart ``index``: float64 least squares, then mpmath polishing of a candidate. With a
+    ``deadline`` (time.time(), the same on every worker up to the clocks' agreement) the restart
+    stops when it passes, between two evaluations of the residuals: ``timed_out`` is then True
+    and the attempt does not count."""
     t0 = time.perf_counter()
     system = problem.system()
-    x, residual = solve_float(system, start_point(problem, seed, index))
-    polished = None
-    if residual < FLOAT_TOLERANCE and np.max(np.abs(x)) <= COEFFICIENT_BOUND:
-        polished = polish(system, x, digits)
+    start = start_point(problem, seed, index)
+    try:
+        x, residual = solve_float(system, start, deadline=deadline)
+        polished = None
+        if residual < FLOAT_TOLERANCE and np.max(np.abs(x)) <= COEFFICIENT_BOUND:
+            polished = polish(system, x, digits, deadline=deadline)
+            if not polished.converged and deadline is not None and time.time() > deadline:
+                raise TimeLimitReached
+    except TimeLimitReached:
+        return Attempt(index, float("inf"), tuple(float(v) for v in start), None, time.perf_counter() - t0, True)
     return Attempt(index, residual, tuple(float(v) for v in x), polished, time.perf_counter() - t0)
 
 
@@ -167,11 +185,14 @@ def run_restarts(problem: Problem, restarts: int, seed: int = 0, executor=None,
     them has run, so the answer does not depend on the executor or its number of workers (only the
     time does). About twice as many restarts as the executor has slots are submitted at a time;
     those beyond the needed success are cancelled. ``on_progress(done, total)`` is called after
-    each finished restart. Ctrl-C cancels the submitted restarts and returns what finished.
+    each finished restart. Ctrl-C cancels the submitted restarts and returns what finished;
+    ``time_limit`` (seconds) is checked inside every restart too (`attempt`), so the run ends
+    within it (plus one evaluation of the residuals).
     """
     executor = InProcess() if executor is None else executor
     t0 = time.perf_counter()
     deadline = None if time_limit is None else t0 + time_limit
+    wall_deadline = None if time_limit is None else time.time() + time_limit
     done: dict[int, Attempt] = {}
     interrupted = timed_out = False
     first_at = None
@@ -202,7 +223,7 @@ def run_restarts(problem: Problem, restarts: int, seed: int = 0, executor=None,
                 if deadline is not None and time.perf_counter() > deadline:
                     timed_out = True
                     break
-                task = executor.submit(attempt, problem, seed, next_index, digits)
+                task = executor.submit(attempt, problem, seed, next_index, digits, wall_deadline)
                 pending[id(task)] = (task, next_index)
                 next_index += 1
             if win is not None:
@@ -212,7 +233,11 @@ def run_restarts(problem: Problem, restarts: int, seed: int = 0, executor=None,
                 break
             task = first_done(executor, [t for t, _ in pending.values()])
             del pending[id(task)]
-            record(task.result())
+            result = task.result()
+            if result.timed_out:  # the limit passed inside it: stop, the unfinished restart does not count
+                timed_out = True
+                break
+            record(result)
     except KeyboardInterrupt:
         interrupted = True
     finally:

@@ -9,6 +9,7 @@ residual is below 10^-D.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from fractions import Fraction
 
@@ -68,10 +69,11 @@ def newton_step(J, r):
 
 
 def polish(system: ResidualSystem, x0, digits: int = 30, max_iterations: int = 40,
-           fixed: dict[int, Fraction] | None = None) -> Polished:
+           fixed: dict[int, Fraction] | None = None, deadline: float | None = None) -> Polished:
     """Newton in mpmath from x0 (floats or strings) until every residual is below 10^-digits.
 
-    ``fixed`` maps unknown indices to values kept fixed (their columns leave the Jacobian).
+    ``fixed`` maps unknown indices to values kept fixed (their columns leave the Jacobian); the
+    iterations stop (not converged) once the clock (time.time()) passes ``deadline``.
     """
     import mpmath
 
@@ -91,6 +93,8 @@ def polish(system: ResidualSystem, x0, digits: int = 30, max_iterations: int = 4
                 break  # diverging
             best = size if best is None else min(best, size)
             if size < tol or iterations == max_iterations:
+                break
+            if deadline is not None and time.time() > deadline:
                 break
             step = newton_step(J[:, free], r)
             x[free] = x[free] + step

@@ -1,11 +1,24 @@
-"""Impossibility certificates: a Groebner basis of the order-condition ideal equal to [1].
+"""Deciding whether a search problem has a solution: Groebner bases of the order-condition ideal.
 
 The order conditions up to order N for S stages are polynomial equations with rational
-coefficients in the unknowns a_ij, b_i (c_i = sum_j a_ij substituted). By Hilbert's
-Nullstellensatz they have no complex solution, hence no tableau exists, exactly when the ideal they
-generate in QQ[a, b] is the whole ring, i.e. when its reduced Groebner basis is [1]. A proper
-ideal (basis not [1]) proves that complex solutions exist; real ones may or may not. The basis is
-computed by sympy (grevlex) in a child process, stopped at the time limit.
+coefficients (:mod:`.ideal`: for explicit tableaux in the unknowns c_i, a_ij (j >= 2), b_i). By
+Hilbert's Nullstellensatz they have no complex solution, hence no tableau exists, exactly when the
+ideal they generate in QQ[unknowns] is the whole ring, i.e. when its reduced Groebner basis is [1].
+A proper ideal (basis not [1]) proves that complex solutions exist; real ones may or may not.
+
+Engines, chosen by measurement (docs/tableau-search.md, "Certificates of impossibility"):
+
+- ``singular`` (when the optional program is installed, :mod:`.singular`): first a Groebner
+  basis modulo the primes of :data:`EVIDENCE_PRIMES` (a quarter of the time limit at most; fast,
+  and evidence only), then the reduced Groebner basis over Q (``slimgb``, degree reverse
+  lexicographic), which decides; when it is [1], the cofactors of 1 = sum g_i f_i (``liftstd``),
+  checked here in exact arithmetic (:mod:`.certificates`) before the problem is called proved
+  with a certificate;
+- ``sympy`` (always available): ``sympy.groebner`` (grevlex, over QQ) in a child process; a basis
+  [1] proves impossibility but gives no cofactors.
+
+Each computation stops at the time limit; ``on_progress(step, elapsed, limit)`` is called about
+four times a second while one runs.
 """
 
 from __future__ import annotations
@@ -14,9 +27,25 @@ import multiprocessing
 import time
 from dataclasses import dataclass
 
-import numpy as np
-
+from ..base.errors import CheckFailed, InputError
+from .certificates import Certificate, CertificateCheck, check_certificate
+from .ideal import (
+    CERTIFICATE_ELIMINATION,
+    DECISION_ELIMINATION,
+    ConditionIdeal,
+    condition_ideal,
+    parse_polynomial,
+    polynomial_text,
+)
+from .singular import singular_basis, singular_cofactors, singular_path
 from .system import ResidualSystem
+
+#: Engines accepted by :func:`prove_impossible`.
+ENGINES = ("auto", "singular", "sympy")
+#: Primes of the modular evidence (below 2^15, where Singular's arithmetic is fastest).
+EVIDENCE_PRIMES = (32003, 31991, 32749)
+#: Share of the time limit given to the modular evidence.
+EVIDENCE_SHARE = 0.25
 
 
 @dataclass(frozen=True)
@@ -24,12 +53,19 @@ class Proof:
     """Outcome of a proof attempt.
 
     Attributes:
-        proved: True when the Groebner basis is [1] (no tableau exists, even over C).
+        proved: True when 1 is in the ideal (no tableau exists, even over C).
         status: "proved", "solutions-over-C" (basis not [1]) or "timeout".
-        method: how (library, ordering, field).
-        polynomials: the generators, as strings (the unknowns named a_ij, b_i, 1-based).
-        basis: the reduced Groebner basis as strings ([] on timeout; ["1"] when proved).
+        method: how (engine, ordering, field, what the result means).
+        polynomials: the generators f_i, as text in ``variables``.
+        basis: the reduced Groebner basis as text ([] on timeout; ["1"] when proved).
         seconds: time spent; time_limit: the limit given.
+        engine: "singular" or "sympy"; variables, substitution: the unknowns (:mod:`.ideal`).
+        dimension: Krull dimension of the ideal (-1 when proved; None when unknown).
+        complex_solutions: number of complex solutions with multiplicity when finitely many.
+        certificate: the checked cofactors (None without: sympy, or the time limit ran out).
+        check: the exact check of the certificate.
+        modular: (prime, basis is [1]) for each prime whose basis was computed in time.
+        eliminated: the variables eliminated before the basis that decided (:mod:`.ideal`).
     """
 
     proved: bool
@@ -39,72 +75,211 @@ class Proof:
     basis: tuple[str, ...]
     seconds: float
     time_limit: float
+    engine: str = "sympy"
+    variables: tuple[str, ...] = ()
+    substitution: str = ""
+    dimension: int | None = None
+    complex_solutions: int | None = None
+    certificate: Certificate | None = None
+    check: CertificateCheck | None = None
+    modular: tuple[tuple[int, bool], ...] = ()
+    eliminated: tuple[str, ...] = ()
+
+    def modular_text(self) -> str:
+        """The modular evidence in words (empty when none)."""
+        if not self.modular:
+            return ""
+        units = [p for p, unit in self.modular if unit]
+        proper = [p for p, unit in self.modular if not unit]
+        parts = []
+        if units:
+            parts.append(f"the basis modulo {', '.join(map(str, units))} is [1] (no solution over "
+                         "the algebraic closure of F_p: evidence of impossibility, not a proof)")
+        if proper:
+            parts.append(f"the ideal modulo {', '.join(map(str, proper))} is proper (evidence "
+                         "that complex solutions exist, not a proof)")
+        return "; ".join(parts)
 
     def result_text(self, stages: int, order: int, cls: str) -> str:
-        """One sentence stating what was (or was not) proved."""
+        """One sentence stating exactly what was (or was not) decided."""
         what = f"{cls} order {order} with {stages} stages"
+        if self.proved and self.certificate is not None:
+            return (f"proved impossible: 1 = sum g_i f_i with exact rational cofactors "
+                    f"({self.check.terms} terms), checked; no tableau for {what}, real or complex "
+                    f"({self.seconds:.2f} s)")
         if self.proved:
+            why = ("cofactors not computed within the time limit" if self.engine == "singular"
+                   else "no cofactors")
             return (f"proved impossible: the Groebner basis of the {len(self.polynomials)} "
-                    f"order-condition polynomials is [1] ({self.seconds:.2f} s)")
+                    f"order-condition polynomials is [1]; no tableau for {what}, real or complex "
+                    f"({why}; {self.seconds:.2f} s)")
         if self.status == "solutions-over-C":
+            size = (f", {self.complex_solutions} complex solutions with multiplicity"
+                    if self.complex_solutions is not None else
+                    f", dimension {self.dimension}" if self.dimension is not None else "")
             return (f"not proved: the ideal of {what} is proper (basis of {len(self.basis)} "
-                    f"polynomials), so complex solutions exist ({self.seconds:.2f} s)")
-        return f"not proved: no Groebner basis for {what} within {self.time_limit:g} s"
+                    f"polynomials{size}), so complex solutions exist; real ones were not "
+                    f"examined ({self.seconds:.2f} s)")
+        evidence = self.modular_text()
+        return (f"not decided: no Groebner basis over Q for {what} within {self.time_limit:g} s "
+                f"({self.engine})" + (f"; {evidence}" if evidence else ""))
 
 
-def unknown_symbols(system: ResidualSystem):
-    """sympy symbols a_ij (1-based, by rows) and b_i, in the order of the unknowns."""
+# ----------------------------------------------------------------------------- sympy
+
+
+def _groebner_worker(exprs, names, conn) -> None:
     import sympy
 
-    names = [f"a{i + 1}{j + 1}" if system.stages < 10 else f"a{i + 1}_{j + 1}"
-             for i, j in system.pattern] + [f"b{i + 1}" for i in range(system.stages)]
-    return sympy.symbols(names)
-
-
-def condition_polynomials(system: ResidualSystem):
-    """The residual polynomials sum_k w_k (gamma(t_k) a(t_k) - 1), expanded, and the symbols."""
-    import sympy
-
-    symbols = unknown_symbols(system)
-    x = np.array(symbols, dtype=object)
-    r, _ = system.residuals(x, jacobian=False)
-    polys = [sympy.expand(v) for v in r]
-    return [p for p in polys if p != 0], symbols
-
-
-def _groebner_worker(polys, symbols, conn) -> None:
-    import sympy
-
-    basis = sympy.groebner(polys, *symbols, order="grevlex", domain=sympy.QQ)
+    symbols = sympy.symbols(names)
+    basis = sympy.groebner(exprs, *symbols, order="grevlex", domain=sympy.QQ)
     conn.send([str(g) for g in basis.exprs])
     conn.close()
 
 
-def prove_impossible(system: ResidualSystem, time_limit: float = 60.0) -> Proof:
-    """Try to prove that the system has no solution (Groebner basis [1]) within ``time_limit`` s."""
-    t0 = time.perf_counter()
-    polys, symbols = condition_polynomials(system)
-    method = "Groebner basis over QQ (sympy, grevlex): basis [1] means no complex solution"
-    text = tuple(str(p) for p in polys)
+def _sympy_basis(ideal: ConditionIdeal, deadline: float, on_wait) -> tuple[str, ...] | None:
+    """The reduced basis by sympy in a child process, or None at the deadline."""
+    exprs = [p.as_expr() for p in ideal.polynomials()]
     ctx = multiprocessing.get_context("fork")
     receive, send = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_groebner_worker, args=(polys, symbols, send), daemon=True)
+    proc = ctx.Process(target=_groebner_worker, args=(exprs, list(ideal.variables), send),
+                       daemon=True)
     proc.start()
     send.close()
-    remaining = max(0.0, time_limit - (time.perf_counter() - t0))
     basis = None
     try:
-        if receive.poll(remaining):
-            basis = tuple(receive.recv())
+        while basis is None and time.monotonic() < deadline:
+            if receive.poll(min(0.25, max(0.0, deadline - time.monotonic()))):
+                basis = tuple(receive.recv())
+            elif not proc.is_alive():
+                break
+            elif on_wait is not None:
+                on_wait()
     except EOFError:
         basis = None
     finally:
         if proc.is_alive():
             proc.terminate()
         proc.join()
-    seconds = time.perf_counter() - t0
+    return basis
+
+
+# ----------------------------------------------------------------------------- singular
+
+
+def _certificate(ideal: ConditionIdeal, lines, produced_by: str) -> Certificate | None:
+    """The certificate of Singular's ``UNIT`` output for the generators of ``ideal``."""
+    if not lines or lines[0] != "UNIT":
+        return None
+    R = ideal.ring()
+    cofactors = tuple(polynomial_text(parse_polynomial(line.removeprefix("POLY "), R),
+                                      ideal.variables) for line in lines[1:])
+    return Certificate(ideal.stages, ideal.order, ideal.cls, ideal.implicit, ideal.variables,
+                       ideal.substitution, ideal.generators, cofactors, produced_by,
+                       ideal.eliminated)
+
+
+def _parse_basis(run) -> tuple[tuple[str, ...], int, int]:
+    """(basis, dim, vdim) of a finished :func:`rkhp.search.singular.singular_basis` run."""
+    head = run.lines[0].split()
+    size, dim, vdim = int(head[1]), int(head[2]), int(head[3])
+    return tuple(line.removeprefix("POLY ").strip() for line in run.lines[1:1 + size]), dim, vdim
+
+
+def _singular_proof(path, full: ConditionIdeal, deadline, waiting, t0, time_limit) -> Proof:
+    """Modular evidence, then the basis of J over Q, its cofactors when [1], else the basis of I."""
+    ideal = full.reduced(DECISION_ELIMINATION)
+    method = ("Singular: slimgb over QQ, degrevlex, on the conditions with "
+              + (", ".join(ideal.eliminated) + " eliminated" if ideal.eliminated else "nothing "
+                 "eliminated") + " (after bases modulo small primes, evidence only); liftstd for "
+              "the cofactors, checked exactly")
+    modular = []
+    for p in EVIDENCE_PRIMES:
+        short = min(deadline, t0 + EVIDENCE_SHARE * time_limit)
+        run = singular_basis(path, ideal.variables, ideal.generators, short,
+                             waiting(f"basis modulo {p}"), p)
+        if not run.finished:
+            break
+        unit = run.lines[1:] == ("POLY 1",)
+        if unit or ideal is full:  # J proper modulo p says nothing about I
+            modular.append((p, unit))
+    common = dict(method=method, polynomials=full.generators, time_limit=time_limit,
+                  engine="singular", variables=full.variables, substitution=full.substitution,
+                  modular=tuple(modular), eliminated=ideal.eliminated)
+    run = singular_basis(path, ideal.variables, ideal.generators, deadline,
+                         waiting("basis over Q"))
+    if not run.finished:
+        return Proof(False, "timeout", basis=(), seconds=time.monotonic() - t0, **common)
+    basis, dim, vdim = _parse_basis(run)
+    if basis != ("1",):
+        if ideal is not full:  # J proper says nothing about I: decide I itself
+            run = singular_basis(path, full.variables, full.generators, deadline,
+                                 waiting("basis over Q, full ideal"))
+            if not run.finished:
+                return Proof(False, "timeout", basis=(), seconds=time.monotonic() - t0, **common)
+            basis, dim, vdim = _parse_basis(run)
+        common["eliminated"] = ()
+        if basis != ("1",):
+            return Proof(False, "solutions-over-C", basis=basis, seconds=time.monotonic() - t0,
+                         dimension=dim, complex_solutions=vdim if dim == 0 else None, **common)
+    ideal = full.reduced(CERTIFICATE_ELIMINATION) if ideal is not full else full
+    lift = singular_cofactors(path, ideal.variables, ideal.generators, deadline,
+                              waiting("cofactors over Q"))
+    cert = check = None
+    if lift.finished:
+        cert = _certificate(ideal, lift.lines, f"{run.version}: liftstd over QQ, dp ordering")
+    if cert is not None:
+        waiting("checking cofactors")()
+        check = check_certificate(cert)
+        if not check.valid:
+            raise CheckFailed(f"Singular's cofactors do not check: {check.reason}")
+    return Proof(True, "proved", basis=("1",), seconds=time.monotonic() - t0, dimension=-1,
+                 certificate=cert, check=check, **common)
+
+
+# ----------------------------------------------------------------------------- entry point
+
+
+def choose_engine(engine: str = "auto") -> tuple[str, str | None]:
+    """(engine, Singular's path or None): ``auto`` is Singular when installed, else sympy."""
+    if engine not in ENGINES:
+        raise InputError(f"unknown proof engine {engine!r}; expected one of {', '.join(ENGINES)}")
+    path = singular_path() if engine in ("auto", "singular") else None
+    if engine == "singular" and path is None:
+        raise InputError("the proof engine 'singular' needs the Singular program on PATH "
+                         "(e.g. apt-get install singular)")
+    return ("singular", path) if path is not None else ("sympy", None)
+
+
+def prove_impossible(system: ResidualSystem, time_limit: float = 60.0, engine: str = "auto",
+                     on_progress=None) -> Proof:
+    """Try to prove that the system has no solution (1 in its ideal) within ``time_limit`` s."""
+    t0 = time.monotonic()
+    deadline = t0 + time_limit
+    name, path = choose_engine(engine)
+
+    def waiting(step: str):
+        if on_progress is None:
+            return lambda: None
+        return lambda: on_progress(step, time.monotonic() - t0, time_limit)
+
+    waiting("order-condition polynomials")()
+    ideal = condition_ideal(system)
+    if name == "singular":
+        return _singular_proof(path, ideal, deadline, waiting, t0, time_limit)
+    method = "sympy: groebner over QQ, grevlex (no cofactors)"
+    reduced = ideal.reduced(DECISION_ELIMINATION)
+    basis = _sympy_basis(reduced, deadline, waiting("basis over Q (sympy)"))
+    eliminated = reduced.eliminated
+    if basis is not None and basis != ("1",) and reduced is not ideal:
+        basis = _sympy_basis(ideal, deadline, waiting("basis over Q, full ideal (sympy)"))
+        eliminated = ()
+    seconds = time.monotonic() - t0
+    common = dict(method=method, polynomials=ideal.generators, seconds=seconds,
+                  time_limit=time_limit, engine="sympy", variables=ideal.variables,
+                  substitution=ideal.substitution, eliminated=eliminated)
     if basis is None:
-        return Proof(False, "timeout", method, text, (), seconds, time_limit)
+        return Proof(False, "timeout", basis=(), **common)
     proved = basis == ("1",)
-    return Proof(proved, "proved" if proved else "solutions-over-C", method, text, basis, seconds,
-                 time_limit)
+    return Proof(proved, "proved" if proved else "solutions-over-C", basis=basis,
+                 dimension=-1 if proved else None, **common)

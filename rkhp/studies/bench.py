@@ -22,13 +22,14 @@ import numpy as np
 
 from ..base import bounds
 from ..base.errors import InputError
-from ..base.executors import InProcess, run_all
+from ..base.executors import InProcess, run_until_interrupted
+from ..base.interrupts import Interrupted, is_interrupt
 from ..integrators import integrate_ensemble
 from ..integrators.methods import DEFAULT_METHODS, SCIPY_METHODS, Method, check_distinct, resolve_method, resolve_system
 from .converge import check_t_final
 from .reference import Reference, dop853_reference, reference
 
-TARGETS = (1e-4, 1e-6, 1e-8, 1e-10)
+TARGETS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
 DEFAULT_STEPS = tuple(10 * 2**k for k in range(9))
 DEFAULT_TOLERANCES = tuple(10.0**-k for k in range(3, 14))
 DEFAULT_PEERS = ("scipy:dop853", "scipy:rk45", "classical:rk4", "implicit-midpoint")
@@ -102,10 +103,11 @@ class BenchStudy:
     cheapest: tuple[Cheapest, ...]
     targets: tuple[float, ...] = TARGETS
     x0: tuple[float, ...] = ()
+    interrupted: bool = False
 
     def to_json(self) -> dict:
         return {"system": self.system, "realisation": self.realisation, "x0": list(self.x0),
-                "t_final": self.t_final,
+                "t_final": self.t_final, "interrupted": self.interrupted,
                 "reference": {"kind": self.reference.kind, "error_estimate": self.reference.error_estimate},
                 "repeats": self.repeats, "ensemble": self.ensemble,
                 "curves": [c.to_json() for c in self.curves],
@@ -145,13 +147,23 @@ def _method_curve(method: Method, system, ref: Reference, steps, t_final: float,
     warm = method.integrate(system, t_final / steps[0], steps[0])
     compile_seconds = float(warm.compile_seconds)
     points = []
-    for n in steps:
-        seconds, traj = _median_seconds(lambda n=n: method.integrate(system, t_final / n, n), repeats)
-        compile_seconds = max(compile_seconds, float(traj.compile_seconds))
-        measured = float(np.linalg.norm(traj.final_state - ref.state)) if traj.ok else None
-        points.append(_point(measured, ref.floor, steps=n, tolerance=None, seconds=seconds,
-                             evaluations=None, status=traj.status))
+    try:
+        for n in steps:
+            seconds, traj = _median_seconds(lambda n=n: method.integrate(system, t_final / n, n), repeats)
+            compile_seconds = max(compile_seconds, float(traj.compile_seconds))
+            measured = float(np.linalg.norm(traj.final_state - ref.state)) if traj.ok else None
+            points.append(_point(measured, ref.floor, steps=n, tolerance=None, seconds=seconds,
+                                 evaluations=None, status=traj.status))
+    except BaseException as exc:
+        _keep_points(exc, BenchCurve(method.name, method.kind, compile_seconds, 1, tuple(points)))
+        raise
     return BenchCurve(method.name, method.kind, compile_seconds, 1, tuple(points))
+
+
+def _keep_points(exc: BaseException, curve: BenchCurve) -> None:
+    """On an interrupt with points measured, raise it again carrying the curve so far."""
+    if curve.points and is_interrupt(exc):
+        raise Interrupted(curve) from exc
 
 
 def _solve_ivp(system, solver: str, x0, t_final: float, rtol: float):
@@ -168,12 +180,17 @@ def _scipy_curve(method: Method, system, ref: Reference, tolerances, t_final: fl
     x0 = np.asarray(system.x0, dtype=float)
     _solve_ivp(system, solver, x0, t_final, max(tolerances))  # warm-up: loads the compiled vector field
     points = []
-    for rtol in tolerances:
-        seconds, sol = _median_seconds(lambda rtol=rtol: _solve_ivp(system, solver, x0, t_final, rtol), repeats)
-        ok = sol.success and np.all(np.isfinite(sol.y[:, -1]))
-        measured = float(np.linalg.norm(sol.y[:, -1] - ref.state)) if ok else None
-        points.append(_point(measured, ref.floor, steps=None, tolerance=rtol, seconds=seconds,
-                             evaluations=int(sol.nfev), status="ok" if ok else f"failed: {sol.message}"))
+    try:
+        for rtol in tolerances:
+            seconds, sol = _median_seconds(lambda rtol=rtol: _solve_ivp(system, solver, x0, t_final, rtol),
+                                           repeats)
+            ok = sol.success and np.all(np.isfinite(sol.y[:, -1]))
+            measured = float(np.linalg.norm(sol.y[:, -1] - ref.state)) if ok else None
+            points.append(_point(measured, ref.floor, steps=None, tolerance=rtol, seconds=seconds,
+                                 evaluations=int(sol.nfev), status="ok" if ok else f"failed: {sol.message}"))
+    except BaseException as exc:
+        _keep_points(exc, BenchCurve(method.name, "scipy", 0.0, 1, tuple(points)))
+        raise
     return BenchCurve(method.name, "scipy", 0.0, 1, tuple(points))
 
 
@@ -285,6 +302,8 @@ def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=
     on the worker that runs it; in ensemble mode the curves run here one after another and each
     RKHP point spreads its K trajectories over the workers (the time per trajectory is then the
     workers' throughput). The errors do not depend on the executor; ``on_curve(done, total)``.
+    Ctrl-C ends the study early: ``interrupted`` is then True, with the curves (in this process:
+    and the points) finished before it.
     """
     system = resolve_system(system)
     t_final = check_t_final(system.t_final if t_final is None else t_final)
@@ -306,23 +325,31 @@ def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=
         ref = reference(system, t_final)
         jobs = [(_method_curve, (m, system, ref, steps, t_final, repeats)) for m in integrators]
         jobs += [(_scipy_curve, (p, system, ref, tolerances, t_final, repeats)) for p in solvers]
-        curves = run_all(executor or InProcess(), _job, jobs, on_curve)
+        found, interrupted = run_until_interrupted(executor or InProcess(), _job, jobs, on_curve)
+        curves = [c for c in found if c is not None]
     else:
         starts = ensemble_starts(system, ensemble, seed)
         refs = [dop853_reference(system, t_final, x) for x in starts[:ENSEMBLE_CHECKED]]
         ref = max(refs, key=lambda r: r.error_estimate)
         curves = []
-        for m in integrators:
-            curves.append(_ensemble_method_curve(m, system, refs, ref.floor, starts, steps, t_final, repeats,
-                                                 executor))
-            if on_curve:
-                on_curve(len(curves), len(integrators) + len(solvers))
-        for p in solvers:
-            curves.append(_ensemble_scipy_curve(p, system, refs, ref.floor, starts, tolerances, t_final, repeats))
-            if on_curve:
-                on_curve(len(curves), len(integrators) + len(solvers))
+        interrupted = False
+        try:
+            for m in integrators:
+                curves.append(_ensemble_method_curve(m, system, refs, ref.floor, starts, steps, t_final, repeats,
+                                                     executor))
+                if on_curve:
+                    on_curve(len(curves), len(integrators) + len(solvers))
+            for p in solvers:
+                curves.append(_ensemble_scipy_curve(p, system, refs, ref.floor, starts, tolerances, t_final,
+                                                    repeats))
+                if on_curve:
+                    on_curve(len(curves), len(integrators) + len(solvers))
+        except BaseException as exc:
+            if not is_interrupt(exc):
+                raise
+            interrupted = True
     return BenchStudy(system.name, system.realisation, t_final, ref, repeats, ensemble, tuple(curves),
-                      cheapest(curves), x0=tuple(float(v) for v in system.x0))
+                      cheapest(curves), x0=tuple(float(v) for v in system.x0), interrupted=interrupted)
 
 
 def _job(curve, args) -> BenchCurve:

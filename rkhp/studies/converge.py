@@ -16,7 +16,7 @@ import numpy as np
 
 from ..base import bounds
 from ..base.errors import InputError
-from ..base.executors import InProcess, run_all
+from ..base.executors import InProcess, run_all, run_until_interrupted
 from ..integrators.methods import condition_class, require_steps, resolve_methods, resolve_system
 from .fit import MIN_FIT_POINTS, OrderFit, fit_order, verdict
 from .invariants import max_deviations
@@ -93,6 +93,7 @@ class ConvergenceStudy:
     methods: tuple[MethodConvergence, ...]
     condition_class: str = "general"
     x0: tuple[float, ...] = ()
+    interrupted: bool = False
 
     @property
     def symmetric(self) -> bool:
@@ -101,7 +102,7 @@ class ConvergenceStudy:
     def to_json(self) -> dict:
         return {"system": self.system, "realisation": self.realisation, "degenerate": self.degenerate,
                 "symmetric": self.symmetric, "x0": list(self.x0),
-                "t_final": self.t_final,
+                "t_final": self.t_final, "interrupted": self.interrupted,
                 "reference": {"kind": self.reference.kind, "error_estimate": self.reference.error_estimate},
                 "methods": [m.to_json() for m in self.methods]}
 
@@ -155,19 +156,37 @@ def study_methods(methods, system, ref: Reference, steps, t_final: float, on_run
     """Each method's convergence table, fit and verdict. Every (method, steps) run is one task on
     ``executor`` (rkhp.base.executors; default: in this process), reduced in method and step order;
     ``on_run(done, total)`` after each finished run."""
+    results, _ = study_rows(methods, system, ref, steps, t_final, on_run, executor, keep=False)
+    return results
+
+
+def study_rows(methods, system, ref: Reference, steps, t_final: float, on_run=None, executor=None,
+               keep: bool = True) -> tuple[tuple[MethodConvergence, ...], bool]:
+    """As :func:`study_methods`, and whether an interrupt stopped the runs (with ``keep``: the
+    tables then hold the rows finished before it, methods without any left out)."""
     runs = [(m, system, ref, n, t_final) for m in methods for n in steps]
-    rows = run_all(executor or InProcess(), run_row, runs, on_run)
-    return tuple(_method_convergence(m, system, ref, rows[k * len(steps):(k + 1) * len(steps)])
-                 for k, m in enumerate(methods))
+    if keep:
+        rows, interrupted = run_until_interrupted(executor or InProcess(), run_row, runs, on_run)
+    else:
+        rows, interrupted = run_all(executor or InProcess(), run_row, runs, on_run), False
+    tables = []
+    for k, m in enumerate(methods):
+        done = [r for r in rows[k * len(steps):(k + 1) * len(steps)] if r is not None]
+        if done:
+            tables.append(_method_convergence(m, system, ref, done))
+    return tuple(tables), interrupted
 
 
 def _method_convergence(method, system, ref: Reference, rows) -> MethodConvergence:
-    fit = fit_order([r.h for r in rows], [r.measured_error for r in rows], floor=ref.floor)
-    rows = [_with_local_order(r, p) for r, p in zip(rows, fit.local_orders, strict=True)]
     expected = method.expected_order_on(system)
     bound = method.realisation_bound(system)
-    return MethodConvergence(method.name, method.kind, expected, fit, verdict(fit.slope, expected), tuple(rows),
-                             bound)
+    if len(rows) < MIN_FIT_POINTS:  # an interrupted study: too few rows to fit
+        fit = OrderFit(None, (), tuple((i, "too few rows") for i in range(len(rows))), (None,) * len(rows))
+        return MethodConvergence(method.name, method.kind, expected, fit, "inconclusive", tuple(rows), bound)
+    fit = fit_order([r.h for r in rows], [r.measured_error for r in rows], floor=ref.floor)
+    rows = [_with_local_order(r, p) for r, p in zip(rows, fit.local_orders, strict=True)]
+    return MethodConvergence(method.name, method.kind, expected, fit, verdict(fit.slope, expected, fit),
+                             tuple(rows), bound)
 
 
 def _with_local_order(row: ConvergenceRow, p) -> ConvergenceRow:
@@ -180,13 +199,14 @@ def converge(system, methods, steps=None, t_final=None, refinements=None, on_run
     defaults when empty) on ``system`` (a name, a spec file or a PoissonSystem) up to ``t_final``
     (default: the system's). The runs are independent tasks on ``executor`` (rkhp.base.executors;
     default: in this process), ``on_run(done, total)`` after each; the reference is computed here,
-    once."""
+    once. Ctrl-C during the runs ends the study early: ``interrupted`` is then True and the tables
+    hold the rows finished before it."""
     system = resolve_system(system)
     methods = require_steps(resolve_methods(methods))
     t_final = check_t_final(system.t_final if t_final is None else t_final)
     counts = step_counts(steps, refinements)
     bounds.check_trajectory(max(counts), system.dim, "the finest run")
     ref = reference(system, t_final)
-    results = study_methods(methods, system, ref, counts, t_final, on_run, executor)
+    results, interrupted = study_rows(methods, system, ref, counts, t_final, on_run, executor)
     return ConvergenceStudy(system.name, system.realisation, bool(system.degenerate), t_final, ref, results,
-                            condition_class(system), tuple(float(v) for v in system.x0))
+                            condition_class(system), tuple(float(v) for v in system.x0), interrupted)

@@ -30,6 +30,10 @@ MIN_ORDER = 0.5
 order is not above it (the error no longer falls) starts the round-off floor; a finer row whose
 error still falls is "order drift"."""
 
+DRIFT = 0.1
+"""Local orders of a fitted range that move steadily (every one below, or every one above, the one
+before) by more than this in all are a drift (:func:`drift`)."""
+
 MIN_FIT_POINTS = 3
 """A fit needs at least this many step sizes (two local orders)."""
 
@@ -135,10 +139,35 @@ def _asymptotic_window(usable: list[int], orders: list, spread: float):
     return None
 
 
-def verdict(observed: float | None, expected: int | None, tol: float = VERDICT_TOLERANCE) -> str:
-    """"confirmed", "higher than expected", "lower than expected" or "inconclusive"."""
+def drift(fit: OrderFit) -> str | None:
+    """"falling" or "rising" when the local orders inside the fitted range move steadily: each one
+    below (above) the one before, by more than DRIFT in all; else None. The range is then not yet
+    asymptotic (the slope averages orders that are still changing), and the order the rows tend
+    to lies beyond the last local order, not at the slope."""
+    inner = [fit.local_orders[i] for i in fit.fit_rows[1:]]
+    if len(inner) < 2 or any(p is None for p in inner):
+        return None
+    steps = [b - a for a, b in zip(inner, inner[1:], strict=False)]
+    if all(d < 0 for d in steps) and inner[0] - inner[-1] > DRIFT:
+        return "falling"
+    if all(d > 0 for d in steps) and inner[-1] - inner[0] > DRIFT:
+        return "rising"
+    return None
+
+
+def verdict(observed: float | None, expected: int | None, fit: OrderFit | None = None,
+            tol: float = VERDICT_TOLERANCE) -> str:
+    """"confirmed", "higher than expected", "lower than expected" or "inconclusive".
+
+    With the ``fit``, a discrepancy is claimed only when the rows show it: "higher" (or "lower")
+    becomes "inconclusive" when the local orders of the fitted range fall (rise) steadily towards
+    the expected order (:func:`drift`), i.e. when the slope is the mean of a drift, not a limit.
+    """
     if observed is None or expected is None:
         return "inconclusive"
     if abs(observed - expected) <= tol:
         return "confirmed"
-    return "higher than expected" if observed > expected else "lower than expected"
+    moving = drift(fit) if fit is not None else None
+    if observed > expected:
+        return "inconclusive" if moving == "falling" else "higher than expected"
+    return "inconclusive" if moving == "rising" else "lower than expected"

@@ -35,10 +35,11 @@ def invariant_deviations(system, states) -> tuple[np.ndarray, np.ndarray]:
     return casimir, energy
 
 
-def max_deviations(system, states) -> tuple[float, float]:
-    """(max Casimir error, max energy error) over a trajectory."""
+def max_deviations(system, states) -> tuple[float | None, float]:
+    """(max Casimir error, max energy error) over a trajectory; the Casimir error is None for a
+    system without Casimirs (no such quantity, shown as a dash)."""
     casimir, energy = invariant_deviations(system, states)
-    return float(casimir.max()), float(energy.max())
+    return (float(casimir.max()) if system.casimirs else None), float(energy.max())
 
 
 def window_maxima(values, windows: int) -> list[float]:

@@ -13,6 +13,7 @@ import json
 from pathlib import Path
 
 from ..base.bounds import check_output_path
+from ..base.files import check_target
 from ..base.provenance import provenance, write_output
 from ..base.tables import csv_text
 
@@ -22,11 +23,13 @@ DATA_COLUMNS = ("panel", "curve", "x", "y")
 FORMATS = ("png", "svg", "pdf")
 
 
-def check_plot_path(path, what: str = "plot file") -> Path:
+def check_plot_path(path, what: str = "plot file", force: bool = False) -> Path:
     """The plot path, after checking its extension and that it and its data file
-    (:func:`data_path`) can be written (`rkhp.base.bounds`); ``what`` names it in messages."""
-    path = check_output_path(path, tuple("." + f for f in FORMATS), what)
-    check_output_path(data_path(path), (".csv",), f"{what} (its data file)")
+    (:func:`data_path`) can be written (`rkhp.base.bounds`; an existing file or a link only with
+    ``force``, `rkhp.base.files`); ``what`` names it in messages."""
+    path = check_target(check_output_path(path, tuple("." + f for f in FORMATS), what), what, force)
+    data_what = f"{what} (its data file)"
+    check_target(check_output_path(data_path(path), (".csv",), data_what), data_what, force)
     return path
 
 
@@ -48,9 +51,10 @@ def _pyplot():
     return plt
 
 
-def _save(fig, path: Path, rows, record: dict | None) -> None:
+def _save(fig, path: Path, rows, record: dict | None, force: bool) -> None:
     """Write the figure and, beside it, its data (``rows`` of :data:`DATA_COLUMNS`), both with the
-    provenance ``record`` (default: this process's)."""
+    provenance ``record`` (default: this process's), atomically (an existing file only with
+    ``force``, rkhp.base.provenance.write_output)."""
     record = provenance() if record is None else record
     fmt = path.suffix.lower().lstrip(".")
     # matplotlib's metadata keys per format: the record as the file's description
@@ -62,14 +66,14 @@ def _save(fig, path: Path, rows, record: dict | None) -> None:
         import matplotlib.pyplot as plt
 
         plt.close(fig)
-    write_output(path, buffer.getvalue(), "plot file")
-    write_output(data_path(path), csv_text(DATA_COLUMNS, rows, record), "plot data file")
+    write_output(path, buffer.getvalue(), "plot file", force)
+    write_output(data_path(path), csv_text(DATA_COLUMNS, rows, record), "plot data file", force)
 
 
-def plot_convergence(study, path, record: dict | None = None) -> Path:
+def plot_convergence(study, path, record: dict | None = None, force: bool = False) -> Path:
     """Log-log global error against h, one line per method, with dashed reference slopes h^p
     for each expected order p, and the reference's accuracy floor."""
-    path = check_plot_path(path)
+    path = check_plot_path(path, force=force)
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 4.8))
     panel = "global error at T against h"
@@ -98,13 +102,13 @@ def plot_convergence(study, path, record: dict | None = None) -> Path:
     ax.set_title(f"{study.system} ({study.realisation} realisation); dashed: slope = expected order", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
-    _save(fig, path, rows, record)
+    _save(fig, path, rows, record, force)
     return path
 
 
-def plot_work_precision(bench, path, record: dict | None = None) -> Path:
+def plot_work_precision(bench, path, record: dict | None = None, force: bool = False) -> Path:
     """Log-log wall time (median) against error at T, one line per method or peer."""
-    path = check_plot_path(path)
+    path = check_plot_path(path, force=force)
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 4.8))
     rows = []
@@ -122,14 +126,14 @@ def plot_work_precision(bench, path, record: dict | None = None) -> Path:
     ax.grid(True, which="both", alpha=0.3)
     ax.invert_xaxis()
     ax.legend(fontsize=7)
-    _save(fig, path, rows, record)
+    _save(fig, path, rows, record, force)
     return path
 
 
-def plot_stress(stress, path, record: dict | None = None) -> Path:
+def plot_stress(stress, path, record: dict | None = None, force: bool = False) -> Path:
     """Casimir and energy drift per window of the long run (part b), log scale; the classical
     RK4 peer dashed."""
-    path = check_plot_path(path)
+    path = check_plot_path(path, force=force)
     plt = _pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     rows = []
@@ -146,5 +150,5 @@ def plot_stress(stress, path, record: dict | None = None) -> Path:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
     fig.suptitle(f"long run, {stress.system}, h = {stress.long_run.h:g}", fontsize=9)
-    _save(fig, path, rows, record)
+    _save(fig, path, rows, record, force)
     return path

@@ -25,7 +25,8 @@ import numpy as np
 
 from ..base import bounds
 from ..base.errors import InputError
-from ..base.executors import InProcess, run_all
+from ..base.executors import InProcess, run_all, run_until_interrupted
+from ..base.interrupts import is_interrupt
 from ..integrators.failure import Failure
 from ..integrators.methods import condition_class, require_steps, resolve_method, resolve_methods, resolve_system
 from ..integrators.modified_energy import ModifiedEnergy, method_series
@@ -42,6 +43,9 @@ LONG_WINDOWS = 10
 SINGULAR_VALUES = (1e-3, 1e-6)
 SINGULAR_STEPS = 200
 ROUND_OFF_STEPS = tuple(int(round(10 ** (1.5 + k / 2))) for k in range(8))
+NOT_RUN = "not run (interrupted)"
+PEER = "classical:rk4"
+"""Part (b)'s peer, run besides the methods (once, also when it is one of them)."""
 CASIMIR_KEPT = 1e-10
 """A Casimir error at most this (over a whole run) counts as kept."""
 MODIFIED_SAMPLES = 2000
@@ -161,10 +165,12 @@ class LongRun:
     seconds: float
     modified: ModifiedWindows | None = None
     failure: Failure = Failure.OK
+    kind: str = "rkhp"
 
     @property
-    def casimir_max(self) -> float:
-        return max(self.casimir_windows)
+    def casimir_max(self) -> float | None:
+        """The largest Casimir error of the run; None for a system without Casimirs."""
+        return max(self.casimir_windows) if self.casimir_windows else None
 
     @property
     def energy_growth(self) -> float | None:
@@ -209,13 +215,18 @@ class LongRunResult:
     peer: LongRun
 
     def verdict(self) -> str:
-        kept = [r for r in self.runs if r.failure == Failure.OK and r.casimir_max <= CASIMIR_KEPT]
+        rkhp = [r for r in self.runs if r.kind == "rkhp"]
+        kept = [r for r in rkhp if r.failure == Failure.OK and r.casimir_max is not None
+                and r.casimir_max <= CASIMIR_KEPT]
         parts = [f"{r.method} Casimir {_fmt(r.casimir_max)}, energy growth x{_fmt(r.energy_growth)}" for r in self.runs]
         peer = self.peer
-        head = (f"over {self.steps} steps, {len(kept)} of {len(self.runs)} RKHP methods keep the Casimir "
-                f"(<= {CASIMIR_KEPT:g})")
-        return (f"{head}: {'; '.join(parts)}; {peer.method} drifts to Casimir {_fmt(peer.casimir_max)}, "
-                f"energy growth x{_fmt(peer.energy_growth)}")
+        if peer.casimir_max is None:
+            head = f"over {self.steps} steps (the system has no Casimir)"
+        else:
+            head = (f"over {self.steps} steps, {len(kept)} of {len(rkhp)} RKHP methods keep the Casimir "
+                    f"(<= {CASIMIR_KEPT:g})")
+        return (f"{head}: {'; '.join([*parts, ''])}{peer.method} (the peer) drifts to Casimir "
+                f"{_fmt(peer.casimir_max)}, energy growth x{_fmt(peer.energy_growth)}")
 
     def to_json(self) -> dict:
         return {"h": self.h, "steps": self.steps, "windows": self.windows, "runs": [r.to_json() for r in self.runs],
@@ -226,8 +237,9 @@ def _long_run(method, system, h: float, steps: int, windows: int) -> LongRun:
     traj = method.integrate(system, h, steps)
     casimir, energy = invariant_deviations(system, traj.states)
     modified = _modified_windows(method, system, h, traj.states, windows) if method.kind == "rkhp" and traj.ok else None
-    return LongRun(method.name, tuple(window_maxima(casimir, windows)), tuple(window_maxima(energy, windows)),
-                   traj.status, traj.run_seconds, modified, traj.cause)
+    casimirs = tuple(window_maxima(casimir, windows)) if system.casimirs else ()
+    return LongRun(method.name, casimirs, tuple(window_maxima(energy, windows)),
+                   traj.status, traj.run_seconds, modified, traj.cause, method.kind)
 
 
 def _modified_windows(method, system, h: float, states, windows: int) -> ModifiedWindows | None:
@@ -252,7 +264,8 @@ def long_run(methods, system, h: float, steps: int = LONG_STEPS, windows: int = 
     per method on ``executor``, rkhp.base.executors)."""
     if steps < windows:
         raise InputError(f"a long run needs at least {windows} steps, got {steps}")
-    everyone = [*methods, resolve_method("classical:rk4")]
+    peer = resolve_method(PEER)
+    everyone = [*(m for m in methods if m.name != peer.name), peer]  # a method named as the peer runs once
     *runs, peer = run_all(executor or InProcess(), _long_run, [(m, system, h, steps, windows) for m in everyone])
     return LongRunResult(h, steps, windows, tuple(runs), peer)
 
@@ -270,7 +283,8 @@ class SingularRun:
 
     @property
     def kept(self) -> bool:
-        return (self.failure == Failure.OK and self.min_component > 0 and self.casimir_error <= CASIMIR_KEPT)
+        return (self.failure == Failure.OK and self.min_component > 0
+                and (self.casimir_error is None or self.casimir_error <= CASIMIR_KEPT))
 
     def to_json(self) -> dict:
         return {"method": self.method, "first_species": self.first_species, "status": self.status,
@@ -290,7 +304,7 @@ class SingularResult:
             return f"not applicable: {self.reason}"
         bad = [r for r in self.runs if not r.kept]
         if not bad:
-            worst = max(r.casimir_error for r in self.runs)
+            worst = max((r.casimir_error for r in self.runs if r.casimir_error is not None), default=None)
             return f"positivity and Casimir (to {_fmt(worst)}) kept by every method from every near-singular start"
         return "; ".join(f"{r.method} from x1 = {r.first_species:g}: "
                          + (r.status if r.failure != Failure.OK else
@@ -396,21 +410,29 @@ class StressStudy:
     realisation: str
     t_final: float
     sweep: tuple[SweepResult, ...]
-    long_run: LongRunResult
-    near_singular: SingularResult
-    round_off: RoundOffResult
+    long_run: LongRunResult | None
+    near_singular: SingularResult | None
+    round_off: RoundOffResult | None
     x0: tuple[float, ...] = ()
+    interrupted: bool = False
 
     def verdicts(self) -> dict[str, str]:
-        return {"a": " | ".join(s.verdict() for s in self.sweep), "b": self.long_run.verdict(),
-                "c": self.near_singular.verdict(), "d": self.round_off.verdict()}
+        """Each part's verdict ("not run (interrupted)" for a part an interrupt left out)."""
+        def of(part):
+            return NOT_RUN if part is None else part.verdict()
+
+        return {"a": " | ".join(s.verdict() for s in self.sweep) if self.sweep or not self.interrupted else NOT_RUN,
+                "b": of(self.long_run), "c": of(self.near_singular), "d": of(self.round_off)}
 
     def to_json(self) -> dict:
+        def of(part):
+            return None if part is None else part.to_json()
+
         return {"system": self.system, "realisation": self.realisation, "x0": list(self.x0),
-                "t_final": self.t_final,
+                "t_final": self.t_final, "interrupted": self.interrupted,
                 "sweep": {"methods": [s.to_json() for s in self.sweep], "verdict": self.verdicts()["a"]},
-                "long_run": self.long_run.to_json(), "near_singular": self.near_singular.to_json(),
-                "round_off": self.round_off.to_json()}
+                "long_run": of(self.long_run), "near_singular": of(self.near_singular),
+                "round_off": of(self.round_off)}
 
 
 def stress(system, methods, t_final=None, long_steps: int = LONG_STEPS, long_h: float | None = None,
@@ -419,7 +441,9 @@ def stress(system, methods, t_final=None, long_steps: int = LONG_STEPS, long_h: 
     """Run parts (a)-(d) for ``methods`` (names of :mod:`rkhp.integrators.methods` or Methods; the defaults
     when empty) on ``system`` (a name, a spec file or a PoissonSystem), one part after the other,
     each part's independent runs as tasks on ``executor`` (rkhp.base.executors; default: in this
-    process); the results do not depend on it."""
+    process); the results do not depend on it. Ctrl-C ends the study early: ``interrupted`` is then
+    True, with the parts finished before it (of part (a): the methods' sweeps finished), the
+    others None."""
     system = resolve_system(system)
     methods = require_steps(resolve_methods(methods))
     t_final = check_t_final(system.t_final if t_final is None else t_final)
@@ -434,12 +458,23 @@ def stress(system, methods, t_final=None, long_steps: int = LONG_STEPS, long_h: 
             on_part(part)
 
     executor = executor or InProcess()
-    a = tuple(run_all(executor, sweep, [(m, system, t_final, sweep_coarsest) for m in methods]))
-    tick("a")
-    b = long_run(methods, system, h_long, long_steps, executor=executor)
-    tick("b")
-    c = near_singular(methods, system, t_final, executor=executor)
-    tick("c")
-    d = round_off(methods, system, t_final, round_off_steps, executor=executor)
-    tick("d")
-    return StressStudy(system.name, system.realisation, t_final, a, b, c, d, tuple(float(v) for v in system.x0))
+    x0 = tuple(float(v) for v in system.x0)
+    found, interrupted = run_until_interrupted(executor, sweep, [(m, system, t_final, sweep_coarsest)
+                                                                 for m in methods])
+    a = tuple(r for r in found if r is not None)
+    parts = []
+    if not interrupted:
+        tick("a")
+        try:
+            parts.append(long_run(methods, system, h_long, long_steps, executor=executor))
+            tick("b")
+            parts.append(near_singular(methods, system, t_final, executor=executor))
+            tick("c")
+            parts.append(round_off(methods, system, t_final, round_off_steps, executor=executor))
+            tick("d")
+        except BaseException as exc:
+            if not is_interrupt(exc):
+                raise
+            interrupted = True
+    b, c, d = (*parts, None, None, None)[:3]
+    return StressStudy(system.name, system.realisation, t_final, a, b, c, d, x0, interrupted)

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..base.bounds import real_vector
 from ..base.errors import InputError
 from ..taylor import tape as tp
 from .spray import MAX_TRUNCATION, truncated_order, truncated_realisation
@@ -197,7 +198,7 @@ class PoissonSystem:
 
     def with_x0(self, x0) -> PoissonSystem:
         """The same system started elsewhere (checked: size and domain; no exact solution)."""
-        x0 = np.asarray(x0, dtype=np.float64).reshape(-1)
+        x0 = np.asarray(real_vector(x0, "x0"), dtype=np.float64)
         if x0.shape != (self.dim,):
             raise InputError(f"x0 has {x0.size} components; {self.name} has dimension {self.dim}")
         if not self.in_domain(x0):

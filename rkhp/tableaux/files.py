@@ -239,10 +239,11 @@ def tableau_mapping(tableau: Tableau) -> dict:
     return data
 
 
-def save_tableau(tableau: Tableau, path, provenance: dict | None = None) -> None:
+def save_tableau(tableau: Tableau, path, provenance: dict | None = None, force: bool = False) -> None:
     """Write a tableau as TOML or JSON (by the file's extension), with its ``provenance`` record
     (rkhp.base.provenance) when given: a table that the reader accepts and does not use (TOML has
-    no null: a null value is left out there)."""
+    no null: a null value is left out there). Written atomically; an existing file (or a symbolic
+    link) is replaced only with ``force`` (`rkhp.base.files`)."""
     path = Path(path)
     data = tableau_mapping(tableau)
     suffix = path.suffix.lower()
@@ -256,4 +257,4 @@ def save_tableau(tableau: Tableau, path, provenance: dict | None = None) -> None
     else:
         raise InputError(f"{path}: cannot write a tableau as {suffix or 'a file without extension'}"
                          " (use .toml or .json)")
-    write_output(path, text, "tableau file")
+    write_output(path, text, "tableau file", force)

@@ -171,11 +171,27 @@ def entry_text(x) -> str:
     return str(x)
 
 
+def _magnitude(x) -> str:
+    """A short text of a (huge) entry: six significant digits and an exponent."""
+    try:
+        if isinstance(x, Fraction):
+            return mpmath.nstr(mpmath.mpf(x.numerator) / x.denominator, 6)
+        return mpmath.nstr(mpmath.mpf(str(x)) if isinstance(x, GivenDecimal) else x, 6)
+    except (TypeError, ValueError):
+        return str(x)[:40]
+
+
 def to_float(x) -> float:
-    """float64 value of an entry."""
-    if isinstance(x, (Fraction, mpmath.mpf)):
-        return float(x)
-    return float(x.evalf(20))
+    """float64 value of an entry; InputError when it is beyond the float range (the float paths,
+    integration and float verification, cannot represent it; exact verification can)."""
+    try:
+        value = float(x) if isinstance(x, (Fraction, mpmath.mpf)) else float(x.evalf(20))
+    except OverflowError:
+        value = math.inf
+    if not math.isfinite(value):
+        raise InputError(f"the entry {_magnitude(x)} is beyond the float range (|x| > 1.8e308): "
+                         "float arithmetic cannot represent it (verify with --precision exact)")
+    return value
 
 
 def to_fraction(x, bits: int) -> Fraction:
@@ -241,8 +257,9 @@ class Tableau:
     source: str = field(default="", compare=False)
 
     def __post_init__(self):
-        s = len(self.A)
         where = self.source or self.name
+        self._read_entries(where)
+        s = len(self.A)
         if s == 0:
             raise InputError(f"{where}: A is empty")
         for i, row in enumerate(self.A):
@@ -260,6 +277,33 @@ class Tableau:
                                       or value < 1):
                 raise InputError(f"{where}: claimed {what} must be a positive integer, "
                                  f"got {value!r}")
+
+    def _read_entries(self, where: str) -> None:
+        """Entries given as plain Python or numpy numbers or text (``Tableau(name, A, b)`` called
+        directly) read as :meth:`from_arrays` reads them (`parse_entry`); InputError otherwise."""
+        def ready(x):
+            return isinstance(x, (Fraction, GivenDecimal)) or type(x).__module__.startswith("sympy")
+
+        def rows(value, label):
+            if isinstance(value, (str, bytes, dict)) or not hasattr(value, "__iter__"):
+                raise InputError(f"{where}: {label} must be a list, got {type(value).__name__}")
+            return list(value)
+
+        A = [rows(r, f"row {i + 1} of A") for i, r in enumerate(rows(self.A, "A"))]
+        b = rows(self.b, "b")
+        c = None if self.c_given is None else rows(self.c_given, "c")
+        if all(ready(x) for r in A for x in r) and all(ready(x) for x in b) and all(ready(x) for x in c or ()):
+            if not (isinstance(self.A, tuple) and all(isinstance(r, tuple) for r in self.A)
+                    and isinstance(self.b, tuple)):
+                object.__setattr__(self, "A", tuple(tuple(r) for r in A))
+                object.__setattr__(self, "b", tuple(b))
+            return
+        object.__setattr__(self, "A", tuple(tuple(parse_entry(x, f"{where}: A[{i + 1}][{j + 1}]")
+                                                  for j, x in enumerate(r)) for i, r in enumerate(A)))
+        object.__setattr__(self, "b", tuple(parse_entry(x, f"{where}: b[{i + 1}]") for i, x in enumerate(b)))
+        if c is not None:
+            object.__setattr__(self, "c_given", tuple(parse_entry(x, f"{where}: c[{i + 1}]")
+                                                      for i, x in enumerate(c)))
 
     @classmethod
     def from_arrays(cls, A, b, name: str = "custom", c=None, **metadata) -> Tableau:

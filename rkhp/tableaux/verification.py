@@ -30,12 +30,19 @@ from typing import NamedTuple
 import numpy as np
 
 from ..base.bounds import BYTES_PER_TREE
-from ..base.errors import InputError
+from ..base.errors import InputError, NumericalFailure
 from ..trees.conditions import CLASSES, OrderCondition, check_class, conditions_of_order
 from ..trees.rooted import MAX_ENUMERATION_ORDER, Tree, check_order, check_tree_memory
 from .files import load_tableau
 from .tableau import Tableau
-from .weights import ExactArithmetic, NoNumberField, arithmetic_for, tree_plan, weights_by_order
+from .weights import (
+    MAX_PRECISION_DIGITS,
+    ExactArithmetic,
+    NoNumberField,
+    arithmetic_for,
+    tree_plan,
+    weights_by_order,
+)
 
 #: Tolerance factor on the rounding unit u (float64 or the given digits).
 TOLERANCE_FACTOR = 1e4
@@ -428,7 +435,8 @@ def approximation_digits(tableau: Tableau) -> int | None:
 
     A rational p/q read as an approximation of a real number fixes it to about 1/q^2 (a best
     approximation is within 1/q^2) or, for a decimal (q divides a power of 10), to 1/q; the
-    shortest long denominator decides: 2 log10 q or log10 q digits (at least 16).
+    shortest long denominator decides: 2 log10 q or log10 q digits (at least 16, at most
+    MAX_PRECISION_DIGITS: a longer denominator is checked to that many).
     """
     if not tableau.is_rational:
         return None
@@ -438,7 +446,7 @@ def approximation_digits(tableau: Tableau) -> int | None:
         if q >= APPROXIMATION_DENOMINATOR:
             decimal = 10 ** len(str(q)) % q == 0
             digits.append(int(math.log10(q) * (1 if decimal else 2)))
-    return max(16, min(digits)) if digits else None
+    return min(max(16, min(digits)), MAX_PRECISION_DIGITS) if digits else None
 
 
 def _verify(tableau, max_order, arithmetic, classes, on_order, note: str) -> Verification:
@@ -509,14 +517,18 @@ def _run(tableau, N, arithmetic, tolerance, classes, on_order):
                       per_tree=BYTES_PER_TREE + tableau.stages * value_bytes)
     plan = tree_plan(N)
     states = {cls: _ClassState(cls) for cls in classes}
-    for n, blk, a in weights_by_order(tableau, N, arithmetic):
-        R = arithmetic.residuals(a, plan.gamma_float[blk] if arithmetic.name == "float"
-                                 else plan.gamma[blk])
-        for state in states.values():
-            if state.done is False:
-                _evaluate_class(state, n, blk, R, plan, arithmetic, tolerance)
-        if on_order is not None:
-            on_order(n, N)
-        if all(s.done for s in states.values()):
-            break
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow of float weights is refused below
+        for n, blk, a in weights_by_order(tableau, N, arithmetic):
+            R = arithmetic.residuals(a, plan.gamma_float[blk] if arithmetic.name == "float"
+                                     else plan.gamma[blk])
+            if arithmetic.name == "float" and not np.all(np.isfinite(R)):
+                raise NumericalFailure(f"{tableau.name}: the weights of order {n} overflow float arithmetic "
+                                       "(entries too large for float64): verify with --precision exact")
+            for state in states.values():
+                if state.done is False:
+                    _evaluate_class(state, n, blk, R, plan, arithmetic, tolerance)
+            if on_order is not None:
+                on_order(n, N)
+            if all(s.done for s in states.values()):
+                break
     return states, n

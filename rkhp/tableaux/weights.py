@@ -105,6 +105,18 @@ def tree_plan(max_order: int) -> TreePlan:
 # ----------------------------------------------------------------------------- arithmetics
 
 
+MAX_PRECISION_DIGITS = 2000
+"""Most decimal digits of a fixed-point verification."""
+
+
+def _float(x) -> float:
+    """float(x), or +-inf when x is beyond the float range."""
+    try:
+        return float(x)
+    except OverflowError:
+        return math.inf if x > 0 else -math.inf
+
+
 class FloatArithmetic:
     """float64 numpy arrays."""
 
@@ -199,7 +211,7 @@ class FixedPointArithmetic:
         """Float values of fixed-point integers (or of Fractions of them)."""
         scale = Fraction(1, 1 << self.bits)
         return np.array([math.ldexp(float(x), -self.bits) if isinstance(x, int)
-                         and abs(x) < 1 << 1000 else float(Fraction(x) * scale) for x in r])
+                         and abs(x) < 1 << 1000 else _float(Fraction(x) * scale) for x in r])
 
 
 class ExactArithmetic:
@@ -263,9 +275,10 @@ class ExactArithmetic:
             else self.field.to_sympy(x)
 
     def to_floats(self, r):
+        """Float values for display (+-inf beyond the float range: the decisions are exact)."""
         if self.field is None:
-            return np.array([float(x) for x in r])
-        return np.array([float(self.to_sympy(x).evalf(30)) for x in r])
+            return np.array([_float(x) for x in r])
+        return np.array([_float(self.to_sympy(x).evalf(30)) for x in r])
 
     def scale(self, x, w: Fraction):
         """x * w for a rational w."""
@@ -345,8 +358,8 @@ def arithmetic_for(tableau: Tableau, precision):
                                 f"{exc.reason} (use a number of digits)") from None
         return arithmetic
     if isinstance(precision, int) and not isinstance(precision, bool):
-        if not 16 <= precision <= 2000:
-            raise InputError(f"precision must be float, exact or 16..2000 digits, got {precision}")
+        if not 16 <= precision <= MAX_PRECISION_DIGITS:
+            raise InputError(f"precision must be float, exact or 16..{MAX_PRECISION_DIGITS} digits, got {precision}")
         return FixedPointArithmetic(precision)
     raise InputError(f"precision must be float, exact or a number of digits, got {precision!r}")
 

@@ -1,0 +1,92 @@
+"""Writing a file safely: never over an existing file unless asked, never through a symbolic
+link, never half-written (docs/input.md "Files rkhp writes").
+
+Every file rkhp writes (a tableau from `search --save`, a relations document, a trajectory, a
+plot and its data) goes through rkhp.base.provenance.write_output, which writes by
+:func:`write_atomic`: the content is written to a temporary file
+in the target's folder, flushed to the disk, then moved to the name in one step (a rename), so a
+full disk or an interrupt leaves the old file or nothing, never a 0-byte or truncated one.
+
+- An existing file is replaced only with ``force`` (the command line's ``--force``); without it
+  the write is refused (InputError), checked before the work (:func:`check_target`) and again at
+  the rename, which does not replace a file created in between.
+- A symbolic link at the name is never followed: without ``force`` it is refused, with ``force``
+  the link itself is replaced by the file (its target is left as it is).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+
+from .errors import InputError
+
+
+def check_target(path, what: str = "output file", force: bool = False) -> Path:
+    """The path, after refusing (InputError) an existing file or a symbolic link unless ``force``."""
+    path = Path(path)
+    if path.is_symlink():
+        if not force:
+            raise InputError(f"{what} {path}: is a symbolic link; rkhp does not write through links "
+                             "(--force replaces the link itself, not its target)")
+    elif path.exists() and not force:
+        raise InputError(f"{what} {path}: the file exists; give --force to replace it")
+    return path
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+@contextlib.contextmanager
+def atomic_path(path, what: str = "output file", force: bool = False):
+    """``with atomic_path(path) as tmp:`` write the content to ``tmp`` (a new file in the same
+    folder, same extension); on leaving without an error it becomes ``path`` (see the module), on
+    an error it is removed. OSError: InputError naming the file, nothing written."""
+    path = check_target(path, what, force)
+    folder = path.parent
+    try:
+        fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=folder)
+    except OSError as exc:
+        raise InputError(f"{what} {path}: cannot write in {folder} ({exc.strerror or exc})") from None
+    tmp = Path(name)
+    try:
+        os.fchmod(fd, 0o666 & ~_umask())
+        os.close(fd)
+        yield tmp
+        _sync(tmp)
+        if force:
+            os.replace(tmp, path)  # replaces a link itself, never its target
+        else:
+            try:
+                os.link(tmp, path)  # fails if the name was taken meanwhile: nothing replaced
+            except FileExistsError:
+                raise InputError(f"{what} {path}: the file exists; give --force to replace it") from None
+            tmp.unlink()
+    except OSError as exc:
+        raise InputError(f"{what} {path}: cannot write the file ({exc.strerror or exc}); "
+                         "nothing was written") from None
+    finally:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+
+
+def _sync(path: Path) -> None:
+    """Flush a written file to the disk (a full disk shows here at the latest)."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def write_atomic(path, content: str | bytes, what: str = "output file", force: bool = False) -> None:
+    """Write ``content`` (text as UTF-8) to ``path`` by :func:`atomic_path`."""
+    data = content.encode("utf-8") if isinstance(content, str) else content
+    with atomic_path(path, what, force) as tmp:
+        with open(tmp, "wb") as fh:
+            fh.write(data)

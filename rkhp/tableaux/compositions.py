@@ -1,0 +1,413 @@
+"""Compositions of a one-step base method: Phi_h = Phi_{gamma_s h} o ... o Phi_{gamma_1 h}
+(docs/compositions.md, docs/theory.md §12; Hairer–Lubich–Wanner, Geometric Numerical Integration,
+§II.4, §III.3, §V.3).
+
+A composition is named by its base method (an RKHP tableau, RKHP Euler by default) and its
+substep coefficients gamma. Its order follows from the base's modified vector field: a base of
+order q has Phi_h = exp(h F_1 + h^(q+1) F_(q+1) + h^(q+2) F_(q+2) + ...), and a symmetric base
+(Phi_{-h} = Phi_h^{-1}) has odd powers of h only. Then
+
+    Phi_{gamma_s h} o ... o Phi_{gamma_1 h} = prod_i exp(sum_k gamma_i^k h^k F_k),
+
+and the composition has order p when this product equals exp(h F_1) up to h^p in the free
+associative algebra over the letters F_k (weight k): the conditions of the free Lie algebra
+(HLW §III.3), written word by word (:func:`composition_order`). The coefficient of a word
+u = F_(k_1) ... F_(k_m) of exp(Y), Y = sum_k g^k F_k, is g^|u| / m!, so the product is built
+substep by substep over the words of weight <= p.
+
+Built-in compositions ship as ``tables/compositions/*.toml``; user files have the same keys:
+
+    name = "yoshida6"                    # optional (default: the file name)
+    kind = "composition"                 # marks a composition file
+    base = "euler"                       # optional: an RKHP method (tableau name or file)
+    gamma = ["0.784513610477557263819", ...]   # numbers or exact expressions (safe reader)
+    reference = "..."                    # optional
+    order = 6                            # optional: the claimed order with a symmetric base of order 2
+    aliases = [...]                      # optional
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from fractions import Fraction
+from functools import cached_property, lru_cache
+from importlib.resources import files
+from pathlib import Path
+
+import mpmath
+
+from ..base.bounds import MAX_CLAIMED_ORDER, MAX_STAGES
+from ..base.documents import parse_document, read_text
+from ..base.errors import InputError
+from .files import load_tableau
+from .tableau import GivenDecimal, entry_text, is_exact, parse_entry, to_float
+
+KIND = "composition"
+#: Most substeps of a composition, as many as a tableau's stages (a file of more is refused before
+#: its coefficients are read).
+MAX_SUBSTEPS = MAX_STAGES
+#: Highest order :func:`composition_order` looks at (376 words of weight <= 12 with a symmetric
+#: base of order 2: the order-10 compositions are checked one order past theirs).
+MAX_COMPOSITION_ORDER = 12
+#: Decimal digits of the evaluation of the conditions when every coefficient is exact.
+EXACT_DIGITS = 60
+_KEYS = ("name", "kind", "base", "gamma", "reference", "order", "aliases", "notes")
+DEFAULT_BASE = "euler"
+
+
+@dataclass(frozen=True)
+class Composition:
+    """A composition of a base method with substeps gamma_1 h, ..., gamma_s h (applied in that
+    order).
+
+    Attributes:
+        name: the composition's name.
+        base: the name (or file) of the base RKHP method.
+        gamma: the coefficients as read (Fraction, sympy number or GivenDecimal).
+        reference: where the coefficients come from.
+        claimed_order: the order claimed by the file (with a symmetric base of order 2), or None.
+        aliases: other names.
+    """
+
+    name: str
+    base: str
+    gamma: tuple
+    reference: str = ""
+    claimed_order: int | None = None
+    aliases: tuple[str, ...] = ()
+    notes: str = field(default="", compare=False)
+
+    @cached_property
+    def gamma_float(self) -> tuple[float, ...]:
+        """The coefficients in float64."""
+        return tuple(to_float(g) for g in self.gamma)
+
+    @property
+    def substeps(self) -> int:
+        return len(self.gamma)
+
+    @cached_property
+    def digits(self) -> int | None:
+        """Decimal digits the coefficients are known to (None: all exact)."""
+        given = [g.digits for g in self.gamma if isinstance(g, GivenDecimal)]
+        return min(given) if given else None
+
+    @cached_property
+    def consistent(self) -> bool:
+        """Whether the coefficients sum to 1 (to the digits given)."""
+        return abs(_residual_sum(self.gamma, self.digits)) <= _tolerance(self.digits)
+
+    @cached_property
+    def symmetric(self) -> bool:
+        """Whether gamma reads the same backwards (to the digits given): with a symmetric base the
+        composition is then symmetric (HLW §V.3.1)."""
+        tol = _tolerance(self.digits)
+        with mpmath.workdps(_dps(self.digits)):
+            values = [_mp(g) for g in self.gamma]
+            return all(abs(a - b) <= tol for a, b in zip(values, reversed(values)))
+
+    def gamma_text(self) -> list[str]:
+        return [entry_text(g) for g in self.gamma]
+
+
+# ----------------------------------------------------------------------------- order
+
+
+@dataclass(frozen=True)
+class CompositionOrder:
+    """The order of a composition for a base of order `base_order` (symmetric or not).
+
+    Attributes:
+        order: the largest p whose conditions all hold (at most `checked_up_to`).
+        checked_up_to: the highest weight whose conditions were evaluated.
+        base_order: q, the base method's order.
+        base_symmetric: whether the base's modified field has odd powers of h only.
+        conditions: number of word conditions up to order + 1 (or checked_up_to).
+        largest_failing: the largest |residual| among the words of weight order + 1 (None when
+            none was checked).
+        precision: how the conditions were evaluated ("exact rationals", "60 digits", ...).
+    """
+
+    order: int
+    checked_up_to: int
+    base_order: int
+    base_symmetric: bool
+    conditions: int
+    largest_failing: float | None
+    precision: str
+
+
+def letters(base_order: int, base_symmetric: bool, max_weight: int) -> tuple[int, ...]:
+    """Weights of the letters F_k of a base of order q: 1, then q+1, q+2, ... (q+1, q+3, ... for a
+    symmetric base), up to `max_weight`."""
+    step = 2 if base_symmetric else 1
+    return (1, *range(base_order + 1, max_weight + 1, step))
+
+
+def words(weights: tuple[int, ...], max_weight: int) -> list[tuple[int, ...]]:
+    """Every word over the letters (by weight) of weight at most `max_weight`, shortest first."""
+    out = [()]
+    frontier = [()]
+    while frontier:
+        nxt = []
+        for w in frontier:
+            total = sum(w)
+            for k in weights:
+                if total + k <= max_weight:
+                    nxt.append((*w, k))
+        out += nxt
+        frontier = nxt
+    return out
+
+
+def _dps(digits: int | None) -> int:
+    return EXACT_DIGITS + 15 if digits is None else digits + 15
+
+
+def _tolerance(digits: int | None):
+    """A residual at most this is zero: 10^-(d - 5) for coefficients of d digits, 10^-50 for
+    exact ones evaluated at 60 digits."""
+    return mpmath.mpf(10) ** -(EXACT_DIGITS - 10 if digits is None else max(digits - 5, 3))
+
+
+def _mp(g):
+    if isinstance(g, Fraction):
+        return mpmath.mpf(g.numerator) / g.denominator
+    if isinstance(g, mpmath.mpf):
+        return mpmath.mpf(g)
+    return mpmath.mpf(g.evalf(mpmath.mp.dps + 5))
+
+
+def _residual_sum(gamma, digits):
+    if all(isinstance(g, Fraction) for g in gamma):
+        return float(sum(gamma, Fraction(0)) - 1)
+    with mpmath.workdps(_dps(digits)):
+        return sum((_mp(g) for g in gamma), mpmath.mpf(0)) - 1
+
+
+def product_coefficients(gamma, weights: tuple[int, ...], max_weight: int) -> dict:
+    """Coefficients of prod_i exp(sum_k gamma_i^k F_k) over the words of weight <= max_weight
+    (exact for Fractions, mpmath numbers otherwise)."""
+    all_words = words(weights, max_weight)
+    coeff = {(): 1 if isinstance(gamma[0], Fraction) else mpmath.mpf(1)}
+    for g in gamma:
+        powers = [g ** k for k in range(max_weight + 1)]
+        new = {}
+        for w in all_words:
+            acc = 0
+            for cut in range(len(w) + 1):
+                head, tail = w[:cut], w[cut:]
+                if head in coeff:
+                    acc += coeff[head] * powers[sum(tail)] / math.factorial(len(tail))
+            if acc:
+                new[w] = acc
+        coeff = new
+    return coeff
+
+
+def _target(w: tuple[int, ...], exact: bool):
+    """The coefficient of w in exp(F_1) (a Fraction, or an mpmath number)."""
+    value = Fraction(1, math.factorial(len(w))) if all(k == 1 for k in w) else Fraction(0)
+    return value if exact else mpmath.mpf(value.numerator) / value.denominator
+
+
+def composition_order(comp: Composition, base_order: int = 2, base_symmetric: bool = True,
+                      max_order: int = MAX_COMPOSITION_ORDER) -> CompositionOrder:
+    """The order of `comp` with a base of order `base_order` (HLW §III.3, §V.3): the largest p such
+    that prod_i exp(sum_k gamma_i^k F_k) = exp(F_1) on every word of weight <= p."""
+    if base_order < 1:
+        raise InputError(f"the base method has order {base_order}: a composition needs order >= 1")
+    exact = all(isinstance(g, Fraction) for g in comp.gamma)
+    digits = comp.digits
+    top = min(max_order, MAX_COMPOSITION_ORDER)
+    weights = letters(base_order, base_symmetric, top)
+    with mpmath.workdps(_dps(digits)):
+        gamma = list(comp.gamma) if exact else [_mp(g) for g in comp.gamma]
+        coeff = product_coefficients(gamma, weights, top)
+        tol = 0 if exact else _tolerance(digits)
+        by_weight: dict[int, list] = {}
+        for w in words(weights, top):
+            if w:
+                by_weight.setdefault(sum(w), []).append(abs(coeff.get(w, 0) - _target(w, exact)))
+        order, count, failing = 0, 0, None
+        for p in range(1, top + 1):
+            residuals = by_weight.get(p, [])
+            count += len(residuals)
+            worst = max(residuals, default=0)
+            if worst > tol:
+                failing = float(worst)
+                break
+            order = p
+    precision = "exact rationals" if exact else (f"{EXACT_DIGITS} digits" if digits is None
+                                                  else f"the {digits} digits given")
+    return CompositionOrder(order, min(order + 1, top), base_order, base_symmetric, count, failing,
+                            precision)
+
+
+# ----------------------------------------------------------------------------- files
+
+
+def _compositions_dir():
+    return files("rkhp.tables").joinpath("compositions")
+
+
+@lru_cache(maxsize=1)
+def _registry() -> dict[str, str]:
+    """name or alias (lower case) -> file name of every built-in composition."""
+    out = {}
+    for entry in sorted(_compositions_dir().iterdir(), key=lambda p: p.name):
+        if entry.name.endswith(".toml"):
+            data = tomllib.loads(entry.read_text(encoding="utf-8"))
+            for key in (data.get("name", entry.name[:-5]), *data.get("aliases", ())):
+                out[key.lower()] = entry.name
+    return out
+
+
+def builtin_compositions() -> list[str]:
+    """Names of the built-in compositions, in file-name order."""
+    names = {}
+    for file in _registry().values():
+        names[file] = None
+    return [load_composition(file[:-5]).name for file in names]
+
+
+def is_composition_name(spec: str) -> bool:
+    """Whether `spec` names a built-in composition or a composition file."""
+    if spec.lower() in _registry():
+        return True
+    path = Path(spec)
+    if path.suffix.lower() in (".toml", ".json") and path.is_file():
+        try:
+            return parse_document(read_text(path), path.suffix.lower(), str(path)).get("kind") == KIND
+        except InputError:
+            return False
+    return False
+
+
+def load_composition(spec: str) -> Composition:
+    """A built-in composition by name or alias, or a composition file (.toml/.json)."""
+    key = spec.lower()
+    if key in _registry():
+        entry = _compositions_dir().joinpath(_registry()[key])
+        data = tomllib.loads(entry.read_text(encoding="utf-8"))
+        return composition_from_dict(data, entry.name[:-5], f"built-in {entry.name}")
+    path = Path(spec)
+    if not path.is_file():
+        raise InputError(f"no composition named {spec!r}")
+    data = parse_document(read_text(path), path.suffix.lower(), str(path))
+    return composition_from_dict(data, path.stem, str(path))
+
+
+def composition_from_dict(data: dict, default_name: str, where: str) -> Composition:
+    """A Composition from the keys of a composition file (module docstring); InputError naming
+    the file and key for anything malformed."""
+    if not isinstance(data, dict):
+        raise InputError(f"{where}: a composition file is a table of keys")
+    unknown = sorted(set(data) - set(_KEYS))
+    if unknown:
+        raise InputError(f"{where}: unknown key(s) {', '.join(map(repr, unknown))} (known: {', '.join(_KEYS)})")
+    if data.get("kind", KIND) != KIND:
+        raise InputError(f"{where}: kind must be {KIND!r}, got {data.get('kind')!r}")
+    gamma = data.get("gamma")
+    if not isinstance(gamma, list) or not gamma:
+        raise InputError(f"{where}: gamma must be a non-empty list of coefficients")
+    if len(gamma) > MAX_SUBSTEPS:
+        raise InputError(f"{where}: {len(gamma)} substeps, more than {MAX_SUBSTEPS}")
+    values = tuple(parse_entry(g, f"{where}: gamma[{k}]") for k, g in enumerate(gamma))
+    name = _text(data.get("name", default_name), where, "name")
+    base = _text(data.get("base", DEFAULT_BASE), where, "base")
+    order = data.get("order")
+    if order is not None and (isinstance(order, bool) or not isinstance(order, int)
+                              or not 1 <= order <= MAX_CLAIMED_ORDER):
+        raise InputError(f"{where}: order must be an integer from 1 to {MAX_CLAIMED_ORDER}")
+    aliases = data.get("aliases", [])
+    if not isinstance(aliases, list):
+        raise InputError(f"{where}: aliases must be a list of names")
+    comp = Composition(name, base, values, _text(data.get("reference", ""), where, "reference"), order,
+                       tuple(_text(a, where, "aliases") for a in aliases),
+                       _text(data.get("notes", ""), where, "notes"))
+    if not comp.consistent:
+        raise InputError(f"{where}: the coefficients sum to {1 + float(_residual_sum(values, comp.digits)):.17g}, "
+                         "not 1: not a consistent composition")
+    return comp
+
+
+def _text(value, where: str, key: str) -> str:
+    if not isinstance(value, str) or len(value) > 2000:
+        raise InputError(f"{where}: {key} must be a text of at most 2000 characters")
+    return value
+
+
+def exact_entries(comp: Composition) -> bool:
+    """Whether every coefficient is exact (rational or algebraic)."""
+    return all(is_exact(g) for g in comp.gamma)
+
+
+# ----------------------------------------------------------------------------- verification
+
+
+@dataclass(frozen=True)
+class CompositionVerification:
+    """What `rkhp verify` says of a composition.
+
+    Attributes:
+        composition: the Composition.
+        own: its order with a symmetric base of order 2 (how compositions are published).
+        base_symmetric: whether the base RKHP method is symmetric under a symmetric birealisation
+            (checked to `base_symmetry_checked` orders, :func:`rkhp.tableaux.symmetry.rkhp_symmetry`).
+        by_class: its order with its base on each realisation class (general, degenerate,
+            symmetric), the base's order in that class counted as q.
+        claim: "confirmed", "overstated" or None (no claimed order).
+    """
+
+    composition: Composition
+    own: CompositionOrder
+    base_symmetric: bool
+    base_symmetry_checked: int
+    by_class: dict
+    claim: str | None
+
+    def to_json(self) -> dict:
+        c = self.composition
+
+        def order_json(o: CompositionOrder) -> dict:
+            return {"order": o.order, "checked_up_to": o.checked_up_to, "base_order": o.base_order,
+                    "base_symmetric": o.base_symmetric, "conditions": o.conditions,
+                    "largest_failing": o.largest_failing, "precision": o.precision}
+
+        return {"name": c.name, "kind": KIND, "base": c.base, "substeps": c.substeps,
+                "gamma": c.gamma_text(), "gamma_float": list(c.gamma_float), "reference": c.reference,
+                "symmetric": c.symmetric, "base_symmetric": self.base_symmetric,
+                "base_symmetry_checked_up_to": self.base_symmetry_checked,
+                "order": self.own.order, "own": order_json(self.own),
+                "orders": {cls: order_json(o) for cls, o in self.by_class.items()},
+                "claimed_order": c.claimed_order, "claim": self.claim}
+
+
+def class_composition_orders(comp: Composition, base) -> dict[str, CompositionOrder]:
+    """The order of `comp` with the RKHP method `base` (a Tableau) on each realisation class: q is
+    the base's order in the class; the base's modified field is odd in h on the symmetric class
+    when the base is a symmetric RKHP method (docs/compositions.md)."""
+    from .symmetry import rkhp_symmetry
+    from .verification import class_orders
+
+    orders = class_orders(base)
+    symmetric = rkhp_symmetry(base).symmetric
+    return {cls: composition_order(comp, q, cls == "symmetric" and symmetric) for cls, q in orders.items()}
+
+
+def verify_composition(comp: Composition) -> CompositionVerification:
+    """The orders of a composition (its own with a symmetric base of order 2, and with its base on
+    each realisation class), its symmetry, and its claimed order checked."""
+    from .symmetry import rkhp_symmetry
+
+    base = load_tableau(comp.base)
+    own = composition_order(comp, 2, True)
+    symmetry = rkhp_symmetry(base)
+    claim = None
+    if comp.claimed_order is not None:
+        claim = "confirmed" if own.order >= comp.claimed_order else "overstated"
+    return CompositionVerification(comp, own, symmetry.symmetric, symmetry.checked_up_to,
+                                   class_composition_orders(comp, base), claim)

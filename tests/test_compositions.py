@@ -1,0 +1,194 @@
+"""Compositions of the symmetric RKHP Euler step (docs/compositions.md, docs/theory.md §12):
+orders against the published ones, symmetry of RKHP methods, backward steps, the composed loop."""
+
+from __future__ import annotations
+
+import json
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from rkhp.base.errors import InputError
+from rkhp.integrators.methods import integrate
+from rkhp.tableaux.compositions import (
+    Composition,
+    builtin_compositions,
+    composition_from_dict,
+    composition_order,
+    letters,
+    load_composition,
+    words,
+)
+from rkhp.tableaux.files import load_tableau
+from rkhp.tableaux.symmetry import rkhp_symmetry
+from rkhp.trees.relations import symmetric_condition_rows
+
+YOSHIDA6 = "tests/data/yoshida6.toml"
+#: published orders (Yoshida 1990; Suzuki 1990; Kahan & Li 1997; Sofroniou & Spaletta 2005)
+PUBLISHED = {"tj4": (4, 3), "suzuki4": (4, 5), "tj6": (6, 9), "kahan-li6": (6, 9), "tj8": (8, 27),
+             "kahan-li8": (8, 17), "sofroniou-spaletta10": (10, 35)}
+
+
+def test_the_built_in_compositions_are_the_published_ones():
+    assert sorted(builtin_compositions()) == sorted(PUBLISHED)
+    for name, (order, substeps) in PUBLISHED.items():
+        comp = load_composition(name)
+        result = composition_order(comp)
+        assert (result.order, comp.substeps, comp.symmetric) == (order, substeps, True), name
+        assert result.largest_failing > 1e-8, name  # the next order fails, not by round-off
+        assert sum(comp.gamma_float) == pytest.approx(1.0, abs=1e-15)
+
+
+def test_a_composition_from_the_literature_not_shipped_has_its_published_order():
+    comp = load_composition(YOSHIDA6)
+    assert (comp.name, comp.substeps, composition_order(comp).order) == ("yoshida6", 7, 6)
+
+
+@pytest.mark.parametrize("p", [2, 4, 6])
+def test_the_triple_jump_raises_the_order_by_two(p):
+    """gamma = (g, 1 - 2g, g), g = 1/(2 - 2^(1/(p+1))) (HLW §II.4) on a symmetric base of order p;
+    with p = 2, 4, 6 the rational approximations of g at 30 digits give order p + 2 to those
+    digits, and the exact Fractions 1/2 + 1/2 give order 2 only."""
+    import mpmath
+
+    with mpmath.workdps(40):
+        g = 1 / (2 - mpmath.mpf(2) ** (mpmath.mpf(1) / (p + 1)))
+        text = [mpmath.nstr(x, 30) for x in (g, 1 - 2 * g, g)]
+    comp = composition_from_dict({"gamma": text}, "jump", "test")
+    assert composition_order(comp, base_order=p).order == p + 2
+    half = Composition("halves", "euler", (Fraction(1, 2), Fraction(1, 2)))
+    assert composition_order(half).order == 2
+
+
+def test_the_words_of_the_conditions_count_the_compositions_into_odd_parts():
+    """Words over the letters F_1, F_3, F_5, ... of weight n: compositions of n into odd parts,
+    the Fibonacci numbers (OEIS A000045)."""
+    fib = [1, 1, 1, 2, 3, 5, 8, 13, 21, 34, 55]
+    all_words = words(letters(2, True, 10), 10)
+    for n in range(1, 11):
+        assert sum(1 for w in all_words if sum(w) == n) == fib[n]
+
+
+def test_a_non_symmetric_base_gets_every_power_of_h():
+    """A symmetric gamma with a base of order 4 that is not symmetric gains nothing beyond the base's
+    order from the odd powers (its h^5 and h^6 terms both count)."""
+    assert letters(4, False, 8) == (1, 5, 6, 7, 8)
+    comp = load_composition("tj4")
+    assert composition_order(comp, 4, False).order >= 4
+    assert composition_order(load_composition("kahan-li8"), 4, False).order < 8
+
+
+def test_euler_is_the_symmetric_rkhp_method_and_others_are_not():
+    """NOTES §12 measured |Phi_{-h}(Phi_h(x)) - x| = 5.7e-18 for Euler, 1.7e-5, 1.4e-8, 2.6e-8 for
+    paper-two-stage, paper-three-stage, gauss2: the first even order whose part of S_h is not zero
+    is 4 for paper-two-stage and 6 for the others."""
+    assert rkhp_symmetry(load_tableau("euler")).symmetric
+    fails = {n: rkhp_symmetry(load_tableau(n)).fails_at for n in
+             ("paper-two-stage", "paper-three-stage", "gauss2", "rk4")}
+    assert fails == {"paper-two-stage": 4, "paper-three-stage": 6, "gauss2": 6, "rk4": 6}
+
+
+def test_the_exact_flow_is_symmetric_in_the_relations():
+    """The exact flow's S_h is odd in h: its even-order parts are relations, i.e. every symmetric
+    condition of even order has weights summing to zero (e(t) gamma(t) = 1)."""
+    for n in range(2, 9, 2):
+        assert all(sum(w) == 0 for _, w in symmetric_condition_rows(n))
+
+
+def test_the_composed_loop_is_the_sequence_of_euler_substeps():
+    comp = load_composition("suzuki4")
+    h = 0.2
+    from rkhp.systems import get_system
+
+    y = np.array(get_system("rigid-body").x0, dtype=float)
+    for g in comp.gamma_float:
+        y = integrate("rigid-body", "euler", g * h, 1, x0=y).final_state
+    composed = integrate("rigid-body", "suzuki4", h, 1).final_state
+    assert np.abs(composed - y).max() < 1e-15
+
+
+@pytest.mark.parametrize("system", ["charged-particle", "rigid-body"])
+def test_forward_then_backward_returns_for_symmetric_methods(system):
+    """100 steps forward, 100 back (negative h): kahan-li8 and euler return to x0 within 1e-13;
+    paper-three-stage (not symmetric) does not."""
+    for method, symmetric in (("euler", True), ("kahan-li8", True), ("paper-three-stage", False)):
+        forward = integrate(system, method, 0.1, 100).raise_if_failed()
+        back = integrate(system, method, -0.1, 100, x0=forward.final_state).raise_if_failed()
+        gap = np.abs(back.final_state - forward.states[0]).max()
+        assert (gap < 1e-13) == symmetric, (method, gap)
+
+
+def _casimir_drift(method: str, steps: int) -> float:
+    from rkhp.systems import get_system
+
+    nambu = get_system("nambu")
+    tr = integrate(nambu, method, 0.1, steps).raise_if_failed()
+    c0 = nambu.casimir_values(tr.states[0])
+    return max(float(np.abs(nambu.casimir_values(x) - c0).max()) for x in tr.states[:: max(1, steps // 1000)]
+               ) / max(1.0, float(np.abs(c0).max()))
+
+
+def test_compositions_keep_casimirs_on_nambu():
+    assert _casimir_drift("kahan-li6", 200) < 1e-13
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", sorted(PUBLISHED))
+def test_every_built_in_composition_keeps_the_casimir_over_1e5_steps(method):
+    """Each substep keeps the Casimir to round-off (alpha(x, p) = y solved to an ulp, docs/theory.md
+    §4): over N substeps the drift is a random walk of N ulps, about sqrt(N) eps; 1e-13 holds up to
+    about 10^6 substeps (tj4 .. kahan-li6), the longer compositions stay within 4 sqrt(N) eps."""
+    substeps = 100_000 * PUBLISHED[method][1]
+    assert _casimir_drift(method, 100_000) < max(1e-13, 4.0 * np.sqrt(substeps) * np.finfo(float).eps)
+
+
+def test_converge_confirms_the_orders_on_the_rigid_body(run_cli):
+    code, out, err = run_cli("converge", "rigid-body", "--method", f"tj4,kahan-li6,{YOSHIDA6}", "--format", "json")
+    assert code == 0, err
+    doc = json.loads(out)
+    verdicts = {m["method"]: (m["expected_order"], m["verdict"]) for m in doc["methods"]}
+    assert verdicts == {"tj4": (4, "confirmed"), "kahan-li6": (6, "confirmed"), YOSHIDA6: (6, "confirmed")}
+
+
+def test_verify_and_show_a_composition(run_cli):
+    code, out, _ = run_cli("verify", YOSHIDA6, "--format", "json")
+    doc = json.loads(out)
+    assert code == 0 and (doc["order"], doc["symmetric"], doc["base_symmetric"], doc["claim"]) == (6, True, True,
+                                                                                                 "confirmed")
+    assert doc["orders"]["symmetric"]["order"] == 6 and doc["orders"]["general"]["order"] == 1
+    code, out, _ = run_cli("show", "kahan-li8", "--format", "json")
+    doc = json.loads(out)
+    assert code == 0 and (doc["kind"], doc["base"], doc["substeps"], doc["order"]) == ("composition", "euler", 17, 8)
+
+
+def test_an_overstated_claim_fails_and_bad_files_are_refused(run_cli, tmp_path):
+    over = tmp_path / "over.toml"
+    over.write_text('kind = "composition"\norder = 6\ngamma = ["1/(2 - 2^(1/3))", "1 - 2/(2 - 2^(1/3))", '
+                    '"1/(2 - 2^(1/3))"]\n')
+    code, _, err = run_cli("verify", str(over))
+    assert code == 1 and "overstated" in err and len(err.strip().splitlines()) == 1
+    bad = {"sum.toml": 'kind = "composition"\ngamma = ["0.5", "0.6"]\n',
+           "keys.toml": 'kind = "composition"\ngamma = ["1"]\nfoo = 1\n',
+           "empty.toml": 'kind = "composition"\ngamma = []\n',
+           "code.toml": 'kind = "composition"\ngamma = ["__import__(\'os\')"]\n',
+           "many.toml": 'kind = "composition"\ngamma = [' + ", ".join(['"0.001"'] * 101) + "]\n"}
+    for name, text in bad.items():
+        path = tmp_path / name
+        path.write_text(text)
+        code, out, err = run_cli("integrate", "rigid-body", "--method", str(path), "--steps", "2")
+        assert code == 2 and err.startswith("rkhp: error:") and len(err.strip().splitlines()) == 1, (name, err)
+
+
+def test_negative_steps_in_the_cli(run_cli):
+    code, out, _ = run_cli("integrate", "rigid-body", "--method", "tj4", "--h", "-0.1", "--format", "json")
+    assert code == 0 and json.loads(out)["t_final"] == pytest.approx(-10.0)
+    code, _, err = run_cli("integrate", "rigid-body", "--method", "tj4", "--h", "-0.1", "--t-final", "1")
+    assert code == 2 and "opposite signs" in err
+    code, _, err = run_cli("integrate", "rigid-body", "--method", "euler", "--h", "0")
+    assert code == 2
+
+
+def test_the_library_refuses_a_zero_step():
+    with pytest.raises(InputError):
+        integrate("rigid-body", "tj4", 0.0, 10)
