@@ -22,6 +22,9 @@ demo: install
 	$(VENV)/bin/rkhp verify paper-three-stage
 	$(VENV)/bin/rkhp search --stages 3 --degenerate --seed 0 --optimize error
 	$(VENV)/bin/rkhp converge rigid-body
+	@echo
+	@echo "rkhp is installed in $(CURDIR)/$(VENV): run it as $(VENV)/bin/rkhp (e.g. $(VENV)/bin/rkhp --help),"
+	@echo "or put it on your PATH for this shell: source $(VENV)/bin/activate"
 
 test: install
 	$(PY) -m pytest -m "not slow" -q -p no:cacheprovider

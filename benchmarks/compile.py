@@ -65,8 +65,8 @@ import json, time
 import numpy as np
 from numba.core import event
 from rkhp.integrators import rkhp_method
-from rkhp.integrators.classical import (hamiltonian_values, integrate_classical,
-                                        integrate_midpoint, vector_field)
+from rkhp.integrators.classical import integrate_classical, integrate_midpoint, vector_field
+from rkhp.integrators.energy import hamiltonian_values
 from rkhp.systems import get_system
 from rkhp.tableaux.files import load_tableau
 KERNELS = ("run_tape", "_hamiltonian_loop", "rkhp_run", "_rk_loop", "_midpoint_loop", "_field")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import click
 
-from .options import console, emit_json
+from .options import console, emit_json, emit_table
 from .render import compact_table, print_table
 
 _CLASSES = ("general", "degenerate", "symmetric")
@@ -19,11 +19,46 @@ def verify_composition(spec: str, fmt: str) -> None:
     result = verify_composition(load_composition(spec))
     if fmt == "json":
         emit_json(result.to_json())
+    elif fmt in ("csv", "latex"):
+        _emit_verification(result, fmt)
     else:
         _render_verification(result)
     if result.claim == "overstated":
         raise CheckFailed(f"claimed order overstated: {result.composition.name} claims "
                           f"{result.composition.claimed_order}, its conditions hold to order {result.own.order}")
+
+
+def _order_rows(result) -> list[tuple[str, object]]:
+    """(label, CompositionOrder): the published symmetric case, then each realisation class."""
+    c = result.composition
+    return [("symmetric, order 2 (published)", result.own),
+            *((f"{c.base} on a {cls} realisation", result.by_class[cls]) for cls in _CLASSES)]
+
+
+def _order_cells(label: str, o) -> list[str]:
+    """A row of the orders table as the terminal shows it (and --format latex)."""
+    failing = "" if o.largest_failing is None else f"{o.largest_failing:.2e} at order {o.order + 1}"
+    return [label, f"{o.base_order}{' (odd in h)' if o.base_symmetric else ''}", str(o.order), str(o.conditions),
+            failing]
+
+
+ORDER_COLUMNS = ("base", "base order", "order", "conditions", "largest failing")
+#: the columns of `verify COMPOSITION --format csv` (docs/results.md)
+ORDER_CSV = ("composition", "case", "base_order", "base_symmetric", "order", "checked_up_to", "conditions",
+             "largest_failing", "precision", "claimed_order", "claim")
+
+
+def _emit_verification(result, fmt) -> None:
+    """The orders table of a composition as CSV or LaTeX (booktabs; rkhp.base.tables)."""
+    from rkhp.base.tables import booktabs
+
+    c = result.composition
+    rows = [(c.name, label, o.base_order, o.base_symmetric, o.order, o.checked_up_to, o.conditions,
+             o.largest_failing, o.precision, c.claimed_order, result.claim) for label, o in _order_rows(result)]
+    caption = (f"Orders of the composition {c.name}: {c.substeps} substeps of {c.base}, "
+               f"{'symmetric' if c.symmetric else 'not symmetric'} coefficients; precision {result.own.precision}")
+    table = booktabs(ORDER_COLUMNS, [_order_cells(label, o) for label, o in _order_rows(result)], caption, "lrrrr")
+    emit_table(fmt, ORDER_CSV, rows, [table])
 
 
 def _render_verification(result) -> None:
@@ -38,15 +73,10 @@ def _render_verification(result) -> None:
     out.print(f"base {escape(c.base)}: {'symmetric' if result.base_symmetric else 'not symmetric'} as an RKHP "
               f"method under a symmetric birealisation (checked to order {result.base_symmetry_checked})")
     table = compact_table(None)
-    for col in ("base", "base order", "order", "conditions", "largest failing"):
+    for col in ORDER_COLUMNS:
         table.add_column(col, justify="left" if col == "base" else "right")
-    own = result.own
-    rows = [("symmetric, order 2 (published)", own)]
-    rows += [(f"{escape(c.base)} on a {cls} realisation", result.by_class[cls]) for cls in _CLASSES]
-    for label, o in rows:
-        base = f"{o.base_order}{' (odd in h)' if o.base_symmetric else ''}"
-        failing = "" if o.largest_failing is None else f"{o.largest_failing:.2e} at order {o.order + 1}"
-        table.add_row(label, base, str(o.order), str(o.conditions), failing)
+    for label, o in _order_rows(result):
+        table.add_row(*map(escape, _order_cells(label, o)))
     print_table(out, table)
     if result.claim is not None:
         out.print(f"claimed order {c.claimed_order}: {result.claim}")

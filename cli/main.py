@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib
 import sys
+from typing import NamedTuple
 
 import click
 
@@ -56,6 +57,8 @@ class LazyGroup(click.Group):
 
         install_interrupt_handler()
         kwargs["standalone_mode"] = False
+        given = args[0] if args else kwargs.get("args")
+        kwargs.setdefault("obj", Invocation(tuple(sys.argv[1:] if given is None else given)))
         try:
             rv = super().main(*args, **kwargs)
             sys.stdout.flush()
@@ -142,6 +145,13 @@ def _is_stdout_error(exc: OSError) -> bool:
     import errno
 
     return exc.errno in (errno.ENOSPC, errno.EIO, errno.EDQUOT, errno.EFBIG, errno.EPIPE) and exc.filename is None
+
+
+class Invocation(NamedTuple):
+    """What the root command was given (the context's ``obj``): the arguments after ``rkhp``,
+    recorded in the provenance of every output (rkhp.base.provenance)."""
+
+    args: tuple[str, ...]
 
 
 def one_line(message: str) -> str:

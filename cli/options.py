@@ -85,29 +85,35 @@ def names(name: str = "NAME,...") -> Checked:
 
 
 class OutputPath(Checked):
-    """A file to write, checked before the work (`rkhp.base.bounds.check_output_path`, and
-    `rkhp.base.files.check_target`: an existing file or a symbolic link only with the command's
-    `--force`, an eager option, so already read); returns the text."""
+    """A file to write, checked before the work by ``check(text, label, force)`` (default:
+    `rkhp.base.bounds.check_output_path` for ``suffixes``, then `rkhp.base.files.check_target`: an
+    existing file or a symbolic link only with the command's `--force`, an eager option, so
+    already read); returns the text."""
 
-    def __init__(self, suffixes: tuple[str, ...]):
-        super().__init__("FILE", lambda text, label: str(bounds.check_output_path(text, suffixes, label)))
+    def __init__(self, suffixes: tuple[str, ...] = (), check=None):
+        super().__init__("FILE", lambda text, label: text)
+        self.check = check or (lambda text, label, force: _checked_target(text, suffixes, label, force))
 
     def convert(self, value, param, ctx):
-        from rkhp.base.files import check_target
-
-        text = super().convert(value, param, ctx)
+        if not isinstance(value, str):
+            return value
         force = bool(ctx is not None and ctx.params.get("force"))
         label = (param.opts[0] if param is not None and param.opts else "output file")
         try:
-            check_target(text, label, force)
+            return str(self.check(value, label, force))
         except InputError as exc:
             raise click.UsageError(str(exc), ctx) from None
-        return text
 
 
-def output_path(*suffixes: str) -> Checked:
+def _checked_target(text, suffixes, label, force):
+    from rkhp.base.files import check_target
+
+    return check_target(bounds.check_output_path(text, suffixes, label), label, force)
+
+
+def output_path(*suffixes: str, check=None) -> Checked:
     """A file to write (:class:`OutputPath`)."""
-    return OutputPath(suffixes)
+    return OutputPath(suffixes, check)
 
 
 def force_option():
@@ -132,12 +138,30 @@ X0 = reals(lambda x, label: x, "X1,X2,...", distinct=False)
 
 
 
+FORMAT_HELP = {"table": "rich table for people", "json": "json with stable keys for programs",
+               "latex": "LaTeX", "markdown": "markdown",
+               "csv": "csv for spreadsheets and data frames (docs/results.md)"}
+
+
 def format_option(*choices: str, default: str = "table"):
     """The `--format` option every command has."""
     return click.option(
         "--format", "fmt", type=click.Choice(choices), default=default, show_default=True,
-        help="Output format: rich table for people, json with stable keys for programs.",
+        help="Output format: " + ", ".join(FORMAT_HELP.get(c, c) for c in choices) + ".",
     )
+
+
+def emit_table(fmt: str, header, rows, latex_tables) -> None:
+    """Write a study's table to stdout as CSV (``header`` and ``rows`` of values) or LaTeX (the
+    booktabs ``latex_tables``, cells as the terminal shows them), each after the provenance line
+    of the running command (rkhp.base.tables; docs/results.md)."""
+    from rkhp.base.tables import csv_text, latex_text
+
+    record = run_provenance()
+    if fmt == "csv":
+        click.echo(csv_text(header, rows, record), nl=False)
+    else:
+        click.echo(latex_text(latex_tables, record), nl=False)
 
 
 def executor_options(what: str):
@@ -211,9 +235,31 @@ def json_text(obj, indent: int = 2) -> str:
     return json.dumps(json_ready(obj), indent=indent, ensure_ascii=False, allow_nan=False)
 
 
-def emit_json(obj) -> None:
-    """Write a JSON document to stdout (stable key order as given; non-finite values as NON_FINITE)."""
-    click.echo(json_text(obj))
+def run_provenance() -> dict:
+    """The provenance record of the running command (rkhp.base.provenance): its command line as
+    given to ``rkhp``, and the value of its --seed option when it has one."""
+    import shlex
+
+    from rkhp.base.provenance import provenance
+
+    ctx = click.get_current_context(silent=True)
+    if ctx is None:
+        return provenance()
+    given = getattr(ctx.find_root().obj, "args", None)
+    command = None if given is None else shlex.join(["rkhp", *given])
+    seed = ctx.params.get("seed") if isinstance(ctx.params.get("seed"), int) else None
+    return provenance(command, seed)
+
+
+def with_provenance(document: dict) -> dict:
+    """The document with the running command's ``provenance`` object as its last key."""
+    return {**document, "provenance": run_provenance()}
+
+
+def emit_json(document: dict) -> None:
+    """Write a JSON document to stdout (stable key order as given, then ``provenance``; non-finite
+    values as NON_FINITE)."""
+    click.echo(json_text(with_provenance(document)))
 
 
 def console():

@@ -16,6 +16,7 @@ from .options import (
     json_text,
     output_path,
     progress,
+    with_provenance,
 )
 
 
@@ -51,11 +52,11 @@ def relations(order, regenerate, seed, output, force, workers, scheduler, fmt):
     doc = data.to_json()
     doc["source"] = "regenerated" if regenerate else "shipped"
     if output:
-        from rkhp.base.files import write_atomic
+        from rkhp.base.provenance import write_output
 
         document = data.to_json()
         document["method"]["regenerate"] += f" --output {output}"
-        write_atomic(output, json_text(document, indent=1) + "\n", "--output", force)
+        write_output(output, json_text(with_provenance(document), indent=1) + "\n", "--output", force)
     if fmt == "json":
         emit_json(doc)
         return

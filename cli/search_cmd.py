@@ -126,7 +126,9 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
 def _save(result, path, force) -> None:
     from rkhp.tableaux.files import save_tableau
 
-    save_tableau(result.tableau_to_save(), path, force)
+    from .options import run_provenance
+
+    save_tableau(result.tableau_to_save(), path, run_provenance(), force)
 
 
 SHOWN_DIGITS = 12

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import click
 
-from .options import console, emit_json, force_option, format_option, integer, output_path, real
+from .options import console, emit_json, force_option, format_option, integer, output_path, real, run_provenance
 
 PLOT_FILE = output_path(".png", ".svg", ".pdf")
 
@@ -50,7 +50,7 @@ def stability(methods, order, realisation, plot, z_max, force, fmt):
     if plot:
         from rkhp.studies.plots import plot_phase
 
-        plot_phase(tableaux, realisation, z_max, plot, force)
+        plot_phase(tableaux, realisation, z_max, plot, run_provenance(), force)
     doc = stability_json(results, order, realisation)
     if fmt == "json":
         emit_json(doc)

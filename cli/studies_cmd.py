@@ -5,6 +5,8 @@ from __future__ import annotations
 import click
 
 from rkhp.base import bounds
+from rkhp.base.tables import booktabs
+from rkhp.studies.plots import check_plot_path, data_path
 
 from .options import (
     METHOD_HELP,
@@ -15,6 +17,7 @@ from .options import (
     compile_notice,
     console,
     emit_json,
+    emit_table,
     executor_options,
     force_option,
     format_option,
@@ -26,6 +29,7 @@ from .options import (
     progress,
     real,
     reals,
+    run_provenance,
     x0_option,
 )
 from .render import compact_table
@@ -34,7 +38,7 @@ from .terminal import plain, stop_interrupted
 #: the steps of one run, listed
 STEP_LIST = integers(1, bounds.MAX_STEPS)
 #: a plot to write (checked before the study)
-PLOT_FILE = output_path(".png", ".svg", ".pdf")
+PLOT_FILE = output_path(check=check_plot_path)
 
 METHODS_HELP = (METHOD_HELP + " Repeat or separate by commas. Default: euler, paper-two-stage, "
                 "paper-three-stage, rk4.")
@@ -102,7 +106,7 @@ def _f(x, digits=2) -> str:
 @click.option("--plot", type=PLOT_FILE, help="Log-log plot of error against h (.png, .svg, .pdf).")
 @force_option()
 @executor_options("runs")
-@format_option("table", "json")
+@format_option("table", "json", "csv", "latex")
 def converge(system, methods, x0, realisation, t_final, steps, refinements, plot, force, workers, scheduler, fmt):
     """Empirical convergence: global error at T against h, observed and expected orders, verdicts."""
     from rkhp.base.executors import open_executor
@@ -119,9 +123,11 @@ def converge(system, methods, x0, realisation, t_final, steps, refinements, plot
     if plot and not study.interrupted:
         from rkhp.studies.plots import plot_convergence
 
-        plot_convergence(study, plot, force)
+        plot_convergence(study, plot, run_provenance(), force)
     if fmt == "json":
         emit_json(study.to_json())
+    elif fmt in ("csv", "latex"):
+        _emit_converge(study, fmt)
     else:
         _render_converge(study, plot if not study.interrupted else None)
     if study.interrupted:
@@ -139,6 +145,56 @@ def _role(method, i) -> str:
     return dict(method.fit.excluded).get(i, "")
 
 
+CONVERGE_COLUMNS = ("h", "steps", "error", "order", "Casimir", "energy", "Newton", "s", "fit")
+
+
+def _converge_cells(study, m, i, r) -> list[str]:
+    """Row i of method m's table, as the terminal shows it (and --format latex)."""
+    error = _e(r.error) if r.status == "ok" and r.error is not None else (
+        f"<{study.reference.floor:.0e}" if r.status == "ok" else "failed")
+    role = SHORT_ROLES.get(_role(m, i), _role(m, i))
+    return [f"{r.h:.3g}", str(r.steps), error, _f(r.local_order), _e1(r.casimir_error), _e1(r.energy_error),
+            f"{r.newton_mean:.1f}/{r.newton_max}", f"{r.seconds:.4f}", role if r.status == "ok" else "failed"]
+
+
+def _verdict_basis(study, m) -> str:
+    kind = {"rkhp": study.condition_class, "taylor": "THP", "implicit-midpoint": "midpoint rule",
+            "composition": f"composition, {study.condition_class}"}.get(m.kind, "general")
+    basis = f"{kind} order"
+    if m.realisation_bound is not None:
+        basis += f", at most {m.realisation_bound} with {study.realisation}"
+    return basis
+
+
+#: the columns of `converge --format csv` (docs/results.md)
+CONVERGE_CSV = ("method", "kind", "h", "steps", "error", "local_order", "casimir_error", "energy_error",
+                "newton_mean", "newton_max", "seconds", "role", "status", "observed_order", "expected_order",
+                "verdict")
+
+
+def _emit_converge(study, fmt) -> None:
+    """converge as CSV (one row per run, the method's fit repeated) or LaTeX (the runs, then the
+    verdicts)."""
+    rows = [(m.method, m.kind, r.h, r.steps, r.error, r.local_order, r.casimir_error, r.energy_error,
+             r.newton_mean, r.newton_max, r.seconds, _role(m, i) or None, r.status, m.observed_order,
+             m.expected_order, m.verdict)
+            for m in study.methods for i, r in enumerate(m.rows)]
+    cells, groups = [], []
+    for m in study.methods:
+        groups.append(len(cells))
+        cells += [[m.method if i == 0 else "", *_converge_cells(study, m, i, r)] for i, r in enumerate(m.rows)]
+    caption = (f"Convergence on {study.system} ({study.realisation} realisation), T = {study.t_final:g}; "
+               f"reference: {study.reference.kind}, estimated error {study.reference.error_estimate:.1e}. "
+               "Global error at T, local order, max Casimir and energy errors over the run, Newton "
+               "iterations mean/max, run seconds, role in the fit.")
+    runs = booktabs(("method", *CONVERGE_COLUMNS), cells, caption, "l" + "r" * 8 + "l", groups)
+    verdicts = booktabs(("method", "observed order", "fitted rows", "expected order", "verdict"),
+                        [(m.method, _f(m.observed_order), ",".join(map(str, m.fit.fit_rows)) or "—",
+                          f"{m.expected_order} ({_verdict_basis(study, m)})", m.verdict) for m in study.methods],
+                        f"Observed and expected orders on {study.system}.", "lrlll")
+    emit_table(fmt, CONVERGE_CSV, rows, [runs, verdicts])
+
+
 def _render_converge(study, plot) -> None:
     from rkhp.studies.fit import drift
 
@@ -154,12 +210,7 @@ def _render_converge(study, plot) -> None:
         for col in ("h", "steps", "error", "order", "Casimir", "energy", "Newton", "s", "fit"):
             table.add_column(col, justify="right" if col != "fit" else "left", no_wrap=True)
         for i, r in enumerate(m.rows):
-            error = _e(r.error) if r.status == "ok" and r.error is not None else (
-                f"<{study.reference.floor:.0e}" if r.status == "ok" else "failed")
-            role = SHORT_ROLES.get(_role(m, i), _role(m, i))
-            table.add_row(f"{r.h:.3g}", str(r.steps), error, _f(r.local_order), _e1(r.casimir_error),
-                          _e1(r.energy_error), f"{r.newton_mean:.1f}/{r.newton_max}", f"{r.seconds:.4f}",
-                          role if r.status == "ok" else "failed")
+            table.add_row(*map(plain, _converge_cells(study, m, i, r)))
         out.print(table)
         failed = [r.status for r in m.rows if r.status != "ok"]
         if failed:
@@ -169,21 +220,17 @@ def _render_converge(study, plot) -> None:
               "floor = round-off floor, drift = order drift, <ref = below the reference's accuracy)")
     out.print("[bold]verdicts[/]")
     for m in study.methods:
-        kind = {"rkhp": study.condition_class, "taylor": "THP", "implicit-midpoint": "midpoint rule",
-                "composition": f"composition, {study.condition_class}"}.get(m.kind, "general")
         left = ", ".join(f"row {i} {why}" for i, why in m.fit.excluded) or "none"
-        basis = f"{kind} order"
-        if m.realisation_bound is not None:
-            basis += f", at most {m.realisation_bound} with {plain(study.realisation)}"
+        basis = _verdict_basis(study, m)
         moving = drift(m.fit) if m.verdict == "inconclusive" and m.observed_order is not None else None
         trend = "" if moving is None else (
             f" (local orders {moving} steadily over the fit: {_f(m.fit.local_orders[m.fit.fit_rows[1]])} to "
             f"{_f(m.fit.local_orders[m.fit.fit_rows[-1]])}, not yet asymptotic)")
         out.print(f"{plain(m.method)}: observed order {_f(m.observed_order)} over rows "
                   f"{','.join(map(str, m.fit.fit_rows)) or '—'} (left out: {left}); expected {m.expected_order} "
-                  f"({basis}): {m.verdict}{trend}")
+                  f"({plain(basis)}): {m.verdict}{trend}")
     if plot:
-        out.print(f"plot written to {plain(plot)}")
+        out.print(f"plot written to {plain(plot)} (its data: {plain(data_path(plot))})")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -210,7 +257,7 @@ def _render_converge(study, plot) -> None:
 @click.option("--plot", type=PLOT_FILE, help="Log-log plot of time against error (.png, .svg, .pdf).")
 @force_option()
 @executor_options("curves (with --ensemble: the trajectories)")
-@format_option("table", "json")
+@format_option("table", "json", "csv", "latex")
 def bench(system, methods, x0, realisation, peers, t_final, steps, tolerances, repeats, ensemble, seed, plot,
           force, workers, scheduler, fmt):
     """Work-precision: wall time (median of repeats) against error, methods and peers."""
@@ -230,13 +277,52 @@ def bench(system, methods, x0, realisation, peers, t_final, steps, tolerances, r
     if plot and not study.interrupted:
         from rkhp.studies.plots import plot_work_precision
 
-        plot_work_precision(study, plot, force)
+        plot_work_precision(study, plot, run_provenance(), force)
     if fmt == "json":
         emit_json(study.to_json())
+    elif fmt in ("csv", "latex"):
+        _emit_bench(study, fmt)
     else:
         _render_bench(study, plot if not study.interrupted else None)
     if study.interrupted:
         stop_interrupted("the points finished so far are shown")
+
+
+def _bench_cells(study, p) -> list[str]:
+    """A point of a curve as the terminal shows it (and --format latex): setting, error, seconds,
+    f evals, status."""
+    setting = str(p.steps) if p.steps is not None else f"{p.tolerance:g}"
+    error = (_e(p.error) if p.error is not None else
+             (f"< {study.reference.floor:.1e}" if p.status == "ok" else "—"))
+    return [setting, error, f"{p.seconds:.2e}", "—" if p.evaluations is None else str(p.evaluations), p.status]
+
+
+#: the columns of `bench --format csv` (docs/results.md)
+BENCH_CSV = ("method", "kind", "steps", "tolerance", "error", "seconds", "evaluations", "status",
+             "compile_seconds", "trajectories")
+
+
+def _emit_bench(study, fmt) -> None:
+    """bench as CSV (one row per point) or LaTeX (the points, then the cheapest per target)."""
+    rows = [(c.method, c.kind, p.steps, p.tolerance, p.error, p.seconds, p.evaluations, p.status,
+             c.compile_seconds, c.trajectories) for c in study.curves for p in c.points]
+    cells, groups = [], []
+    for c in study.curves:
+        groups.append(len(cells))
+        cells += [[c.method if i == 0 else "", c.kind if i == 0 else "", *_bench_cells(study, p)]
+                  for i, p in enumerate(c.points)]
+    mode = (f"ensemble of {study.ensemble} starts, seconds per trajectory" if study.ensemble
+            else "one trajectory")
+    caption = (f"Work-precision on {study.system} ({study.realisation} realisation), T = {study.t_final:g}, "
+               f"{mode}, median of {study.repeats} repeats; reference: {study.reference.kind}. Setting: "
+               "steps, or rtol for scipy.")
+    points = booktabs(("method", "kind", "setting", "error", "seconds", "f evals", "status"), cells, caption,
+                      "llrrrrl", groups)
+    cheapest = booktabs(("error at most", "cheapest", "setting", "seconds"),
+                        [(f"{c.target:.0e}", c.method or "no method reached it", c.setting or "—",
+                          "—" if c.seconds is None else f"{c.seconds:.2e}") for c in study.cheapest],
+                        f"Cheapest method per error target on {study.system}.", "rllr")
+    emit_table(fmt, BENCH_CSV, rows, [points, cheapest])
 
 
 def _render_bench(study, plot) -> None:
@@ -256,10 +342,7 @@ def _render_bench(study, plot) -> None:
         for col in ("steps" if c.kind != "scipy" else "rtol", "error", "seconds", "f evals", "status"):
             table.add_column(col, justify="right")
         for p in c.points:
-            setting = str(p.steps) if p.steps is not None else f"{p.tolerance:g}"
-            error = _e(p.error) if p.error is not None else (f"< {ref.floor:.1e}" if p.status == "ok" else "—")
-            table.add_row(setting, error, f"{p.seconds:.2e}", "—" if p.evaluations is None else str(p.evaluations),
-                          plain(p.status))
+            table.add_row(*map(plain, _bench_cells(study, p)))
         out.print(table)
     out.print("[bold]cheapest[/]")
     for c in study.cheapest:
@@ -268,7 +351,7 @@ def _render_bench(study, plot) -> None:
         else:
             out.print(f"error <= {c.target:.0e}: {plain(c.method)} ({plain(c.setting)}), {c.seconds:.2e} s")
     if plot:
-        out.print(f"plot written to {plain(plot)}")
+        out.print(f"plot written to {plain(plot)} (its data: {plain(data_path(plot))})")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -286,7 +369,7 @@ def _render_bench(study, plot) -> None:
 @click.option("--plot", type=PLOT_FILE, help="Plot of the long run's drift (.png, .svg, .pdf).")
 @force_option()
 @executor_options("runs of each part")
-@format_option("table", "json")
+@format_option("table", "json", "csv", "latex")
 def stress(system, methods, x0, realisation, t_final, long_steps, long_h, sweep_coarsest, round_off_steps, plot,
            force, workers, scheduler, fmt):
     """Stress tests: (a) step sweep to Newton failure, (b) long-run drift, (c) near-singular starts,
@@ -306,13 +389,110 @@ def stress(system, methods, x0, realisation, t_final, long_steps, long_h, sweep_
     if plot and not study.interrupted:
         from rkhp.studies.plots import plot_stress
 
-        plot_stress(study, plot, force)
+        plot_stress(study, plot, run_provenance(), force)
     if fmt == "json":
         emit_json(study.to_json())
+    elif fmt in ("csv", "latex"):
+        _emit_stress(study, fmt)
     else:
         _render_stress(study, plot if not study.interrupted else None)
     if study.interrupted:
         stop_interrupted("the parts finished so far are shown")
+
+
+SWEEP_COLUMNS = ("h", "steps", "ok", "Newton max", "rel. error", "rel. energy err")
+LONG_RUN_COLUMNS = ("method", "Casimir max", "energy, 1st window", "last window", "growth", "modified energy max",
+                    "seconds")
+SINGULAR_COLUMNS = ("method", "x1(0)", "status", "min component", "Casimir err", "kept")
+
+
+def _sweep_cells(r) -> list[str]:
+    return [f"{r.h:.3g}", str(r.steps), "yes" if r.ok else "no", str(r.newton_max), _e(r.relative_error),
+            _e(r.relative_energy_error)]
+
+
+def _long_run_cells(r) -> list[str]:
+    modified = "—" if r.modified is None else f"{_e(r.modified.max)} (H~_{r.modified.order})"
+    return [r.method, _e(r.casimir_max), _e(r.energy_windows[0]), _e(r.energy_windows[-1]),
+            "—" if r.energy_growth is None else f"x{r.energy_growth:.2g}", modified, f"{r.seconds:.2f}"]
+
+
+def _singular_cells(r) -> list[str]:
+    return [r.method, f"{r.first_species:g}", r.status, _e(r.min_component), _e(r.casimir_error),
+            "yes" if r.kept else "no"]
+
+
+def _round_off_cells(ro, i, r) -> list[str]:
+    """Row i of part (d): steps, then per method "error [mark] | energy error [mark]"."""
+    cells = []
+    for m, energy in zip(ro.studies, ro.energy_fits, strict=True):
+        row = m.rows[i]
+        if row.status != "ok":
+            cells.append("failed")
+            continue
+        role = SHORT_ROLES.get(_role(m, i), _role(m, i))
+        error = f"<{ro.reference_floor:.0e}" if row.error is None else _e1(row.error)
+        e_role = "" if i in energy.fit_rows else SHORT_ROLES.get(dict(energy.excluded).get(i, ""), "")
+        cells.append(f"{error}{'' if role == 'fit' else ' ' + role} | {_e1(row.energy_error)}"
+                     f"{'' if not e_role else ' ' + e_role}")
+    return [str(r.steps), *cells]
+
+
+#: the columns of `stress --format csv`, one measured quantity per row (docs/results.md)
+STRESS_CSV = ("part", "method", "h", "steps", "start", "quantity", "value")
+
+
+def _stress_rows(study, verdicts):
+    """The long-form rows of `stress --format csv` (a part an interrupt left out: its verdict only)."""
+    for s in study.sweep:
+        for r in s.rows:
+            for key in ("ok", "newton_max", "relative_error", "relative_energy_error", "status"):
+                yield ("a", s.method, r.h, r.steps, None, key, getattr(r, key))
+    lr = study.long_run
+    for r in () if lr is None else (*lr.runs, lr.peer):
+        values = {"casimir_max": r.casimir_max, "energy_first_window": r.energy_windows[0],
+                  "energy_last_window": r.energy_windows[-1], "energy_growth": r.energy_growth,
+                  "modified_energy_max": None if r.modified is None else r.modified.max,
+                  "seconds": r.seconds, "status": r.status}
+        for key, value in values.items():
+            yield ("b", r.method, lr.h, lr.steps, None, key, value)
+    for r in () if study.near_singular is None else study.near_singular.runs:
+        for key in ("status", "min_component", "casimir_error", "kept"):
+            yield ("c", r.method, None, None, r.first_species, key, getattr(r, key))
+    for m in () if study.round_off is None else study.round_off.studies:
+        for r in m.rows:
+            for key in ("error", "energy_error", "status"):
+                yield ("d", m.method, r.h, r.steps, None, key, getattr(r, key))
+    for part, text in verdicts.items():
+        yield (part, None, None, None, None, "verdict", text)
+
+
+def _emit_stress(study, fmt) -> None:
+    """stress as CSV (long form: one measured quantity per row) or LaTeX (one table per part)."""
+    verdicts = study.verdicts()
+    where = f"{study.system} ({study.realisation} realisation)"
+    cells, groups = [], []
+    for s in study.sweep:
+        groups.append(len(cells))
+        cells += [[s.method if i == 0 else "", *_sweep_cells(r)] for i, r in enumerate(s.rows)]
+    tables = [booktabs(("method", *SWEEP_COLUMNS), cells,
+                       f"(a) Step-size sweep on {where}, T = {study.t_final:g}: {verdicts['a']}", "lrrlrrr", groups)]
+    lr = study.long_run
+    if lr is not None:
+        tables.append(booktabs(LONG_RUN_COLUMNS, [_long_run_cells(r) for r in (*lr.runs, lr.peer)],
+                               f"(b) Long run on {where}, {lr.steps} steps of h = {lr.h:g}, max error per window "
+                               f"({lr.windows} windows): {verdicts['b']}", "lrrrrrr"))
+    if study.near_singular is not None and study.near_singular.applicable:
+        tables.append(booktabs(SINGULAR_COLUMNS, [_singular_cells(r) for r in study.near_singular.runs],
+                               f"(c) Near-singular starts on {where}: {verdicts['c']}", "lrlrrl"))
+    ro = study.round_off
+    if ro is not None:
+        tables.append(booktabs(("steps", *(m.method for m in ro.studies)),
+                               [_round_off_cells(ro, i, r) for i, r in enumerate(ro.studies[0].rows)],
+                               f"(d) Tiny steps on {where}, T = {ro.t_final:g}: error at T | max energy error "
+                               f"(pre = pre-asymptotic, floor = round-off floor, drift = order drift): {verdicts['d']}",
+                               "r" * (1 + len(ro.studies))))
+    emit_table(fmt, STRESS_CSV, _stress_rows(study, verdicts), tables)
 
 
 def _render_stress(study, plot) -> None:
@@ -326,8 +506,7 @@ def _render_stress(study, plot) -> None:
         for col in ("h", "steps", "ok", "Newton max", "rel. error", "rel. energy err"):
             table.add_column(col, justify="right")
         for r in s.rows:
-            table.add_row(f"{r.h:.3g}", str(r.steps), "yes" if r.ok else "no", str(r.newton_max),
-                          _e(r.relative_error), _e(r.relative_energy_error))
+            table.add_row(*map(plain, _sweep_cells(r)))
         out.print(table)
     for s in study.sweep:
         out.print(f"verdict (a): {plain(s.verdict())}")
@@ -339,7 +518,7 @@ def _render_stress(study, plot) -> None:
         else:
             render(out, part, verdicts)
     if plot:
-        out.print(f"plot written to {plain(plot)}")
+        out.print(f"plot written to {plain(plot)} (its data: {plain(data_path(plot))})")
 
 
 def _render_long_run(out, lr, verdicts) -> None:
@@ -349,9 +528,7 @@ def _render_long_run(out, lr, verdicts) -> None:
     for col in ("Casimir max", "energy, 1st window", "last window", "growth", "modified energy max", "seconds"):
         table.add_column(col, justify="right")
     for r in (*lr.runs, lr.peer):
-        modified = "—" if r.modified is None else f"{_e(r.modified.max)} (H~_{r.modified.order})"
-        table.add_row(plain(r.method), _e(r.casimir_max), _e(r.energy_windows[0]), _e(r.energy_windows[-1]),
-                      "—" if r.energy_growth is None else f"x{r.energy_growth:.2g}", modified, f"{r.seconds:.2f}")
+        table.add_row(*map(plain, _long_run_cells(r)))
     out.print(table)
     for r in (*lr.runs, lr.peer):
         if r.status != "ok":
@@ -366,8 +543,7 @@ def _render_near_singular(out, near_singular, verdicts) -> None:
         for col in ("method", "x1(0)", "status", "min component", "Casimir err", "kept"):
             table.add_column(col)
         for r in near_singular.runs:
-            table.add_row(plain(r.method), f"{r.first_species:g}", plain(r.status), _e(r.min_component),
-                          _e(r.casimir_error), "yes" if r.kept else "no")
+            table.add_row(*map(plain, _singular_cells(r)))
         out.print(table)
     out.print(f"verdict (c): {plain(verdicts['c'])}")
 
@@ -380,18 +556,7 @@ def _render_round_off(out, ro, verdicts) -> None:
     for m in ro.studies:
         table.add_column(plain(m.method), justify="right")
     for i, r in enumerate(ro.studies[0].rows):
-        cells = []
-        for m, energy in zip(ro.studies, ro.energy_fits, strict=True):
-            row = m.rows[i]
-            if row.status != "ok":
-                cells.append("failed")
-                continue
-            role = SHORT_ROLES.get(_role(m, i), _role(m, i))
-            error = f"<{ro.reference_floor:.0e}" if row.error is None else _e1(row.error)
-            e_role = "" if i in energy.fit_rows else SHORT_ROLES.get(dict(energy.excluded).get(i, ""), "")
-            cells.append(f"{error}{'' if role == 'fit' else ' ' + role} | {_e1(row.energy_error)}"
-                         f"{'' if not e_role else ' ' + e_role}")
-        table.add_row(str(r.steps), *cells)
+        table.add_row(*map(plain, _round_off_cells(ro, i, r)))
     out.print(table)
     out.print("marks: pre = pre-asymptotic, floor = round-off floor, drift = order drift (left out of the fit)")
     out.print(f"verdict (d): {plain(verdicts['d'])}")
@@ -431,7 +596,7 @@ def long_time(system, methods, x0, realisation, h, steps, tolerance, plot, force
     if plot:
         from rkhp.studies.plots import plot_long_time
 
-        plot_long_time(sys_.name, runs, plot, force)
+        plot_long_time(sys_.name, runs, plot, run_provenance(), force)
     doc = {"system": sys_.name, "realisation": sys_.realisation, "h": h, "steps": steps,
            "t_final": h * steps, "runs": [r.to_json() for r in runs]}
     if fmt == "json":

@@ -14,9 +14,13 @@ from .options import (
     compile_notice,
     console,
     emit_json,
+    force_option,
     format_option,
     integer,
+    output_path,
     parse_x0,
+    reals,
+    run_provenance,
     x0_option,
 )
 from .render import compact_table, print_table
@@ -52,7 +56,7 @@ def systems(fmt):
                      "casimirs": list(s.casimir_names), "exact_solution": s.exact_solution
                      is not None, "description": s.description})
     if fmt == "json":
-        emit_json(rows)
+        emit_json({"systems": rows})
         return
     table = compact_table("Built-in Poisson systems (realisations: symmetric, shifted, quartic, "
                           "truncated:K)")
@@ -148,21 +152,41 @@ def integration_report(system, trajectory, method: str, h: float, steps: int) ->
               help="Also report max over the run of |H~_N(y_n) - H~_N(y_0)|, H~_N the method's modified "
                    "Hamiltonian to order N (docs/modified.md).")
 @realisation_option()
+@click.option("--output", type=output_path(".csv", ".npz"), default=None,
+              help="Write the trajectory to FILE, CSV or NPZ by its suffix: t, x1..xn, energy, casimir1.., "
+                   "newton_iterations, stage_sweeps per state, with the run's provenance (docs/results.md).")
+@click.option("--every", type=integer(1, bounds.MAX_STEPS, "K"), default=None,
+              help="With --output: keep every K-th state (and the last).")
+@click.option("--t-eval", "t_eval", type=reals(lambda x, label: x, "T1,T2,..."), default=None,
+              help="States at these times between 0 and T, each one step of the method of size t - t_n from the "
+                   "last grid point t_n (a Poisson map: on the leaf, of the method's order); with "
+                   "--output, the file holds these states.")
+@click.option("--t-eval-count", type=integer(2, bounds.MAX_OUTPUT_TIMES, "N"), default=None,
+              help="As --t-eval, at N equally spaced times from 0 to T (numpy's linspace).")
+@force_option()
 @format_option("table", "json")
-def integrate(system, method, steps, h, t_final, x0, modified_order, realisation, fmt):
+def integrate(system, method, steps, h, t_final, x0, modified_order, realisation, output, every, t_eval,
+              t_eval_count, force, fmt):
     """Integrate SYSTEM (built-in or spec file) with METHOD (docs/methods.md)."""
     from rkhp.base.errors import InputError, NumericalFailure
     from rkhp.integrators.methods import resolve_method, resolve_system
 
     if (steps is None) == (h is None):
         raise InputError("give exactly one of --steps and --h")
+    if t_eval is not None and t_eval_count is not None:
+        raise InputError("give at most one of --t-eval and --t-eval-count")
+    chosen_times = t_eval is not None or t_eval_count is not None
+    if every is not None and (output is None or chosen_times):
+        raise InputError("--every thins the states written by --output (not those of --t-eval)")
     poisson = resolve_system(system, realisation, parse_x0(x0))
     chosen = resolve_method(method)
     _warn_c(chosen)
-    if t_final is None:
-        t_final = -poisson.t_final if h is not None and h < 0 else poisson.t_final
-    n, step = bounds.step_plan(t_final, steps, h)
+    end = t_final
+    if end is None:
+        end = -poisson.t_final if h is not None and h < 0 else poisson.t_final
+    n, step = bounds.step_plan(end, steps, h)
     bounds.check_trajectory(n, poisson.dim)
+    times = _output_times(t_eval, t_eval_count, end)
     series = None
     if modified_order is not None:
         from .modified_cmd import modified_series
@@ -175,6 +199,17 @@ def integrate(system, method, steps, h, t_final, x0, modified_order, realisation
         from .modified_cmd import modified_energy_report
 
         report.update(modified_energy_report(poisson, series, step, trajectory.states, fmt != "json"))
+    timed = None
+    if times is not None:
+        timed = _states_at(trajectory, chosen, times)
+        report["t_eval"] = timed_report(poisson, timed)
+    if output is not None and times is None:
+        from rkhp.integrators.trajectory import kept_rows
+
+        written = trajectory.write(output, every or 1, run_provenance(), force=force)
+        report["output"] = {"file": str(written), "rows": len(kept_rows(len(trajectory.states), every or 1))}
+    elif output is not None and timed is not None:  # a failed run may reach none of the chosen times
+        report["output"] = {"file": str(timed.write(output, run_provenance(), force)), "rows": len(timed.times)}
     if fmt == "json":
         emit_json(report)
     else:
@@ -182,6 +217,51 @@ def integrate(system, method, steps, h, t_final, x0, modified_order, realisation
     if not trajectory.ok:
         raise NumericalFailure(f"{poisson.name}, {chosen.name}, h = {step:g}: "
                                f"{trajectory.status}")
+
+
+def _output_times(t_eval, count, end: float):
+    """The times of --t-eval (checked against [0, T]) or the N of --t-eval-count, or None."""
+    import numpy as np
+
+    from rkhp.integrators.output_times import check_output_times
+
+    if count is not None:
+        return np.linspace(0.0, end, count)
+    if t_eval is None:
+        return None
+    return check_output_times(t_eval, 0.0, end, "--t-eval")
+
+
+def _states_at(trajectory, method, times):
+    """The states at the chosen times reached by the run (all of them when it succeeded)."""
+    from rkhp.integrators.output_times import states_at
+
+    if trajectory.ok:
+        reached = times
+    else:  # in either direction of the run
+        start, last = trajectory.times[0], trajectory.times[-1]
+        reached = times[abs(times - start) <= abs(last - start)]
+    if not reached.size:
+        return None
+    return states_at(trajectory, method, reached)
+
+
+def timed_report(system, timed) -> dict | None:
+    """The `t_eval` object of `rkhp integrate`'s JSON (docs/json.md)."""
+    import numpy as np
+
+    if timed is None:
+        return None
+    casimir = None
+    if system.casimirs:
+        start = system.casimir_values(system.x0)
+        casimir = float(max(np.abs(system.casimir_values(x) - start).max() for x in timed.states))
+    exact = None
+    if system.exact_solution is not None:
+        exact = float(max(np.abs(system.exact_solution(t) - x).max() for t, x in zip(timed.times, timed.states,
+                                                                                     strict=True)))
+    return {"times": timed.times.tolist(), "states": timed.states.tolist(), "substeps": timed.substeps.tolist(),
+            "casimir_error": casimir, "exact_error": exact}
 
 
 def _warn_c(method) -> None:
@@ -222,6 +302,19 @@ def _print_integration(r: dict) -> None:
             ("status", plain(r["status"])),
             ("compile seconds", f"{r['compile_seconds']:.3f}"),
             ("run seconds", f"{r['run_seconds']:.4f}")]
+    if r.get("output") is not None:
+        rows.append(("written", f"{r['output']['file']} ({r['output']['rows']} rows)"))
     for key, value in rows:
         table.add_row(key, value)
-    print_table(console(), table)
+    out = console()
+    print_table(out, table)
+    timed = r.get("t_eval")
+    if timed is not None:
+        states = compact_table("states at the chosen times (one step of the method of size t - t_n)")
+        for col in ("t", "x", "t - t_n"):
+            states.add_column(col, justify="right")
+        for t, x, d in zip(timed["times"], timed["states"], timed["substeps"], strict=True):
+            states.add_row(f"{t:.6g}", ", ".join(f"{v:.15g}" for v in x), f"{d:.3g}")
+        print_table(out, states)
+        out.print(f"at these times: Casimir error {_fmt(timed['casimir_error'], 3)}, "
+                  f"error vs exact solution {_fmt(timed['exact_error'], 3)}")

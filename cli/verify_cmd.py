@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import click
 
-from .options import console, emit_json, format_option, integer, progress
+from rkhp.base.tables import booktabs
+
+from .options import console, emit_json, emit_table, format_option, integer, progress
 from .render import compact_table, print_table
 
 _PRECISION_HELP = ("float, exact, or a number of decimal digits (fixed point). Default: exact when "
@@ -20,7 +22,7 @@ _CLASS_SETS = {"general": "general (T)", "degenerate": "degenerate (T_0)"}
 @click.option("--precision", default=None, metavar="float|exact|DIGITS", help=_PRECISION_HELP)
 @click.option("--show", type=integer(0, MAX_SHOW, name="N"), default=10, show_default=True,
               help="Failing conditions listed per class in the table view (JSON lists all).")
-@format_option("table", "json")
+@format_option("table", "json", "csv", "latex")
 def verify(tableau, max_order, precision, show, fmt):
     """Verify the order of a tableau over T (general) and T_0 (degenerate), exactly or at a
     stated tolerance, with the failing trees and the principal error (paper §5); or the order and
@@ -41,9 +43,42 @@ def verify(tableau, max_order, precision, show, fmt):
                             on_order=lambda n, N: bar.update(task, completed=n, total=N))
     if fmt == "json":
         emit_json(result.to_json())
+    elif fmt in ("csv", "latex"):
+        _emit_orders(result, fmt)
     else:
         _render(result, tab, show)
     fail_on_overstated([result])
+
+
+ORDER_COLUMNS = ("class", "order", "checked to", "claimed", "principal error", "largest")
+#: the columns of `verify --format csv` (docs/results.md)
+ORDER_CSV = ("tableau", "class", "order", "lower_bound", "checked_up_to", "claimed", "claim", "principal_error",
+             "principal_error_max", "precision")
+
+
+def _order_cells(result, cls, order) -> list[str]:
+    """A class's row of the orders table as the terminal shows it (and --format latex)."""
+    checked = result.class_checked_up_to.get(cls, result.checked_up_to)
+    lower = ">= " if result.is_lower_bound(cls) else ""
+    pe = result.principal_error.get(cls)
+    pm = result.principal_error_max.get(cls)
+    claimed = result.claimed.get(cls)
+    claim = "" if claimed is None else f"{claimed} ({result.claims.get(cls, 'not checked')})"
+    return [_CLASS_SETS.get(cls, cls), f"{lower}{order}", str(checked), claim,
+            "" if pe is None else f"{pe:.3e}", "" if pm is None else f"{pm:.3e}"]
+
+
+def _emit_orders(result, fmt) -> None:
+    """The orders table as CSV or LaTeX (booktabs; rkhp.base.tables)."""
+    rows = [(result.name, cls, order, result.is_lower_bound(cls),
+             result.class_checked_up_to.get(cls, result.checked_up_to), result.claimed.get(cls),
+             result.claims.get(cls), result.principal_error.get(cls),
+             result.principal_error_max.get(cls), result.precision) for cls, order in result.orders.items()]
+    caption = (f"Verified orders of {result.name} ({result.stages} stages, {result.kind}); precision "
+               f"{result.precision}; {result.tolerance_rule}")
+    table = booktabs(ORDER_COLUMNS, [_order_cells(result, cls, order) for cls, order in result.orders.items()],
+                     caption, "lrrlrr")
+    emit_table(fmt, ORDER_CSV, rows, [table])
 
 
 def fail_on_overstated(results) -> None:
@@ -68,17 +103,10 @@ def _render(result, tab, show: int) -> None:
         out.print(f"[yellow]warning:[/yellow] the given c of stage {stage + 1} (counting from 1) "
                   f"differs from the row sum of A by {diff:.3g}; the row sums are used")
     table = Table(title=None)
-    for col in ("class", "order", "checked to", "claimed", "principal error", "largest"):
+    for col in ORDER_COLUMNS:
         table.add_column(col, justify="left" if col in ("class", "claimed") else "right")
     for cls, order in result.orders.items():
-        checked = result.class_checked_up_to.get(cls, result.checked_up_to)
-        lower = ">= " if result.is_lower_bound(cls) else ""
-        pe = result.principal_error.get(cls)
-        pm = result.principal_error_max.get(cls)
-        claimed = result.claimed.get(cls)
-        claim = "" if claimed is None else f"{claimed} ({result.claims.get(cls, 'not checked')})"
-        table.add_row(_CLASS_SETS.get(cls, cls), f"{lower}{order}", str(checked), plain(claim),
-                      "" if pe is None else f"{pe:.3e}", "" if pm is None else f"{pm:.3e}")
+        table.add_row(*map(plain, _order_cells(result, cls, order)))
     print_table(out, table)
     for cls, failures in result.failing.items():
         if not len(failures):
@@ -161,7 +189,8 @@ def tables(precision, fmt, name):
 
     compositions = composition_rows()
     if fmt == "json":
-        emit_json([tables_row(tab, r) for tab, r in rows] + [c.to_json() for c in compositions])
+        emit_json({"tables": [tables_row(tab, r) for tab, r in rows],
+                   "compositions": [c.to_json() for c in compositions]})
     else:
         _render_tables(rows, precision)
         render_composition_table(compositions)

@@ -25,6 +25,8 @@ _LAZY = {
     "load_tableau": "rkhp.tableaux.files",
     "verify": "rkhp.tableaux.verification",
     "get_system": "rkhp.systems",
+    "states_at": "rkhp.integrators.output_times",
+    "system": "rkhp.systems.spec",
 }
 
 __all__ = sorted(_LAZY)

@@ -9,11 +9,11 @@ import pytest
 
 from rkhp.base.errors import InputError
 from rkhp.integrators.classical import (
-    hamiltonian_values,
     integrate_classical,
     integrate_midpoint,
     vector_field,
 )
+from rkhp.integrators.energy import hamiltonian_values
 from rkhp.integrators.failure import Failure
 from rkhp.systems import get_system
 from rkhp.tableaux.files import load_tableau

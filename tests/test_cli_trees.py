@@ -11,7 +11,7 @@ def test_conditions_json_keys_and_table_1(run_cli):
     rc, out, err = run_cli("conditions", "--order", "5", "--degenerate", "--format", "json")
     assert rc == 0, err
     doc = json.loads(out)
-    assert list(doc) == ["order", "degenerate", "class", "counts", "conditions"]
+    assert list(doc) == ["order", "degenerate", "class", "counts", "conditions", "provenance"]
     assert doc["class"] == "degenerate"
     assert doc["counts"] == {"1": 1, "2": 0, "3": 1, "4": 2, "5": 4}
     first = doc["conditions"][1]

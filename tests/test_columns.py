@@ -113,14 +113,14 @@ def test_verify_at_80_columns(name):
 
 
 def test_tables_at_80_columns():
-    rows = json.loads(_run("tables", "--format", "json"))
+    rows = json.loads(_run("tables", "--format", "json"))["tables"]
     table = _run("tables")
     _check(table, [{"name": r["name"], "stages": r["stages"], "orders": r["orders"],
                     "claimed": r["claimed"]} for r in rows])
 
 
 def test_systems_at_80_columns():
-    rows = json.loads(_run("systems", "--format", "json"))
+    rows = json.loads(_run("systems", "--format", "json"))["systems"]
     table = _run("systems")
     _check(table, [{k: r[k] for k in ("name", "family", "dim", "domain", "x0", "t_final", "casimirs")}
                    for r in rows])

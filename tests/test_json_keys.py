@@ -8,14 +8,23 @@ the Butcher matrix, as in tableau files) and appear quoted in docs/json.md.
 from __future__ import annotations
 
 import json
+import platform
 import re
+import shlex
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 from rkhp_cli.main import rkhp as cli
 
+import rkhp
+from rkhp.base.provenance import KEYS
+
 DOC = (Path(__file__).resolve().parent.parent / "docs" / "json.md").read_text()
+
+#: commands with a --seed option (default 0)
+SEEDED = ("search", "check", "bench", "relations", "modified", "compose")
 
 COMMANDS = [
     ["trees", "--order", "3"],
@@ -40,6 +49,7 @@ COMMANDS = [
     ["stability", "euler", "--realisation", "shifted", "--order", "3"],
     ["long-time", "rigid-body", "--steps", "200", "--method", "euler"],
     ["integrate", "pendulum", "--method", "euler", "--steps", "10", "--modified", "3"],
+    ["integrate", "rigid-body", "--method", "rk4", "--steps", "10", "--t-eval", "0.5,1.25"],
 ]
 
 
@@ -59,6 +69,15 @@ def _keys(doc, out: set) -> set:
 def test_every_key_is_documented_in_one_style(args):
     result = CliRunner().invoke(cli, [*args, "--format", "json"])
     assert result.exit_code == 0, result.output
-    keys = _keys(json.loads(result.stdout), set())
+    document = json.loads(result.stdout)
+    # the provenance record closes every document (docs/json.md "Provenance")
+    record = document["provenance"]
+    assert list(document)[-1] == "provenance" and tuple(record) == KEYS
+    assert record["command"] == shlex.join(["rkhp", *args, "--format", "json"])
+    assert record["rkhp_version"] == rkhp.__version__ and record["numpy"] == np.__version__
+    assert record["python"] == platform.python_version() and record["date"].endswith("Z")
+    assert record["seed"] == (int(args[args.index("--seed") + 1]) if "--seed" in args else
+                              0 if args[0] in SEEDED else None)
+    keys = _keys(document, set())
     assert not [k for k in keys if not re.fullmatch(r"[a-z][a-z0-9_]*|A", k)]  # A: as in tableau files
     assert not sorted(k for k in keys if f'"{k}"' not in DOC)

@@ -190,7 +190,7 @@ def _run(args):
 
 
 CONVERGE_KEYS = {"system", "realisation", "degenerate", "symmetric", "x0", "t_final", "reference", "methods",
-                 "interrupted"}
+                 "interrupted", "provenance"}
 METHOD_KEYS = {"method", "expected_order", "observed_order", "verdict", "fit_rows", "rows",
                "realisation_bound"}
 ROW_KEYS = {"h", "steps", "error", "local_order", "casimir_error", "energy_error", "newton_mean", "newton_max",
@@ -290,7 +290,7 @@ def test_bench_error_falls_as_cost_rises(tmp_path):
                         "--tolerances", "1e-4,1e-6,1e-8", "--repeats", "1", "--plot", str(plot)])
     assert plot.read_bytes().startswith(b"\x89PNG")
     assert set(data) == {"system", "realisation", "x0", "t_final", "reference", "repeats", "ensemble", "curves",
-                         "cheapest", "interrupted"}
+                         "cheapest", "interrupted", "provenance"}
     kinds = {c["method"]: c["kind"] for c in data["curves"]}
     assert kinds == {"paper-three-stage": "rkhp", "classical:rk4": "classical", "scipy:dop853": "scipy"}
     for c in data["curves"]:
@@ -347,7 +347,7 @@ def test_stress_cli_parts_end_with_verdicts(tmp_path):
     assert plot.read_bytes().startswith(b"%PDF-")
     data = json.loads(result.output)
     assert set(data) == {"system", "realisation", "x0", "t_final", "sweep", "long_run", "near_singular", "round_off",
-                         "interrupted"}
+                         "interrupted", "provenance"}
     for part in ("sweep", "long_run", "near_singular", "round_off"):
         assert data[part]["verdict"]
     runs = data["long_run"]["runs"]

@@ -214,7 +214,7 @@ def test_cli_systems_and_check_json():
     runner = CliRunner()
     res = runner.invoke(rkhp, ["systems", "--format", "json"])
     assert res.exit_code == 0
-    assert [r["name"] for r in json.loads(res.output)] == list(BUILTINS)
+    assert [r["name"] for r in json.loads(res.output)["systems"]] == list(BUILTINS)
     res = runner.invoke(rkhp, ["check", "lotka-volterra", "--realisation", "shifted",
                                "--samples", "10", "--format", "json"])
     assert res.exit_code == 0

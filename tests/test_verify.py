@@ -206,7 +206,7 @@ def test_cli_verify_json_and_table(run_cli):
 def test_cli_tables(run_cli):
     rc, out, err = run_cli("tables", "--format", "json")
     assert rc == 0, err
-    rows = {r["name"]: r for r in json.loads(out)}
+    rows = {r["name"]: r for r in json.loads(out)["tables"]}
     assert rows["feagin14"]["order"]["order"] == 14 and rows["paper-implicit"]["degenerate_order"]["order"] == 3
     assert all(r["claim_ok"] for r in rows.values())
 

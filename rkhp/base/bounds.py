@@ -26,6 +26,8 @@ from .errors import InputError
 MEMORY_LIMIT = 2 * 1024**3
 #: steps of one trajectory (beyond the memory limit anyway for every system but the smallest)
 MAX_STEPS = 10**9
+#: the most output times of one run (`integrate --t-eval`; each costs one step of the method)
+MAX_OUTPUT_TIMES = 100_000
 #: halvings of h in a convergence study (20 * 2^30 steps is far beyond the memory limit)
 MAX_REFINEMENTS = 30
 #: largest seed: seeds are 0 .. 2^64 - 1 (numpy's SeedSequence takes non-negative integers)

@@ -1,8 +1,9 @@
 """Writing a file safely: never over an existing file unless asked, never through a symbolic
 link, never half-written (docs/input.md "Files rkhp writes").
 
-Every file rkhp writes (a tableau from `search --save`, a relations document, a plot) goes
-through :func:`write_atomic` or :func:`atomic_path`: the content is written to a temporary file
+Every file rkhp writes (a tableau from `search --save`, a relations document, a trajectory, a
+plot and its data) goes through rkhp.base.provenance.write_output, which writes by
+:func:`write_atomic`: the content is written to a temporary file
 in the target's folder, flushed to the disk, then moved to the name in one step (a rename), so a
 full disk or an interrupt leaves the old file or nothing, never a 0-byte or truncated one.
 

@@ -174,19 +174,6 @@ def _midpoint_loop(htape, atape, space, h, n_steps, x0, domain, tol, max_it, sta
     return n_steps, Failure.OK
 
 
-@nb.njit(**NJIT)
-def _hamiltonian_loop(htape, space, states, work, out):
-    n = states.shape[1]
-    ho = htape.outputs[0]
-    W = work.W
-    for r in range(states.shape[0]):
-        W[:, :] = 0.0
-        for i in range(n):
-            W[i, 0] = states[r, i]
-        run_tape(htape, np.int64(0), space, work)
-        out[r] = W[ho, 0]
-
-
 # ----------------------------------------------------------------------------------------------
 # Python API
 
@@ -258,7 +245,7 @@ def _trajectory(system, method, h, k_done, cause, states, newton, started, compi
                               status=failure_status(cause, k_done, h, system.domain) if failed else "ok",
                               failed_step=k_done if failed else None, cause=cause,
                               compile_seconds=compile_s, run_seconds=time.perf_counter() - started - compile_s,
-                              method=method, system=system.name, extra=extra or {}), system)
+                              method=method, system=system.name, extra=extra or {}, poisson=system), system)
 
 
 def _warm_up(kernel, args_of_one_step) -> float:
@@ -346,19 +333,3 @@ def vector_field(system):
         return out
 
     return f
-
-
-def hamiltonian_values(system, states) -> np.ndarray:
-    """H at every row of ``states`` (compiled loop over the system's Hamiltonian tape)."""
-    states = np.ascontiguousarray(states, dtype=np.float64).reshape(-1, system.dim)
-    space = jet_space(0, 0)
-    ht = system.h_tape
-    out = np.empty(len(states))
-    _hamiltonian_loop(ht, space, states, tape_work((ht,), space.size), out)
-    if "hamiltonian" not in _VERIFIED and len(out):
-        want = system.hamiltonian(states[0])
-        if not abs(out[0] - want) <= 1e-12 * max(1.0, abs(want)):
-            raise NumericalFailure("compiled Hamiltonian kernel of rkhp.integrators.classical disagrees with "
-                                   f"{system.name}'s own evaluation (stale numba cache after a source change?)")
-        _VERIFIED.add("hamiltonian")
-    return out

@@ -156,4 +156,4 @@ def integrate_composition(system, composition, h, n_steps, x0=None, *, keep_all:
         method=composition.name, system=system.name,
         extra={"newton_tolerance": tol, "newton_max_iterations": max_iter,
                "realisation": system.realisation, "base": base.name,
-               "substeps": composition.substeps}), system)
+               "substeps": composition.substeps}, poisson=system), system)

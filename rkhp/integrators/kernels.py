@@ -51,7 +51,7 @@ interpreter in compile 0.3 to 2.4 s longer too (not counted)."""
 
 KERNELS: dict[str, tuple[Kernel, ...]] = {
     "tape": (TAPE,),
-    "invariants": (Kernel("rkhp.integrators.classical", "_hamiltonian_loop", 1.0),),
+    "invariants": (Kernel("rkhp.integrators.energy", "_hamiltonian_loop", 1.0),),
     "rkhp": (Kernel("rkhp.integrators.engine", "rkhp_run", 9.1),),
     "taylor": (),  # THP runs the tape interpreter from Python
     "classical": (Kernel("rkhp.integrators.classical", "_rk_loop", 6.8),),

@@ -169,7 +169,7 @@ def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLER
         failed_step=done if failed else None, compile_seconds=compile_seconds,
         run_seconds=run_seconds, method=getattr(tableau, "name", "custom"), system=system.name,
         extra={"newton_tolerance": tol, "newton_max_iterations": max_iter,
-               "realisation": system.realisation, "stage_degree": stage.degree}), system)
+               "realisation": system.realisation, "stage_degree": stage.degree}, poisson=system), system)
 
 
 def integrate_ensemble(system, tableau, h, n_steps, x0s, *, tol: float = NEWTON_TOLERANCE,

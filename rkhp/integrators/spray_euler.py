@@ -61,7 +61,7 @@ from .engine import state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS
 from .rkhp_method import check_step, start_state
-from .trajectory import Trajectory
+from .trajectory import Trajectory, checked
 
 MAX_NODES = 12
 """Collocation nodes of the direct form at most (E_12 theta^24 <= NODE_BOUND for theta up to
@@ -680,7 +680,8 @@ def integrate_spray_euler(system, gammas, h, n_steps, x0=None, keep_all: bool = 
 
     Returns a Trajectory whose times advance by h sum(gammas) a step; states y_0..y_k with
     keep_all, else y_0 and the last state; newton_iterations: chord iterations per step (all
-    substeps); a failed run keeps the states before the failing step and names it.
+    substeps); a failed run keeps the states before the failing step and names it, and with
+    keep_all a run that diverged ends before the state that diverged (trajectory.checked).
     InputError for another family or realisation, or bad arguments.
     """
     tapes = spray_tapes(system)
@@ -706,7 +707,7 @@ def integrate_spray_euler(system, gammas, h, n_steps, x0=None, keep_all: bool = 
         kept, times = states[: done + 1], step * np.arange(done + 1)
     else:
         kept, times = np.vstack([y0, states[0]]), np.array([0.0, step * done])
-    return Trajectory(
+    trajectory = Trajectory(
         times=times, states=kept, newton_iterations=iterations[: done + failed],
         cause=cause, status=failure_status(cause, done, step, system.domain) if failed else "ok",
         failed_step=done if failed else None, compile_seconds=compile_seconds,
@@ -714,4 +715,7 @@ def integrate_spray_euler(system, gammas, h, n_steps, x0=None, keep_all: bool = 
         system=system.name,
         extra={"gammas": g.tolist(), "newton_tolerance": tol, "newton_max_iterations": max_iter,
                "realisation": system.realisation, "nodes": memory.nodes.tolist(),
-               "refreshes": memory.refreshes.tolist()})
+               "refreshes": memory.refreshes.tolist()}, poisson=system)
+    # divergence (rkhp.integrators.trajectory.checked) needs every state; without keep_all only
+    # y_0 and the last state are kept
+    return checked(trajectory, system) if keep_all else trajectory

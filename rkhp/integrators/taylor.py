@@ -210,4 +210,4 @@ def integrate_taylor(system, order: int, degenerate: bool, h, n_steps, x0=None, 
                               failed_step=failed, cause=cause, compile_seconds=compile_seconds,
                               run_seconds=run_seconds,
                               method=f"THP{order}" + (" (T_0)" if degenerate else " (T)"),
-                              system=system.name, extra={"realisation": system.realisation}), system)
+                              system=system.name, extra={"realisation": system.realisation}, poisson=system), system)

@@ -8,17 +8,27 @@ programs, `status` for people.
 
 from __future__ import annotations
 
+import io
+import json
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 
-from ..base.errors import NumericalFailure
+from ..base.errors import InputError, NumericalFailure
+from ..base.provenance import provenance, write_output
+from ..base.tables import csv_text
 from .failure import Failure, failure_status
 
 GROWTH = 100.0
 """A state counts as grown when its max-norm exceeds this times max(1, |y_0|) (`divergence`)."""
 DIVERGENCE = 1e8
 """A grown state whose energy error exceeds this times max(1, |H(y_0)|) ends the run (`divergence`)."""
+
+#: the file formats of a trajectory, by the file's suffix (docs/results.md)
+FILE_SUFFIXES = (".csv", ".npz")
+#: from this many states on, H is evaluated by the compiled loop (as rkhp.studies.invariants)
+COMPILED_ENERGY_FROM = 20_000
 
 
 @dataclass(frozen=True)
@@ -40,6 +50,7 @@ class Trajectory:
         run_seconds: wall time of the integration itself.
         method: name of the method; system: name of the system.
         extra: free-form details (e.g. Newton tolerance used).
+        poisson: the PoissonSystem integrated (for the energy and Casimir columns), or None.
     """
 
     times: np.ndarray
@@ -54,6 +65,7 @@ class Trajectory:
     method: str = ""
     system: str = ""
     extra: dict = field(default_factory=dict)
+    poisson: object = field(default=None, repr=False, compare=False)
 
     @property
     def ok(self) -> bool:
@@ -68,6 +80,93 @@ class Trajectory:
         if not self.ok:
             raise NumericalFailure(self.status)
         return self
+
+    def row_counts(self) -> tuple[np.ndarray, np.ndarray]:
+        """Newton iterations and stage sweeps per state: 0 for y_0, then those of the step that
+        reached y_k (zeros where the integrator does not count them)."""
+        rows = len(self.states)
+        out = []
+        for counts in (self.newton_iterations, self.stage_sweeps):
+            column = np.zeros(rows, dtype=np.int64)
+            kept = np.asarray(counts, dtype=np.int64)[: rows - 1]
+            column[1: 1 + len(kept)] = kept
+            out.append(column)
+        return out[0], out[1]
+
+    def columns(self, every: int = 1, system=None) -> dict[str, np.ndarray]:
+        """The columns of the trajectory's file (docs/results.md), as arrays: ``t``, ``x1..xn``,
+        ``energy`` (H), ``casimir1..`` (the system's Casimirs), ``newton_iterations`` and
+        ``stage_sweeps`` (those of the step that reached the row; 0 in the first row); every
+        ``every``-th state from y_0, and always the last one. ``system``: the PoissonSystem
+        (default: the one integrated)."""
+        newton, sweeps = self.row_counts()
+        rows = kept_rows(len(self.states), every)
+        return state_columns(self._system(system), self.times[rows], self.states[rows], newton[rows],
+                             sweeps[rows])
+
+    def write(self, path, every: int = 1, record: dict | None = None, system=None, force: bool = False) -> Path:
+        """Write :meth:`columns` to ``path``, CSV or NPZ by its suffix, with the provenance
+        ``record`` (default: this process's, rkhp.base.provenance); an existing file only with
+        ``force``. Returns the path."""
+        return write_columns(path, self.columns(every, system), record, force)
+
+    def _system(self, system):
+        system = self.poisson if system is None else system
+        if system is None:
+            raise InputError("this trajectory does not hold its system: pass system=")
+        return system
+
+
+def kept_rows(count: int, every: int) -> np.ndarray:
+    """Indices 0, K, 2K, ... of ``count`` rows, and the last one (K = ``every``)."""
+    if isinstance(every, bool) or int(every) != every or every < 1:
+        raise InputError(f"every must be a positive integer, got {every!r}")
+    rows = np.arange(0, count, int(every))
+    if count and rows[-1] != count - 1:
+        rows = np.append(rows, count - 1)
+    return rows
+
+
+def energies(system, states) -> np.ndarray:
+    """H at every row of ``states`` (the compiled loop for long runs)."""
+    if len(states) >= COMPILED_ENERGY_FROM:
+        from .energy import hamiltonian_values
+
+        return hamiltonian_values(system, states)
+    return np.fromiter((system.hamiltonian(x) for x in states), dtype=float, count=len(states))
+
+
+def state_columns(system, times, states, newton, sweeps) -> dict[str, np.ndarray]:
+    """The named columns of a file of states (docs/results.md): t, x1..xn, energy, casimir1..,
+    newton_iterations, stage_sweeps."""
+    states = np.asarray(states, dtype=np.float64).reshape(len(times), system.dim)
+    columns = {"t": np.asarray(times, dtype=np.float64)}
+    columns.update({f"x{i + 1}": states[:, i].copy() for i in range(system.dim)})
+    columns["energy"] = energies(system, states)
+    for k, C in enumerate(system.casimirs):
+        columns[f"casimir{k + 1}"] = np.fromiter((C(x) for x in states), dtype=float, count=len(states))
+    columns["newton_iterations"] = np.asarray(newton, dtype=np.int64)
+    columns["stage_sweeps"] = np.asarray(sweeps, dtype=np.int64)
+    return columns
+
+
+def write_columns(path, columns: dict[str, np.ndarray], record: dict | None = None, force: bool = False) -> Path:
+    """Write named columns as CSV (a provenance line, a header, one row per state; floats by repr,
+    read back bit for bit) or NPZ (one array per column and ``provenance``, the record as a JSON
+    string; np.load needs no pickle), chosen by the suffix of ``path``."""
+    path = Path(path)
+    record = provenance() if record is None else record
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
+        rows = zip(*(column.tolist() for column in columns.values()), strict=True)
+        return write_output(path, csv_text(list(columns), rows, record), "trajectory file", force)
+    if suffix == ".npz":
+        buffer = io.BytesIO()
+        np.savez(buffer, **columns, provenance=np.array(json.dumps(record, ensure_ascii=False)))
+        return write_output(path, buffer.getvalue(), "trajectory file", force)
+    raise InputError(f"trajectory file {path}: unknown extension {suffix or '(none)'}; the name must end in "
+                     f"{' or '.join(FILE_SUFFIXES)}")
+
 
 
 def divergence(system, states) -> int | None:

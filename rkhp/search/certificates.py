@@ -23,7 +23,7 @@ from importlib import resources
 from pathlib import Path
 
 from ..base.errors import InputError
-from ..base.files import write_atomic
+from ..base.provenance import write_output
 from .ideal import condition_ideal, parse_polynomial
 from .system import ResidualSystem, check_problem
 
@@ -159,7 +159,7 @@ def load_certificate(path) -> Certificate:
 def save_certificate(cert: Certificate, path, force: bool = False) -> None:
     """Write ``cert`` as JSON (one polynomial per list entry), atomically; an existing file only
     with ``force`` (`rkhp.base.files`)."""
-    write_atomic(path, json.dumps(cert.to_json(), indent=1) + "\n", "--certificate", force)
+    write_output(path, json.dumps(cert.to_json(), indent=1) + "\n", "--certificate", force)
 
 
 def shipped_certificates() -> list[Path]:

@@ -115,8 +115,51 @@ def load_spec(path, realisation: str = "symmetric") -> PoissonSystem:
     declared Casimir Poisson-commutes with every x_i (`rkhp.systems.structure`).
     """
     path = Path(path)
-    data = _read(path)
-    where = str(path)
+    return system_from_keys(_read(path), str(path), path.stem, path.name, realisation)
+
+
+#: where the errors of :func:`system` say they come from
+PYTHON_SOURCE = "rkhp.system"
+
+
+def system(*, realisation: str = "symmetric", **keys) -> PoissonSystem:
+    """A PoissonSystem from the keys of a spec file given as Python values (docs/spec-files.md):
+    ``rkhp.system(family="general", poisson=[["0", "-x3", "x2"], ...], hamiltonian="...",
+    x0=[...], casimirs=[...])``. Expressions are strings or sympy expressions (read back through
+    the same safe reader as a file's, from their text), matrices nested lists (or a sympy Matrix,
+    a numpy array), numbers Python or numpy numbers. The checks and the errors are those of
+    :func:`load_spec`, the errors naming ``rkhp.system`` instead of a file; ``name`` defaults
+    to "system".
+    """
+    data = {key: _plain_value(value) for key, value in keys.items()}
+    allowed = spec_keys()
+    unknown = sorted(set(data) - set(allowed))
+    if unknown:
+        raise InputError(f"{PYTHON_SOURCE}: unknown key(s) {', '.join(unknown)}; allowed: {', '.join(allowed)}")
+    return system_from_keys(data, PYTHON_SOURCE, "system", "Python", realisation)
+
+
+def _plain_value(value):
+    """A Python value as a parsed spec document holds it: sympy expressions as their text, sympy
+    matrices and numpy arrays as nested lists, numpy scalars as Python numbers (booleans stay
+    booleans, which the readers refuse as numbers)."""
+    if isinstance(value, str | bool | int | float) or value is None:
+        return value
+    if type(value).__module__.split(".")[0] == "sympy":
+        if hasattr(value, "tolist"):  # a Matrix
+            return _plain_value(value.tolist())
+        return str(value)
+    if isinstance(value, np.ndarray | np.generic):
+        return _plain_value(value.tolist())
+    if isinstance(value, list | tuple):
+        return [_plain_value(v) for v in value]
+    return value
+
+
+def system_from_keys(data: dict, where: str, default_name: str, source: str,
+                     realisation: str = "symmetric") -> PoissonSystem:
+    """A PoissonSystem from the keys of a spec document (:func:`load_spec`'s checks; messages
+    start with ``where``; ``source`` names the origin in the description)."""
     family = data.get("family")
     if family not in family_names():
         raise InputError(f"{where}: family must be one of {', '.join(family_names())}, got {short(family)}")
@@ -124,7 +167,7 @@ def load_spec(path, realisation: str = "symmetric") -> PoissonSystem:
         raise InputError(f"{where}: missing key x0")
     x0 = np.array(documents.number_list(data["x0"], f"{where}: x0", max_size=MAX_DIMENSION))
     n = x0.size
-    name = documents.string(data.get("name", path.stem), f"{where}: name")
+    name = documents.string(data.get("name", default_name), f"{where}: name")
     t_final = documents.number(data.get("t_final", 10.0), f"{where}: t_final", 0.0, low_open=True)
     needed = FAMILIES[family].spec_key
     for key in set(spec_keys()) - set(COMMON_KEYS):
@@ -146,7 +189,7 @@ def load_spec(path, realisation: str = "symmetric") -> PoissonSystem:
     casimirs = tuple(numeric_function(e, symbols) for e in exprs)
     names = tuple(str(e) for e in exprs)
     common = dict(name=name, t_final=t_final, realisation=realisation, x0=x0,
-                  description=f"from {path.name}: H = {H.expression}")
+                  description=f"from {source}: H = {H.expression}")
     if family == "general":
         # the structure and the declared Casimirs are checked (docs/theory.md §9)
         system = general(structure, H, casimirs=exprs, where=f"{where}: poisson", **common)

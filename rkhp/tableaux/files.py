@@ -9,6 +9,7 @@ Schema (TOML, or the same keys in JSON; README "Tableau files"):
     degenerate_order = 4              # optional: the claimed order over T_0
     symmetric_order = 4               # optional: the claimed order in the symmetric class
     notes = "..."                     # optional
+    [provenance]                      # optional: how the file was made (docs/json.md), not read
     A = [["0", "0"], ["1/2", "0"]]    # s rows of s entries
     b = ["0", "1"]
     c = ["0", "1/2"]                  # optional; compared with the row sums of A
@@ -33,11 +34,11 @@ import tomli_w
 from ..base.bounds import MAX_CLAIMED_ORDER, MAX_STAGES
 from ..base.documents import parse_document, read_text
 from ..base.errors import InputError
-from ..base.files import write_atomic
+from ..base.provenance import write_output
 from .tableau import Tableau, entry_text, parse_entry
 
 _KEYS = ("name", "aliases", "reference", "order", "degenerate_order", "symmetric_order", "notes", "A",
-         "b", "c")
+         "b", "c", "provenance")
 _FILE_SUFFIXES = (".toml", ".json", ".txt")
 
 
@@ -146,6 +147,8 @@ def tableau_from_mapping(data, where: str, default_name: str) -> Tableau:
     for key in ("name", "reference", "notes"):
         if key in data and not isinstance(data[key], str):
             raise InputError(f"{where}: {key} must be a string")
+    if "provenance" in data and not isinstance(data["provenance"], dict):
+        raise InputError(f"{where}: provenance must be a table")
     if not all(isinstance(a, str) for a in data.get("aliases", [])):
         raise InputError(f"{where}: aliases must be strings")
     name = data.get("name", default_name)
@@ -236,12 +239,17 @@ def tableau_mapping(tableau: Tableau) -> dict:
     return data
 
 
-def save_tableau(tableau: Tableau, path, force: bool = False) -> None:
-    """Write a tableau as TOML or JSON (by the file's extension), atomically; an existing file (or a
-    symbolic link) is replaced only with ``force`` (`rkhp.base.files`)."""
+def save_tableau(tableau: Tableau, path, provenance: dict | None = None, force: bool = False) -> None:
+    """Write a tableau as TOML or JSON (by the file's extension), with its ``provenance`` record
+    (rkhp.base.provenance) when given: a table that the reader accepts and does not use (TOML has
+    no null: a null value is left out there). Written atomically; an existing file (or a symbolic
+    link) is replaced only with ``force`` (`rkhp.base.files`)."""
     path = Path(path)
     data = tableau_mapping(tableau)
     suffix = path.suffix.lower()
+    if provenance is not None:
+        data["provenance"] = (provenance if suffix == ".json"
+                              else {k: v for k, v in provenance.items() if v is not None})
     if suffix == ".json":
         text = json.dumps(data, indent=2, ensure_ascii=False) + "\n"
     elif suffix == ".toml":
@@ -249,4 +257,4 @@ def save_tableau(tableau: Tableau, path, force: bool = False) -> None:
     else:
         raise InputError(f"{path}: cannot write a tableau as {suffix or 'a file without extension'}"
                          " (use .toml or .json)")
-    write_atomic(path, text, "tableau file", force)
+    write_output(path, text, "tableau file", force)
