@@ -9,10 +9,11 @@ DOCS_STAMP := $(VENV)/.docs-installed
 
 install: $(STAMP)
 
-$(STAMP): pyproject.toml
+# constraints.txt: the versions the test suite passed with (docs/development.md)
+$(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test,distributed]'
+	$(PY) -m pip install --quiet -c constraints.txt -e '.[test,distributed]'
 	touch $(STAMP)
 
 # The main job: the paper's Table 1, an exact order check, a seeded search that finds the paper's
@@ -30,7 +31,7 @@ test-all: install $(DOCS_STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider
 
 $(DOCS_STAMP): $(STAMP)
-	$(PY) -m pip install --quiet -e '.[test,docs]'
+	$(PY) -m pip install --quiet -c constraints.txt -e '.[test,docs]'
 	touch $(DOCS_STAMP)
 
 # The documentation site (Sphinx, see docs/index.md): offline, warnings are errors, every
@@ -39,7 +40,7 @@ docs: $(DOCS_STAMP)
 	$(VENV)/bin/sphinx-build -E -W --keep-going -n -q -b html docs docs/_build/html
 
 bench: install
-	$(PY) -m pip install --quiet -e '.[bench]'
+	$(PY) -m pip install --quiet -c constraints.txt -e '.[bench]'
 	$(PY) -c "import nodepy.runge_kutta_method, nodepy.rooted_trees"  # the peers must import: no silent skip
 	for b in benchmarks/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
