@@ -7,7 +7,7 @@ symplectomorphism of T*M fixing the zero section, (x, p) -> (x + s(p), p):
 - ``symmetric``: s = 0 (degenerate: d_p alpha(x, 0) = -pi(x)/2 is antisymmetric);
 - ``shifted``: s(p) = Q p with the constant symmetric matrix Q = SHIFT_Q (diagonal 1/2,
   off-diagonal 1/4; docs/theory.md §4), which breaks the degeneracy: d_p alpha(x, 0) = -pi(x)/2 + Q;
-- further kinds join with :func:`register_realisation` (e.g. issue 7's ``quartic``,
+- further kinds join with :func:`register_realisation` (e.g. ``quartic``,
   s(p) = grad K(p) with K(p) even in p, which stays degenerate).
 
 The symmetric bases come from the registry of Poisson families (`rkhp.systems.families`). H,

@@ -91,7 +91,7 @@ class FailureList(Sequence):
 
 @dataclass(frozen=True)
 class Verification:
-    """The verified orders of a tableau, with the evidence (issue 3, item 4)."""
+    """The verified orders of a tableau, with the evidence."""
 
     name: str
     stages: int
