@@ -150,11 +150,9 @@ def integration_report(system, trajectory, method: str, h: float, steps: int) ->
 @format_option("table", "json")
 def integrate(system, method, steps, h, t_final, x0, modified_order, realisation, fmt):
     """Integrate SYSTEM (built-in or spec file) with METHOD (docs/methods.md)."""
-    from rkhp.base.errors import InputError, NumericalFailure
+    from rkhp.base.errors import NumericalFailure
     from rkhp.integrators.methods import resolve_method, resolve_system
 
-    if (steps is None) == (h is None):
-        raise InputError("give exactly one of --steps and --h")
     poisson = resolve_system(system, realisation, parse_x0(x0))
     chosen = resolve_method(method)
     n, step = bounds.step_plan(poisson.t_final if t_final is None else t_final, steps, h)

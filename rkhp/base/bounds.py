@@ -62,7 +62,7 @@ MAX_DECIMAL_DIGITS = 2000
 #: numbers of steps or tolerances in one comma-separated list
 MAX_LIST = 1000
 
-#: relative tolerance within which T/h counts as an integer (see :func:`steps_for_h`)
+#: relative tolerance within which T/h counts as an integer (see :func:`step_plan`)
 DIVIDES_TOLERANCE = 1e-9
 
 
@@ -151,15 +151,22 @@ def parse_float(text: str, what: str) -> float:
 # ----------------------------------------------------------------------------- time steps
 
 
-def steps_for_h(t_final: float, h: float) -> int:
+def check_step(h, n_steps) -> tuple[float, int]:
+    """A step size and a number of steps, as every integrator takes them: h positive and finite,
+    0 <= n_steps <= MAX_STEPS an integer (numpy's too; 0 steps: the start alone)."""
+    h = positive(h, "step size h")
+    if isinstance(n_steps, bool) or not hasattr(n_steps, "__index__"):
+        raise InputError(f"number of steps must be an integer, got {_shown(n_steps)}")
+    return h, integer(n_steps.__index__(), "number of steps", 0, MAX_STEPS)
+
+
+def _divisions(t_final: float, h: float) -> int:
     """The number of steps N = T/h when h divides T, else InputError.
 
     h divides T when T/h is within DIVIDES_TOLERANCE (relative) of an integer N >= 1: the run
     then reaches t = N h = T up to rounding. Otherwise it is refused, naming the nearest step
     sizes that divide T (never a run that stops short of T or overshoots it).
     """
-    t_final = positive(t_final, "T (--t-final)")
-    h = positive(h, "--h")
     ratio = t_final / h
     if ratio > MAX_STEPS:
         raise InputError(f"--h {h:g} over T = {t_final:g} means {ratio:.3g} steps; at most {MAX_STEPS}")
@@ -180,7 +187,8 @@ def step_plan(t_final, steps: int | None, h: float | None) -> tuple[int, float]:
     if steps is not None:
         n = integer(steps, "--steps", 1, MAX_STEPS)
         return n, t_final / n
-    return steps_for_h(t_final, h), float(h)
+    h = positive(h, "--h")
+    return _divisions(t_final, h), h
 
 
 # ----------------------------------------------------------------------------- memory

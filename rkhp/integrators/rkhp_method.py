@@ -10,13 +10,13 @@ time.
 
 from __future__ import annotations
 
-import math
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from ..base.bounds import check_step
 from ..base.errors import InputError, NumericalFailure
 from ..base.executors import run_all
 from .failure import Failure, failure_status
@@ -86,24 +86,6 @@ def implicit_degree(order: int) -> int:
     return max(order + 1, 2)
 
 
-def check_step(h, n_steps) -> tuple[float, int]:
-    try:
-        h = float(h)
-    except (TypeError, ValueError):
-        raise InputError(f"step size h must be a number, got {h!r}") from None
-    if not math.isfinite(h) or h <= 0.0:
-        raise InputError(f"step size h must be positive and finite, got {h}")
-    if int(n_steps) != n_steps or n_steps < 0:
-        raise InputError(f"number of steps must be a non-negative integer, got {n_steps}")
-    return h, int(n_steps)
-
-
-def start_state(system, x0) -> np.ndarray:
-    if x0 is None:
-        return np.array(system.x0, dtype=np.float64)
-    return system.with_x0(x0).x0
-
-
 def engine_data(system, stages: int, stage):
     """(tapes, jet space) for the compiled engine: jets in n variables of degree s + 1 (explicit)
     or the stage degree (implicit)."""
@@ -133,7 +115,7 @@ def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLER
 
     tableau = resolve_tableau(tableau)
     h, n_steps = check_step(h, n_steps)
-    y0 = start_state(system, x0)
+    y0 = system.start(x0)
     A, b = tableau_arrays(tableau)
     stage = stage_solve(tableau, A, stage_degree)
     tapes, space = engine_data(system, len(b), stage)

@@ -195,6 +195,11 @@ class PoissonSystem:
     def casimir_values(self, x) -> np.ndarray:
         return np.array([c(np.asarray(x, dtype=np.float64)) for c in self.casimirs])
 
+    def start(self, x0=None) -> np.ndarray:
+        """The state a run starts from, as a new float64 vector: ``x0`` checked as by
+        :meth:`with_x0` (size, finite, domain), or the system's own when None."""
+        return np.array(self.x0 if x0 is None else self.with_x0(x0).x0, dtype=np.float64)
+
     def with_x0(self, x0) -> PoissonSystem:
         """The same system started elsewhere (checked: size and domain; no exact solution)."""
         x0 = np.asarray(x0, dtype=np.float64).reshape(-1)
