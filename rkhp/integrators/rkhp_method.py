@@ -59,7 +59,7 @@ def stage_solve(tableau, A, degree=None, max_sweeps=STAGE_MAX_SWEEPS):
     if degree is None:
         from ..tableaux.verification import class_orders
 
-        degree = implicit_degree(max(class_orders(tableau).values()))
+        degree = implicit_degree(max(class_orders(tableau, "float").values()))
     if int(degree) != degree or degree < 1:
         raise InputError(f"the stage degree must be a positive integer, got {degree!r}")
     return StageSolve(int(degree), int(max_sweeps))
