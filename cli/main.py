@@ -27,6 +27,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "converge": ("rkhp_cli.studies_cmd", "converge", "Convergence study: error against h, observed orders."),
     "bench": ("rkhp_cli.studies_cmd", "bench", "Work-precision: wall time against error, with scipy peers."),
     "stress": ("rkhp_cli.studies_cmd", "stress", "Stress tests: Newton failure, long-run drift, round-off."),
+    "compile": ("rkhp_cli.compile_cmd", "compile_", "Compile the integrator kernels of every built-in family ahead."),
 }
 
 

@@ -37,6 +37,7 @@ COMMANDS = [
     ["modified", "--method", "euler", "--order", "3", "--symmetric"],
     ["compose", "euler,euler", "--order", "4", "--symmetric"],
     ["integrate", "pendulum", "--method", "euler", "--steps", "10", "--modified", "3"],
+    ["compile"],
 ]
 
 
