@@ -22,12 +22,13 @@ AHEAD_METHODS = ("rk4", "gauss2", "thp2", "classical:rk4", "implicit-midpoint")
 
 class Compiled(NamedTuple):
     """One class of tapes made ready: the built-in systems that use it, the entry kernels that
-    were missing from the cache (empty: nothing to do), and the seconds it took."""
+    were missing from the cache (empty: nothing to do), and the wall and CPU seconds it took."""
 
     tape_class: str
     systems: tuple[str, ...]
     compiled: tuple[str, ...]
     seconds: float
+    cpu_seconds: float
 
 
 def tape_classes() -> dict[type, tuple[str, ...]]:
@@ -62,9 +63,9 @@ def compile_ahead(on_class=None) -> list[Compiled]:
     done = []
     for cls, names in tape_classes().items():
         cold = cold_start(tuple(KERNELS), cls)
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         prepare(get_system(names[0]))  # also when nothing is cold: a specialisation may be missing
-        item = Compiled(cls.__name__, names, cold.kernels, time.perf_counter() - start)
+        item = Compiled(cls.__name__, names, cold.kernels, time.perf_counter() - start, time.process_time() - cpu)
         done.append(item)
         if on_class is not None:
             on_class(item)
