@@ -27,11 +27,13 @@ demo: install
 	$(VENV)/bin/rkhp search --stages 3 --degenerate --seed 0 --optimize error
 	$(VENV)/bin/rkhp converge rigid-body
 
+# -n auto: one test process per core (pytest-xdist); PYTHONHASHSEED=0: the docs' rkhp commands run
+# in the test process (docs/_ext/doccode.py) with the hashing of the separate process they stand for
 test: install
-	$(PY) -m pytest -m "not slow" -q -p no:cacheprovider
+	PYTHONHASHSEED=0 $(PY) -m pytest -m "not slow" -q -p no:cacheprovider -n auto
 
 test-all: install $(DOCS_STAMP)
-	$(PY) -m pytest -q -p no:cacheprovider
+	PYTHONHASHSEED=0 $(PY) -m pytest -q -p no:cacheprovider -n auto
 
 $(DOCS_STAMP): $(STAMP)
 	$(PY) -m pip install --quiet -c constraints.txt -e '.[test,docs]'
