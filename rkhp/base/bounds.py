@@ -11,6 +11,7 @@ it before importing anything heavy.
 from __future__ import annotations
 
 import math
+import numbers
 import os
 import re
 import stat
@@ -153,7 +154,9 @@ def parse_float(text: str, what: str) -> float:
 
 def check_step(h, n_steps) -> tuple[float, int]:
     """A step size and a number of steps, as every integrator takes them: h positive and finite,
-    0 <= n_steps <= MAX_STEPS an integer (numpy's too; 0 steps: the start alone)."""
+    0 <= n_steps <= MAX_STEPS an integer (numpy's numbers too; 0 steps: the start alone)."""
+    if isinstance(h, numbers.Real) and not isinstance(h, bool | int | float):
+        h = float(h)  # numpy's float32, Fraction, ...
     h = positive(h, "step size h")
     if isinstance(n_steps, bool) or not hasattr(n_steps, "__index__"):
         raise InputError(f"number of steps must be an integer, got {_shown(n_steps)}")
