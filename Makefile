@@ -9,15 +9,19 @@ DOCS_STAMP := $(VENV)/.docs-installed
 
 install: $(STAMP)
 
-$(STAMP): pyproject.toml
+# constraints.txt: the versions the test suite passed with (docs/development.md)
+$(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test,distributed]'
+	$(PY) -m pip install --quiet -c constraints.txt -e '.[test,distributed]'
+	$(VENV)/bin/rkhp compile  # numba's cache: no run waits for a compile (docs/engine.md)
 	touch $(STAMP)
 
-# The main job: the paper's Table 1, an exact order check, a seeded search that finds the paper's
-# "one stage less than RK4", and a convergence study of the RKHP methods on the rigid body.
+# The main job: the kernels compiled (again after an edit of the compiled sources), the paper's
+# Table 1, an exact order check, a seeded search that finds the paper's "one stage less than RK4",
+# and a convergence study of the RKHP methods on the rigid body.
 demo: install
+	$(VENV)/bin/rkhp compile
 	$(VENV)/bin/rkhp conditions --order 5 --degenerate
 	$(VENV)/bin/rkhp verify paper-three-stage
 	$(VENV)/bin/rkhp search --stages 3 --degenerate --seed 0 --optimize error
@@ -26,14 +30,20 @@ demo: install
 	@echo "rkhp is installed in $(CURDIR)/$(VENV): run it as $(VENV)/bin/rkhp (e.g. $(VENV)/bin/rkhp --help),"
 	@echo "or put it on your PATH for this shell: source $(VENV)/bin/activate"
 
+# rkhp compile first (a no-op on a full cache): the test processes then never compile the same
+# kernel side by side. -n auto: one test process per core (pytest-xdist); PYTHONHASHSEED=0: the
+# docs' rkhp commands run in the test process (docs/_ext/doccode.py) with the hashing of the
+# separate process they stand for.
 test: install
-	$(PY) -m pytest -m "not slow" -q -p no:cacheprovider
+	$(VENV)/bin/rkhp compile --format json > /dev/null
+	PYTHONHASHSEED=0 $(PY) -m pytest -m "not slow" -q -p no:cacheprovider -n auto
 
 test-all: install $(DOCS_STAMP)
-	$(PY) -m pytest -q -p no:cacheprovider
+	$(VENV)/bin/rkhp compile --format json > /dev/null
+	PYTHONHASHSEED=0 $(PY) -m pytest -q -p no:cacheprovider -n auto
 
 $(DOCS_STAMP): $(STAMP)
-	$(PY) -m pip install --quiet -e '.[test,docs]'
+	$(PY) -m pip install --quiet -c constraints.txt -e '.[test,docs]'
 	touch $(DOCS_STAMP)
 
 # The documentation site (Sphinx, see docs/index.md): offline, warnings are errors, every
@@ -42,7 +52,7 @@ docs: $(DOCS_STAMP)
 	$(VENV)/bin/sphinx-build -E -W --keep-going -n -q -b html docs docs/_build/html
 
 bench: install
-	$(PY) -m pip install --quiet -e '.[bench]'
+	$(PY) -m pip install --quiet -c constraints.txt -e '.[bench]'
 	$(PY) -c "import nodepy.runge_kutta_method, nodepy.rooted_trees"  # the peers must import: no silent skip
 	for b in benchmarks/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 

@@ -30,6 +30,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "bench": ("rkhp_cli.studies_cmd", "bench", "Work-precision: wall time against error, with scipy peers."),
     "long-time": ("rkhp_cli.studies_cmd", "long_time", "Long-time energy error growth, fitted as C t^k."),
     "stress": ("rkhp_cli.studies_cmd", "stress", "Stress tests: Newton failure, long-run drift, round-off."),
+    "compile": ("rkhp_cli.compile_cmd", "compile_", "Compile the integrator kernels of every built-in family ahead."),
 }
 
 

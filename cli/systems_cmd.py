@@ -171,8 +171,6 @@ def integrate(system, method, steps, h, t_final, x0, modified_order, realisation
     from rkhp.base.errors import InputError, NumericalFailure
     from rkhp.integrators.methods import resolve_method, resolve_system
 
-    if (steps is None) == (h is None):
-        raise InputError("give exactly one of --steps and --h")
     if t_eval is not None and t_eval_count is not None:
         raise InputError("give at most one of --t-eval and --t-eval-count")
     chosen_times = t_eval is not None or t_eval_count is not None

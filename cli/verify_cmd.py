@@ -165,7 +165,7 @@ def _exact_cell(text: str) -> str:
 def tables(precision, fmt, name):
     """List the built-in tableaux with stages, kind, verified and claimed orders, and the built-in
     compositions with their orders."""
-    if name is not None:  # one tableau is `rkhp show`'s (issue 15: `rkhp tables rk4` said only "extra argument")
+    if name is not None:  # one tableau is `rkhp show`'s: say so, not just "extra argument"
         from rkhp.base.errors import InputError
 
         shown = name if len(name) <= 40 and name.isprintable() else "NAME"

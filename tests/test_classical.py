@@ -121,12 +121,19 @@ def test_classical_loses_the_casimir_rkhp_keeps(rigid):
     assert np.max(np.abs(r2 - r2[0])) > 1e-8
 
 
-@pytest.mark.parametrize(("h", "n"), [(0.0, 10), (-0.1, 10), (math.nan, 10), (math.inf, 1), (0.1, 0), (0.1, 2.5)])
+@pytest.mark.parametrize(("h", "n"), [(0.0, 10), (-0.1, 10), (math.nan, 10), (math.inf, 1), (0.1, -1), (0.1, 2.5),
+                                    ("0.1", 10), (0.1, True)])
 def test_bad_step_input(rigid, h, n):
     with pytest.raises(InputError):
         integrate_classical(rigid, load_tableau("rk4"), h, n)
     with pytest.raises(InputError):
         integrate_midpoint(rigid, h, n)
+
+
+def test_zero_steps_is_the_start_alone(rigid):
+    """The one rule of every integrator (rkhp.base.bounds.check_step): 0 <= n_steps."""
+    for traj in (integrate_classical(rigid, load_tableau("rk4"), 0.1, 0), integrate_midpoint(rigid, 0.1, 0)):
+        assert traj.ok and traj.states.tolist() == [list(rigid.x0)]
 
 
 def test_bad_start_and_tableau(rigid):

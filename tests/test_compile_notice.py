@@ -133,3 +133,35 @@ def test_a_cold_json_run_is_quiet_and_then_warm(tmp_path):
     assert any((tmp_path / "numba-cache").rglob("engine.rkhp_run-*.nbi"))
     # the same machine again: in the cache, so no notice even on a terminal
     assert NOTICE not in _stderr_on_a_terminal(args[:-2], env, timeout=600)
+
+
+def test_compiling_ahead_leaves_no_run_of_a_builtin_system_cold():
+    """`rkhp compile` (rkhp.integrators.ahead): after it, no kind of run on any built-in system
+    lacks a kernel, and a run on a terminal says nothing about compiling."""
+    from rkhp.integrators.ahead import compile_ahead, tape_classes
+    from rkhp.systems import builtin_systems, get_system
+
+    classes = tape_classes()
+    assert sorted(cls.__name__ for cls in classes) == ["Tape", "Tape_phimv", "Tape_spray"]
+    assert sorted(n for names in classes.values() for n in names) == sorted(builtin_systems())
+    done = compile_ahead()
+    assert [item.tape_class for item in done] == [cls.__name__ for cls in classes]
+    for name in builtin_systems():
+        assert not cold_start(tuple(KERNELS), type(get_system(name).h_tape)), name
+    args = [sys.executable, "-m", "rkhp", "integrate", "charged-particle", "--method", "rk4", "--steps", "10"]
+    assert NOTICE not in _stderr_on_a_terminal(args, dict(os.environ))
+
+
+@pytest.mark.slow
+def test_rkhp_compile_on_an_empty_cache_compiles_every_class(tmp_path):
+    env = _fresh_cache(tmp_path)
+    proc = subprocess.run([sys.executable, "-m", "rkhp", "compile", "--format", "json"], env=env,
+                          capture_output=True, text=True, timeout=1200)
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads(proc.stdout)
+    assert report["cache_dir"] == str(tmp_path / "numba-cache")
+    for item in report["classes"]:
+        assert "rkhp.taylor.interpreter.run_tape" in item["compiled"], item
+        assert "rkhp.integrators.engine.rkhp_run" in item["compiled"], item
+    args = [sys.executable, "-m", "rkhp", "integrate", "nambu", "--method", "gauss2", "--steps", "10"]
+    assert NOTICE not in _stderr_on_a_terminal(args, env, timeout=600)

@@ -68,3 +68,20 @@ def heading_slugs(page: Path) -> set[str]:
             text = line.lstrip("#").strip().lower()
             slugs.add(re.sub(r"\s", "-", re.sub(r"[^\w\s-]", "", text)))
     return slugs
+
+
+TOCTREE = re.compile(r"```\{toctree\}\n(.*?)```", re.S)
+KINDS = ["Tutorials", "How-to guides", "Reference", "Explanation", "Contributing"]
+
+
+def test_index_lists_every_page_once_by_kind():
+    """docs/index.md has one explicit toctree per kind of page (no glob), and every page of docs/
+    stands in exactly one of them."""
+    trees = TOCTREE.findall((ROOT / "docs" / "index.md").read_text(encoding="utf-8"))
+    options = [[line for line in tree.splitlines() if line.startswith(":")] for tree in trees]
+    assert [o for opts in options for o in opts if o.startswith(":caption:")] == [f":caption: {k}" for k in KINDS]
+    assert not any(o.startswith(":glob:") for opts in options for o in opts)
+    listed = [line.strip() for tree in trees for line in tree.splitlines()
+              if line.strip() and not line.startswith(":")]
+    pages_ = sorted(str(p.relative_to(ROOT / "docs").with_suffix("")) for p in pages()[1:])
+    assert sorted(listed) == [p for p in pages_ if p != "index"]

@@ -1,26 +1,24 @@
-"""Hostile input through the real command line (issue 12): a corpus of named cases.
+"""Hostile input through the real command line: a corpus of named cases.
 
-Every case runs `python -m rkhp ARGS` in a fresh process, in its own empty folder holding only the
-files the case writes, under resource limits (address space 1 GiB, 10 s of CPU, 10 s of wall
-time). Each must end with the exit status it names (2 for bad input, 1 for a detected numerical
-failure), exactly one line on stderr, no traceback, and must create nothing: the payloads would
-create a file named PWNED in the folder (or in an absolute path inside it) if anything executed
-them.
+Every case runs `rkhp ARGS` in a process of its own, forked from a server that has imported the
+command line once (tests/forkserver.py: the process is what `python -m rkhp ARGS` would be, less
+its start-up), in its own empty folder holding only the files the case writes, under resource
+limits (address space 1 GiB, 10 s of CPU, 10 s of wall time). Each must end with the exit status
+it names (2 for bad input, 1 for a detected numerical failure), exactly one line on stderr, no
+traceback, and must create nothing: the payloads would create a file named PWNED in the folder (or
+in an absolute path inside it) if anything executed them.
 
-The cases run concurrently (two at a time, the cores of the test machine) from one fixture; the
-parametrized test checks each one's result. Only a few cases get as far as the compiled engine
-(numerical failures, exit status 1); the fixture first fills numba's cache for them (WARM_UP).
+Each case is a test (pytest-xdist spreads them over the cores; one fork server per test process).
+Only a few cases get as far as the compiled engine (numerical failures, exit status 1); the server's
+fixture first fills numba's cache for them (WARM_UP).
 """
 
 from __future__ import annotations
 
 import json
 import os
-import resource
 import subprocess
 import sys
-import time
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import NamedTuple
 
@@ -519,11 +517,6 @@ CASES = _payload_cases() + _expression_cases() + _spec_cases() + _file_cases() +
 # --------------------------------------------------------------------------- running
 
 
-def _limits():
-    resource.setrlimit(resource.RLIMIT_AS, (ADDRESS_SPACE, ADDRESS_SPACE))
-    resource.setrlimit(resource.RLIMIT_CPU, (CPU_SECONDS, CPU_SECONDS + 1))
-
-
 def _write(folder: Path, files: dict) -> None:
     for name, content in files.items():
         if callable(content):
@@ -548,59 +541,53 @@ class Outcome(NamedTuple):
     created: list
 
 
-def _end_group(pid: int) -> None:
-    """End what the case's process left behind (its session's process group: workers it forked)."""
-    import signal
-
-    try:
-        os.killpg(pid, signal.SIGKILL)
-    except (ProcessLookupError, PermissionError):
-        pass
+#: the environment of every case (one thread per library: CPU time is the case's own)
+ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
-def _run(case: Case, folder: Path) -> Outcome:
+class ForkServer:
+    """tests/forkserver.py, started once per test process: it forks a process per case."""
+
+    def __init__(self):
+        self.proc = subprocess.Popen([sys.executable, str(Path(__file__).with_name("forkserver.py"))],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                                     env={**os.environ, **ENV})
+        assert json.loads(self.proc.stdout.readline()) == {"ready": True}
+
+    def run(self, request: dict) -> dict:
+        self.proc.stdin.write(json.dumps(request) + "\n")
+        self.proc.stdin.flush()
+        return json.loads(self.proc.stdout.readline())
+
+    def close(self) -> None:
+        self.proc.stdin.close()
+        self.proc.wait(timeout=60)
+
+
+def _run(case: Case, folder: Path, server: ForkServer) -> Outcome:
     """Run one case in `folder`; its CPU time and peak memory come from wait4's resource usage."""
-    import tempfile
-    import threading
-
     folder.mkdir()
     _write(folder, case.files)
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1",
-           "MKL_NUM_THREADS": "1", **case.env}
     before = {p.relative_to(folder) for p in folder.rglob("*")}
-    args = [a.replace("{d}", str(folder)) for a in case.args]
-    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
-        start = time.perf_counter()
-        proc = subprocess.Popen([sys.executable, "-m", "rkhp", *args], cwd=folder, env=env, stdin=subprocess.DEVNULL,
-                                stdout=out, stderr=err, preexec_fn=_limits, start_new_session=True)
-        timer = threading.Timer(WALL_GUARD, proc.kill)
-        timer.start()
-        _, code, usage = os.wait4(proc.pid, 0)
-        timer.cancel()
-        _end_group(proc.pid)
-        wall = time.perf_counter() - start
-        proc.returncode = status = os.waitstatus_to_exitcode(code)
-        if wall >= WALL_GUARD:
-            status = "timeout"
-        out.seek(0)
-        err.seek(0)
-        stdout, stderr = (f.read().decode("utf-8", "replace") for f in (out, err))
+    out, err = folder.parent / "stdout", folder.parent / "stderr"
+    out.touch()
+    err.touch()
+    answer = server.run({"args": [a.replace("{d}", str(folder)) for a in case.args], "cwd": str(folder),
+                         "env": {**os.environ, **ENV, **case.env}, "stdout": str(out), "stderr": str(err),
+                         "address_space": ADDRESS_SPACE, "cpu_seconds": CPU_SECONDS, "wall_seconds": WALL_GUARD})
+    stdout, stderr = (f.read_bytes().decode("utf-8", "replace") for f in (out, err))
     after = {p.relative_to(folder) for p in folder.rglob("*")}
-    return Outcome(status, stderr, stdout, wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss * 1024,
+    return Outcome(answer["status"], stderr, stdout, answer["wall"], answer["cpu"], answer["rss"],
                    sorted(str(p) for p in after - before))
 
 
-@pytest.fixture(scope="module")
-def outcomes():
-    import tempfile
-
+@pytest.fixture(scope="session")
+def server():
     for args in WARM_UP:  # numba's cache: a case's 10 s of CPU must not include compiling the engine
         subprocess.run([sys.executable, "-m", "rkhp", *args], capture_output=True, check=True)
-    with tempfile.TemporaryDirectory(prefix="rkhp-hostile-") as tmp:
-        root = Path(tmp)
-        with ThreadPoolExecutor(max_workers=2) as pool:
-            futures = {c.name: pool.submit(_run, c, root / c.name) for c in CASES}
-            return {name: f.result() for name, f in futures.items()}
+    forks = ForkServer()
+    yield forks
+    forks.close()
 
 
 def test_corpus_size_and_names():
@@ -609,8 +596,8 @@ def test_corpus_size_and_names():
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
-def test_hostile(case, outcomes):
-    o = outcomes[case.name]
+def test_hostile(case, server, tmp_path):
+    o = _run(case, tmp_path / "case", server)
     assert o.status != "timeout", f"blocked: no answer within {WALL_GUARD} s"
     assert "Traceback" not in o.stderr, o.stderr[-2000:]
     assert o.status == case.status, (o.status, o.stderr[-2000:])

@@ -30,10 +30,12 @@ import doctest
 import io
 import os
 import re
+import shlex
 import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 from sybil import Document, Region
 from sybil.parsers.markdown.lexers import DirectiveInHTMLCommentLexer, FencedCodeBlockLexer
@@ -187,16 +189,85 @@ def environment() -> dict[str, str]:
     return env
 
 
+class Ran(NamedTuple):
+    """What a command printed (stdout and stderr together) and its exit status."""
+
+    output: str
+    status: int
+
+
+#: what bash would expand or treat as an operator, outside quotes; and inside double quotes
+_SHELL_SYNTAX = re.compile(r"[|&;<>()$`*?~\[\]{}!\\#\n]")
+_QUOTED = re.compile(r"'[^']*'|\"[^\"$`\\!]*\"")
+
+
+def plain_rkhp(command: str) -> tuple[list[str], str] | None:
+    """(arguments, rest) when ``command`` is ``rkhp ARGS`` or ``rkhp ARGS | REST`` with nothing in
+    ARGS that bash would expand or redirect (the words as bash would pass them); else None."""
+    head, bar, rest = command.partition("|")
+    if bar and (rest.startswith("|") or _SHELL_SYNTAX.search(_QUOTED.sub("", head.rstrip()))):
+        return None
+    if not bar and _SHELL_SYNTAX.search(_QUOTED.sub("", command)):
+        return None
+    try:
+        words = shlex.split(head)
+    except ValueError:
+        return None
+    if not words or words[0] != "rkhp":
+        return None
+    return words[1:], rest
+
+
+def in_process() -> bool:
+    """Whether plain ``rkhp`` commands may run in this process: only under PYTHONHASHSEED=0, the
+    hashing of the separate process they stand for (`make test` sets it)."""
+    return sys.flags.hash_randomization == 0
+
+
+def run_rkhp(args: list[str], rest: str, settings: Settings) -> Ran:
+    """``rkhp ARGS [| REST]`` with rkhp run in this process by click's test runner, in the page's
+    scratch folder (the current directory), with the environment of :func:`environment`: what a
+    separate process would print, without its start-up. REST, if any, runs in bash on rkhp's
+    stdout; rkhp's stderr comes first, as on a terminal where REST prints when its input ends."""
+    import traceback
+
+    from click.testing import CliRunner
+    from rkhp_cli.main import rkhp
+
+    env = {k: v for k, v in environment().items() if k not in ("PATH", "PYTHONHASHSEED")}
+    env["FORCE_COLOR"] = None
+    result = CliRunner(env=env).invoke(rkhp, args, prog_name="rkhp", catch_exceptions=True)
+    status = result.exit_code
+    if result.exception is not None and not isinstance(result.exception, SystemExit):
+        crash = "".join(traceback.format_exception(result.exception))
+        return Ran(result.output + crash, 1)
+    if not rest:
+        return Ran(result.output, status)
+    proc = subprocess.run(["bash", "-c", rest], cwd=settings.scratch, env=environment(), input=result.stdout,
+                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=COMMAND_TIMEOUT)
+    return Ran(result.stderr + proc.stdout, proc.returncode)
+
+
+def run_command(command: str, settings: Settings) -> Ran:
+    """One command of a console block: in this process when it is a plain ``rkhp`` command
+    (:func:`plain_rkhp`, :func:`in_process`), else in bash."""
+    plain = plain_rkhp(command) if in_process() else None
+    if plain is not None:
+        return run_rkhp(*plain, settings)
+    proc = subprocess.run(["bash", "-c", command], cwd=settings.scratch, env=environment(),
+                          stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                          stderr=subprocess.STDOUT, text=True, timeout=COMMAND_TIMEOUT)
+    return Ran(proc.stdout, proc.returncode)
+
+
 def run_console(source: str, settings: Settings, compare: bool) -> str | None:
     for command, shown in commands(source):
-        proc = subprocess.run(["bash", "-c", command], cwd=settings.scratch, env=environment(),
-                              stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                              stderr=subprocess.STDOUT, text=True, timeout=COMMAND_TIMEOUT)
-        actual = normalise(proc.stdout, settings.scratch)
+        ran = run_command(command, settings)
+        actual = normalise(ran.output, settings.scratch)
         expected = normalise(shown, settings.scratch)
         last = expected.splitlines()[-1] if expected else ""
-        if proc.returncode != 0 and not last.startswith("rkhp: "):
-            return f"$ {command}\nexit status {proc.returncode}:\n{actual}"
+        if ran.status != 0 and not last.startswith("rkhp: "):
+            return f"$ {command}\nexit status {ran.status}:\n{actual}"
         if compare and not matches(expected, actual):
             return f"$ {command}\n--- shown\n{expected}\n--- actual\n{actual}"
     return None

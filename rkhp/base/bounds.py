@@ -65,7 +65,7 @@ MAX_DECIMAL_DIGITS = 2000
 #: numbers of steps or tolerances in one comma-separated list
 MAX_LIST = 1000
 
-#: relative tolerance within which T/h counts as an integer (see :func:`steps_for_h`)
+#: relative tolerance within which T/h counts as an integer (see :func:`step_plan`)
 DIVIDES_TOLERANCE = 1e-9
 
 
@@ -166,7 +166,27 @@ def parse_float(text: str, what: str) -> float:
 # ----------------------------------------------------------------------------- time steps
 
 
-def steps_for_h(t_final: float, h: float) -> int:
+def check_step(h, n_steps, dim: int | None = None) -> tuple[float, int]:
+    """A step size and a number of steps, as every integrator takes them: h a finite, non-zero real
+    number (negative: a backward run, docs/compositions.md "Backward steps"; not text, not a bool),
+    0 <= n_steps <= MAX_STEPS an integer (numpy's integers too; 0 steps: the start alone); with the
+    dimension, the stored trajectory within the memory limit."""
+    if isinstance(h, bool) or not isinstance(h, numbers.Real):
+        raise InputError(f"step size h must be a number, got {type(h).__name__} {_shown(h)}")
+    try:
+        h = float(h)
+    except OverflowError:
+        raise InputError("step size h is too large for a float") from None
+    h = nonzero(h, "step size h")
+    if isinstance(n_steps, bool) or not hasattr(n_steps, "__index__"):
+        raise InputError(f"number of steps must be an integer, got {_shown(n_steps)}")
+    n = integer(n_steps.__index__(), "number of steps", 0, MAX_STEPS)
+    if dim is not None:
+        check_trajectory(n, dim)
+    return h, n
+
+
+def _divisions(t_final: float, h: float) -> int:
     """The number of steps N = T/h when h divides T, else InputError.
 
     T and h are non-zero and of one sign (negative: a backward run). h divides T when T/h is
@@ -174,10 +194,6 @@ def steps_for_h(t_final: float, h: float) -> int:
     to rounding. Otherwise it is refused, naming the nearest step sizes that divide T (never a run
     that stops short of T or overshoots it).
     """
-    t_final = nonzero(t_final, "T (--t-final)")
-    h = nonzero(h, "--h")
-    if (t_final > 0) != (h > 0):
-        raise InputError(f"--h {h:g} and T = {t_final:g} have opposite signs: a run goes from 0 to T")
     ratio = t_final / h
     if ratio > MAX_STEPS:
         raise InputError(f"--h {h:g} over T = {t_final:g} means {ratio:.3g} steps; at most {MAX_STEPS}")
@@ -199,7 +215,10 @@ def step_plan(t_final, steps: int | None, h: float | None) -> tuple[int, float]:
     if steps is not None:
         n = integer(steps, "--steps", 1, MAX_STEPS)
         return n, t_final / n
-    return steps_for_h(t_final, h), float(h)
+    h = nonzero(h, "--h")
+    if (t_final > 0) != (h > 0):
+        raise InputError(f"--h {h:g} and T = {t_final:g} have opposite signs: a run goes from 0 to T")
+    return _divisions(t_final, h), h
 
 
 def real_vector(values, what: str = "x0") -> list[float]:

@@ -27,6 +27,7 @@ import time
 
 import numpy as np
 
+from ..base.bounds import check_step
 from ..base.errors import InputError, NumericalFailure
 from ..taylor.compiler import NJIT
 from ..taylor.compiler import numba as nb
@@ -35,7 +36,6 @@ from ..taylor.jets import jet_space
 from .engine import state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_TOLERANCE
-from .rkhp_method import check_step
 from .trajectory import Trajectory, checked
 
 MIDPOINT_MAX_ITERATIONS = 30
@@ -178,16 +178,6 @@ def _midpoint_loop(htape, atape, space, h, n_steps, x0, domain, tol, max_it, sta
 # Python API
 
 
-def initial_state(system, x0) -> np.ndarray:
-    """``x0`` as a float64 vector of the system's dimension (the system's default when None)."""
-    x = np.array(system.x0 if x0 is None else x0, dtype=np.float64).reshape(-1)
-    if x.shape != (system.dim,):
-        raise InputError(f"x0 has {x.size} components; system {system.name} has dimension {system.dim}")
-    if not system.in_domain(x):
-        raise InputError(f"x0 = {x.tolist()} lies outside the domain of system {system.name}")
-    return x
-
-
 def _workspace(system):
     """The H and alpha tapes, first-order jets in n variables, and work arrays for each tape."""
     space = jet_space(system.dim, 1)
@@ -274,7 +264,7 @@ def integrate_classical(system, tableau, h, n_steps, x0=None) -> Trajectory:
         raise InputError(f"tableau {tableau.name} is {tableau.kind}; the classical peer needs an explicit one")
     A = np.ascontiguousarray(tableau.A_float, dtype=np.float64)
     b = np.ascontiguousarray(tableau.b_float, dtype=np.float64)
-    x = initial_state(system, x0)
+    x = system.start(x0)
     ws = _workspace(system)
     ht, at, space, wh, wa = ws
     domain = system.domain_code
@@ -305,7 +295,7 @@ def integrate_midpoint(system, h, n_steps, x0=None) -> Trajectory:
         A Trajectory with the Newton iterations of every step and a status naming any failure.
     """
     h, n_steps = check_step(h, n_steps, system.dim)
-    x = initial_state(system, x0)
+    x = system.start(x0)
     ws = _workspace(system)
     ht, at, space, wh, wa = ws
     domain = system.domain_code

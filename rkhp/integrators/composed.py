@@ -14,6 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..base.bounds import check_step
 from ..base.errors import InputError
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
@@ -21,12 +22,10 @@ from .engine import rkhp_step, state_failure, step_buffers
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE
 from .rkhp_method import (
-    check_step,
     engine_data,
     is_implicit,
     resolve_tableau,
     stage_solve,
-    start_state,
     tableau_arrays,
 )
 from .trajectory import Trajectory, checked
@@ -131,7 +130,7 @@ def integrate_composition(system, composition, h, n_steps, x0=None, *, keep_all:
                          "run explicit RKHP bases")
     tol = NEWTON_TOLERANCE if tol is None else float(tol)
     max_iter = NEWTON_MAX_ITERATIONS if max_iter is None else int(max_iter)
-    y0 = start_state(system, x0)
+    y0 = system.start(x0)
     tapes, space = engine_data(system, len(b), stage_solve(base, A))
     buf = step_buffers(tapes, system.dim, len(b), space)
     method = Substeps(A, b, h * np.asarray(composition.gamma_float, dtype=np.float64))

@@ -24,14 +24,10 @@ from ..taylor.ops import BY_CODE
 class Kernel(NamedTuple):
     """An entry kernel: module, function name, and its cold compile time in seconds of one core.
 
-    ``seconds`` was measured on this project's reference machine (numba 0.68, one core of an AMD
-    EPYC, CPU time of a fresh process with an empty cache, kernels compiled in the order below,
-    so each figure leaves out what the kernels before it had already compiled); all re-measured
-    on the rigid body after the cheaper inlining of `rkhp.taylor.compiler` (load about 2.7, where
-    the version before it measured 6.6, 1.5, 10.3, 8.7, 7.8 and 1.6 s; docs/engine.md "Compile
-    time"); ``run_tape`` and ``_hamiltonian_loop`` scaled by their change when ``crb_coef`` stopped
-    allocating (about 0.74 and 0.75 of the CPU before, `benchmarks/compile.py --kernels`; the others
-    unchanged within the noise)."""
+    ``seconds``: CPU seconds of one core (numba 0.68, one core of an AMD EPYC, a fresh process
+    with an empty cache, the rigid body), kernels compiled in the order below, so each figure leaves
+    out what the kernels before it had already compiled: `python benchmarks/compile.py --kernels`
+    (docs/engine.md "Compile time"). The figures weigh the compile notice; they are not limits."""
 
     module: str
     name: str
@@ -43,11 +39,10 @@ TAPE = Kernel("rkhp.taylor.interpreter", "run_tape", 4.8)
 COMPOSITE_SECONDS: dict[str, float] = {"spray": 43.0, "phimv": 2.4}
 """Cold compile seconds that a composite operation adds to a run whose tapes hold it (a tape class,
 `rkhp.taylor.tape.Tape.composites`; numba compiles its kernel into the interpreter): the
-interpreter's extra compile with that class, in the units of the table above. Measured (numba's
-compile events, fresh cache, load about 1): `run_tape` compiled in 21.66 s for `nambu` (spray),
-3.26 s for `heavy-top` (phimv) and 2.18 s for the rigid body, scaled by 4.8 / 2.18 = 2.2 (this
-table's figure for the rigid body over that measurement); the entry kernels that link the
-interpreter in compile 0.3 to 2.4 s longer too (not counted)."""
+interpreter's extra compile with that class, in the units of the table above: the compile time of
+`run_tape` with that class over its compile time on the rigid body (numba's compile events, fresh
+cache), times `TAPE`'s figure; the entry kernels that link the interpreter in compile longer too
+(not counted)."""
 
 KERNELS: dict[str, tuple[Kernel, ...]] = {
     "tape": (TAPE,),

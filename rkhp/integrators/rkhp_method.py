@@ -10,15 +10,13 @@ time.
 
 from __future__ import annotations
 
-import math
-import numbers
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ..base.bounds import MAX_STEPS, check_trajectory
+from ..base.bounds import check_step
 from ..base.errors import InputError, NumericalFailure
 from ..base.executors import run_all
 from .failure import Failure, failure_status
@@ -61,7 +59,7 @@ def stage_solve(tableau, A, degree=None, max_sweeps=STAGE_MAX_SWEEPS):
     if degree is None:
         from ..tableaux.verification import class_orders
 
-        degree = implicit_degree(max(class_orders(tableau).values()))
+        degree = implicit_degree(max(class_orders(tableau, "float").values()))
     if int(degree) != degree or degree < 1:
         raise InputError(f"the stage degree must be a positive integer, got {degree!r}")
     return StageSolve(int(degree), int(max_sweeps))
@@ -86,34 +84,6 @@ def implicit_degree(order: int) -> int:
     docs/implicit.md; docs/theory.md §10).
     """
     return max(order + 1, 2)
-
-
-def check_step(h, n_steps, dim: int | None = None) -> tuple[float, int]:
-    """(h, n_steps) of a run, checked as the command line checks them: h a finite non-zero real
-    number (not text, not a bool; negative h integrates backwards, docs/compositions.md "Backward
-    steps"), n_steps an integer 1..MAX_STEPS (an integral float too); with the dimension, the
-    stored trajectory within the memory limit (`rkhp.base.bounds`)."""
-    if isinstance(h, bool) or not isinstance(h, numbers.Real):
-        raise InputError(f"step size h must be a number, got {type(h).__name__} {h!r:.40}")
-    try:
-        h = float(h)
-    except OverflowError:
-        raise InputError("step size h is too large for a float") from None
-    if not math.isfinite(h) or h == 0.0:
-        raise InputError(f"step size h must be finite and non-zero, got {h}")
-    if isinstance(n_steps, bool) or not isinstance(n_steps, numbers.Real) or not (
-            math.isfinite(n_steps) and int(n_steps) == n_steps and 1 <= n_steps <= MAX_STEPS):
-        raise InputError(f"number of steps must be an integer 1..{MAX_STEPS}, got {n_steps!r:.40}")
-    n_steps = int(n_steps)
-    if dim is not None:
-        check_trajectory(n_steps, dim)
-    return h, n_steps
-
-
-def start_state(system, x0) -> np.ndarray:
-    if x0 is None:
-        return np.array(system.x0, dtype=np.float64)
-    return system.with_x0(x0).x0
 
 
 def engine_data(system, stages: int, stage):
@@ -145,7 +115,7 @@ def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLER
 
     tableau = resolve_tableau(tableau)
     h, n_steps = check_step(h, n_steps, system.dim)
-    y0 = start_state(system, x0)
+    y0 = system.start(x0)
     A, b = tableau_arrays(tableau)
     stage = stage_solve(tableau, A, stage_degree)
     tapes, space = engine_data(system, len(b), stage)

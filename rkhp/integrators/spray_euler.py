@@ -46,7 +46,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..base.bounds import MAX_STAGES
+from ..base.bounds import MAX_STAGES, check_step
 from ..base.errors import InputError
 from ..taylor.collocation import TABLE_A, TABLE_B, TABLE_E, TABLE_W
 from ..taylor.compiler import NJIT_NORC
@@ -60,7 +60,6 @@ from ..taylor.tape import Tape
 from .engine import state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS
-from .rkhp_method import check_step, start_state
 from .trajectory import Trajectory, checked
 
 MAX_NODES = 12
@@ -688,7 +687,7 @@ def integrate_spray_euler(system, gammas, h, n_steps, x0=None, keep_all: bool = 
     g = check_gammas(gammas)
     h, n_steps = check_step(h, n_steps, system.dim)
     n = system.dim
-    y0 = start_state(system, x0)
+    y0 = system.start(x0)
     work = euler_work(tapes, n)
     memory = substep_memory(g.size, n)
     rest = (tapes, work, memory, system.domain_code, float(tol), int(max_iter))

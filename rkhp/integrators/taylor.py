@@ -21,6 +21,7 @@ from math import factorial
 
 import numpy as np
 
+from ..base.bounds import check_step
 from ..base.errors import InputError
 from ..taylor.interpreter import run_tape, tape_work
 from ..taylor.jets import jet_space, monomials
@@ -28,7 +29,6 @@ from ..trees.rooted import trees_up_to
 from .engine import state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE
-from .rkhp_method import check_step, start_state
 from .trajectory import Trajectory, checked
 
 
@@ -188,7 +188,7 @@ def integrate_taylor(system, order: int, degenerate: bool, h, n_steps, x0=None, 
     if not isinstance(order, int) or not 1 <= order <= 8:
         raise InputError(f"THP order must be an integer from 1 to 8, got {order!r}")
     h, n_steps = check_step(h, n_steps, system.dim)
-    y = start_state(system, x0)
+    y = system.start(x0)
     t0 = time.perf_counter()
     tower = _Tower(system, order, degenerate)
     tower.psi(y, h)  # compiles or loads the interpreter

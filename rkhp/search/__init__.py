@@ -1,4 +1,4 @@
-"""Tableau search (issue 4): minimal-stage tableaux, polished, recognised, verified, proved.
+"""Tableau search: minimal-stage tableaux, polished, recognised, verified, proved.
 
 Modules, one idea each:
 

@@ -108,7 +108,7 @@ class Optimisation:
 
 @dataclass(frozen=True)
 class SearchResult:
-    """Everything a search found, with the evidence (issue 4's JSON via :meth:`to_json`)."""
+    """Everything a search found, with the evidence (its JSON via :meth:`to_json`, docs/json.md)."""
 
     stages: int
     cls: str

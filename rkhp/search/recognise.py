@@ -5,8 +5,8 @@ reach a tableau with a closed form, free unknowns are fixed one at a time at sim
 first, then rationals of small denominator near the current value), the others following by
 Newton's method, until the solution is locally isolated. Each remaining coefficient is then
 recognised as a rational or a quadratic irrational (an integer relation of degree <= 2 found by
-PSLQ; sympy's nsimplify with a list of surds was tried first and spent seconds per failed
-number), and the closed form is kept only if every order condition holds exactly.
+PSLQ, which decides a failed number in milliseconds where sympy's nsimplify with a list of surds
+takes seconds), and the closed form is kept only if every order condition holds exactly.
 """
 
 from __future__ import annotations

@@ -1,1 +1,1 @@
-"""Studies: references, convergence, work-precision, stress (issue 6)."""
+"""Studies: references, convergence, work-precision, stress (docs/studies.md)."""

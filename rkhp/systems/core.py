@@ -7,7 +7,7 @@ symplectomorphism of T*M fixing the zero section, (x, p) -> (x + s(p), p):
 - ``symmetric``: s = 0 (degenerate: d_p alpha(x, 0) = -pi(x)/2 is antisymmetric);
 - ``shifted``: s(p) = Q p with the constant symmetric matrix Q = SHIFT_Q (diagonal 1/2,
   off-diagonal 1/4; docs/theory.md §4), which breaks the degeneracy: d_p alpha(x, 0) = -pi(x)/2 + Q;
-- further kinds join with :func:`register_realisation` (e.g. issue 7's ``quartic``,
+- further kinds join with :func:`register_realisation` (e.g. ``quartic``,
   s(p) = grad K(p) with K(p) even in p, which stays degenerate).
 
 The symmetric bases come from the registry of Poisson families (`rkhp.systems.families`). H,
@@ -195,6 +195,11 @@ class PoissonSystem:
 
     def casimir_values(self, x) -> np.ndarray:
         return np.array([c(np.asarray(x, dtype=np.float64)) for c in self.casimirs])
+
+    def start(self, x0=None) -> np.ndarray:
+        """The state a run starts from, as a new float64 vector: ``x0`` checked as by
+        :meth:`with_x0` (size, finite, domain), or the system's own when None."""
+        return np.array(self.x0 if x0 is None else self.with_x0(x0).x0, dtype=np.float64)
 
     def with_x0(self, x0) -> PoissonSystem:
         """The same system started elsewhere (checked: size and domain; no exact solution)."""

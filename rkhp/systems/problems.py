@@ -1,4 +1,4 @@
-"""Reference problems of the field (issue 10; docs/theory.md §9), each with its source.
+"""Reference problems of the field (docs/theory.md §9), each with its source.
 
 Convention of docs/theory.md §4: xdot = pi(x) grad H(x), pi_ij = {x_i, x_j}. Every problem is
 described once, as expressions (:class:`ProblemData`: pi, H, Casimirs, x0, t_final), and built in

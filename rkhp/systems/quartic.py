@@ -1,4 +1,4 @@
-"""The ``quartic`` realisation: degenerate but not symmetric (docs/theory.md §8, issue 7).
+"""The ``quartic`` realisation: degenerate but not symmetric (docs/theory.md §8).
 
 Every system's base birealisation (alpha, beta) is symmetric, beta(x, p) = alpha(x, -p). The
 quartic realisation composes it with the time-1 flow of the Hamiltonian K(p) on T*M, the

@@ -24,7 +24,6 @@ from __future__ import annotations
 import difflib
 import json
 import re
-import tomllib
 from functools import lru_cache
 from importlib.resources import files
 from pathlib import Path
@@ -60,10 +59,11 @@ def _registry() -> dict[str, tuple[str, tuple[str, ...]]]:
         # only the one-line `name` and `aliases` keys are needed here: parsing them alone spares
         # reading every coefficient of every table (60-digit files) on each start-up
         head = "\n".join(line for line in text.splitlines() if line.startswith(("name ", "name=", "aliases")))
+        where = f"tables/{entry.name}"
         try:
-            data = tomllib.loads(head)
-        except tomllib.TOMLDecodeError:
-            data = tomllib.loads(text)
+            data = parse_document(head, where, "toml")
+        except InputError:  # `name` or `aliases` written over several lines: the whole file
+            data = parse_document(text, where, "toml")
         name = data.get("name", entry.name[:-5])
         out[name] = (entry.name, tuple(data.get("aliases", ())))
     return out
@@ -87,7 +87,8 @@ def _alias_map() -> dict[str, str]:
 def _load_builtin(name: str) -> Tableau:
     filename = _registry()[name][0]
     text = (_tables_dir() / filename).read_text(encoding="utf-8")
-    return tableau_from_mapping(tomllib.loads(text), f"tables/{filename}", filename[:-5])
+    where = f"tables/{filename}"
+    return tableau_from_mapping(parse_document(text, where, "toml"), where, filename[:-5])
 
 
 def load_tableau(name_or_path) -> Tableau:

@@ -15,7 +15,7 @@ the arithmetics work on whole blocks of trees of one order at once:
 - ``digits``: fixed point, values scaled by 2^bits as Python integers (60+ digits);
 - ``exact``: Fractions, or elements of an algebraic number field (sympy) for radicals.
 
-:func:`symbolic_weights` gives a(t) as polynomials in symbols a_i_j, b_i (issue 2, item 4).
+:func:`symbolic_weights` gives a(t) as polynomials in symbols a_i_j, b_i.
 """
 
 from __future__ import annotations

@@ -57,20 +57,69 @@ class _NoCopy:
         return x
 
 
+#: the names `InlineWorker.inline_function` uses, in numba's form that the patch was checked on:
+#: build the callee's IR, then call `inline_ir` once
+INLINE_FUNCTION_NAMES = ("run_untyped_passes", "__code__", "co_freevars", "inline_ir")
+
+
+def _code_objects(code):
+    """``code`` and the code objects nested in it (local functions), depth first."""
+    yield code
+    for const in code.co_consts:
+        if hasattr(const, "co_names"):
+            yield from _code_objects(const)
+
+
+def _deepcopy_users(module) -> list[str]:
+    """Qualified names of the functions of ``module`` (its classes' methods included) whose code
+    calls ``deepcopy`` on a global name."""
+    functions = []
+    for value in list(vars(module).values()):
+        if isinstance(value, type) and value.__module__ == module.__name__:
+            functions += [f for f in vars(value).values() if hasattr(f, "__code__")]
+            functions += getattr(value, "rkhp_originals", ())  # numba's own, under this patch
+        elif hasattr(value, "__code__") and value.__module__ == module.__name__:
+            functions.append(value)
+    return sorted(code.co_qualname for f in functions for code in _code_objects(f.__code__)
+                  if "deepcopy" in code.co_names)
+
+
+def inlining_precondition(module=inline_closurecall) -> list[str]:
+    """What `_cheap_inlining` expects of numba's inliner module and does not find (empty: all).
+
+    The patch swaps the module's global ``copy`` during `InlineWorker.inline_ir`, so ``copy``
+    must be the standard module and its only ``deepcopy`` the one copying the callee's IR
+    (``inline_ir``'s local ``copy_ir``); it skips the copy of an IR that `inline_function` has just
+    built, so that function must still be "build the IR, then `inline_ir` once"."""
+    worker = module.InlineWorker
+    inline_ir, inline_function = getattr(worker, "rkhp_originals", (worker.inline_ir, worker.inline_function))
+    missing = []
+    if getattr(module, "copy", None) is not copy:
+        missing.append(f"{module.__name__}.copy is not the copy module")
+    users = _deepcopy_users(module) if not missing else []
+    if not missing and users != ["InlineWorker.inline_ir.<locals>.copy_ir"]:
+        missing.append(f"deepcopy is called in {users or 'no function'}, not only in inline_ir's copy_ir")
+    if getattr(inline_ir, "__qualname__", "") != "InlineWorker.inline_ir":
+        missing.append("InlineWorker.inline_ir is not numba's own")
+    if getattr(getattr(inline_function, "__code__", None), "co_names", ()) != INLINE_FUNCTION_NAMES:
+        missing.append(f"InlineWorker.inline_function does not use exactly {INLINE_FUNCTION_NAMES}")
+    return missing
+
+
 def _cheap_inlining(worker) -> None:
     """Make numba's inlining of `inline="always"` functions cheaper, with the same result.
 
     At every call site numba's inliner (`InlineWorker.inline_ir`) deep-copies the callee's IR
     twice (a copy to rewrite and an untouched copy to return), block by block with a memo per
     block, so each block copies the callee's whole variable scope again: quadratic in the size of
-    the inlined function (numba issue #8989; it was a quarter of the engine's cold compile,
-    docs/engine.md "Compile time"). Here the copies share one memo (the blocks of the copy share
-    one scope, as the callee's do), and an IR that `InlineWorker.inline_function` has just built
-    for this one site (nothing else holds it, and numba's callers drop the returned copy) is not
-    copied at all. The IR, the machine code and the results are the same (bitwise). numba's
-    `copy` module is swapped for the call only (numba compiles under its global lock).
-    `inline_function` is wrapped only in the form this was checked on (numba 0.68: build the
-    IR, then `inline_ir` once)."""
+    the inlined function (numba issue #8989; docs/engine.md "Compile time"). Here the copies share
+    one memo (the blocks of the copy share one scope, as the callee's do), and an IR that
+    `InlineWorker.inline_function` has just built for this one site (nothing else holds it, and
+    numba's callers drop the returned copy) is not copied at all. The IR, the machine code and the
+    results are the same (bitwise). numba's `copy` module is swapped for the call only (numba
+    compiles under its global lock). Applied only when `inlining_precondition` finds numba's
+    inliner in the form this was checked on (numba 0.68); tests/test_dependencies.py fails
+    loudly otherwise."""
     inline_ir, inline_function = worker.inline_ir, worker.inline_function
 
     def inline_ir_cheaply(self, *args, **kwargs):
@@ -88,26 +137,25 @@ def _cheap_inlining(worker) -> None:
         finally:
             self._rkhp_fresh_ir = False
 
+    worker.rkhp_originals = (inline_ir, inline_function)
     worker.inline_ir = inline_ir_cheaply
-    if inline_function.__code__.co_names == ("run_untyped_passes", "__code__", "co_freevars",
-                                             "inline_ir"):
-        worker.inline_function = inline_function_fresh
+    worker.inline_function = inline_function_fresh
     worker.rkhp_cheap_inlining = True
 
 
-if (getattr(inline_closurecall, "copy", None) is copy
-        and not getattr(inline_closurecall.InlineWorker, "rkhp_cheap_inlining", False)):
+if (not getattr(inline_closurecall.InlineWorker, "rkhp_cheap_inlining", False)
+        and not inlining_precondition()):
     _cheap_inlining(inline_closurecall.InlineWorker)
 
 NJIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 """Every compiled function: cached on disk, no GIL, IEEE arithmetic, numpy's error model.
 Calls between compiled functions pass integers as np.int64(...), never as bare literals: numba
-compiles a separate specialisation for every literal value (measured: 10 of jet_mul)."""
+compiles a separate specialisation for every literal value (jet_mul once per degree)."""
 NJIT_NORC = dict(NJIT, _nrt=False)
 """Kernels of the step loop that allocate nothing: compiled without numba's reference counting
-(its incref/decref of every array argument was about a fifth of a step). A function compiled so
-may only call functions that allocate nothing, or ones that set NJIT_NRT: callees without an
-explicit setting inherit the caller's."""
+(numba's incref/decref of every array argument at every call is a sizeable part of a step). A
+function compiled so may only call functions that allocate nothing, or ones that set NJIT_NRT:
+callees without an explicit setting inherit the caller's."""
 NJIT_NRT = dict(NJIT, _nrt=True)
 """Functions that allocate and are called from NJIT_NORC kernels (e.g. in rkhp.taylor.composites)."""
 
@@ -134,4 +182,5 @@ def is_cached(kernel, signature: str | None = None) -> bool:
     return any(signature in str(key[0]) for key in entries)
 
 
-__all__ = ["numba", "overload", "cache_dir", "is_cached", "NJIT", "NJIT_NORC", "NJIT_NRT"]
+__all__ = ["numba", "overload", "cache_dir", "is_cached", "inlining_precondition", "NJIT", "NJIT_NORC",
+           "NJIT_NRT"]

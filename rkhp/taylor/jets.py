@@ -102,9 +102,9 @@ def jet_mul(X, i, Y, j, Z, k, D, space):
     """Z[k] = X[i] * Y[j] truncated at degree D (rows of 2-d arrays; Z[k] not X[i] or Y[j]).
 
     Rows are passed as (array, index), not as views: a view costs reference counting. The pair
-    tables are unsigned, so that indexing skips the negative-index wrap-around (both measured:
-    together about 1.7x on the tower). Two partial sums (even and odd pairs) halve the chain of
-    dependent additions (the sum's rounding differs from the sequential one at round-off level).
+    tables are unsigned, so that indexing skips the negative-index wrap-around. Two partial sums
+    (even and odd pairs) halve the chain of dependent additions (the sum's rounding differs from the
+    sequential one at round-off level).
     """
     start, pa, pb = space.start, space.pa, space.pb
     one = np.uint64(1)

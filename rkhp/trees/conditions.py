@@ -3,7 +3,7 @@
 Paper §5 (Theorem "order conditions" and Table 1): an RKHP method with coefficient map a has order
 N when a(t) = e(t) = 1/gamma(t) for every tree t of T with |t| <= N (general birealisations), or
 for every t of T_0 under the degeneracy condition (eq. (degen)). The third class, "symmetric"
-(issue 7, docs/theory.md §8), replaces the T_0 conditions of each order by fewer linear combinations of the
+(docs/theory.md §8), replaces the T_0 conditions of each order by fewer linear combinations of the
 residuals r(t) = gamma(t) a(t) - 1; its rows come from :mod:`rkhp.trees.relations`.
 
 The Butcher form folds the leaves into c_i = sum_j a_ij (docs/theory.md §2):

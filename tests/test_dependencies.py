@@ -1,0 +1,125 @@
+"""The dependencies: the ranges of pyproject.toml, the pins of constraints.txt, and the form of
+numba's inliner that rkhp.taylor.compiler patches (docs/development.md)."""
+
+from __future__ import annotations
+
+import re
+import sys
+import tomllib
+import types
+from importlib import metadata
+from pathlib import Path
+
+import pytest
+from packaging.requirements import Requirement
+
+ROOT = Path(__file__).resolve().parent.parent
+TESTED_EXTRAS = ("test", "distributed")  # what `make install` installs
+
+
+def requirements() -> list[Requirement]:
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+    listed = project["dependencies"] + [r for extra in TESTED_EXTRAS for r in project["optional-dependencies"][extra]]
+    return [Requirement(r) for r in listed]
+
+
+def pins() -> dict[str, str]:
+    out = {}
+    for line in (ROOT / "constraints.txt").read_text(encoding="utf-8").splitlines():
+        line = line.split("#", 1)[0].strip()
+        if line:
+            name, _, version = line.partition("==")
+            assert version, f"constraints.txt: {line!r} is not NAME==VERSION"
+            out[canonical(name)] = version
+    return out
+
+
+def canonical(name: str) -> str:
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+
+def test_every_dependency_is_pinned_within_its_range():
+    pinned = pins()
+    for req in requirements():
+        assert canonical(req.name) in pinned, f"{req.name} has no pin in constraints.txt"
+        assert req.specifier.contains(pinned[canonical(req.name)], prereleases=True), \
+            f"constraints.txt pins {req.name}=={pinned[canonical(req.name)]}, outside pyproject's {req}"
+
+
+@pytest.mark.parametrize("name", ["numba", "numpy", "click"])
+def test_the_engines_dependencies_are_bounded_above(name):
+    req = next(r for r in requirements() if canonical(r.name) == name)
+    assert any(s.operator == "<" for s in req.specifier), f"{req} has no upper bound"
+
+
+def test_installed_numba_is_within_its_range():
+    req = next(r for r in requirements() if r.name == "numba")
+    assert req.specifier.contains(metadata.version("numba")), \
+        f"numba {metadata.version('numba')} installed, pyproject.toml asks {req}"
+
+
+def test_numba_inliner_has_the_form_the_patch_expects():
+    """Fails loudly when a numba release changes the inliner that rkhp.taylor.compiler patches:
+    the patch is then skipped (correct, slower compiles) and must be reviewed before numba's upper
+    bound moves."""
+    from numba.core import inline_closurecall
+
+    from rkhp.taylor.compiler import inlining_precondition
+
+    missing = inlining_precondition()
+    assert not missing, (f"numba {metadata.version('numba')}'s inliner changed; rkhp.taylor.compiler's "
+                         f"cheap inlining is not applied: {'; '.join(missing)}")
+    worker = inline_closurecall.InlineWorker
+    assert worker.rkhp_cheap_inlining
+    assert worker.inline_ir.__name__ == "inline_ir_cheaply"
+    assert worker.inline_function.__name__ == "inline_function_fresh"
+
+
+def test_precondition_sees_a_changed_inliner():
+    """The check fails on an inliner of another form: deepcopy elsewhere, inline_function doing more."""
+    import copy
+
+    from rkhp.taylor.compiler import inlining_precondition
+
+    source = '''
+import copy
+class InlineWorker:
+    def inline_ir(self, ir):
+        return copy.deepcopy(ir), copy.deepcopy(ir)
+    def inline_function(self, function):
+        ir = self.run_untyped_passes(function)
+        ir = self.validate(ir)
+        return self.inline_ir(ir, function.__code__.co_freevars)
+'''
+    module = types.ModuleType("fake_numba_inliner")
+    sys.modules[module.__name__] = module
+    try:
+        exec(compile(source, module.__name__, "exec"), module.__dict__)
+        missing = inlining_precondition(module)
+    finally:
+        del sys.modules[module.__name__]
+    assert any("deepcopy is called in ['InlineWorker.inline_ir']" in m for m in missing), missing
+    assert any("inline_function does not use exactly" in m for m in missing), missing
+    module.copy = types.SimpleNamespace(deepcopy=copy.deepcopy)
+    assert inlining_precondition(module)[0] == "fake_numba_inliner.copy is not the copy module"
+
+
+def test_inlined_function_gives_the_same_values():
+    """A function inlined at two sites (`inline="always"`) under the patched inliner: same values
+    as the plain Python function."""
+    from rkhp.taylor.compiler import numba
+
+    def poly(x, k):
+        y = 0.0
+        for i in range(k):
+            y = y * x + (i + 1)
+        return y
+
+    inlined = numba.njit(inline="always")(poly)
+
+    @numba.njit
+    def twice(x):
+        return inlined(x, 4) - 2.0 * inlined(-x, 3)
+
+    for x in (0.0, 0.5, -1.25, 3.0):
+        assert twice(x) == poly(x, 4) - 2.0 * poly(-x, 3)
