@@ -15,13 +15,13 @@ import os
 import signal
 import sys
 
+from rkhp.base import interrupts
+
 INTERRUPTED = "rkhp: interrupted"
 INTERRUPT_STATUS = 130
 
 
 def _on_sigint(signum, frame):
-    from rkhp.base import interrupts
-
     if interrupts.requested():
         try:
             os.write(2, (INTERRUPTED + "\n").encode())
