@@ -2,7 +2,8 @@
 
 - :func:`install_interrupt_handler`: Ctrl-C records the interrupt (`rkhp.base.interrupts`) and
   raises KeyboardInterrupt; a second Ctrl-C ends the process at once with status 130 and the same
-  one line, whatever it is doing (waiting for workers included).
+  one line, whatever it is doing (waiting for workers included); once interrupted, finalisers'
+  "Exception ignored" reports are not printed.
 - :func:`silence_stdout`: after stdout failed (a full device, a closed pipe), point it at
   /dev/null so that the interpreter's last flush cannot print a traceback.
 - :func:`plain`: text from a file or a flag, safe to print through rich (markup escaped, control
@@ -15,13 +16,13 @@ import os
 import signal
 import sys
 
+from rkhp.base import interrupts
+
 INTERRUPTED = "rkhp: interrupted"
 INTERRUPT_STATUS = 130
 
 
 def _on_sigint(signum, frame):
-    from rkhp.base import interrupts
-
     if interrupts.requested():
         try:
             os.write(2, (INTERRUPTED + "\n").encode())
@@ -32,11 +33,20 @@ def _on_sigint(signum, frame):
 
 
 def install_interrupt_handler() -> None:
-    """Ctrl-C as described in the module (only in the main thread, where signals are delivered)."""
+    """Ctrl-C as described in the module (only in the main thread, where signals are delivered);
+    after an interrupt, the errors Python can only report as "Exception ignored" (a compiler's
+    object finalised half-built when the interrupt cut its compilation) are not printed."""
     try:
         signal.signal(signal.SIGINT, _on_sigint)
     except ValueError:  # not the main thread
-        pass
+        return
+    previous = sys.unraisablehook
+
+    def unraisable(report):
+        if not interrupts.requested():
+            previous(report)
+
+    sys.unraisablehook = unraisable
 
 
 def silence_stdout() -> None:

@@ -45,6 +45,8 @@ CONNECT_SECONDS = 10
 #: Seconds a Dask cluster may be without workers (at the start, or during a run) before the
 #: command ends with one line: its tasks would never run.
 WORKERS_SECONDS = 30
+#: How often a Dask executor looks for finished tasks while none is ready (seconds).
+POLL_SECONDS = 0.01
 #: How often a Dask executor asks the scheduler how many worker threads it has (seconds).
 SLOTS_SECONDS = 5.0
 #: Largest --workers accepted (a local pool; a larger run belongs on a cluster).
@@ -278,25 +280,31 @@ class DaskCluster:
 
     def as_completed(self, tasks):
         """The tasks as they finish; InputError when the cluster has had no worker for
-        workers_seconds (nothing would ever finish)."""
-        from distributed import wait
+        workers_seconds (nothing would ever finish). Polls distributed's stream every
+        POLL_SECONDS and the workers every second."""
+        from distributed import as_completed
 
-        left = list(tasks)
+        stream = as_completed(list(tasks), loop=self._client.loop)
         idle_since = None
-        while left:
-            done, _ = wait(left, timeout=1.0, return_when="FIRST_COMPLETED")
-            if not done:
-                if self._worker_count():
-                    idle_since = None
-                elif idle_since is None:
-                    idle_since = time.monotonic()
-                elif time.monotonic() - idle_since > self.workers_seconds:
-                    raise InputError(f"the Dask cluster at {self.address} has had no workers for "
-                                     f"{self.workers_seconds:g} s: its tasks cannot run")
+        checked = time.monotonic()
+        while not stream.is_empty():
+            batch = stream.next_batch(block=False)
+            if batch:
+                idle_since = None
+                yield from batch
                 continue
-            for task in [t for t in left if t in done]:
-                left.remove(task)
-                yield task
+            time.sleep(POLL_SECONDS)
+            now = time.monotonic()
+            if now - checked < 1.0:
+                continue
+            checked = now
+            if self._worker_count():
+                idle_since = None
+            elif idle_since is None:
+                idle_since = now
+            elif now - idle_since > self.workers_seconds:
+                raise InputError(f"the Dask cluster at {self.address} has had no workers for "
+                                 f"{self.workers_seconds:g} s: its tasks cannot run")
 
     def cancel(self, tasks) -> None:
         tasks = [t for t in tasks if not t.done()]
@@ -332,6 +340,9 @@ def _connect(address: str, seconds: float):
     if error is not None:
         if isinstance(error, KeyboardInterrupt):
             raise error
+        if isinstance(error, (OSError, TimeoutError)):
+            raise InputError(f"cannot reach the Dask scheduler at {address} within {seconds:g} s "
+                             f"({type(error).__name__})") from None
         detail = " ".join(str(error).split())[:120]
         raise InputError(f"cannot use the Dask scheduler at {address} ({type(error).__name__}"
                          + (f": {detail}" if detail else "") + ")") from None

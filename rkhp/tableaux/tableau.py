@@ -281,8 +281,8 @@ class Tableau:
     def _read_entries(self, where: str) -> None:
         """Entries given as plain Python or numpy numbers or text (``Tableau(name, A, b)`` called
         directly) read as :meth:`from_arrays` reads them (`parse_entry`); InputError otherwise."""
-        def ready(x):
-            return isinstance(x, (Fraction, GivenDecimal)) or type(x).__module__.startswith("sympy")
+        def ready(x):  # the entry types, computed mpmath values included (kept at their precision)
+            return isinstance(x, (Fraction, mpmath.mpf)) or type(x).__module__.startswith("sympy")
 
         def rows(value, label):
             if isinstance(value, (str, bytes, dict)) or not hasattr(value, "__iter__"):
