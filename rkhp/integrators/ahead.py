@@ -16,8 +16,9 @@ from typing import NamedTuple
 from .kernels import KERNELS, cold_start
 from .methods import resolve_method
 
-#: one method of each kind, explicit and implicit RKHP being two specialisations of the step loop
-AHEAD_METHODS = ("rk4", "gauss2", "thp2", "classical:rk4", "implicit-midpoint")
+#: one method of each kind, explicit and implicit RKHP being two specialisations of the step loop;
+#: tj4, a composition of Euler steps: the composed loop, or on the spray realisation its direct form
+AHEAD_METHODS = ("rk4", "gauss2", "thp2", "classical:rk4", "implicit-midpoint", "tj4")
 
 
 class Compiled(NamedTuple):
