@@ -46,7 +46,8 @@ def prepare(system) -> None:
     """Run every entry kernel once on ``system`` (one step of each of `AHEAD_METHODS`)."""
     import numpy as np
 
-    from .classical import hamiltonian_values, vector_field
+    from .classical import vector_field
+    from .energy import hamiltonian_values
 
     h = system.t_final / 1000
     for name in AHEAD_METHODS:
