@@ -202,3 +202,22 @@ def test_the_phase_of_a_composition_has_its_order(run_cli):
     orders = {m["method"]: (m["kind"], m["phase_order"]) for m in json.loads(out)["methods"]}
     assert orders == {"tj4": ("composition", 4), "kahan-li6": ("composition", 6),
                       "sofroniou-spaletta10": ("composition", 10)}
+
+
+def test_verify_csv_and_tables_json_list_the_compositions(run_cli):
+    # the triple jump (Yoshida 1990) is of order 4 with a symmetric base of order 2 and no better
+    # than its base otherwise: order 1 with Euler on a general realisation
+    code, out, _ = run_cli("verify", "tj4", "--format", "csv")
+    assert code == 0 and out.startswith("# provenance: ")
+    import csv
+
+    rows = {r["case"]: r for r in csv.DictReader(out.splitlines()[1:])}
+    assert rows["symmetric, order 2 (published)"]["order"] == "4"
+    assert rows["euler on a general realisation"]["order"] == "1"
+    code, out, _ = run_cli("tables", "--format", "json")
+    assert code == 0
+    doc = json.loads(out)
+    assert sorted(doc) == ["compositions", "provenance", "tables"]
+    orders = {c["name"]: c["order"] for c in doc["compositions"]}
+    assert orders["tj4"] == 4 and orders["tj6"] == 6 and orders["kahan-li8"] == 8
+    assert all(c["kind"] == "composition" and "provenance" not in c for c in doc["compositions"])

@@ -351,3 +351,39 @@ def test_t_eval_at_the_end_of_a_grid_that_misses_it_by_round_off():
     assert doc["t_final"] < 1.0 and doc["t_eval"]["times"] == [1.0]
     assert 0 < doc["t_eval"]["substeps"][0] < 1e-15
     assert np.abs(np.array(doc["t_eval"]["states"][0]) - np.array(doc["x_final"])).max() < 1e-14
+
+
+# ----------------------------------------------------------------------------- files and --force
+
+
+def test_output_and_plot_data_need_force_to_replace_a_file(tmp_path):
+    out = tmp_path / "t.csv"
+    out.write_text("kept\n")
+    code, _, err = _invoke(*RUN, "--output", str(out))
+    assert code == 2 and "--force" in err and out.read_text() == "kept\n"
+    code, _, _ = _invoke(*RUN, "--output", str(out), "--force")
+    assert code == 0 and read_provenance_line(out.read_text().splitlines()[0])["command"].endswith("--force")
+    data = tmp_path / "c.csv"  # the plot's data file exists, the plot does not
+    data.write_text("kept\n")
+    code, _, err = _invoke(*STUDIES["converge"], "--plot", str(tmp_path / "c.png"))
+    assert code == 2 and "data file" in err and data.read_text() == "kept\n"
+    assert not (tmp_path / "c.png").exists()
+    code, _, _ = _invoke(*STUDIES["converge"], "--plot", str(tmp_path / "c.png"), "--force")
+    assert code == 0 and data.read_text().startswith("# provenance: ")
+
+
+def test_write_output_is_atomic_and_never_writes_through_a_link(tmp_path):
+    from rkhp.base.errors import InputError
+    from rkhp.base.provenance import write_output
+
+    target = tmp_path / "target.txt"
+    target.write_text("target\n")
+    link = tmp_path / "link.csv"
+    link.symlink_to(target)
+    with pytest.raises(InputError, match="symbolic link"):
+        write_output(link, "new\n")
+    write_output(link, "new\n", force=True)
+    assert not link.is_symlink() and link.read_text() == "new\n" and target.read_text() == "target\n"
+    with pytest.raises(InputError, match="exists"):
+        write_output(target, "other\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link.csv", "target.txt"]  # no temporary left

@@ -200,7 +200,7 @@ ROW_KEYS = {"h", "steps", "error", "local_order", "casimir_error", "energy_error
 def test_converge_json_keys_and_plots(tmp_path):
     magic = {"png": b"\x89PNG\r\n\x1a\n", "pdf": b"%PDF-", "svg": b"<?xml"}
     for ext, head in magic.items():
-        path = tmp_path / f"conv.{ext}"
+        path = tmp_path / f"conv-{ext}.{ext}"  # each plot has its own data file (.csv)
         result = _run(["converge", "rigid-body", "--method", "euler,rk4", "--steps", "20,40,80",
                        "--plot", str(path), "--format", "json"])
         assert result.exit_code == 0, result.output
@@ -305,7 +305,7 @@ def test_bench_error_falls_as_cost_rises(tmp_path):
             fast = min(points, key=lambda p: p["seconds"])
             assert slow["error"] < fast["error"]
     targets = [c["target"] for c in data["cheapest"]]
-    assert targets == [1e-4, 1e-6, 1e-8, 1e-10]
+    assert targets == [1e-4, 1e-6, 1e-8, 1e-10, 1e-12]
     for c in data["cheapest"]:
         if c["method"] is not None:
             assert c["error"] is None or c["error"] <= c["target"]
