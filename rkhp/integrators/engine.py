@@ -144,7 +144,7 @@ class StageNewtonWork(NamedTuple):
     """The work arrays of `_stage_newton` for N unknowns (N = 0: none, the fallback is off): the
     factorised Jacobian J (N, N) and its row order perm, kept between calls (memo[9] says whether
     it holds one); u, r, trial, rt, tmp (N,): iterate, residual, correction, trial point and its
-    residual."""
+    residual; start (N,): the polynomials it started from (given back when it fails)."""
 
     J: np.ndarray
     perm: np.ndarray
@@ -153,12 +153,13 @@ class StageNewtonWork(NamedTuple):
     trial: np.ndarray
     rt: np.ndarray
     tmp: np.ndarray
+    start: np.ndarray
 
 
 def stage_newton_work(unknowns: int) -> StageNewtonWork:
     """Work arrays for `unknowns` coefficients (none above STAGE_NEWTON_MAX_UNKNOWNS)."""
     N = unknowns if 0 < unknowns <= STAGE_NEWTON_MAX_UNKNOWNS else 0
-    return StageNewtonWork(np.zeros((N, N)), np.zeros(N, np.int64), *(np.zeros(N) for _ in range(5)))
+    return StageNewtonWork(np.zeros((N, N)), np.zeros(N, np.int64), *(np.zeros(N) for _ in range(6)))
 
 
 def step_buffers(tapes: SystemTapes, n: int, s: int, space, stage_degree: int = 0) -> StepBuffers:
@@ -599,8 +600,9 @@ def _stage_newton(x0, A, h, D, tapes, space, buf):
     does not decrease the residual; each correction is halved until the residual decreases. From
     the polynomials in G (G = 0 if they are not finite). Converged when a correction is at
     round-off of the coefficients (`STAGE_NEWTON_DONE`, `STAGE_NEWTON_ROUND_OFF`); returns whether
-    it did, G holding the solution (buf.changes reset). False at once when the work arrays hold
-    fewer than the unknowns (`STAGE_NEWTON_MAX_UNKNOWNS`).
+    it did, G holding the solution (buf.changes reset), or the polynomials it started from when
+    it did not. False at once when the work arrays hold fewer than the unknowns
+    (`STAGE_NEWTON_MAX_UNKNOWNS`).
     """
     G, memo, work = buf.G, buf.memo, buf.stage_newton
     s, n = G.shape[0], G.shape[1]
@@ -615,6 +617,7 @@ def _stage_newton(x0, A, h, D, tapes, space, buf):
         for k in range(n):
             for m in range(M):
                 u[q] = G[j, k, m]
+                work.start[q] = u[q]
                 if not np.isfinite(u[q]):
                     finite = False
                 q += 1
@@ -672,10 +675,11 @@ def _stage_newton(x0, A, h, D, tapes, space, buf):
     for j in range(s):
         for k in range(n):
             for m in range(M):
-                G[j, k, m] = u[q]
+                G[j, k, m] = u[q] if converged else work.start[q]
                 q += 1
-    for k in range(D + 1):
-        buf.changes[k] = 0.0
+    if converged:
+        for k in range(D + 1):
+            buf.changes[k] = 0.0
     return converged
 
 
@@ -706,12 +710,13 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     that is at most Newton's tolerance `tol` times `scale`.
 
     When the sweeps stall (a non-finite one, stage.max_sweeps of them while settling, or half as
-    many in one step without converging), the stages are solved by `_stage_newton`,
-    and from then on in the run every tower solves them so (memo[8]; docs/implicit.md "When the
-    sweeps stall").
+    many in one step without converging), the stages are solved by `_stage_newton`, and from
+    then on in the run every tower solves them so (memo[8]; docs/implicit.md "When the sweeps
+    stall") until it finds no solution, where the sweeps take over again.
 
-    Returns (Failure, sweeps, converged): STAGES_NO_CONVERGENCE when the sweeps stalled and
-    `_stage_newton` found no solution.
+    Returns (Failure, sweeps, converged): STAGES_NO_CONVERGENCE when the sweeps stalled while
+    settling (or went non-finite) and `_stage_newton` found no solution; a step whose sweeps
+    stalled goes on sweeping when it found none.
 
     Not inlined (unlike `tower`): numba's inlining copies a callee's whole inlined subtree at every
     site, and the loop of explicit tableaux, where this call sits in a pruned branch, would pay
@@ -764,10 +769,10 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
         if learn:
             _predict(G, buf.defect, D, space, np.bool_(False), predict)
     if newton:
-        if not _stage_newton(x0, A, h, D, tapes, space, buf):
-            return Failure.STAGES_NO_CONVERGENCE, 0, False
-        _psi_alpha(x0, b, h, tapes, space, buf, jacobian)
-        return Failure.OK, 0, True
+        if _stage_newton(x0, A, h, D, tapes, space, buf):
+            _psi_alpha(x0, b, h, tapes, space, buf, jacobian)
+            return Failure.OK, 0, True
+        memo[8] = 0.0  # no solution found by Newton here: back to the sweeps
     sweeps = 0
     converged = False
     if top == 0:
@@ -814,11 +819,13 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
         stalled = not np.isfinite(effect) or (
             sweeps >= stage.max_sweeps if settle else memo[7] >= stage.max_sweeps // 2)
         if stalled:
-            if not _stage_newton(x0, A, h, D, tapes, space, buf):
+            if _stage_newton(x0, A, h, D, tapes, space, buf):
+                memo[8] = 1.0
+                converged = True
+                break
+            if settle or not np.isfinite(effect):
                 return Failure.STAGES_NO_CONVERGENCE, sweeps, False
-            memo[8] = 1.0
-            converged = True
-            break
+            # no solution found by Newton here: the sweeps go on from where they were
         if not settle:
             break
     _psi_alpha(x0, b, h, tapes, space, buf, jacobian)
