@@ -121,7 +121,7 @@ def test_classical_loses_the_casimir_rkhp_keeps(rigid):
     assert np.max(np.abs(r2 - r2[0])) > 1e-8
 
 
-@pytest.mark.parametrize(("h", "n"), [(0.0, 10), (-0.1, 10), (math.nan, 10), (math.inf, 1), (0.1, -1), (0.1, 2.5),
+@pytest.mark.parametrize(("h", "n"), [(0.0, 10), (-0.0, 10), (math.nan, 10), (math.inf, 1), (0.1, -1), (0.1, 2.5),
                                     ("0.1", 10), (0.1, True)])
 def test_bad_step_input(rigid, h, n):
     with pytest.raises(InputError):

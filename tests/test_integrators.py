@@ -100,7 +100,7 @@ def test_too_large_h_is_a_newton_failure():
 
 def test_bad_input():
     system = get_system("rigid-body")
-    for h in (0.0, -1.0, float("nan"), float("inf")):
+    for h in (0.0, -0.0, float("nan"), float("inf"), -float("inf")):  # negative h runs backwards
         with pytest.raises(InputError):
             integrate(system, "euler", h, 10)
     with pytest.raises(InputError):
@@ -147,7 +147,7 @@ def test_cli_integrate_json_and_failures():
     assert 1e-8 < doc["exact_error"] < 5e-8
     res = runner.invoke(rkhp, ["integrate", "lotka-volterra", "--method", "rk4", "--h", "1"])
     assert res.exit_code == 1
-    for args in (["--h", "-1"], ["--h", "nan"], ["--steps", "0"], ["--x0", "1,2"],
+    for args in (["--h", "-1", "--t-final", "10"], ["--h", "nan"], ["--steps", "0"], ["--x0", "1,2"],
                  ["--x0", "a,b,c"], []):
         res = runner.invoke(rkhp, ["integrate", "rigid-body", "--method", "rk4", *args])
         assert res.exit_code == 2, args

@@ -46,12 +46,15 @@ def prepare(system) -> None:
     """Run every entry kernel once on ``system`` (one step of each of `AHEAD_METHODS`)."""
     import numpy as np
 
+    from ..tableaux.compositions import load_composition
     from .classical import vector_field
+    from .composed import integrate_composition
     from .energy import hamiltonian_values
 
     h = system.t_final / 1000
     for name in AHEAD_METHODS:
         resolve_method(name).integrate(system, h, 1)
+    integrate_composition(system, load_composition("tj4"), h, 1)  # on the spray too (tj4 runs direct there)
     hamiltonian_values(system, np.array([system.x0]))
     vector_field(system)(system.x0)
 
