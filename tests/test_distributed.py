@@ -28,8 +28,9 @@ def _rkhp(*args, env=None):
     return proc.returncode, proc.stdout, proc.stderr
 
 
-def _without(doc, keys=("seconds", "compile_seconds")):
-    """The document less its wall-time fields (the only ones a run on other processes may change)."""
+def _without(doc, keys=("seconds", "compile_seconds", "provenance")):
+    """The document less its wall-time fields and the provenance record of the command that printed
+    it (the only ones a run on other processes may change)."""
     if isinstance(doc, dict):
         return {k: _without(v, keys) for k, v in doc.items() if k not in keys}
     if isinstance(doc, list):
