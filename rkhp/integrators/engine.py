@@ -639,8 +639,8 @@ def _stage_newton(x0, A, h, D, tapes, space, buf):
         for q in range(N):
             trial[q] = -r[q]
         lu_solve(work.J, work.perm, trial, tmp)
-        correction = _max_abs(trial)
-        scale = max(1.0, _max_abs(u))
+        correction = max_abs(trial)
+        scale = max(1.0, max_abs(u))
         if not fresh and not correction < STAGE_NEWTON_CONTRACTION * previous:
             fresh = True  # the kept Jacobian no longer serves: refresh it
             continue
@@ -739,7 +739,7 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     bound = tol * scale
     for k in range(n):
         buf.delta[k] = x0[k] - buf.Gx[k]
-    shift = 0.0 if settle else _max_abs(buf.delta)
+    shift = 0.0 if settle else max_abs(buf.delta)
     since = memo[6] + shift
     stale = _stale_factor(since, memo[5])
     # once the sweeps have stalled in a run, every tower solves its stages by Newton (`_stage_newton`)
@@ -833,7 +833,8 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
 
 
 @nb.njit(**NJIT_NORC)
-def _max_abs(v):
+def max_abs(v):
+    """The largest |v_k| (NaN if any component is NaN)."""
     r = 0.0
     for q in range(v.shape[0]):
         a = abs(v[q])
@@ -862,7 +863,7 @@ def rkhp_step(A, b, h, tapes, space, buf, tol, max_iter, stage):
     """
     y, x, res, delta, hist, memo = buf.y, buf.x, buf.res, buf.delta, buf.hist, buf.memo
     n = y.shape[0]
-    scale = max(1.0, _max_abs(y))
+    scale = max(1.0, max_abs(y))
     for k in range(n):
         x[k] = y[k]
     if memo[0] >= 1.0:
@@ -874,7 +875,7 @@ def rkhp_step(A, b, h, tapes, space, buf, tol, max_iter, stage):
             else:
                 res[k] = hist[0, k]
         _polish(res, tapes.alpha, space, buf, scale, np.int64(1), np.bool_(True))
-        if not np.isfinite(_max_abs(x)):
+        if not np.isfinite(max_abs(x)):
             for k in range(n):
                 x[k] = y[k]
     previous = np.inf
@@ -901,7 +902,7 @@ def rkhp_step(A, b, h, tapes, space, buf, tol, max_iter, stage):
         for k in range(n):
             res[k] = y[k] - buf.alpha[k]
         solve_small(buf.Jalpha, res, delta, buf.LU, buf.perm, buf.v)
-        size = _max_abs(delta)
+        size = max_abs(delta)
         if not np.isfinite(size):
             return Failure.NEWTON_NON_FINITE, it, sweeps
         for k in range(n):
@@ -982,7 +983,7 @@ def _polish(p, atape, space, buf, scale, iterations, exact):
         solve_small(J, alpha, delta, buf.LU, buf.perm, buf.v)
         for k in range(n):
             x[k] += delta[k]
-        if not _max_abs(delta) > 4e-16 * scale:
+        if not max_abs(delta) > 4e-16 * scale:
             break
 
 

@@ -57,7 +57,7 @@ from ..taylor.ops import SCRATCH_BASE, SPRAY
 from ..taylor.rows import subprogram_at
 from ..taylor.scalar import SCALAR_CODES, gradients, shared, values
 from ..taylor.tape import Tape
-from .engine import state_failure
+from .engine import max_abs, state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS
 from .trajectory import Trajectory, checked
@@ -321,16 +321,6 @@ def _theta(y0, tapes, work, n):
 
 
 @nb.njit(**NJIT_NORC)
-def _max_abs(v):
-    r = 0.0
-    for k in range(v.shape[0]):
-        a = abs(v[k])
-        if not a <= r:  # also catches NaN
-            r = a
-    return r
-
-
-@nb.njit(**NJIT_NORC)
 def _weight(count, r):
     """The weight of the r-th newest of `count` equally spaced values in their polynomial
     extrapolation one step ahead: (-1)^r binom(count, r + 1)."""
@@ -476,7 +466,7 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     the substep's last measured first contraction), is at most tol max(1, |y0|); then X is
     evaluated at the final (Z, p) and y1 = y0 + sum_j b_j X_j."""
     n = y0.shape[0]
-    scale = max(1.0, _max_abs(y0))
+    scale = max(1.0, max_abs(y0))
     _predict(i, y0, hs, tapes, work, memory, n)
     fresh = False
     q = memory.nodes[i]
