@@ -80,7 +80,7 @@ def test_a_non_symmetric_base_gets_every_power_of_h():
 
 
 def test_euler_is_the_symmetric_rkhp_method_and_others_are_not():
-    """NOTES §12 measured |Phi_{-h}(Phi_h(x)) - x| = 5.7e-18 for Euler, 1.7e-5, 1.4e-8, 2.6e-8 for
+    """docs/theory.md §12 reports |Phi_{-h}(Phi_h(x)) - x| = 5.7e-18 for Euler, 1.7e-5, 1.4e-8, 2.6e-8 for
     paper-two-stage, paper-three-stage, gauss2: the first even order whose part of S_h is not zero
     is 4 for paper-two-stage and 6 for the others."""
     assert rkhp_symmetry(load_tableau("euler")).symmetric

@@ -33,6 +33,7 @@ import sympy
 from sympy.polys.constructor import construct_domain
 
 from ..base.errors import InputError, NumericalFailure
+from ..base.expressions import parse_expression
 from .tableau import Tableau, as_sympy, is_exact, to_fraction
 
 Z = sympy.Symbol("z")
@@ -101,12 +102,25 @@ def exact_text(expr) -> str:
     return str(expr).replace("**", "^")
 
 
+def exact_number(g):
+    """A number given from Python as a sympy number: sympy numbers as they are, Fractions and
+    integers exactly, floats by nsimplify; text and anything else refused (InputError: text goes
+    through the safe expression reader of tableau files, never through sympify)."""
+    if isinstance(g, sympy.Basic):
+        return g
+    if isinstance(g, bool) or not isinstance(g, (int, float, Fraction)):
+        raise InputError(f"expected a number, got {type(g).__name__}")
+    if isinstance(g, float):
+        return sympy.nsimplify(g)
+    return sympy.Rational(g.numerator, g.denominator) if isinstance(g, Fraction) else sympy.Integer(g)
+
+
 def tableau_field(tableau: Tableau, extra=()) -> Field:
     """The field of the entries of A and b (and of `extra` sympy numbers, e.g. composition
     coefficients): decimals known to D digits enter as the rationals they spell."""
     values = [as_sympy(x) if is_exact(x) else sympy.Rational(*_pair(to_fraction(x, 0)))
               for x in tableau.entries()]
-    values += [sympy.sympify(g) for g in extra]
+    values += [exact_number(g) for g in extra]
     K, elements = construct_domain(values, extension=True)
     K, elements = K.get_field(), [K.get_field().convert_from(e, K) for e in elements]
     s = tableau.stages
@@ -216,7 +230,7 @@ class Phase:
         terms = [(k, c) for k, c in self.coefficients if c.exact is not None and c.exact != "0"]
         if any(c.exact is None for _, c in self.coefficients):
             return None
-        return polynomial_text([(k, sympy.sympify(c.exact.replace("^", "**"))) for k, c in terms])
+        return polynomial_text([(k, parse_expression(c.exact, where="phase coefficient")) for k, c in terms])
 
 
 def polynomial_text(terms) -> str:
@@ -262,7 +276,7 @@ def composition_phase(tableau: Tableau, gammas, order: int = 9) -> Phase:
     theta(z) = sum_i theta_base(gamma_i z) and the coefficient of z^k is theta_base's times
     sum_i gamma_i^k (docs/stability.md, "Compositions")."""
     _check_order(order)
-    gammas = [sympy.nsimplify(g) if isinstance(g, float) else sympy.sympify(g) for g in gammas]
+    gammas = [exact_number(g) for g in gammas]
     if not gammas:
         raise InputError("a composition needs at least one substep")
     for g in gammas:
