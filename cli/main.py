@@ -103,6 +103,8 @@ def _exit(status: int):
     """Exit with `status`, stdout flushed first (a failed flush: one line, status 1)."""
     try:
         sys.stdout.flush()
+    except KeyboardInterrupt:
+        _interrupted()
     except BrokenPipeError:
         from .terminal import silence_stdout
 
@@ -171,4 +173,12 @@ def rkhp():
 
 
 def main() -> None:
-    rkhp.main(prog_name="rkhp")
+    """The `rkhp` command: the group, then no Ctrl-C past the chosen exit status."""
+    from .terminal import ignore_late_interrupts
+
+    try:
+        rkhp.main(prog_name="rkhp")
+    except KeyboardInterrupt:
+        _interrupted()
+    finally:
+        ignore_late_interrupts()

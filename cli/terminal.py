@@ -49,6 +49,16 @@ def install_interrupt_handler() -> None:
     sys.unraisablehook = unraisable
 
 
+def ignore_late_interrupts() -> None:
+    """The command has ended (its status is chosen, its output written): Ctrl-C from here on is
+    ignored. The interpreter's shutdown puts back the default action of SIGINT for a Python
+    handler, so a late Ctrl-C would otherwise kill the process with no line and no status."""
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread
+        pass
+
+
 def silence_stdout() -> None:
     """Point file descriptor 1 at /dev/null and drop what Python still buffers for it."""
     try:
