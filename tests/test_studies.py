@@ -311,6 +311,34 @@ def test_bench_error_falls_as_cost_rises(tmp_path):
             assert c["error"] is None or c["error"] <= c["target"]
 
 
+def test_bench_interleaves_the_curves_in_rounds():
+    """In one process every curve is warmed up, then each round times every point once, each round
+    starting one point further on (rkhp.studies.bench): the calls of two curves alternate."""
+    from types import SimpleNamespace
+
+    from rkhp.studies import bench as B
+    from rkhp.studies.reference import reference
+
+    system = get_system("rigid-body")
+    ref = reference(system, 1.0)
+    calls = []
+
+    def method(name):
+        def integrate(sys_, h, n):
+            calls.append((name, n))
+            return SimpleNamespace(final_state=ref.state + 1e-3 / n, ok=True, status="ok", compile_seconds=0.0)
+
+        return SimpleNamespace(name=name, kind="rkhp", integrate=integrate)
+
+    curves, interrupted = B._interleaved_curves([method("a"), method("b")], system, ref, (10, 20), (), 1.0, 2)
+    assert not interrupted
+    assert calls == [("a", 10), ("b", 10),  # warm-up
+                     ("a", 10), ("a", 20), ("b", 10), ("b", 20),  # round 1
+                     ("a", 20), ("b", 10), ("b", 20), ("a", 10)]  # round 2, one point further on
+    assert [c.method for c in curves] == ["a", "b"]
+    assert [p.error for p in curves[0].points] == pytest.approx([np.sqrt(3) * 1e-4, np.sqrt(3) * 5e-5])
+
+
 def test_bench_ensemble_mode():
     data = _bench_json(["--method", "paper-three-stage", "--peers", "scipy:dop853", "--steps", "20,40,80",
                         "--tolerances", "1e-6,1e-9", "--repeats", "1", "--ensemble", "6"])

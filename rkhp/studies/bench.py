@@ -1,10 +1,15 @@
 """Work-precision: wall time against global error, for the methods and their peers.
 
 Every method runs over numbers of steps; scipy's ``solve_ivp`` peers run over tolerances. A point's
-time is the median wall time of ``repeats`` calls, after one warm-up call whose compile time
-(reported by the engine) is kept apart. The error is the 2-norm at T against the reference
-(:mod:`rkhp.studies.reference`); an error not above the reference's accuracy is not a measurement
-(``error`` None) but still counts as reaching a target error above that accuracy.
+time is the median wall time of ``repeats`` calls, after one warm-up call per curve whose compile
+time (reported by the engine) is kept apart. In this process the calls are interleaved: every
+curve is warmed up first, then each of the ``repeats`` rounds times every point of every curve
+once (each round starting one point further on), so that a change of the machine's load or clock
+during the study falls on all curves alike (:func:`_interleaved_curves`); with an executor of
+several workers each curve is one task, timed on the worker that runs it. The error is the
+2-norm at T against the reference (:mod:`rkhp.studies.reference`); an error not above the
+reference's accuracy is not a measurement (``error`` None) but still counts as reaching a target
+error above that accuracy.
 
 Ensemble mode (``ensemble`` = K): every point times K initial conditions near x0 (seeded); RKHP
 methods run all K at once through ``rkhp.integrators.integrate_ensemble``, the peers one after
@@ -16,13 +21,15 @@ from __future__ import annotations
 
 import statistics
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from ..base import bounds
 from ..base.errors import InputError
-from ..base.executors import InProcess, run_until_interrupted
+from ..base.executors import run_until_interrupted
 from ..base.interrupts import Interrupted, is_interrupt
 from ..integrators import integrate_ensemble
 from ..integrators.methods import DEFAULT_METHODS, SCIPY_METHODS, Method, check_distinct, resolve_method, resolve_system
@@ -138,32 +145,127 @@ def _median_seconds(call, repeats: int):
     return statistics.median(times), result
 
 
+class Outcome(NamedTuple):
+    """What one call of a point gives: its measured error (None: failed), f evaluations (scipy), status
+    and the compile time the engine reported."""
+
+    measured: float | None
+    evaluations: int | None
+    status: str
+    compile_seconds: float
+
+
+class Setting(NamedTuple):
+    """A point to time: its curve (index), its setting (``steps`` or ``tolerance``) and its call."""
+
+    curve: int
+    steps: int | None
+    tolerance: float | None
+    call: Callable[[], Outcome]
+
+
+def _method_call(method: Method, system, ref: Reference, n: int, t_final: float) -> Callable[[], Outcome]:
+    def call() -> Outcome:
+        traj = method.integrate(system, t_final / n, n)
+        measured = float(np.linalg.norm(traj.final_state - ref.state)) if traj.ok else None
+        return Outcome(measured, None, traj.status, float(traj.compile_seconds))
+
+    return call
+
+
+def _scipy_call(method: Method, system, ref: Reference, rtol: float, t_final: float) -> Callable[[], Outcome]:
+    x0 = np.asarray(system.x0, dtype=float)
+
+    def call() -> Outcome:
+        sol = solve_peer(system, method.solver, x0, t_final, rtol)
+        ok = sol.success and np.all(np.isfinite(sol.y[:, -1]))
+        measured = float(np.linalg.norm(sol.y[:, -1] - ref.state)) if ok else None
+        return Outcome(measured, int(sol.nfev), "ok" if ok else f"failed: {sol.message}", 0.0)
+
+    return call
+
+
+def _settings(curves, system, ref: Reference, steps, tolerances, t_final: float) -> list[Setting]:
+    """Every point of every curve (RKHP and classical methods over ``steps``, scipy over ``tolerances``)."""
+    out = []
+    for k, m in enumerate(curves):
+        if m.kind == "scipy":
+            out += [Setting(k, None, rtol, _scipy_call(m, system, ref, rtol, t_final)) for rtol in tolerances]
+        else:
+            out += [Setting(k, n, None, _method_call(m, system, ref, n, t_final)) for n in steps]
+    return out
+
+
+def _timed(call) -> tuple[float, Outcome]:
+    start = time.perf_counter()
+    outcome = call()
+    return time.perf_counter() - start, outcome
+
+
+def _interleaved_curves(curves, system, ref: Reference, steps, tolerances, t_final: float, repeats: int,
+                        on_curve=None) -> tuple[list[BenchCurve], bool]:
+    """The curves of ``curves`` (Methods) timed in this process, interleaved (see the module): a
+    warm-up call per curve, then ``repeats`` rounds over all points. Returns the curves and whether
+    an interrupt cut the study short (the points then have the rounds finished before it; points
+    never timed are left out)."""
+    settings = _settings(curves, system, ref, steps, tolerances, t_final)
+    times: list[list[float]] = [[] for _ in settings]
+    outcomes: list[Outcome | None] = [None] * len(settings)
+    compile_seconds = [0.0] * len(curves)
+    calls = len(curves) + repeats * len(settings)
+    done = 0
+    interrupted = False
+
+    def advance():
+        nonlocal done
+        done += 1
+        if on_curve:
+            on_curve(len(curves) * done / calls, len(curves))
+
+    try:
+        for k in range(len(curves)):
+            first = next(s for s in settings if s.curve == k)
+            compile_seconds[k] = first.call().compile_seconds
+            advance()
+        for r in range(repeats):
+            for j in range(len(settings)):
+                i = (j + r) % len(settings)
+                seconds, outcome = _timed(settings[i].call)
+                times[i].append(seconds)
+                outcomes[i] = outcome
+                compile_seconds[settings[i].curve] = max(compile_seconds[settings[i].curve], outcome.compile_seconds)
+                advance()
+    except BaseException as exc:
+        if not is_interrupt(exc):
+            raise
+        interrupted = True
+    built = []
+    for k, m in enumerate(curves):
+        points = tuple(
+            _point(o.measured, ref.floor, steps=s.steps, tolerance=s.tolerance, seconds=statistics.median(t),
+                   evaluations=o.evaluations, status=o.status)
+            for s, t, o in zip(settings, times, outcomes, strict=True) if s.curve == k and t)
+        if points or not interrupted:
+            built.append(BenchCurve(m.name, "scipy" if m.kind == "scipy" else m.kind, compile_seconds[k], 1, points))
+    return built, interrupted
+
+
 def _point(measured: float | None, ref_floor: float, **fields) -> BenchPoint:
     error = measured if measured is not None and measured > ref_floor else None
     return BenchPoint(error=error, measured_error=measured, **fields)
 
 
-def _method_curve(method: Method, system, ref: Reference, steps, t_final: float, repeats: int) -> BenchCurve:
-    warm = method.integrate(system, t_final / steps[0], steps[0])
-    compile_seconds = float(warm.compile_seconds)
-    points = []
-    try:
-        for n in steps:
-            seconds, traj = _median_seconds(lambda n=n: method.integrate(system, t_final / n, n), repeats)
-            compile_seconds = max(compile_seconds, float(traj.compile_seconds))
-            measured = float(np.linalg.norm(traj.final_state - ref.state)) if traj.ok else None
-            points.append(_point(measured, ref.floor, steps=n, tolerance=None, seconds=seconds,
-                                 evaluations=None, status=traj.status))
-    except BaseException as exc:
-        _keep_points(exc, BenchCurve(method.name, method.kind, compile_seconds, 1, tuple(points)))
-        raise
-    return BenchCurve(method.name, method.kind, compile_seconds, 1, tuple(points))
-
-
-def _keep_points(exc: BaseException, curve: BenchCurve) -> None:
-    """On an interrupt with points measured, raise it again carrying the curve so far."""
-    if curve.points and is_interrupt(exc):
-        raise Interrupted(curve) from exc
+def _curve_task(method: Method, system, ref: Reference, steps, tolerances, t_final: float,
+                repeats: int) -> BenchCurve:
+    """One curve as a task of an executor: its points interleaved over ``repeats`` rounds
+    (:func:`_interleaved_curves`); an interrupt raises :class:`Interrupted` carrying the points
+    timed before it."""
+    curves, interrupted = _interleaved_curves([method], system, ref, steps, tolerances, t_final, repeats)
+    if interrupted:
+        if curves and curves[0].points:
+            raise Interrupted(curves[0])
+        raise KeyboardInterrupt
+    return curves[0]
 
 
 def solve_peer(system, solver: str, x0, t_final: float, rtol: float):
@@ -175,25 +277,6 @@ def solve_peer(system, solver: str, x0, t_final: float, rtol: float):
 
     f = vector_field(system)
     return solve_ivp(lambda t, x: f(x), (0.0, t_final), x0, method=solver, rtol=rtol, atol=1e-3 * rtol)
-
-
-def _scipy_curve(method: Method, system, ref: Reference, tolerances, t_final: float, repeats: int) -> BenchCurve:
-    solver = method.solver
-    x0 = np.asarray(system.x0, dtype=float)
-    solve_peer(system, solver, x0, t_final, max(tolerances))  # warm-up: loads the compiled vector field
-    points = []
-    try:
-        for rtol in tolerances:
-            seconds, sol = _median_seconds(lambda rtol=rtol: solve_peer(system, solver, x0, t_final, rtol),
-                                           repeats)
-            ok = sol.success and np.all(np.isfinite(sol.y[:, -1]))
-            measured = float(np.linalg.norm(sol.y[:, -1] - ref.state)) if ok else None
-            points.append(_point(measured, ref.floor, steps=None, tolerance=rtol, seconds=seconds,
-                                 evaluations=int(sol.nfev), status="ok" if ok else f"failed: {sol.message}"))
-    except BaseException as exc:
-        _keep_points(exc, BenchCurve(method.name, "scipy", 0.0, 1, tuple(points)))
-        raise
-    return BenchCurve(method.name, "scipy", 0.0, 1, tuple(points))
 
 
 def cheapest(curves, targets=TARGETS) -> tuple[Cheapest, ...]:
@@ -325,10 +408,13 @@ def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=
     solvers = [m for m in curves_of if m.kind == "scipy"]
     if ensemble is None:
         ref = reference(system, t_final)
-        jobs = [(_method_curve, (m, system, ref, steps, t_final, repeats)) for m in integrators]
-        jobs += [(_scipy_curve, (p, system, ref, tolerances, t_final, repeats)) for p in solvers]
-        found, interrupted = run_until_interrupted(executor or InProcess(), _job, jobs, on_curve)
-        curves = [c for c in found if c is not None]
+        if executor is None or executor.kind == "in-process":
+            curves, interrupted = _interleaved_curves([*integrators, *solvers], system, ref, steps, tolerances,
+                                                      t_final, repeats, on_curve)
+        else:
+            jobs = [(m, system, ref, steps, tolerances, t_final, repeats) for m in [*integrators, *solvers]]
+            found, interrupted = run_until_interrupted(executor, _curve_task, jobs, on_curve)
+            curves = [c for c in found if c is not None]
     else:
         starts = ensemble_starts(system, ensemble, seed)
         refs = [dop853_reference(system, t_final, x) for x in starts[:ENSEMBLE_CHECKED]]
@@ -352,8 +438,3 @@ def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=
             interrupted = True
     return BenchStudy(system.name, system.realisation, t_final, ref, repeats, ensemble, tuple(curves),
                       cheapest(curves), x0=tuple(float(v) for v in system.x0), interrupted=interrupted)
-
-
-def _job(curve, args) -> BenchCurve:
-    """One curve (a task: the function and its arguments)."""
-    return curve(*args)
