@@ -160,7 +160,7 @@ def test_shifted_realisation_drops_euler_not_rk4(system, t_final):
 
 
 def test_errors_below_reference_accuracy_are_not_measurements():
-    study = _study("rigid-body", "symmetric", ["rk4"], [100, 1000, 10000, 20000])
+    study = _study("nambu", "symmetric", ["rk4"], [100, 1000, 10000, 20000])  # reference: DOP853
     (m,) = study.methods
     floor = study.reference.floor
     for i, r in enumerate(m.rows):
