@@ -2,12 +2,12 @@
 
 Every method runs over numbers of steps; scipy's ``solve_ivp`` peers run over tolerances. A point's
 time is the median wall time of ``repeats`` calls, after one warm-up call per curve whose compile
-time (reported by the engine) is kept apart. In this process the calls are interleaved: every
-curve is warmed up first, then each of the ``repeats`` rounds times every point of every curve
-once (each round starting one point further on), so that a change of the machine's load or clock
-during the study falls on all curves alike (:func:`_interleaved_curves`); with an executor of
-several workers each curve is one task, timed on the worker that runs it. The error is the
-2-norm at T against the reference (:mod:`rkhp.studies.reference`); an error not above the
+time (reported by the engine) is kept apart. Without an ensemble, in this process, the calls are
+interleaved: every curve is warmed up first, then each of the ``repeats`` rounds times every point
+of every curve once (each round starting one point further on), so that a change of the machine's
+load or clock during the study falls on all curves alike (:func:`_interleaved_curves`); with an
+executor of several workers each curve is one task, timed on the worker that runs it. The error is
+the 2-norm at T against the reference (:mod:`rkhp.studies.reference`); an error not above the
 reference's accuracy is not a measurement (``error`` None) but still counts as reaching a target
 error above that accuracy.
 
