@@ -396,6 +396,20 @@ def test_long_time_short_version():
     assert _growth(system, 20_000, "scipy:dop853").exponent > 0.8
 
 
+def test_long_time_compositions_and_the_integrable_lotka_volterra():
+    """10^4 steps (t = 1000): compositions (triple jump tj4, Kahan–Li order 6) keep the energy
+    error bounded on the rigid body and on the integrable 5-d Lotka–Volterra system, as the RKHP
+    method does; DOP853 drifts on the latter (its H is not linear, docs/stability.md)."""
+    from rkhp.systems import get_system
+
+    rigid, lv5 = get_system("rigid-body"), get_system("lv5-integrable")
+    for method in ("tj4", "kahan-li6"):
+        assert abs(_growth(rigid, 10_000, method).exponent) < 0.1, method
+    for method in ("paper-three-stage", "tj4", "kahan-li6"):
+        assert abs(_growth(lv5, 10_000, method).exponent) < 0.1, method
+    assert 0.8 < _growth(lv5, 10_000, "scipy:dop853").exponent < 1.2
+
+
 def test_growth_fit_recovers_a_power():
     from rkhp.studies.longtime import fit_exponent
 
@@ -424,4 +438,9 @@ def test_long_time_cli(run_cli, tmp_path):
     run = json.loads(out)["runs"][0]
     assert run["method"] == "euler" and run["status"] == "ok" and len(run["times"]) == len(run["energy_errors"])
     status, _, err = run_cli("long-time", "rigid-body", "--steps", "10")
+    assert status == 2 and err.count("\n") == 1
+    status, out, _ = run_cli("long-time", "rigid-body", "--steps", "200", "--method", "tj4,kahan-li6",
+                             "--format", "json")
+    assert status == 0 and [r["method"] for r in json.loads(out)["runs"]] == ["tj4", "kahan-li6"]
+    status, _, err = run_cli("long-time", "rigid-body", "--method", "tj4,no-such-method")
     assert status == 2 and err.count("\n") == 1
