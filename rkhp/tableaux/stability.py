@@ -1017,7 +1017,10 @@ def _continue(A, D, u, z, z_target, on_step=None):
     det = np.linalg.det(_shifted_jacobian(A, D, u, z))
     while z < z_target:
         dz = min(dz, z_target - z)
-        step = dz * _shifted_tangent(A, D, u, z)
+        try:
+            step = dz * _shifted_tangent(A, D, u, z)
+        except np.linalg.LinAlgError:  # J singular at an accepted point: the fold itself
+            return u, z, False
         trial = _shifted_newton(A, D, u + step, z + dz, iterations=12)
         trial_det = None if trial is None else np.linalg.det(_shifted_jacobian(A, D, trial, z + dz))
         if trial is None or np.linalg.norm(trial - u - step) > np.linalg.norm(step) / 2 or trial_det * det <= 0 \
@@ -1047,8 +1050,13 @@ def shifted_branch(tableau: Tableau) -> ShiftedBranch:
             boundary.append(_bisect_boundary(A, b, D, Dp, u0, z0, z1))
 
     u, z, reached = _continue(A, D, np.zeros(3 * tableau.stages), 0.0, MAX_CONTINUATION_Z, watch)
-    fold = None if reached or np.linalg.norm(u) > 1e7 else _refine_shifted_fold(tableau, u, z)
-    limit = None if fold is None else Number(_one_stage_fold_text(tableau, fold), float(fold))
+    if reached:
+        fold, limit = None, None
+    elif np.linalg.norm(u) > 1e7:  # the stages grow without bound near z: no step beyond
+        fold, limit = z, Number(None, z)
+    else:
+        fold = _refine_shifted_fold(tableau, u, z)
+        limit = Number(_one_stage_fold_text(tableau, fold), float(fold))
     if boundary and (fold is None or boundary[0] < fold):
         return ShiftedBranch(limit, Number(None, boundary[0]))
     return ShiftedBranch(limit, limit if limit is not None else UNBOUNDED)
