@@ -16,7 +16,9 @@ solution at all (the existence limit z*, a fold of the branch through m(0) = 0).
 With the ``shifted`` realisation (alpha, beta = x + Q p -/+ pi p/2, Q symmetric) the stages are
 symmetric matrices M_i = z sum_j a_ij (I + D M_j)^T (I + D M_j), D = Q - pi/2, the step matrix is
 R = (I + D' P)(I + D P)^-1 (D' = Q + pi/2, P the same sum with b), and the trace of R decides: |tr R| < 2 is an elliptic
-(bounded) step, a rotation by arccos(tr R / 2) in a skew frame; |tr R| > 2 is hyperbolic.
+(bounded) step, a rotation by arccos(tr R / 2) in a skew frame; |tr R| > 2 is hyperbolic. tr R depends
+on delta = det(P^-1 + Q) alone (elliptic iff delta > 0), explicit and implicit stages alike; an implicit
+tableau's matrix stages are followed from M = 0 to their fold (`shifted_branch`).
 
 Everything here is exact (sympy, in the number field of the tableau's entries) where the tableau is
 exact; a tableau given by decimals is read at its digits and its values have no exact text.
