@@ -578,20 +578,21 @@ def _render_round_off(out, ro, verdicts) -> None:
 @format_option("table", "json")
 def long_time(system, methods, x0, realisation, h, steps, tolerance, plot, force, fmt):
     """Long-time energy behaviour: the running maximum of |H(y_n) - H(y_0)| over `--steps` steps,
-    fitted as C t^k over the last three decades (k about 0: bounded; 1: a drift). Default methods:
-    paper-three-stage, euler and scipy:dop853 (docs/stability.md)."""
-    from rkhp.integrators.methods import resolve_system
+    fitted as C t^k over the last three decades (k about 0: bounded; 1: a drift). Methods: RKHP
+    tableaux, compositions (tj4, kahan-li6, ...), any fixed-step method and scipy's adaptive ones;
+    default paper-three-stage, euler and scipy:dop853 (docs/stability.md)."""
+    from rkhp.integrators.methods import resolve_methods, resolve_system
     from rkhp.studies.longtime import check_long_time, energy_growth
 
     check_long_time(h, steps)
     sys_ = resolve_system(system, realisation, parse_x0(x0))
-    names = _names(methods) or ("paper-three-stage", "euler", "scipy:dop853")
-    compile_notice(("rkhp", "invariants"), fmt != "json", sys_)
+    resolved = resolve_methods(_names(methods) or ("paper-three-stage", "euler", "scipy:dop853"))
+    compile_notice(_kinds(resolved), fmt != "json", sys_)
     runs = []
     with progress(fmt != "json") as bar:
-        task = bar.add_task("long runs", total=len(names))
-        for name in names:
-            runs.append(energy_growth(sys_, name, h, steps, tolerance))
+        task = bar.add_task("long runs", total=len(resolved))
+        for method in resolved:
+            runs.append(energy_growth(sys_, method, h, steps, tolerance))
             bar.advance(task)
     if plot:
         from rkhp.studies.plots import plot_long_time

@@ -32,7 +32,8 @@ PUBLISHED = {
 CHARGED_PARTICLE_MPMATH = ("-1.1760476489103914646", "1.4959067160003578921")
 
 SIZES = ["charged-particle", "point-vortices", "nambu", "heavy-top", "toda", "toda:12",
-         "volterra-lattice", "volterra-lattice:6", "lotka-volterra-4d"]
+         "volterra-lattice", "volterra-lattice:6", "lotka-volterra-4d", "lv5-integrable",
+         "lv5-nonintegrable"]
 
 
 def system(name):
@@ -102,7 +103,11 @@ def _source_fields():
                          q[2] * (-a[0] * q[0] - a[1] * q[1] + a[3] * q[3] - b[0] - b[1] + b[3]),
                          q[3] * (-a[0] * q[0] - a[1] * q[1] - a[2] * q[2] - b[0] - b[1] - b[2])])
 
-    return {"charged-particle": charged, "point-vortices": vortices, "nambu": nambu,
+    def lv5d_sign(x):  # Christodoulidi, Hone & Kouloukas: x_i' = x_i sum_j sign(j - i) (x_j - 1)
+        return x * np.array([sum(np.sign(j - i) * (x[j] - 1) for j in range(5)) for i in range(5)])
+
+    return {"lv5-integrable": volterra, "lv5-nonintegrable": lv5d_sign,
+            "charged-particle": charged, "point-vortices": vortices, "nambu": nambu,
             "heavy-top": heavy_top, "toda": flaschka, "toda:12": flaschka,
             "volterra-lattice": volterra, "volterra-lattice:6": volterra,
             "lotka-volterra-4d": lv4d}
@@ -154,7 +159,8 @@ def test_charged_particle_mpmath_reference():
 @pytest.mark.parametrize("name, steps, tolerance", [
     ("heavy-top", 200, 2e-5), ("toda", 200, 1e-6), ("volterra-lattice", 200, 2e-6),
     ("lotka-volterra-4d", 200, 5e-6), ("charged-particle", 200, 1e-9),
-    ("point-vortices", 800, 1e-5), ("nambu", 200, 1e-8)])
+    ("point-vortices", 800, 1e-5), ("nambu", 200, 1e-8), ("lv5-integrable", 200, 2e-6),
+    ("lv5-nonintegrable", 400, 1e-5)])
 def test_rkhp_integration_against_reference(name, steps, tolerance):
     """paper-three-stage to T = 10 (h = 0.05; the point vortices, pre-asymptotic there, from
     h = 0.0125): the error against the reference falls by about 2^4 when h is halved, and the
@@ -173,6 +179,37 @@ def test_rkhp_integration_against_reference(name, steps, tolerance):
         drift = np.abs(np.array([s.casimir_values(x) for x in traj.states])
                        - s.casimir_values(s.x0)).max()
         assert drift < 1e-13
+
+
+def test_lotka_volterra_5d_integrals():
+    """The integrable 5-d system keeps sum x_i and sum (x_i^2/2 + x_i x_(i+1)) (the Volterra
+    lattice's integrals in involution, Suris 2003): both are orthogonal to its vector field, and
+    {I1, I2} = 0 for its pi. The non-integrable one keeps H: grad H . f = 0."""
+    s = system("lv5-integrable")
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        x = rng.uniform(0.3, 3.0, 5)
+        grad1, grad2 = np.ones(5), x + np.roll(x, -1) + np.roll(x, 1)
+        f = s.vector_field(x)
+        assert abs(grad1 @ f) < 1e-13 and abs(grad2 @ f) < 1e-12
+        assert abs(grad1 @ s.poisson(x) @ grad2) < 1e-12
+        g = system("lv5-nonintegrable")
+        assert abs((1 - 1 / x) @ g.vector_field(x)) < 1e-12
+
+
+@pytest.mark.parametrize("name", ["lv5-integrable", "lv5-nonintegrable"])
+def test_lotka_volterra_5d_euler_keeps_energy_and_casimir(name):
+    """RKHP Euler (h = 0.01, 5000 steps to t = 50): the Casimir kept to round-off, the energy error
+    bounded at O(h) (the first-order modified Hamiltonian, docs/theory.md §11): it does not grow
+    from the first to the second half of the run."""
+    s = system(name)
+    traj = integrate(s, "euler", 0.01, 5000)
+    assert traj.ok
+    casimir = np.array([s.casimir_values(x) for x in traj.states]) - s.casimir_values(s.x0)
+    assert np.abs(casimir).max() < 1e-12
+    energy = np.abs(np.array([s.hamiltonian(x) for x in traj.states]) - s.hamiltonian(np.asarray(s.x0)))
+    first, second = energy[:2500].max(), energy[2500:].max()
+    assert first < 0.05 and second < 1.5 * first
 
 
 @pytest.mark.parametrize("name, message", [

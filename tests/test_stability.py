@@ -28,6 +28,9 @@ from rkhp.tableaux.tableau import Tableau
 GAUSS1 = Tableau.from_arrays([["1/2"]], [1], name="gauss1")
 #: b has a negative weight: P = z sum b_i G_i becomes indefinite, the shifted step hyperbolic
 NEGATIVE_WEIGHT = Tableau.from_arrays([[0, 0], [1, 0]], ["3/2", "-1/2"], name="negative-weight")
+#: implicit (diagonally) with the same weights: its shifted step turns hyperbolic before its stages fold
+NEGATIVE_WEIGHT_IMPLICIT = Tableau.from_arrays([["1/4", 0], [1, "1/4"]], ["3/2", "-1/2"],
+                                               name="negative-weight-implicit")
 EXPLICIT = [n for n in builtin_names() if load_tableau(n).is_explicit]
 
 
@@ -253,6 +256,77 @@ def test_shifted_positive_weights_are_elliptic_for_every_z():
     assert np.linalg.norm(x) < 10
 
 
+def _step_matrix_of_the_integrator(system, tableau, z):
+    return np.array([integrate(system, tableau, z, 1, x0=e).final_state for e in ((1.0, 0.0), (0.0, 1.0))]).T
+
+
+@pytest.mark.parametrize("tableau", [GAUSS1, load_tableau("paper-implicit"), load_tableau("gauss2"),
+                                     NEGATIVE_WEIGHT_IMPLICIT], ids=lambda t: t.name)
+def test_shifted_implicit_step_matrix_equals_the_integrator(tableau):
+    """Implicit stages with the shifted realisation: the predicted step matrix (the branch of the
+    matrix stage equations through 0) is the integrator's, det R = 1, tr R depends on
+    delta = det(P^-1 + Q) alone as 2 (4 delta - 1)/(4 delta + 1), and the series of theta(z) - z
+    matches arccos(tr R/2) of the integrator's step at small z."""
+    system = oscillator("shifted")
+    r = analyse(tableau, order=9, realisation="shifted")
+    for z in (0.05, 0.3):
+        R = _step_matrix_of_the_integrator(system, tableau, z)
+        assert np.allclose(R, step_matrix_shifted(tableau, z), rtol=0, atol=1e-13)
+        assert np.linalg.det(R) == pytest.approx(1.0, abs=1e-13)
+        # P from R alone: R (I + D P) = I + D' P, so P = (R D - D')^-1 (I - R)
+        Q, half_J = np.array([[0.5, 0.25], [0.25, 0.5]]), np.array([[0.0, 0.5], [-0.5, 0.0]])
+        P = np.linalg.solve(R @ (Q - half_J) - (Q + half_J), np.eye(2) - R)
+        delta = np.linalg.det(np.linalg.inv(P) + Q)
+        assert np.trace(R) == pytest.approx(2 * (4 * delta - 1) / (4 * delta + 1), abs=1e-12)
+    z = 0.05
+    series = z + sum(c.value * z**k for k, c in r.phase.coefficients)
+    theta = math.acos(np.trace(_step_matrix_of_the_integrator(system, tableau, z)) / 2)
+    assert theta == pytest.approx(series, abs=1e-11)
+
+
+def test_one_stage_shifted_fold_by_elimination():
+    """One stage: M = c G(M), c = z a. Eliminating M from the stage equations and det J = 0 leaves
+    a polynomial in c with the root 1/3, where the branch through 0 folds: z* = 1/(3a)."""
+    c, u, v, w = sympy.symbols("c u v w")
+    Q = sympy.Matrix([[sympy.Rational(1, 2), sympy.Rational(1, 4)], [sympy.Rational(1, 4), sympy.Rational(1, 2)]])
+    D = Q - sympy.Matrix([[0, 1], [-1, 0]]) / 2
+    M = sympy.Matrix([[u, v], [v, w]])
+    N = sympy.eye(2) + D * M
+    F = M - c * N.T * N
+    equations = [sympy.expand(F[0, 0]), sympy.expand(F[0, 1]), sympy.expand(F[1, 1])]
+    jacobian = sympy.Matrix(equations).jacobian([u, v, w]).det()
+    basis = sympy.groebner([*equations, sympy.expand(jacobian)], u, v, w, c, order="lex")
+    eliminant = [g for g in basis.exprs if g.free_symbols <= {c}][-1]
+    assert eliminant.subs(c, sympy.Rational(1, 3)) == 0
+    for tableau, exact in ((GAUSS1, "2/3"), (load_tableau("paper-implicit"), "sqrt(3)/3")):
+        r = analyse(tableau, realisation="shifted")
+        assert r.existence_limit.exact == exact and r.stability_interval.exact == exact
+        assert r.existence_limit.value == pytest.approx(1 / (3 * tableau.A_float[0][0]), rel=1e-15)
+
+
+def test_shifted_implicit_interval_by_integration():
+    """Positive weights: P is a positive combination of Gram matrices, the step is elliptic wherever
+    the stages exist, and the interval ends at their fold: 200 steps stay bounded just inside, and
+    just outside the stage iteration fails. A negative weight: the step turns hyperbolic before the
+    fold; 2000 steps stay bounded just inside and diverge just outside."""
+    system = oscillator("shifted")
+    for tableau in (GAUSS1, load_tableau("gauss2")):
+        z0 = analyse(tableau, realisation="shifted").stability_interval.value
+        inside = integrate(system, tableau, 0.98 * z0, 200)
+        assert inside.ok and np.linalg.norm(inside.final_state) < 10
+        outside = integrate(system, tableau, 1.02 * z0, 200)
+        assert not outside.ok and "did not converge" in outside.status
+    r = analyse(NEGATIVE_WEIGHT_IMPLICIT, realisation="shifted")
+    z0, fold = r.stability_interval.value, r.existence_limit.value
+    assert z0 < 0.97 * fold
+    assert abs(np.trace(_step_matrix_of_the_integrator(system, NEGATIVE_WEIGHT_IMPLICIT, z0))) \
+        == pytest.approx(2.0, abs=1e-12)
+    inside = integrate(system, NEGATIVE_WEIGHT_IMPLICIT, 0.97 * z0, 2000)
+    outside = integrate(system, NEGATIVE_WEIGHT_IMPLICIT, 1.03 * z0, 2000)
+    assert inside.ok and np.linalg.norm(inside.final_state) < 10
+    assert outside.cause.name == "DIVERGED" and np.linalg.norm(outside.final_state) > 1e3
+
+
 # ----------------------------------------------------------------------------- compositions
 
 
@@ -322,6 +396,20 @@ def test_long_time_short_version():
     assert _growth(system, 20_000, "scipy:dop853").exponent > 0.8
 
 
+def test_long_time_compositions_and_the_integrable_lotka_volterra():
+    """10^4 steps (t = 1000): compositions (triple jump tj4, Kahan–Li order 6) keep the energy
+    error bounded on the rigid body and on the integrable 5-d Lotka–Volterra system, as the RKHP
+    method does; DOP853 drifts on the latter (its H is not linear, docs/stability.md)."""
+    from rkhp.systems import get_system
+
+    rigid, lv5 = get_system("rigid-body"), get_system("lv5-integrable")
+    for method in ("tj4", "kahan-li6"):
+        assert abs(_growth(rigid, 10_000, method).exponent) < 0.1, method
+    for method in ("paper-three-stage", "tj4", "kahan-li6"):
+        assert abs(_growth(lv5, 10_000, method).exponent) < 0.1, method
+    assert 0.8 < _growth(lv5, 10_000, "scipy:dop853").exponent < 1.2
+
+
 def test_growth_fit_recovers_a_power():
     from rkhp.studies.longtime import fit_exponent
 
@@ -350,4 +438,9 @@ def test_long_time_cli(run_cli, tmp_path):
     run = json.loads(out)["runs"][0]
     assert run["method"] == "euler" and run["status"] == "ok" and len(run["times"]) == len(run["energy_errors"])
     status, _, err = run_cli("long-time", "rigid-body", "--steps", "10")
+    assert status == 2 and err.count("\n") == 1
+    status, out, _ = run_cli("long-time", "rigid-body", "--steps", "200", "--method", "tj4,kahan-li6",
+                             "--format", "json")
+    assert status == 0 and [r["method"] for r in json.loads(out)["runs"]] == ["tj4", "kahan-li6"]
+    status, _, err = run_cli("long-time", "rigid-body", "--method", "tj4,no-such-method")
     assert status == 2 and err.count("\n") == 1

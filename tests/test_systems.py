@@ -16,7 +16,8 @@ from rkhp.systems import builtin_systems, get_system
 from rkhp.systems.check import check_birealisation
 
 BUILTINS = ("rigid-body", "lotka-volterra", "pendulum", "charged-particle", "point-vortices",
-            "nambu", "heavy-top", "toda", "volterra-lattice", "lotka-volterra-4d")
+            "nambu", "heavy-top", "toda", "volterra-lattice", "lotka-volterra-4d", "lv5-integrable",
+            "lv5-nonintegrable")
 SPEC_RIGID_BODY = """
 name = "rigid-body-spec"
 family = "lie-poisson"

@@ -19,6 +19,12 @@ them with the values the sources publish (point vortices, Lotka–Volterra 4d) a
   (Kac & van Moerbeke, Adv. Math. 16, 160, 1975; Suris, The Problem of Integrable
   Discretization, 2003), size a parameter (``volterra-lattice:7``).
 - ``lotka-volterra-4d``: GeometricProblems.jl, LotkaVolterra4d.
+- ``lv5-integrable``: 5 species, integrable: the periodic Kac–van Moerbeke lattice with
+  Volterra's Hamiltonian sum (x_i - log x_i) (Volterra 1931; Kac & van Moerbeke 1975).
+- ``lv5-nonintegrable``: 5 species, lambda_ij = sign(j - i), H = sum (x_i - log x_i):
+  the class of Christodoulidi, Hone & Kouloukas (J. Comput. Dyn. 6, 223, 2019) without its
+  integrability conditions. The two 5-d systems stand for the integrable and the non-integrable
+  Lotka–Volterra systems of Cosserat, arXiv 2511.14303.
 """
 
 from __future__ import annotations
@@ -238,6 +244,58 @@ def lotka_volterra_4d() -> ProblemData:
                        "log-canonical", L)
 
 
+def lotka_volterra_5d() -> ProblemData:
+    """An integrable 5-species Lotka–Volterra system: x_i' = x_i (x_(i+1) - x_(i-1)) (indices mod 5),
+    the periodic Kac–van Moerbeke (Volterra) lattice (Volterra, Leçons sur la théorie
+    mathématique de la lutte pour la vie, 1931; Kac & van Moerbeke, Adv. Math. 16, 160, 1975),
+    written with Volterra's Hamiltonian H = sum (x_i - log x_i) and the log-canonical bracket
+    {x_i, x_(i+1)} = x_i x_(i+1) (docs/theory.md §6).
+
+    lambda has rank 4 with kernel (1, 1, 1, 1, 1): C = sum log x_i is the Casimir, and H differs
+    from the lattice's sum x_i (``volterra-lattice``) by C, so the flow is the lattice's. On each
+    4-dimensional leaf sum x_i and sum (x_i^2/2 + x_i x_(i+1)) are two integrals in involution
+    (the lattice's hierarchy, Suris 2003): Liouville integrable. Unlike sum x_i, H is not
+    linear: a method that keeps linear invariants (every Runge–Kutta method) still shows its
+    drift in H. x0: x_i = 1 + cos(2 pi i / 5)/2, as ``volterra-lattice``.
+    """
+    n = 5
+    L = np.zeros((n, n))
+    for i in range(n):
+        L[i, (i + 1) % n], L[(i + 1) % n, i] = 1.0, -1.0
+    x0 = 1.0 + 0.5 * np.cos(2 * np.pi * np.arange(1, n + 1) / n)
+    return ProblemData("lv5-integrable", _log_text(L),
+                       " + ".join(f"x{k} - log(x{k})" for k in range(1, n + 1)),
+                       (" + ".join(f"log(x{k})" for k in range(1, n + 1)),),
+                       ("log x1 + ... + log x5",), tuple(float(v) for v in x0), 10.0,
+                       "5-d Lotka-Volterra, integrable: periodic Kac-van Moerbeke lattice, "
+                       "H = sum (x_i - log x_i)", "log-canonical", L)
+
+
+def lotka_volterra_5d_nonintegrable() -> ProblemData:
+    """A non-integrable 5-species Lotka–Volterra system: lambda_ij = +1 for j > i, -1 for j < i,
+    H = sum (x_i - log x_i), i.e. x_i' = x_i (sum_(j>i) (x_j - 1) - sum_(j<i) (x_j - 1)).
+
+    The class x_i' = x_i sum_j lambda_ij (a_j x_j + k_j) (H = sum (a_i x_i + k_i log x_i)) of
+    Christodoulidi, Hone & Kouloukas ("A new class of integrable Lotka–Volterra systems",
+    J. Comput. Dyn. 6, 223, 2019), with a_i = 1, k_i = -1. The source proves integrability under
+    conditions on the parameters and studies the 4-dimensional member with these parameters
+    numerically (Poincaré sections, largest Lyapunov exponents) as a case without them; with
+    k_i = 0 the class is the superintegrable system of Kouloukas, Quispel & Vanhaecke (J. Phys. A
+    49, 225201, 2016). lambda has rank 4 with kernel (1, -1, 1, -1, 1): the Casimir
+    log x1 - log x2 + log x3 - log x4 + log x5; H is the only other integral known. Equilibrium
+    x = (1, ..., 1); x0 = (3, 1/2, 1, 2, 1/2), H(x0) = 6.59 (a regular-looking orbit there: its
+    finite-time Lyapunov exponent falls like 1/t, 4e-4 at t = 2 10^4, as on KAM tori).
+    """
+    n = 5
+    L = np.array([[0.0 if i == j else (1.0 if j > i else -1.0) for j in range(n)] for i in range(n)])
+    return ProblemData("lv5-nonintegrable", _log_text(L),
+                       " + ".join(f"x{k} - log(x{k})" for k in range(1, n + 1)),
+                       ("log(x1) - log(x2) + log(x3) - log(x4) + log(x5)",),
+                       ("sum (-1)^(i+1) log x_i",), (3.0, 0.5, 1.0, 2.0, 0.5), 10.0,
+                       "5-d Lotka-Volterra, non-integrable: lambda_ij = sign(j - i), "
+                       "H = sum (x_i - log x_i)", "log-canonical", L)
+
+
 #: name -> (problem data constructor, whether it takes a size, the default size)
 PROBLEMS: dict[str, tuple[Callable, bool]] = {
     "charged-particle": (charged_particle, False),
@@ -247,6 +305,8 @@ PROBLEMS: dict[str, tuple[Callable, bool]] = {
     "toda": (toda, True),
     "volterra-lattice": (volterra_lattice, True),
     "lotka-volterra-4d": (lotka_volterra_4d, False),
+    "lv5-integrable": (lotka_volterra_5d, False),
+    "lv5-nonintegrable": (lotka_volterra_5d_nonintegrable, False),
 }
 
 
