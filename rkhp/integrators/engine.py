@@ -194,7 +194,8 @@ class StageNewtonWork(NamedTuple):
     """The work arrays of `_stage_newton` for N unknowns (N = 0: none, the fallback is off): the
     factorised Jacobian J (N, N) and its row order perm, kept between calls (memo slot
     MEMO_JACOBIAN_KEPT says whether it holds one); u, r, trial, rt, tmp (N,): iterate, residual,
-    correction, trial point and its residual; start (N,): the polynomials it started from (given back when it fails)."""
+    correction, trial point and its residual; start (N,): the polynomials it started from (given
+    back when it fails)."""
 
     J: np.ndarray
     perm: np.ndarray
