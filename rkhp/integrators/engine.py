@@ -54,7 +54,7 @@ SHIFT_MARGIN = 10.0
 value-only sweeps leave out (`_stale_factor`)."""
 
 # The slots of StepBuffers.memo, the scalars that the step loop keeps from one tower or step to
-# the next (module constants: numba compiles memo[MEMO_RATE] as memo[2]).
+# the next (module constants, which numba folds: the compiled code indexes by the number).
 MEMO_HISTORY = 0
 """How many previous steps' psi buf.hist holds (0 to 3; the start predictor of `rkhp_step`)."""
 MEMO_NEWTON_L = 1
