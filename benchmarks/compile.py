@@ -1,18 +1,25 @@
-"""Cold and warm `rkhp converge rigid-body`, and the cost of a step, before and after (issue 11).
+"""Cold and warm `rkhp converge rigid-body`, the cold start of each class of tapes, and the cost of
+a step, before and after a change, in one run.
 
 Run: python benchmarks/compile.py [--before COMMIT] [--also COMMIT] [--rounds N] [--step-runs N]
                                   [--kernels]
 
 Each version is a copy of rkhp (the library, its CLI and its tableau files) in a temporary folder:
-the version to compare with from `git archive COMMIT` (default d63087d, the engine before issue 11's
-compile work), this checkout's working tree as "after". Both run in fresh processes of this
-Python with PYTHONPATH set to their copy, so that the same interpreter and numba are measured:
+the version to compare with from `git archive COMMIT` (default 2575823, the engine before its
+state was named: docs/engine.md "The state of the step loop"), this checkout's working tree as
+"after". Both run in fresh processes of this Python with PYTHONPATH set to their copy, so that the
+same interpreter and numba are measured:
 
 - cold: `python -m rkhp converge rigid-body --format json` with an empty numba cache
   (NUMBA_CACHE_DIR set to a new folder), the whole process: wall and CPU (user + system) seconds;
 - warm: the same command again, on the cache the cold run filled;
-- us/step: the rigid body at h = 0.05, 1000 steps, with the paper's three-stage method, RK4
-  (4 stages) and Butcher's six-stage `butcher5`, warm: CPU seconds of the process around each
+- families: `python -m rkhp integrate SYSTEM --method paper-three-stage --steps 10` for one
+  system of each class of tapes (`FAMILIES`: the rigid body's plain tapes, the spray tapes of
+  charged-particle, the phimv tapes of toda:12), each with an empty cache of its own: the
+  whole process's CPU seconds, the interpreter compiled for that class and the loop of explicit
+  tableaux linking it;
+- us/step: the rigid body at h = 0.05, 1000 steps, with the paper's three-stage method, RKHP
+  Euler and the implicit gauss2 (`STEP_METHODS`), warm: CPU seconds of the process around each
   run (the fairer figure on a loaded machine), the minimum over the repeats;
 - with --kernels, the cold compile of each entry kernel of `rkhp.integrators.kernels`, in the order
   of its table (each figure leaves out what the kernels before it compiled), in one fresh process
@@ -38,9 +45,12 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-BEFORE = "d63087d"
+BEFORE = "2575823"
 COMMAND = ["converge", "rigid-body", "--format", "json"]
-STEP_METHODS = (("paper-three-stage", 3), ("rk4", 4), ("butcher5", 6))
+STEP_METHODS = ("paper-three-stage", "euler", "gauss2")
+FAMILIES = ("rigid-body", "charged-particle", "toda:12")
+FAMILY_COMMAND = ["integrate", "{system}", "--method", "paper-three-stage", "--steps", "10",
+                  "--format", "json"]
 
 STEP_CODE = """
 import json, sys, time
@@ -128,12 +138,17 @@ def measure(tree: Path, work: Path, repeats: int, step_runs: int) -> dict:
     cache = Path(tempfile.mkdtemp(prefix="numba-", dir=work))
     cold = run(tree, ["-m", "rkhp", *COMMAND], cache)
     warm = run(tree, ["-m", "rkhp", *COMMAND], cache)
-    methods = [m for m, _ in STEP_METHODS]
-    runs = [json.loads(run(tree, ["-c", STEP_CODE % repeats, *methods], cache)[2])
+    runs = [json.loads(run(tree, ["-c", STEP_CODE % repeats, *STEP_METHODS], cache)[2])
             for _ in range(step_runs)]
     shutil.rmtree(cache)
-    return {"cold": cold[:2], "warm": warm[:2],
-            "us_per_step": {m: min(r[m] for r in runs) for m in methods}}
+    families = {}
+    for system in FAMILIES:
+        cache = Path(tempfile.mkdtemp(prefix="numba-", dir=work))
+        command = [part.format(system=system) for part in FAMILY_COMMAND]
+        families[system] = run(tree, ["-m", "rkhp", *command], cache)[1]
+        shutil.rmtree(cache)
+    return {"cold": cold[:2], "warm": warm[:2], "families": families,
+            "us_per_step": {m: min(r[m] for r in runs) for m in STEP_METHODS}}
 
 
 def measure_kernels(tree: Path, work: Path) -> dict:
@@ -173,13 +188,18 @@ def main() -> None:
         print(f"machine: {os.cpu_count()} CPUs, load average {min(loads):.1f} to {max(loads):.1f} "
               f"during the runs; `rkhp {' '.join(COMMAND)}`, minima over {options.rounds} rounds")
         print(f"{'version':24s} {'cold wall':>10s} {'cold CPU':>9s} {'warm wall':>10s} {'warm CPU':>9s}  "
-              + "  ".join(f"{f'{s} stages':>9s}" for _, s in STEP_METHODS) + " (us/step)")
+              + "  ".join(f"{m:>17s}" for m in STEP_METHODS) + " (us/step)")
         for name, rounds in results.items():
             cold = [min(r["cold"][k] for r in rounds) for k in (0, 1)]
             warm = [min(r["warm"][k] for r in rounds) for k in (0, 1)]
-            steps = [min(r["us_per_step"][m] for r in rounds) for m, _ in STEP_METHODS]
+            steps = [min(r["us_per_step"][m] for r in rounds) for m in STEP_METHODS]
             print(f"{name:24s} {cold[0]:9.1f}s {cold[1]:8.1f}s {warm[0]:9.2f}s {warm[1]:8.2f}s  "
-                  + "  ".join(f"{v:9.2f}" for v in steps))
+                  + "  ".join(f"{v:17.2f}" for v in steps))
+        print(f"cold start CPU (s, minima) of `rkhp {' '.join(FAMILY_COMMAND)}` per class of tapes")
+        print(f"{'version':24s} " + " ".join(f"{system:>16s}" for system in FAMILIES))
+        for name, rounds in results.items():
+            print(f"{name:24s} " + " ".join(f"{min(r['families'][f] for r in rounds):15.1f}s"
+                                            for f in FAMILIES))
         if options.kernels:
             names = list(results["after (this tree)"][0]["kernels"])
             print("cold compile CPU of each entry kernel (s, minima): " + ", ".join(names))

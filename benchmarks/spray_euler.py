@@ -44,8 +44,8 @@ def direct_loop(system, h: float, steps: int):
     tapes = spray_euler.spray_tapes(system)
     args = (np.array(system.x0), np.ones(1), h, steps, tapes, spray_euler.euler_work(tapes, n),
             spray_euler.substep_memory(1, n),
-            system.domain_code, NEWTON_TOLERANCE, NEWTON_MAX_ITERATIONS, np.zeros((steps + 1, n)),
-            np.zeros(steps, np.int64), True)
+            engine.Solver(NEWTON_TOLERANCE, NEWTON_MAX_ITERATIONS, system.domain_code),
+            engine.Record(np.zeros((steps + 1, n)), np.zeros(steps, np.int64), True))
     return lambda: spray_euler.run(*args)
 
 
@@ -57,10 +57,11 @@ def engine_loop(system, h: float, steps: int):
     stage = rkhp_method.stage_solve(tableau, A)
     tapes, space = rkhp_method.engine_data(system, len(b), stage)
     n = system.dim
-    args = (np.array(system.x0), A, b, h, steps, tapes, space,
-            engine.step_buffers(tapes, n, len(b), space), system.domain_code, NEWTON_TOLERANCE,
-            NEWTON_MAX_ITERATIONS, rkhp_method.compiled_stage(stage), np.zeros((steps + 1, n)),
-            np.zeros(steps, np.int64), np.zeros(steps, np.int64), True)
+    args = (np.array(system.x0), engine.Method(A, b, h), steps, tapes, space,
+            engine.step_buffers(tapes, n, len(b), space),
+            engine.Solver(NEWTON_TOLERANCE, NEWTON_MAX_ITERATIONS, system.domain_code),
+            rkhp_method.compiled_stage(stage),
+            engine.Record(np.zeros((steps + 1, n)), np.zeros(steps, np.int64), True), np.zeros(steps, np.int64))
     return lambda: engine.rkhp_run(*args)
 
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -31,8 +32,9 @@ from ..base.bounds import check_step
 from ..base.errors import InputError, NumericalFailure
 from ..taylor.compiler import NJIT
 from ..taylor.compiler import numba as nb
-from ..taylor.interpreter import run_tape, tape_work
-from ..taylor.jets import jet_space
+from ..taylor.interpreter import TapeWork, run_tape, tape_work
+from ..taylor.jets import JetSpace, jet_space
+from ..taylor.tape import Tape
 from .engine import state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_TOLERANCE
@@ -42,13 +44,25 @@ MIDPOINT_MAX_ITERATIONS = 30
 """Newton iterations after which a step of the implicit midpoint rule is declared failed."""
 
 
+class FieldWork(NamedTuple):
+    """What the compiled field evaluates with: the H and alpha tapes, first-order jets in n
+    variables, and the interpreter's work arrays for each tape (`_workspace`)."""
+
+    htape: Tape
+    atape: Tape
+    space: JetSpace
+    wh: TapeWork
+    wa: TapeWork
+
+
 # ----------------------------------------------------------------------------------------------
 # compiled kernels
 
 
 @nb.njit(inline="always", **NJIT)
-def _field(x, htape, atape, space, wh, wa, out):
+def _field(x, ws, out):
     """out = pi(x) grad H(x): grad H from the H tape, pi = D^T - D from the alpha tape."""
+    htape, atape, space, wh, wa = ws.htape, ws.atape, ws.space, ws.wh, ws.wa
     n = x.shape[0]
     Wh, Wa = wh.W, wa.W
     Wh[:, :] = 0.0
@@ -70,7 +84,7 @@ def _field(x, htape, atape, space, wh, wa, out):
 
 
 @nb.njit(**NJIT)
-def _rk_loop(htape, atape, space, A, b, h, n_steps, x0, domain, states, wh, wa):
+def _rk_loop(ws, A, b, h, n_steps, x0, domain, states):
     """Explicit RK steps; returns (steps done, Failure)."""
     n = x0.shape[0]
     s = b.shape[0]
@@ -87,7 +101,7 @@ def _rk_loop(htape, atape, space, A, b, h, n_steps, x0, domain, states, wh, wa):
                 if a != 0.0:
                     for q in range(n):
                         xi[q] += a * K[j, q]
-            _field(xi, htape, atape, space, wh, wa, K[i])
+            _field(xi, ws, K[i])
         for i in range(s):
             w = h * b[i]
             if w != 0.0:
@@ -101,8 +115,7 @@ def _rk_loop(htape, atape, space, A, b, h, n_steps, x0, domain, states, wh, wa):
 
 
 @nb.njit(**NJIT)
-def _midpoint_loop(htape, atape, space, h, n_steps, x0, domain, tol, max_it, states, newton,
-                   wh, wa):
+def _midpoint_loop(ws, h, n_steps, x0, domain, tol, max_it, states, newton):
     """Implicit midpoint steps, Newton on the midpoint; returns (steps done, Failure)."""
     n = x0.shape[0]
     x = x0.copy()
@@ -115,7 +128,7 @@ def _midpoint_loop(htape, atape, space, h, n_steps, x0, domain, tol, max_it, sta
     y = np.empty(n)
     states[0] = x
     for k in range(n_steps):
-        _field(x, htape, atape, space, wh, wa, g)
+        _field(x, ws, g)
         for q in range(n):
             m[q] = x[q] + 0.5 * h * g[q]
         fresh = True
@@ -132,16 +145,16 @@ def _midpoint_loop(htape, atape, space, h, n_steps, x0, domain, tol, max_it, sta
                     for q in range(n):
                         y[q] = m[q]
                     y[j] = m[j] + d
-                    _field(y, htape, atape, space, wh, wa, fp)
+                    _field(y, ws, fp)
                     y[j] = m[j] - d
-                    _field(y, htape, atape, space, wh, wa, fm)
+                    _field(y, ws, fm)
                     for q in range(n):
                         J[q, j] = (1.0 if q == j else 0.0) - 0.5 * h * (fp[q] - fm[q]) / (2.0 * d)
                 if abs(np.linalg.det(J)) < 1e-300:
                     return k, Failure.SINGULAR
                 inv[:, :] = np.linalg.inv(J)
                 fresh = False
-            _field(m, htape, atape, space, wh, wa, g)
+            _field(m, ws, g)
             size = 0.0
             scale = 1.0
             for q in range(n):
@@ -182,7 +195,7 @@ def _workspace(system):
     """The H and alpha tapes, first-order jets in n variables, and work arrays for each tape."""
     space = jet_space(system.dim, 1)
     ht, at = system.h_tape, system.alpha_tape
-    return ht, at, space, tape_work((ht,), space.size), tape_work((at,), space.size)
+    return FieldWork(ht, at, space, tape_work((ht,), space.size), tape_work((at,), space.size))
 
 
 _VERIFIED: set[str] = set()
@@ -199,20 +212,19 @@ def _verify(name: str, system, ws) -> None:
     """
     if name in _VERIFIED:
         return
-    ht, at, space, wh, wa = ws
     x = np.array(system.x0, dtype=np.float64)
     f = np.asarray(system.vector_field(x), dtype=np.float64)
     h = 1e-3
     states = np.empty((2, x.size))
     if name == "field":
         got, want = np.empty(x.size), f
-        _field(x, ht, at, space, wh, wa, got)
+        _field(x, ws, got)
     elif name == "rk":
-        _rk_loop(ht, at, space, np.zeros((1, 1)), np.ones(1), h, 1, x, 0, states, wh, wa)
+        _rk_loop(ws, np.zeros((1, 1)), np.ones(1), h, 1, x, 0, states)
         got, want = states[1], x + h * f
     else:
-        _midpoint_loop(ht, at, space, h, 1, x, 0, NEWTON_TOLERANCE, MIDPOINT_MAX_ITERATIONS,
-                       states, np.zeros(1, dtype=np.int64), wh, wa)
+        _midpoint_loop(ws, h, 1, x, 0, NEWTON_TOLERANCE, MIDPOINT_MAX_ITERATIONS, states,
+                       np.zeros(1, dtype=np.int64))
         got = states[1]
         want = x + h * np.asarray(system.vector_field((x + got) / 2), dtype=np.float64)
     scale = max(1.0, float(np.max(np.abs(want))))
@@ -266,13 +278,12 @@ def integrate_classical(system, tableau, h, n_steps, x0=None) -> Trajectory:
     b = np.ascontiguousarray(tableau.b_float, dtype=np.float64)
     x = system.start(x0)
     ws = _workspace(system)
-    ht, at, space, wh, wa = ws
     domain = system.domain_code
     states = np.empty((n_steps + 1, x.size))
     started = time.perf_counter()
-    compile_s = _warm_up(_rk_loop, (ht, at, space, A, b, h, 1, x, domain, np.empty((2, x.size)), wh, wa))
+    compile_s = _warm_up(_rk_loop, (ws, A, b, h, 1, x, domain, np.empty((2, x.size))))
     _verify("rk", system, ws)
-    k_done, cause = _rk_loop(ht, at, space, A, b, h, n_steps, x, domain, states, wh, wa)
+    k_done, cause = _rk_loop(ws, A, b, h, n_steps, x, domain, states)
     newton = np.zeros(n_steps, dtype=np.int64)
     return _trajectory(system, f"classical {tableau.name}", h, k_done, cause, states, newton, started, compile_s)
 
@@ -297,16 +308,15 @@ def integrate_midpoint(system, h, n_steps, x0=None) -> Trajectory:
     h, n_steps = check_step(h, n_steps, system.dim)
     x = system.start(x0)
     ws = _workspace(system)
-    ht, at, space, wh, wa = ws
     domain = system.domain_code
     states = np.empty((n_steps + 1, x.size))
     newton = np.zeros(n_steps, dtype=np.int64)
     tol, max_it = NEWTON_TOLERANCE, MIDPOINT_MAX_ITERATIONS
     started = time.perf_counter()
-    compile_s = _warm_up(_midpoint_loop, (ht, at, space, h, 1, x, domain, tol, max_it, np.empty((2, x.size)),
-                                          np.zeros(1, dtype=np.int64), wh, wa))
+    compile_s = _warm_up(_midpoint_loop, (ws, h, 1, x, domain, tol, max_it, np.empty((2, x.size)),
+                                          np.zeros(1, dtype=np.int64)))
     _verify("midpoint", system, ws)
-    k_done, cause = _midpoint_loop(ht, at, space, h, n_steps, x, domain, tol, max_it, states, newton, wh, wa)
+    k_done, cause = _midpoint_loop(ws, h, n_steps, x, domain, tol, max_it, states, newton)
     extra = {"newton_tolerance": tol, "newton_max_iterations": max_it}
     return _trajectory(system, "implicit midpoint", h, k_done, cause, states, newton, started, compile_s, extra)
 
@@ -314,12 +324,11 @@ def integrate_midpoint(system, h, n_steps, x0=None) -> Trajectory:
 def vector_field(system):
     """The compiled Poisson vector field ``x -> pi(x) grad H(x)`` of a system (docs/theory.md §4)."""
     ws = _workspace(system)
-    ht, at, space, wh, wa = ws
     _verify("field", system, ws)
 
     def f(x):
         out = np.empty(system.dim)
-        _field(np.ascontiguousarray(x, dtype=np.float64), ht, at, space, wh, wa, out)
+        _field(np.ascontiguousarray(x, dtype=np.float64), ws, out)
         return out
 
     return f

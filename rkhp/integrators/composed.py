@@ -18,7 +18,16 @@ from ..base.bounds import check_step
 from ..base.errors import InputError
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
-from .engine import rkhp_step, state_failure, step_buffers
+from .engine import (
+    MEMO_HISTORY,
+    MEMO_NEWTON_L,
+    Method,
+    Record,
+    Solver,
+    rkhp_step,
+    state_failure,
+    step_buffers,
+)
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE
 from .rkhp_method import (
@@ -47,23 +56,6 @@ class SubstepMemory(NamedTuple):
     count: np.ndarray
 
 
-class Solver(NamedTuple):
-    """Newton's tolerance and iteration limit, and the system's domain code."""
-
-    tol: float
-    max_iter: int
-    domain: int
-
-
-class Record(NamedTuple):
-    """Where a run writes: states (all, or the last in row 0), Newton iterations per step (summed
-    over its substeps), and whether every state is kept."""
-
-    states: np.ndarray
-    iterations: np.ndarray
-    keep_all: bool
-
-
 def substep_memory(substeps: int, n: int) -> SubstepMemory:
     return SubstepMemory(np.zeros((substeps, 3, n)), np.zeros(substeps))
 
@@ -78,9 +70,9 @@ def _swap_history(buf, memory, i, n, into_buffers):
             else:
                 memory.hist[i, r, k] = buf.hist[r, k]
     if into_buffers:
-        buf.memo[0] = memory.count[i]
+        buf.memo[MEMO_HISTORY] = memory.count[i]
     else:
-        memory.count[i] = buf.memo[0]
+        memory.count[i] = buf.memo[MEMO_HISTORY]
 
 
 @nb.njit(**NJIT_NORC)
@@ -92,15 +84,15 @@ def composed_run(y0, method, n_steps, tapes, space, buf, memory, solver, record)
     for k in range(n):
         y[k] = y0[k]
         record.states[0, k] = y0[k]
-    buf.memo[1] = 0.0
+    buf.memo[MEMO_NEWTON_L] = 0.0
     for i in range(method.sizes.shape[0]):
         memory.count[i] = 0.0
     for step in range(n_steps):
         total = 0
         for i in range(method.sizes.shape[0]):
             _swap_history(buf, memory, i, n, True)
-            cause, it, _ = rkhp_step(method.A, method.b, method.sizes[i], tapes, space, buf,
-                                     solver.tol, solver.max_iter, None)
+            cause, it, _ = rkhp_step(Method(method.A, method.b, method.sizes[i]), tapes, space, buf,
+                                     solver, None)
             _swap_history(buf, memory, i, n, False)
             total += it
             if cause == Failure.OK:

@@ -14,8 +14,11 @@ round-off (so the Casimirs are kept); y_next = beta(x, p). Each stage is compute
 is polynomial in s (see `rkhp_step`).
 
 The tableau, h and the states are data: one compilation serves every system and tableau. The
-compiled data are named: `SystemTapes` (the four tapes), `rkhp.taylor.jets.JetSpace`,
-`StepBuffers` (every work array of the step loop, allocated once by `step_buffers`). A run ends
+compiled data are small named groups (docs/engine.md "The state of the step loop"):
+`SystemTapes` (the four tapes), `rkhp.taylor.jets.JetSpace`, `Method` (A, b, h), `Solver`,
+`StageSolve`, `Record` (where a run writes), `StepBuffers` (every work array of the step loop,
+allocated once by `step_buffers`; the scalars kept between towers and steps in the named slots
+MEMO_HISTORY ... MEMO_JACOBIAN_KEPT of its memo). A run ends
 with a `rkhp.integrators.failure.Failure`; `state_failure` is the one step validator (finite
 values, the system's domain) of every integrator.
 """
@@ -50,6 +53,31 @@ SHIFT_MARGIN = 10.0
 """Safety factor on the linear estimate of how a Taylor shift moves the degrees of G that
 value-only sweeps leave out (`_stale_factor`)."""
 
+# The slots of StepBuffers.memo, the scalars that the step loop keeps from one tower or step to
+# the next (module constants, which numba folds: the compiled code indexes by the number).
+MEMO_HISTORY = 0
+"""How many previous steps' psi buf.hist holds (0 to 3; the start predictor of `rkhp_step`)."""
+MEMO_NEWTON_L = 1
+"""Newton's quadratic constant L (|dx_{k+1}| ~ L |dx_k|^2) measured on an earlier step (0: unknown)."""
+MEMO_RATE = 2
+"""The implicit stages' rate h |c|_1 (`_stage_measure`, `_stage_weights`)."""
+MEMO_FACTOR = 3
+"""The implicit stages' effect factor (`_stage_measure`)."""
+MEMO_EFFECT = 4
+"""The stages' measure at the last sweep of this step; inf at the start of a step (`implicit_tower`)."""
+MEMO_SHIFT_BEFORE = 5
+"""The Taylor shifts (max-norm, summed) before the last sweep of every degree of G (`_stale_factor`)."""
+MEMO_SHIFT_SINCE = 6
+"""The Taylor shifts since the last sweep of every degree of G (`_stale_factor`)."""
+MEMO_SWEEPS = 7
+"""The sweeps of this step, from its first tower on (`implicit_tower`)."""
+MEMO_STALLED = 8
+"""1 once the sweeps have stalled in this run: every tower then solves the stages by `_stage_newton`."""
+MEMO_JACOBIAN_KEPT = 9
+"""1 while StepBuffers.stage_newton holds a factorised Jacobian (`_stage_newton`)."""
+MEMO_SIZE = 10
+"""The number of memo slots."""
+
 
 class SystemTapes(NamedTuple):
     """The tapes of a system over the 2n inputs (x, p): f = H o alpha, H, alpha, beta."""
@@ -66,12 +94,8 @@ class StepBuffers(NamedTuple):
     work: the interpreter's; G (s, n, jet size): gradients of the stage functions; psi, Jpsi,
     alpha, Jalpha: the tower's results; x, delta, res (n): Newton's iterate, correction and
     residual; LU (n, n), perm (n,) int64, v (n): the linear solve's (`solve_small`); hist (3, n):
-    psi of the three previous steps; memo (10,): how many of them there are, Newton's measured
-    quadratic constant L, the implicit stages' rate h |c|_1 and effect factor (`_stage_measure`),
-    then (`implicit_tower`) inf at the start of a step, the Taylor shifts before the last sweep of
-    every degree and since, the number of sweeps of this step (from its first tower on), and 1
-    once the sweeps have stalled in this run (every tower then solves the stages by
-    `_stage_newton`), and 1 while stage_newton holds a factorised Jacobian; y, y_next (n): the
+    psi of the three previous steps; memo (MEMO_SIZE,): the scalars kept from one tower or step to
+    the next, each in its named slot (MEMO_HISTORY ... MEMO_JACOBIAN_KEPT); y, y_next (n): the
     state before and after the step; Gx (n): the point where G is expanded
     (implicit stages); changes (jet degree + 1,): per degree k of G, the weighted change of its
     coefficients at their last sweep (`_stage`, `implicit_tower`); weights (s, jet size): the
@@ -118,6 +142,32 @@ class StageSolve(NamedTuple):
     max_sweeps: int
 
 
+class Method(NamedTuple):
+    """An RKHP step: the tableau's A (s, s) and b (s,), and the step size h."""
+
+    A: np.ndarray
+    b: np.ndarray
+    h: float
+
+
+class Solver(NamedTuple):
+    """Newton's tolerance and iteration limit (`rkhp.integrators.newton`), and the system's domain
+    code (`state_failure`)."""
+
+    tol: float
+    max_iter: int
+    domain: int
+
+
+class Record(NamedTuple):
+    """Where a run writes: states (all, or the last in row 0), Newton iterations per step (summed
+    over its substeps in a composed run), and whether every state is kept."""
+
+    states: np.ndarray
+    iterations: np.ndarray
+    keep_all: bool
+
+
 STAGE_NEWTON_ITERATIONS = 30
 """Most iterations of one `_stage_newton` solve of the stage equations."""
 STAGE_NEWTON_MAX_UNKNOWNS = 1500
@@ -142,9 +192,10 @@ previous one refreshes the Jacobian (the chord iteration converges too slowly)."
 
 class StageNewtonWork(NamedTuple):
     """The work arrays of `_stage_newton` for N unknowns (N = 0: none, the fallback is off): the
-    factorised Jacobian J (N, N) and its row order perm, kept between calls (memo[9] says whether
-    it holds one); u, r, trial, rt, tmp (N,): iterate, residual, correction, trial point and its
-    residual; start (N,): the polynomials it started from (given back when it fails)."""
+    factorised Jacobian J (N, N) and its row order perm, kept between calls (memo slot
+    MEMO_JACOBIAN_KEPT says whether it holds one); u, r, trial, rt, tmp (N,): iterate, residual,
+    correction, trial point and its residual; start (N,): the polynomials it started from (given
+    back when it fails)."""
 
     J: np.ndarray
     perm: np.ndarray
@@ -159,7 +210,8 @@ class StageNewtonWork(NamedTuple):
 def stage_newton_work(unknowns: int) -> StageNewtonWork:
     """Work arrays for `unknowns` coefficients (none above STAGE_NEWTON_MAX_UNKNOWNS)."""
     N = unknowns if 0 < unknowns <= STAGE_NEWTON_MAX_UNKNOWNS else 0
-    return StageNewtonWork(np.zeros((N, N)), np.zeros(N, np.int64), *(np.zeros(N) for _ in range(6)))
+    return StageNewtonWork(J=np.zeros((N, N)), perm=np.zeros(N, np.int64), u=np.zeros(N), r=np.zeros(N),
+                           trial=np.zeros(N), rt=np.zeros(N), tmp=np.zeros(N), start=np.zeros(N))
 
 
 def step_buffers(tapes: SystemTapes, n: int, s: int, space, stage_degree: int = 0) -> StepBuffers:
@@ -174,11 +226,12 @@ def step_buffers(tapes: SystemTapes, n: int, s: int, space, stage_degree: int = 
     def mat():
         return np.zeros((n, n))
 
-    return StepBuffers(tape_work(tapes, size), np.zeros((s, n, size)), vec(), mat(), vec(), mat(),
-                       vec(), vec(), vec(), mat(), np.zeros(n, np.int64), vec(), np.zeros((3, n)),
-                       np.zeros(10), vec(), vec(), vec(), np.zeros(space.degree + 1),
-                       np.zeros((s, size)), np.zeros((s, n, size)), np.zeros(space.degree + 1),
-                       stage_newton_work(unknowns))
+    return StepBuffers(
+        work=tape_work(tapes, size), G=np.zeros((s, n, size)), psi=vec(), Jpsi=mat(), alpha=vec(),
+        Jalpha=mat(), x=vec(), delta=vec(), res=vec(), LU=mat(), perm=np.zeros(n, np.int64), v=vec(),
+        hist=np.zeros((3, n)), memo=np.zeros(MEMO_SIZE), y=vec(), y_next=vec(), Gx=vec(),
+        changes=np.zeros(space.degree + 1), weights=np.zeros((s, size)), defect=np.zeros((s, n, size)),
+        defects=np.zeros(space.degree + 1), stage_newton=stage_newton_work(unknowns))
 
 
 @nb.njit(inline="always", **NJIT_NORC)
@@ -344,8 +397,9 @@ def _set_p(W, x0, n):
 @nb.njit(inline="always", **NJIT_NORC)
 def _stage_measure(x0, A, b, h, tapes, space, buf):
     """The scales of the implicit stages' convergence measure at x0 (docs/implicit.md): the rate
-    h |c|_1 of `_stage_weights` into buf.memo[2] and the effect factor into buf.memo[3], from
-    J = d_p alpha(x0, 0) and c = d_p f(x0, 0) (the tapes at degree 1 in p, x fixed).
+    h |c|_1 of `_stage_weights` into buf.memo[MEMO_RATE] and the effect factor into
+    buf.memo[MEMO_FACTOR], from J = d_p alpha(x0, 0) and c = d_p f(x0, 0) (the tapes at degree 1
+    in p, x fixed).
 
     A change of psi = h sum_i b_i G_i(0) by dpsi moves y_next = beta(x, psi) with x
     (alpha(x, psi) = y) by about (d_p beta - d_p alpha) dpsi = pi dpsi, pi = J^T - J: the effect
@@ -370,8 +424,8 @@ def _stage_measure(x0, A, b, h, tapes, space, buf):
     bsum = 0.0
     for i in range(b.shape[0]):
         bsum += abs(b[i])
-    buf.memo[2] = h * c
-    buf.memo[3] = pi * h * bsum
+    buf.memo[MEMO_RATE] = h * c
+    buf.memo[MEMO_FACTOR] = pi * h * bsum
 
 
 @nb.njit(inline="always", **NJIT_NORC)
@@ -625,7 +679,7 @@ def _stage_newton(x0, A, h, D, tapes, space, buf):
         for q in range(N):
             u[q] = 0.0
     size = _sweep_residual(u, r, x0, A, h, D, tapes, space, buf, M)
-    fresh = memo[9] == 0.0
+    fresh = memo[MEMO_JACOBIAN_KEPT] == 0.0
     previous = np.inf
     converged = False
     for _ in range(STAGE_NEWTON_ITERATIONS):
@@ -633,9 +687,9 @@ def _stage_newton(x0, A, h, D, tapes, space, buf):
             break
         if fresh:
             if not _sweep_jacobian(x0, A, h, D, tapes, space, buf, M):
-                memo[9] = 0.0
+                memo[MEMO_JACOBIAN_KEPT] = 0.0
                 break
-            memo[9] = 1.0
+            memo[MEMO_JACOBIAN_KEPT] = 1.0
         for q in range(N):
             trial[q] = -r[q]
         lu_solve(work.J, work.perm, trial, tmp)
@@ -684,7 +738,7 @@ def _stage_newton(x0, A, h, D, tapes, space, buf):
 
 
 @nb.njit(**NJIT_NORC)
-def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, scale):
+def implicit_tower(x0, method, tapes, space, buf, jacobian, stage, first, bound):
     """The implicit tower (docs/theory.md §10, docs/implicit.md): psi and alpha(x0, psi) (with
     `jacobian`, their Jacobians) as `tower`, the stage polynomials G (degree D - 1,
     D = stage.degree: every stage function a jet of degree D) from Gauss–Seidel Picard sweeps of
@@ -707,12 +761,12 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     first changes are the polynomials themselves, not a contraction, and measured, the tail factor
     then stops D = 10 too early); the part of the degrees left out counts once, times
     `_stale_factor` for the Taylor shifts since their last sweep. The stages have converged when
-    that is at most Newton's tolerance `tol` times `scale`.
+    that is at most `bound` (Newton's tolerance times the state's scale, `rkhp_step`).
 
     When the sweeps stall (a non-finite one, stage.max_sweeps of them while settling, or half as
     many in one step without converging), the stages are solved by `_stage_newton`, and from
-    then on in the run every tower solves them so (memo[8]; docs/implicit.md "When the sweeps
-    stall") until it finds no solution, where the sweeps take over again.
+    then on in the run every tower solves them so (MEMO_STALLED; docs/implicit.md "When the
+    sweeps stall") until it finds no solution, where the sweeps take over again.
 
     Returns (Failure, sweeps, converged): STAGES_NO_CONVERGENCE when the sweeps stalled while
     settling (or went non-finite) and `_stage_newton` found no solution; a step whose sweeps
@@ -722,30 +776,30 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     site, and the loop of explicit tableaux, where this call sits in a pruned branch, would pay
     for it (docs/engine.md "Compile time").
     """
+    A, b, h = method.A, method.b, method.h
     s = b.shape[0]
     n = x0.shape[0]
     D = np.int64(stage.degree)
     G, changes, memo = buf.G, buf.changes, buf.memo
-    settle = first and memo[0] == 0.0
+    settle = first and memo[MEMO_HISTORY] == 0.0
     # the first tower of a later step learns the defect, and starts from the shifted polynomials
     # plus the one learnt at the previous step if that step converged in at most TRUST_SWEEPS
     # sweeps (the defect it learnt was most of what it needed)
     learn = first and not settle
-    predict = learn and memo[7] <= TRUST_SWEEPS
+    predict = learn and memo[MEMO_SWEEPS] <= TRUST_SWEEPS
     if first:
         _stage_measure(x0, A, b, h, tapes, space, buf)
-        memo[4] = np.inf
-    factor = memo[3]
-    bound = tol * scale
+        memo[MEMO_EFFECT] = np.inf
+    factor = memo[MEMO_FACTOR]
     for k in range(n):
         buf.delta[k] = x0[k] - buf.Gx[k]
     shift = 0.0 if settle else max_abs(buf.delta)
-    since = memo[6] + shift
-    stale = _stale_factor(since, memo[5])
+    since = memo[MEMO_SHIFT_SINCE] + shift
+    stale = _stale_factor(since, memo[MEMO_SHIFT_BEFORE])
     # once the sweeps have stalled in a run, every tower solves its stages by Newton (`_stage_newton`)
-    newton = memo[8] > 0.0 and not settle
+    newton = memo[MEMO_STALLED] > 0.0 and not settle
     top = D if jacobian or newton else _value_degree(changes, buf.defects, factor, stale, D, bound)
-    memo[5], memo[6] = (since, 0.0) if top == D else (memo[5], since)
+    memo[MEMO_SHIFT_BEFORE], memo[MEMO_SHIFT_SINCE] = (since, 0.0) if top == D else (memo[MEMO_SHIFT_BEFORE], since)
     if settle:
         for k in range(n):
             buf.Gx[k] = x0[k]
@@ -756,9 +810,9 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
                     buf.defect[j, k, m] = 0.0
         for k in range(D + 1):
             buf.defects[k] = 0.0
-        memo[7] = 0.0
-        memo[8] = 0.0
-        memo[9] = 0.0
+        memo[MEMO_SWEEPS] = 0.0
+        memo[MEMO_STALLED] = 0.0
+        memo[MEMO_JACOBIAN_KEPT] = 0.0
         _stage_weights(A, b, space, buf.weights)
     elif top > 0:
         if predict:
@@ -772,7 +826,7 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
         if _stage_newton(x0, A, h, D, tapes, space, buf):
             _psi_alpha(x0, b, h, tapes, space, buf, jacobian)
             return Failure.OK, 0, True
-        memo[8] = 0.0  # no solution found by Newton here: back to the sweeps
+        memo[MEMO_STALLED] = 0.0  # no solution found by Newton here: back to the sweeps
     sweeps = 0
     converged = False
     if top == 0:
@@ -784,7 +838,7 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
     while top > 0:
         sweeps += 1
         # the measure of the degrees swept now at their last sweep (inf: none yet in this step)
-        previous = memo[4]
+        previous = memo[MEMO_EFFECT]
         if previous < np.inf:
             previous = 0.0
             for k in range(top):
@@ -792,21 +846,21 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
         for k in range(top):
             changes[k] = 0.0
         for i in range(s):
-            _stage(i, x0, A, h, top, s, tapes, space, buf, memo[2])
+            _stage(i, x0, A, h, top, s, tapes, space, buf, memo[MEMO_RATE])
         swept = 0.0
         for k in range(top):
             swept += factor * changes[k]
         if learn:
-            _learn(G, buf.defect, buf.weights, memo[2], D, space, buf.defects)
-            memo[7] = 1.0
+            _learn(G, buf.defect, buf.weights, memo[MEMO_RATE], D, space, buf.defects)
+            memo[MEMO_SWEEPS] = 1.0
         else:
-            memo[7] += 1.0
+            memo[MEMO_SWEEPS] += 1.0
         kept = _kept(changes, buf.defects, factor, stale, top, D)
         effect = swept + kept
         tail = _tail_factor(swept, previous)
         if settle:
             tail = max(1.0, tail)
-        memo[4] = effect
+        memo[MEMO_EFFECT] = effect
         # a sweep that did not contract proves nothing, unless its changes are already far below
         # the tolerance (round-off: the measure then no longer decreases)
         converged = swept * tail + kept <= bound or effect <= ROUND_OFF_SHARE * bound
@@ -817,10 +871,10 @@ def implicit_tower(x0, A, b, h, tapes, space, buf, jacobian, stage, first, tol, 
         # (A sweep larger than the previous one is no stall by itself: after a Taylor shift it
         # also measures what the shift moved.)
         stalled = not np.isfinite(effect) or (
-            sweeps >= stage.max_sweeps if settle else memo[7] >= stage.max_sweeps // 2)
+            sweeps >= stage.max_sweeps if settle else memo[MEMO_SWEEPS] >= stage.max_sweeps // 2)
         if stalled:
             if _stage_newton(x0, A, h, D, tapes, space, buf):
-                memo[8] = 1.0
+                memo[MEMO_STALLED] = 1.0
                 converged = True
                 break
             if settle or not np.isfinite(effect):
@@ -844,16 +898,16 @@ def max_abs(v):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def rkhp_step(A, b, h, tapes, space, buf, tol, max_iter, stage):
+def rkhp_step(method, tapes, space, buf, solver, stage):
     """One RKHP step from buf.y into buf.y_next; returns (Failure, Newton iterations, stage
     sweeps). `stage` says how the towers compute the stages: None, explicit (`tower`), or a
     StageSolve, implicit (`implicit_tower`: one sweep per tower, so the iterations go on after
     Newton's test holds until the stages have converged too, at most max_iter + stage.max_sweeps
     of them; STAGES_NO_CONVERGENCE when Newton's test held but the stages did not settle).
 
-    buf.hist[0..2]: psi of the three previous steps, buf.memo[0]: how many of them there are,
-    buf.memo[1]: Newton's quadratic constant L (|dx_{k+1}| ~ L |dx_k|^2) measured on an earlier
-    step (0 when unknown). The start is predicted: psi extrapolated (quadratically) from the
+    buf.hist[0..2]: psi of the three previous steps, buf.memo[MEMO_HISTORY]: how many of them
+    there are, buf.memo[MEMO_NEWTON_L]: Newton's quadratic constant L (|dx_{k+1}| ~ L |dx_k|^2)
+    measured on an earlier step (0 when unknown). The start is predicted: psi extrapolated (quadratically) from the
     previous steps, x from alpha(x, psi_predicted) = y by a cheap Newton step (no tower). The first
     tower has the Jacobian; it is the last when max(2 L, 1/max(1, |y|)) |dx|^2 is below the
     tolerance. Later iterations are chord steps with value-only towers (one degree less, about
@@ -861,16 +915,17 @@ def rkhp_step(A, b, h, tapes, space, buf, tol, max_iter, stage):
     Jacobian is refreshed when theta > 1/4 (docs/theory.md §7 measured 2 full towers per step
     instead of 3).
     """
+    A, b, h, tol, max_iter = method.A, method.b, method.h, solver.tol, solver.max_iter
     y, x, res, delta, hist, memo = buf.y, buf.x, buf.res, buf.delta, buf.hist, buf.memo
     n = y.shape[0]
     scale = max(1.0, max_abs(y))
     for k in range(n):
         x[k] = y[k]
-    if memo[0] >= 1.0:
+    if memo[MEMO_HISTORY] >= 1.0:
         for k in range(n):
-            if memo[0] >= 3.0:
+            if memo[MEMO_HISTORY] >= 3.0:
                 res[k] = 3.0 * (hist[0, k] - hist[1, k]) + hist[2, k]
-            elif memo[0] >= 2.0:
+            elif memo[MEMO_HISTORY] >= 2.0:
                 res[k] = 2.0 * hist[0, k] - hist[1, k]
             else:
                 res[k] = hist[0, k]
@@ -895,7 +950,7 @@ def rkhp_step(A, b, h, tapes, space, buf, tol, max_iter, stage):
             tower(x, A, b, h, tapes, space, buf, full)
         else:
             cause, done, stages_done = implicit_tower(
-                x, A, b, h, tapes, space, buf, full, stage, np.bool_(it == 1), tol, scale)
+                x, method, tapes, space, buf, full, stage, np.bool_(it == 1), tol * scale)
             sweeps += done
             if cause != Failure.OK:
                 return cause, it, sweeps
@@ -908,7 +963,7 @@ def rkhp_step(A, b, h, tapes, space, buf, tol, max_iter, stage):
         for k in range(n):
             x[k] += delta[k]
         if previous < np.inf and previous > 1e3 * tol * scale and size < 0.5 * previous:
-            memo[1] = size / (previous * previous)
+            memo[MEMO_NEWTON_L] = size / (previous * previous)
         if previous < np.inf:
             # chord step: |dx_{k+1}| <~ theta |dx_k| with theta = |dx_k| / |dx_{k-1}|
             theta = size / previous
@@ -916,7 +971,7 @@ def rkhp_step(A, b, h, tapes, space, buf, tol, max_iter, stage):
         else:
             # next correction ~ L |dx|^2; one measured L can be far too small (a correction
             # along a flat direction), hence the floor 1 / scale
-            predicted = max(2.0 * memo[1], 1.0 / scale) * size * size
+            predicted = max(2.0 * memo[MEMO_NEWTON_L], 1.0 / scale) * size * size
         newton_done = size <= tol * scale or predicted <= tol * scale
         if newton_done and stages_done:
             converged = True
@@ -940,7 +995,7 @@ def rkhp_step(A, b, h, tapes, space, buf, tol, max_iter, stage):
         hist[2, k] = hist[1, k]
         hist[1, k] = hist[0, k]
         hist[0, k] = res[k]
-    memo[0] = min(memo[0] + 1.0, 3.0)
+    memo[MEMO_HISTORY] = min(memo[MEMO_HISTORY] + 1.0, 3.0)
     W = buf.work.W
     for k in range(n):
         W[k, 0] = x[k]
@@ -1003,10 +1058,9 @@ def state_failure(y, domain):
 
 
 @nb.njit(**NJIT_NORC)
-def rkhp_run(y0, A, b, h, n_steps, tapes, space, buf, domain, tol, max_iter, stage, states,
-             iterations, sweeps, keep_all):
-    """Integrate n_steps from y0; states[k] = y_k (keep_all) or states[0] = the last state;
-    iterations[k], sweeps[k]: Newton iterations and stage sweeps of step k.
+def rkhp_run(y0, method, n_steps, tapes, space, buf, solver, stage, record, sweeps):
+    """Integrate n_steps from y0 into `record`: states[k] = y_k (keep_all) or states[0] = the last
+    state; iterations[k], sweeps[k]: Newton iterations and stage sweeps of step k.
 
     Returns (number of completed steps, Failure of the step after them or Failure.OK).
     """
@@ -1014,20 +1068,20 @@ def rkhp_run(y0, A, b, h, n_steps, tapes, space, buf, domain, tol, max_iter, sta
     y = buf.y
     for k in range(n):
         y[k] = y0[k]
-    buf.memo[0] = 0.0
-    buf.memo[1] = 0.0
+    buf.memo[MEMO_HISTORY] = 0.0
+    buf.memo[MEMO_NEWTON_L] = 0.0
     for k in range(n):
-        states[0, k] = y[k]
+        record.states[0, k] = y[k]
     for step in range(n_steps):
-        cause, it, done = rkhp_step(A, b, h, tapes, space, buf, tol, max_iter, stage)
-        iterations[step] = it
+        cause, it, done = rkhp_step(method, tapes, space, buf, solver, stage)
+        record.iterations[step] = it
         sweeps[step] = done
         if cause == Failure.OK:
-            cause = state_failure(buf.y_next, domain)
+            cause = state_failure(buf.y_next, solver.domain)
         if cause != Failure.OK:
             return step, cause
-        row = step + 1 if keep_all else 0
+        row = step + 1 if record.keep_all else 0
         for k in range(n):
             y[k] = buf.y_next[k]
-            states[row, k] = y[k]
+            record.states[row, k] = y[k]
     return n_steps, Failure.OK

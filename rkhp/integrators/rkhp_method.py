@@ -111,7 +111,7 @@ def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLER
     status naming the failing step, time and cause if a step failed (then only the states before
     it are kept).
     """
-    from .engine import rkhp_run, step_buffers
+    from .engine import Method, Record, Solver, rkhp_run, step_buffers
 
     tableau = resolve_tableau(tableau)
     h, n_steps = check_step(h, n_steps, system.dim)
@@ -120,16 +120,17 @@ def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLER
     stage = stage_solve(tableau, A, stage_degree)
     tapes, space = engine_data(system, len(b), stage)
     buf = step_buffers(tapes, system.dim, len(b), space, stage.degree)
-    rest = (tapes, space, buf, system.domain_code, float(tol), int(max_iter), compiled_stage(stage))
+    method, solver = Method(A, b, h), Solver(float(tol), int(max_iter), system.domain_code)
+    rest = (tapes, space, buf, solver, compiled_stage(stage))
     t0 = time.perf_counter()
-    rkhp_run(y0, A, b, h, 0, *rest, np.zeros((1, y0.size)), np.zeros(1, np.int64),
-             np.zeros(1, np.int64), True)
+    rkhp_run(y0, method, 0, *rest, Record(np.zeros((1, y0.size)), np.zeros(1, np.int64), True),
+             np.zeros(1, np.int64))
     compile_seconds = time.perf_counter() - t0
     states = np.empty((n_steps + 1, y0.size))
     iterations = np.zeros(max(n_steps, 1), dtype=np.int64)
     sweeps = np.zeros(max(n_steps, 1), dtype=np.int64)
     t0 = time.perf_counter()
-    done, cause = rkhp_run(y0, A, b, h, n_steps, *rest, states, iterations, sweeps, True)
+    done, cause = rkhp_run(y0, method, n_steps, *rest, Record(states, iterations, True), sweeps)
     run_seconds = time.perf_counter() - t0
     failed = cause != Failure.OK
     return checked(Trajectory(
@@ -176,9 +177,10 @@ def integrate_ensemble(system, tableau, h, n_steps, x0s, *, tol: float = NEWTON_
 
 def _ensemble_chunk(system, A, b, h, n_steps, x0s, tol, max_iter, stage, threads):
     """(final states, steps done, Failure codes) of the trajectories from ``x0s``, in threads."""
-    from .engine import rkhp_run, step_buffers
+    from .engine import Method, Record, Solver, rkhp_run, step_buffers
 
     tapes, space = engine_data(system, len(b), stage)
+    method, solver = Method(A, b, h), Solver(tol, max_iter, system.domain_code)
     m = len(x0s)
     finals = np.zeros_like(x0s)
     done = np.zeros(m, dtype=np.int64)
@@ -191,10 +193,10 @@ def _ensemble_chunk(system, A, b, h, n_steps, x0s, tol, max_iter, stage, threads
         iterations = np.zeros(max(n_steps, 1), dtype=np.int64)
         sweeps = np.zeros(max(n_steps, 1), dtype=np.int64)
         buf = step_buffers(tapes, system.dim, len(b), space, stage.degree)
+        record = Record(last, iterations, False)
         for t in range(lo, hi):
-            done[t], codes[t] = rkhp_run(x0s[t], A, b, h, n_steps, tapes, space, buf,
-                                         system.domain_code, tol, max_iter, compiled_stage(stage), last,
-                                         iterations, sweeps, False)
+            done[t], codes[t] = rkhp_run(x0s[t], method, n_steps, tapes, space, buf, solver,
+                                         compiled_stage(stage), record, sweeps)
             finals[t] = last[0]
 
     with ThreadPoolExecutor(max_workers=len(bounds) - 1) as pool:

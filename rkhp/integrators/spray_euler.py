@@ -57,7 +57,7 @@ from ..taylor.ops import SCRATCH_BASE, SPRAY
 from ..taylor.rows import subprogram_at
 from ..taylor.scalar import SCALAR_CODES, gradients, shared, values
 from ..taylor.tape import Tape
-from .engine import max_abs, state_failure
+from .engine import Record, Solver, max_abs, state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS
 from .trajectory import Trajectory, checked
@@ -530,18 +530,18 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
 
 
 @nb.njit(**NJIT_NORC)
-def run(y0, gammas, h, n_steps, tapes, work, memory, domain, tol, max_iter, states,
-        iterations, keep_all):
+def run(y0, gammas, h, n_steps, tapes, work, memory, solver, record):
     """The composed loop: n_steps steps from y0, each the Euler substeps gammas[0] h,
     gammas[1] h, ... in direct form (`euler_substep`), substep i warm-started from substep i of
     the previous step (`memory`, emptied here first), all in compiled code.
 
     Arguments: y0 (n,); gammas (s,) the composition's coefficients; h the step (negative: a
-    backward run); tapes, work, memory from `spray_tapes`, `euler_work`,
-    `substep_memory`; domain the system's domain code (`state_failure`); tol, max_iter the chord
-    iterations' tolerance (relative to max(1, |y|)) and limit per substep; states
-    (n_steps + 1, n) when keep_all (states[k] = y_k), else (1, n) (the last state);
-    iterations (n_steps,) int64: chord iterations of each step (all its substeps).
+    backward run); tapes, work, memory from `spray_tapes`, `euler_work`, `substep_memory`;
+    solver (`rkhp.integrators.engine.Solver`): the chord iterations' tolerance (relative to
+    max(1, |y|)) and limit per substep, the system's domain code (`state_failure`); record
+    (`rkhp.integrators.engine.Record`): states (n_steps + 1, n) when keep_all (states[k] = y_k),
+    else (1, n) (the last state), iterations (n_steps,) int64: chord iterations of each step (all
+    its substeps).
 
     The state is carried as a double-double y + y_low (the substeps see y): each substep adds its
     increment without rounding the state to doubles, so the rounding of the states does not
@@ -556,7 +556,7 @@ def run(y0, gammas, h, n_steps, tapes, work, memory, domain, tol, max_iter, stat
     for k in range(n):
         y[k] = y0[k]
         low[k] = 0.0
-        states[0, k] = y0[k]
+        record.states[0, k] = y0[k]
     for i in range(s):
         memory.counts[i, 0] = 0
         memory.counts[i, 1] = 0
@@ -566,11 +566,11 @@ def run(y0, gammas, h, n_steps, tapes, work, memory, domain, tol, max_iter, stat
     for step in range(n_steps):
         total = 0
         for i in range(s):
-            cause, it = euler_substep(i, y, gammas[i] * h, tapes, work, memory, tol,
-                                      max_iter)
+            cause, it = euler_substep(i, y, gammas[i] * h, tapes, work, memory, solver.tol,
+                                      solver.max_iter)
             total += it
             if cause != Failure.OK:
-                iterations[step] = total
+                record.iterations[step] = total
                 return step, cause
             for k in range(n):
                 # y + low += dy, kept as a double-double (Knuth's two-sum)
@@ -578,13 +578,13 @@ def run(y0, gammas, h, n_steps, tapes, work, memory, domain, tol, max_iter, stat
                 total_k = a + b
                 bb = total_k - a
                 y[k], low[k] = total_k, (a - (total_k - bb)) + (b - bb)
-        iterations[step] = total
-        cause = state_failure(y, domain)
+        record.iterations[step] = total
+        cause = state_failure(y, solver.domain)
         if cause != Failure.OK:
             return step, cause
-        row = step + 1 if keep_all else 0
+        row = step + 1 if record.keep_all else 0
         for k in range(n):
-            states[row, k] = y[k]
+            record.states[row, k] = y[k]
     return n_steps, Failure.OK
 
 
@@ -680,14 +680,14 @@ def integrate_spray_euler(system, gammas, h, n_steps, x0=None, keep_all: bool = 
     y0 = system.start(x0)
     work = euler_work(tapes, n)
     memory = substep_memory(g.size, n)
-    rest = (tapes, work, memory, system.domain_code, float(tol), int(max_iter))
+    rest = (tapes, work, memory, Solver(float(tol), int(max_iter), system.domain_code))
     t0 = time.perf_counter()
-    run(y0, g, h, 0, *rest, np.zeros((1, n)), np.zeros(1, np.int64), True)
+    run(y0, g, h, 0, *rest, Record(np.zeros((1, n)), np.zeros(1, np.int64), True))
     compile_seconds = time.perf_counter() - t0
     states = np.empty((n_steps + 1 if keep_all else 1, n))
     iterations = np.zeros(max(n_steps, 1), dtype=np.int64)
     t0 = time.perf_counter()
-    done, cause = run(y0, g, h, n_steps, *rest, states, iterations, bool(keep_all))
+    done, cause = run(y0, g, h, n_steps, *rest, Record(states, iterations, bool(keep_all)))
     run_seconds = time.perf_counter() - t0
     cause = Failure(cause)
     failed = cause != Failure.OK

@@ -11,13 +11,14 @@ A kernel evaluates a sub-program by setting its input slots (jets of degree D, a
 bounds) and calling `rkhp.taylor.rows.run_rows(tape, lo, hi, ...)` on its row range, then reading
 its output slots; it may do so as often as it needs (a fixed-point iteration, several collocation
 nodes). Registering one: a code and an `rkhp.taylor.ops.OPS` row (kind COMPOSITE, its scratch
-need), the kernel here, and one branch in `rkhp.taylor.interpreter._composite`
-(docs/engine.md "Composite operations").
+need), the kernel here, and its entry in `rkhp.taylor.interpreter.COMPOSITE_KERNELS` (the one
+dispatch, `rkhp.taylor.interpreter._dispatch`, reads it; docs/engine.md "Composite operations").
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -29,6 +30,7 @@ from .jets import jet_mul
 from .linalg import lu_factor, lu_solve
 from .ops import SCRATCH_BASE, SPRAY_MAX_NODES
 from .rows import run_rows, subprogram_at
+from .tape import Tape
 
 
 @nb.njit(**NJIT_NORC)
@@ -102,12 +104,51 @@ SPRAY_MAX_SWEEPS = 50
 TABLE_AW = TABLE_A - TABLE_W[:, None, :]
 
 
+class SprayOp(NamedTuple):
+    """A spray row as its helpers read it (`spray`): the tape; its sub-program X(y, p) as
+    sub = (lo, hi, in0, out0) (`rkhp.taylor.rows.subprogram_at`); where its x and p operand
+    slots are listed in tape.args (x_slots, p_slots); the dimension n; its scratch rows: the
+    stage values from Ys, their X from Xs."""
+
+    tape: Tape
+    sub: tuple
+    x_slots: int
+    p_slots: int
+    n: int
+    Ys: int
+    Xs: int
+
+
+class ValueStart(NamedTuple):
+    """Where `_value_stages` starts: J = d_y X and X0 = X at y = x (the operand's values), theta
+    an estimate of |J|_2, scale = max(1, |x|)."""
+
+    J: np.ndarray
+    X0: np.ndarray
+    theta: float
+    scale: float
+
+
+class StageNewton(NamedTuple):
+    """The Newton matrix of the stage values' solve for q nodes and its work arrays: Js (q, n, n)
+    its Jacobians, LU (qn, qn) and perm (qn,) its factors and row order, rvec and tmp (at least
+    qn) the linear solves' vectors, base (n) where `_jacobian` writes X."""
+
+    Js: np.ndarray
+    LU: np.ndarray
+    perm: np.ndarray
+    rvec: np.ndarray
+    tmp: np.ndarray
+    base: np.ndarray
+
+
 @nb.njit(inline="always", **NJIT_NORC)
-def _spray_field(tape, sub, W, D, space, S, deg, y_row, p_slots, n):
+def _spray_field(op, W, D, space, S, deg, y_row):
     """X = pi(y) p by the sub-program at degree D: y from the scratch rows S[y_row + k] (with
     y_row < 0: already in the sub-program's input slots, degree 0), p from the slots listed at
-    args[p_slots:]."""
-    lo, hi, in0 = sub[0], sub[1], sub[2]
+    args[op.p_slots:]."""
+    lo, hi, in0 = op.sub[0], op.sub[1], op.sub[2]
+    tape, p_slots, n = op.tape, op.p_slots, op.n
     args = tape.args
     M = space.counts[D]
     for k in range(n):
@@ -145,15 +186,13 @@ def spray(tape, r, W, D, space, S, deg):
     ops, args = tape.ops, tape.args
     out, start, n = ops[r, 1], ops[r, 2], ops[r, 4]
     lo, hi, in0, n_in, out0, n_out, pos = subprogram_at(args, start)
-    sub = (lo, hi, in0, out0)
-    x_slots, p_slots = pos, pos + n
-    M = space.counts[D]
-    Ys = SCRATCH_BASE
+    x_slots = pos
     Xs = SCRATCH_BASE + SPRAY_MAX_NODES * n
-    if tape.fpar[r] == 1.0 and _bernoulli_spray(tape, sub, W, D, space, S, deg, x_slots, p_slots,
-                                                n, out, Ys):
+    op = SprayOp(tape, (lo, hi, in0, out0), pos, pos + n, n, np.int64(SCRATCH_BASE), Xs)
+    M = space.counts[D]
+    if tape.fpar[r] == 1.0 and _bernoulli_spray(op, W, D, space, S, deg, out):
         return
-    q = _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs)
+    q = _spray_stages(op, W, D, space, S, deg)
     for k in range(n):
         xs = args[x_slots + k]
         for m in range(M):
@@ -174,7 +213,7 @@ def spray(tape, r, W, D, space, S, deg):
 
 
 @nb.njit(**NJIT_NRT)
-def _bernoulli_spray(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, out, rows):
+def _bernoulli_spray(op, W, D, space, S, deg, out):
     """alpha and beta of `spray` for X affine in y, X(y) = c + L y (c = X(0), L = d_y X: jets in
     p), by the Bernoulli series (docs/theory.md §9.3, "X affine in y"):
     alpha = x - v_1 / 2 + E, beta = x + v_1 / 2 + E, E = sum_{k even >= 2} B_k / k! v_k, with
@@ -187,10 +226,11 @@ def _bernoulli_spray(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, out, r
     (the degree-d coefficients of v_k grow like binom(k, d) theta^(k - d) until k > d, then
     shrink by ratios that decrease towards theta). Writes the results (slots out..) and returns
     True; False, nothing written, when theta > SPRAY_SERIES_RATIO 2 pi or the series does not
-    meet the bound within PHI_COEF's terms. Scratch rows from `rows`: v_k, c, E, v_1 (n each)."""
-    args = tape.args
-    out0 = sub[3]
+    meet the bound within PHI_COEF's terms. Scratch rows from op.Ys: v_k, c, E, v_1 (n each)."""
+    args, x_slots, n = op.tape.args, op.x_slots, op.n
+    out0 = op.sub[3]
     M = space.counts[D]
+    rows = op.Ys
     V, C, E, V1 = rows, rows + n, rows + 2 * n, rows + 3 * n
     J = np.empty((n, n))
     X0 = np.empty(n)
@@ -198,7 +238,7 @@ def _bernoulli_spray(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, out, r
     for k in range(n):
         S[V + k, 0] = W[args[x_slots + k], 0]
         scale = max(scale, abs(S[V + k, 0]))
-    _jacobian(tape, sub, W, space, S, deg, np.int64(V), p_slots, n, J, X0, True)
+    _jacobian(op, W, space, S, deg, np.int64(V), J, X0, True)
     ratio = _norm_bound(J) / TWO_PI
     if not ratio <= SPRAY_SERIES_RATIO:
         return False
@@ -211,7 +251,7 @@ def _bernoulli_spray(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, out, r
     previous = 0.0
     done = False
     for k in range(PHI_COEF.shape[0]):
-        _spray_field(tape, sub, W, D, space, S, deg, np.int64(V), p_slots, n)
+        _spray_field(op, W, D, space, S, deg, np.int64(V))
         power /= TWO_PI
         b = PHI_COEF[k]  # B_k / k! for even k, 0 for odd k >= 3
         norm = 0.0
@@ -258,11 +298,12 @@ def _bernoulli_spray(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, out, r
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _jacobian(tape, sub, W, space, S, deg, y_row, p_slots, n, J, base, affine):
+def _jacobian(op, W, space, S, deg, y_row, J, base, affine):
     """J := d_y X(y, p) and base := X(y, p) at the values y = S[y_row + k, 0] and p's values:
     by forward mode (one evaluation at degree 1) when the jet space has n variables, else by
     finite differences (for X affine in y, `affine`, with steps max(1, |y_k|): exact but for
     round-off)."""
+    tape, sub, p_slots, n = op.tape, op.sub, op.p_slots, op.n
     args = tape.args
     in0, out0 = sub[2], sub[3]
     if space.n_vars >= n and space.degree >= 1:
@@ -293,7 +334,7 @@ def _jacobian(tape, sub, W, space, S, deg, y_row, p_slots, n, J, base, affine):
         if k >= 0:
             step = (1.0 if affine else 1.4901161193847656e-08) * max(1.0, abs(S[y_row + k, 0]))
             W[args[in0 + k], 0] = S[y_row + k, 0] + step
-        _spray_field(tape, sub, W, zero, space, S, deg, np.int64(-1), p_slots, n)
+        _spray_field(op, W, zero, space, S, deg, np.int64(-1))
         for i in range(n):
             if k < 0:
                 base[i] = W[args[out0 + i], 0]
@@ -302,8 +343,8 @@ def _jacobian(tape, sub, W, space, S, deg, y_row, p_slots, n, J, base, affine):
 
 
 @nb.njit(**NJIT_NRT)
-def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
-    """The stage values of `spray` (rows Ys) and their X (rows Xs) up to degree D; returns Q,
+def _spray_stages(op, W, D, space, S, deg):
+    """The stage values of `spray` (rows op.Ys) and their X (rows op.Xs) up to degree D; returns Q,
     or 0 when they cannot be solved. Allocates the Jacobians and the Newton matrices.
     docs/theory.md §9.3, "Choice of Q" and "Solving for the stages".
 
@@ -320,8 +361,8 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
        (exact at degree d). One evaluation per stage and degree, at that degree (two with
        finite-difference Jacobians).
     """
-    args = tape.args
-    out0 = sub[3]
+    args, x_slots, n, Ys, Xs = op.tape.args, op.x_slots, op.n, op.Ys, op.Xs
+    out0 = op.sub[3]
     counts = space.counts
     work = np.empty(n)
     J = np.empty((n, n))
@@ -331,7 +372,7 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
     tmp = np.empty(SPRAY_MAX_NODES * n)
     for k in range(n):
         S[Ys + k, 0] = W[args[x_slots + k], 0]
-    _jacobian(tape, sub, W, space, S, deg, np.int64(Ys), p_slots, n, J, X0, False)
+    _jacobian(op, W, space, S, deg, np.int64(Ys), J, X0, False)
     scale = 1.0
     for k in range(n):
         scale = max(scale, abs(W[args[x_slots + k], 0]))
@@ -348,11 +389,10 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
     while True:
         if q > SPRAY_MAX_NODES:
             return 0
-        Jv = np.empty((q, n, n))
-        LUv = np.empty((q * n, q * n))
-        permv = np.empty(q * n, dtype=np.int64)
-        if not _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J, X0,
-                             theta, scale, alpha, warm, Jv, LUv, permv, rvec, tmp, work):
+        newton = StageNewton(np.empty((q, n, n)), np.empty((q * n, q * n)),
+                             np.empty(q * n, dtype=np.int64), rvec, tmp, work)
+        if not _value_stages(op, W, space, S, deg, q, ValueStart(J, X0, theta, scale), alpha, warm,
+                             newton):
             return 0
         if warm:
             gap = 0.0
@@ -369,13 +409,11 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
     AW = TABLE_AW[q]
     # the last value-level matrix is the exact one when its Jacobians are the stages': then
     # its factors serve, else factorise
-    LU, perm = LUv, permv
     Js = np.empty((q, n, n))
     for j in range(q):
-        _jacobian(tape, sub, W, space, S, deg, np.int64(Ys + j * n), p_slots, n, Js[j], work,
-                  False)
-    if not np.array_equal(Js, Jv):
-        if not _newton_matrix(AW, Js, q, n, LU, perm):
+        _jacobian(op, W, space, S, deg, np.int64(Ys + j * n), Js[j], work, False)
+    if not np.array_equal(Js, newton.Js):
+        if not _newton_matrix(AW, Js, q, n, newton.LU, newton.perm):
             return 0
     for i in range(q):
         for k in range(n):
@@ -388,15 +426,13 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
     for step in range(passes * D):
         d = 1 + step // passes
         for j in range(q):
-            _spray_field(tape, sub, W, np.int64(d), space, S, deg, np.int64(Ys + j * n),
-                         p_slots, n)
+            _spray_field(op, W, np.int64(d), space, S, deg, np.int64(Ys + j * n))
             for k in range(n):
                 o = args[out0 + k]
                 for m in range(counts[d]):
                     S[Xs + j * n + k, m] = W[o, m]
         for m in range(counts[d - 1], counts[d]):
-            _newton_step(W, S, args, x_slots, AW, q, n, Ys, Xs, np.int64(m), LU, perm, rvec,
-                         tmp)
+            _newton_step(op, W, S, AW, q, np.int64(m), newton)
             for j in range(q):
                 for i in range(n):
                     acc = 0.0
@@ -407,8 +443,7 @@ def _spray_stages(tape, sub, W, D, space, S, deg, x_slots, p_slots, n, Ys, Xs):
 
 
 @nb.njit(**NJIT_NORC)
-def _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J, X0, theta,
-                  scale, alpha, warm, Js, LU, perm, rvec, tmp, work):
+def _value_stages(op, W, space, S, deg, q, start, alpha, warm, newton):
     """The stage values with q nodes at the values (rows Ys, column 0; their X in Xs) by Newton
     with the matrix I - (A - w) (x) J (J at the stage values when the first corrections contract
     slowly: far from x it matters) until the update is at the round-off level; alpha := the
@@ -417,13 +452,15 @@ def _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J
     `warm` the (q - 1)-node solution's collocation polynomial at the q nodes (its X in the rows
     Xs). alpha comes from X at the last stage values but one, so the last update need only be
     below 4 eps max(1, |x|) / theta (alpha moves by about theta |dY| / 2). False if it does not
-    converge (or q nodes exceed SPRAY_MAX_NODES). Js (q, n, n), LU (qn, qn), perm (qn): the
-    Newton matrix's Jacobians, factors and row order, left as last used; rvec, tmp (at least
-    qn), work (n): work vectors."""
+    converge (or q nodes exceed SPRAY_MAX_NODES). start: J, X0, theta and scale at x
+    (`ValueStart`); newton: the Newton matrix and its work arrays (`StageNewton`), its Jacobians,
+    factors and row order left as last used."""
     if q > SPRAY_MAX_NODES:
         return False
-    args = tape.args
-    out0 = sub[3]
+    args, x_slots, n, Ys, Xs = op.tape.args, op.x_slots, op.n, op.Ys, op.Xs
+    J, X0, theta, scale = start.J, start.X0, start.theta, start.scale
+    Js, LU, perm = newton.Js, newton.LU, newton.perm
+    out0 = op.sub[3]
     zero = np.int64(0)
     AW = TABLE_AW[q]
     for j in range(q):  # J frozen at every node
@@ -452,10 +489,10 @@ def _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J
     previous = np.inf
     for sweep in range(SPRAY_MAX_SWEEPS):
         for j in range(q):
-            _spray_field(tape, sub, W, zero, space, S, deg, np.int64(Ys + j * n), p_slots, n)
+            _spray_field(op, W, zero, space, S, deg, np.int64(Ys + j * n))
             for k in range(n):
                 S[Xs + j * n + k, 0] = W[args[out0 + k], 0]
-        update = _newton_step(W, S, args, x_slots, AW, q, n, Ys, Xs, zero, LU, perm, rvec, tmp)
+        update = _newton_step(op, W, S, AW, q, zero, newton)
         if not update < np.inf:
             return False
         converged = update <= tol
@@ -473,8 +510,7 @@ def _value_stages(tape, sub, W, space, S, deg, x_slots, p_slots, n, Ys, Xs, q, J
             return True
         if sweep == 1 and update > 0.05 * previous:
             for j in range(q):
-                _jacobian(tape, sub, W, space, S, deg, np.int64(Ys + j * n), p_slots, n, Js[j],
-                          work, False)
+                _jacobian(op, W, space, S, deg, np.int64(Ys + j * n), Js[j], newton.base, False)
             if not _newton_matrix(AW, Js, q, n, LU, perm):
                 return False
         previous = update
@@ -494,16 +530,19 @@ def _newton_matrix(AW, Js, q, n, LU, perm):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _newton_step(W, S, args, x_slots, AW, q, n, Ys, Xs, m, LU, perm, rvec, tmp):
+def _newton_step(op, W, S, AW, q, m, newton):
     """One Newton correction of the stage values' coefficient m: rvec := N^-1 (x + (A - w) X
-    - Y)_m, added to the rows Ys; returns its largest magnitude (NaN-safe)."""
+    - Y)_m (N factorised in newton.LU, newton.perm), added to the rows Ys; returns its largest
+    magnitude (NaN-safe)."""
+    args, x_slots, n, Ys, Xs = op.tape.args, op.x_slots, op.n, op.Ys, op.Xs
+    rvec = newton.rvec
     for i in range(q):
         for k in range(n):
             acc = W[args[x_slots + k], m] - S[Ys + i * n + k, m]
             for j in range(q):
                 acc += AW[i, j] * S[Xs + j * n + k, m]
             rvec[i * n + k] = acc
-    lu_solve(LU, perm, rvec, tmp)
+    lu_solve(newton.LU, newton.perm, rvec, newton.tmp)
     update = 0.0
     for a in range(q * n):
         S[Ys + a, m] += rvec[a]

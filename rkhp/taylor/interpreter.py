@@ -83,33 +83,39 @@ def _composite(tape, r, W, D, space, S, deg):
     raise NotImplementedError("compiled code only")
 
 
-@overload(_composite, jit_options=dict(_nrt=False, error_model="numpy"))
-def _composite_kernels(tape, r, W, D, space, S, deg):
-    """The one dispatch of composite codes to their kernels, compiled for the tape's class with
-    the kernels of its composite codes only (`rkhp.taylor.tape.Tape`): none for a plain tape,
-    so that a system without composite operations never compiles them."""
-    codes = tape.instance_class.composites
+def _dispatch(codes):
+    """The one dispatch of composite codes to their kernels (`COMPOSITE_KERNELS`), for a tape
+    class whose composite codes are `codes`: nothing for none (a system without composite
+    operations never compiles them), the kernel itself for one, else a test of the row's code
+    against the first code and the dispatch of the others (inlined) when it differs."""
     if not codes:
         def no_kernel(tape, r, W, D, space, S, deg):
             pass
 
         return no_kernel
+    kernel = COMPOSITE_KERNELS[codes[0]]
     if len(codes) == 1:
-        kernel = COMPOSITE_KERNELS[codes[0]]
-
         def one_kernel(tape, r, W, D, space, S, deg):
             kernel(tape, r, W, D, space, S, deg)
 
         return one_kernel
+    code = codes[0]
+    others = nb.njit(inline="always", _nrt=False, error_model="numpy")(_dispatch(codes[1:]))
 
-    def every_kernel(tape, r, W, D, space, S, deg):
-        code = tape.ops[r, 0]
-        if code == PHIMV:
-            phimv(tape, r, W, D, space, S, deg)
-        elif code == SPRAY:
-            spray(tape, r, W, D, space, S, deg)
+    def first_or_others(tape, r, W, D, space, S, deg):
+        if tape.ops[r, 0] == code:
+            kernel(tape, r, W, D, space, S, deg)
+        else:
+            others(tape, r, W, D, space, S, deg)
 
-    return every_kernel
+    return first_or_others
+
+
+@overload(_composite, jit_options=dict(_nrt=False, error_model="numpy"))
+def _composite_kernels(tape, r, W, D, space, S, deg):
+    """`_composite` compiled for the tape's class with the kernels of its composite codes only
+    (`rkhp.taylor.tape.Tape`, `_dispatch`)."""
+    return _dispatch(tape.instance_class.composites)
 
 
 def evaluate(tape, inputs: np.ndarray, degree: int = 0, n_vars: int = 0):

@@ -1,0 +1,110 @@
+"""The engine's state is named (docs/engine.md "The state of the step loop"): read from the sources
+(nothing is imported or compiled), every compiled function of rkhp takes at most MAX_PARAMETERS
+parameters (more go in small NamedTuples), the step loop's memo is indexed by its named slots
+(`rkhp.integrators.engine.MEMO_HISTORY` ...) and StepBuffers is built with keywords."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parent.parent / "rkhp"
+MAX_PARAMETERS = 10
+COMPILERS = ("njit", "jit", "overload")
+"""The callables that compile a function: numba's, and `rkhp.taylor.compiler.overload`."""
+
+
+def _name(node: ast.AST) -> str:
+    """The last name of a decorator or callee: ``nb.njit(**NJIT_NORC)`` -> "njit"."""
+    if isinstance(node, ast.Call):
+        node = node.func
+    if isinstance(node, ast.Attribute):
+        return node.attr
+    return node.id if isinstance(node, ast.Name) else ""
+
+
+def _calls_compiler(function: ast.FunctionDef) -> bool:
+    return any(isinstance(n, ast.Call) and _name(n) in COMPILERS for n in ast.walk(function))
+
+
+def compiled_functions(tree: ast.Module) -> list[ast.FunctionDef]:
+    """The functions a module compiles: those decorated by a compiler, and the functions defined
+    inside an `overload` implementation or inside a function that compiles what it builds (the
+    implementations that they return)."""
+    found = []
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.FunctionDef):
+            continue
+        decorators = {_name(d) for d in node.decorator_list}
+        if decorators & {"njit", "jit"}:
+            found.append(node)
+        if "overload" in decorators or _calls_compiler(node):
+            found += [n for n in ast.walk(node) if isinstance(n, ast.FunctionDef) and n is not node]
+    return found
+
+
+def _parameters(function: ast.FunctionDef) -> int:
+    a = function.args
+    return len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs) + bool(a.vararg) + bool(a.kwarg)
+
+
+def _modules():
+    for path in sorted(PACKAGE.rglob("*.py")):
+        yield path.relative_to(PACKAGE.parent), ast.parse(path.read_text(encoding="utf-8"))
+
+
+def test_the_scan_finds_the_compiled_functions():
+    names = {f.name for _, tree in _modules() for f in compiled_functions(tree)}
+    assert {"rkhp_run", "rkhp_step", "implicit_tower", "run_tape", "spray", "composed_run",
+            "_value_stages", "one_kernel", "first_or_others"} <= names
+
+
+def test_compiled_functions_take_at_most_ten_parameters():
+    wide = [f"{path}:{f.lineno} {f.name} ({_parameters(f)})" for path, tree in _modules()
+            for f in compiled_functions(tree) if _parameters(f) > MAX_PARAMETERS]
+    assert not wide, f"compiled functions with more than {MAX_PARAMETERS} parameters: {wide}"
+
+
+def test_memo_slots_are_named():
+    numbered = [f"{path}:{n.lineno}" for path, tree in _modules() for n in ast.walk(tree)
+                if isinstance(n, ast.Subscript) and _name(n.value) == "memo"
+                and isinstance(n.slice, ast.Constant) and isinstance(n.slice.value, int)]
+    assert not numbered, f"memo indexed by a number: {numbered}"
+
+
+def test_step_buffers_are_built_with_keywords():
+    positional = [f"{path}:{n.lineno}" for path, tree in _modules() for n in ast.walk(tree)
+                  if isinstance(n, ast.Call) and _name(n) in ("StepBuffers", "StageNewtonWork") and n.args]
+    assert not positional, f"positional construction: {positional}"
+
+
+def test_memo_slots_are_distinct_and_fill_the_memo():
+    from rkhp.integrators import engine
+
+    slots = {name: value for name, value in vars(engine).items()
+             if name.startswith("MEMO_") and name != "MEMO_SIZE"}
+    assert sorted(slots.values()) == list(range(engine.MEMO_SIZE))
+
+
+@pytest.mark.slow
+def test_the_dispatch_of_several_composite_codes_runs_each_kernel():
+    """No built-in system holds both composite codes, so the dispatch's test of the row's code
+    (`rkhp.taylor.interpreter._dispatch`) is compiled here only: the tapes of toda (phimv) and
+    charged-particle (spray) recast to the class of all codes give their own values and
+    Jacobians."""
+    import numpy as np
+
+    from rkhp.systems import get_system
+    from rkhp.taylor.interpreter import evaluate
+    from rkhp.taylor.ops import PHIMV, SPRAY
+    from rkhp.taylor.tape import tape_class
+
+    every = tape_class((PHIMV, SPRAY))
+    for name in ("toda", "charged-particle"):
+        tape = get_system(name).alpha_tape
+        inputs = np.linspace(0.1, 0.4, tape.n_inputs)
+        own = evaluate(tape, inputs, 1, tape.n_inputs)
+        recast = evaluate(every(*tape), inputs, 1, tape.n_inputs)
+        assert all(np.array_equal(a, b) for a, b in zip(own, recast, strict=True)), name
