@@ -529,6 +529,16 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     return Failure.OK, it
 
 
+@nb.njit(inline="always", **NJIT_NORC)
+def add_increment(y, low, dy, n):
+    """y + low += dy, the state kept as a double-double (Knuth's two-sum per component)."""
+    for k in range(n):
+        a, b = y[k], low[k] + dy[k]
+        total = a + b
+        bb = total - a
+        y[k], low[k] = total, (a - (total - bb)) + (b - bb)
+
+
 @nb.njit(**NJIT_NORC)
 def run(y0, gammas, h, n_steps, tapes, work, memory, domain, tol, max_iter, states,
         iterations, keep_all):
@@ -572,12 +582,7 @@ def run(y0, gammas, h, n_steps, tapes, work, memory, domain, tol, max_iter, stat
             if cause != Failure.OK:
                 iterations[step] = total
                 return step, cause
-            for k in range(n):
-                # y + low += dy, kept as a double-double (Knuth's two-sum)
-                a, b = y[k], low[k] + work.dy[k]
-                total_k = a + b
-                bb = total_k - a
-                y[k], low[k] = total_k, (a - (total_k - bb)) + (b - bb)
+            add_increment(y, low, work.dy, n)
         iterations[step] = total
         cause = state_failure(y, domain)
         if cause != Failure.OK:
