@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import math
 import time
+import weakref
 from typing import NamedTuple
 
 import numpy as np
@@ -481,6 +482,10 @@ def run(y0, gammas, h, n_steps, form, work, memory, solver, record):
 # Python
 
 
+_FORMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+"""`closed_form` of the systems seen, while they live."""
+
+
 def _lie_entries(C: np.ndarray):
     """K(p)'s entries that are not identically zero, as `ClosedForm`'s pairs, starts, cols, coefs."""
     n = C.shape[0]
@@ -501,7 +506,16 @@ def closed_form(system) -> ClosedForm:
     """The data of the direct form for a system of the constant, lie-poisson or log-canonical
     family with the symmetric realisation (the family's base birealisation itself); InputError
     otherwise. The structure is read back from the system's pi, which is constant, linear
-    (pi(x)_ij = sum_k C_ijk x_k) or lambda_ij x_i x_j on these families."""
+    (pi(x)_ij = sum_k C_ijk x_k) or lambda_ij x_i x_j on these families. Kept per system (a run
+    of a few steps spends its time in Python, and `direct_euler` and the run each ask for it)."""
+    form = _FORMS.get(system)
+    if form is None:
+        form = _FORMS[system] = _read_form(system)
+    return form
+
+
+def _read_form(system) -> ClosedForm:
+    """`closed_form`, read from the system."""
     if system.family not in KINDS or system.realisation != "symmetric":
         raise InputError(f"{system.name}: the closed-form direct Euler step needs the family "
                          f"constant, lie-poisson or log-canonical with the symmetric realisation; "
