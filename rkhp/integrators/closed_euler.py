@@ -41,7 +41,6 @@ Compiled data: `ClosedForm` (the family's structure and H's tape), `ClosedWork` 
 from __future__ import annotations
 
 import math
-import time
 import weakref
 from typing import NamedTuple
 
@@ -57,7 +56,7 @@ from ..taylor.scalar import SCALAR_CODES, shared
 from ..taylor.tape import Tape
 from .composed import Record, Solver
 from .engine import max_abs, state_failure
-from .failure import Failure, failure_status
+from .failure import Failure
 from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE
 from .spray_euler import (
     HISTORY,
@@ -69,8 +68,9 @@ from .spray_euler import (
     _weight,
     add_increment,
     check_gammas,
+    direct_trajectory,
 )
-from .trajectory import Trajectory, checked
+from .trajectory import Trajectory
 
 CONSTANT, LIE_POISSON, LOG_CANONICAL = 0, 1, 2
 """The families of `ClosedForm.kind`."""
@@ -564,32 +564,16 @@ def integrate_closed_euler(system, gammas, h, n_steps, x0=None, keep_all: bool =
     g = check_gammas(gammas)
     h, n_steps = check_step(h, n_steps, system.dim)
     n = system.dim
-    y0 = system.start(x0)
     work = closed_work(form, n)
     memory = chord_memory(g.size, n)
     solver = Solver(float(tol), int(max_iter), system.domain_code)
-    t0 = time.perf_counter()
-    run(y0, g, h, 0, form, work, memory, solver, Record(np.zeros((1, n)), np.zeros(1, np.int64), True))
-    compile_seconds = time.perf_counter() - t0
-    record = Record(np.empty((n_steps + 1 if keep_all else 1, n)),
-                    np.zeros(max(n_steps, 1), dtype=np.int64), bool(keep_all))
-    t0 = time.perf_counter()
-    done, cause = run(y0, g, h, n_steps, form, work, memory, solver, record)
-    run_seconds = time.perf_counter() - t0
-    cause = Failure(cause)
-    failed = cause != Failure.OK
-    step = h * float(np.sum(g))
-    if keep_all:
-        kept, times = record.states[: done + 1], step * np.arange(done + 1)
-    else:
-        kept, times = np.vstack([y0, record.states[0]]), np.array([0.0, step * done])
-    trajectory = Trajectory(
-        times=times, states=kept, newton_iterations=record.iterations[: done + failed],
-        cause=cause, status=failure_status(cause, done, step, system.domain) if failed else "ok",
-        failed_step=done if failed else None, compile_seconds=compile_seconds,
-        run_seconds=run_seconds, method="closed-euler" if g.size == 1 else "closed-euler-composition",
-        system=system.name,
-        extra={"gammas": g.tolist(), "newton_tolerance": tol, "newton_max_iterations": max_iter,
-               "realisation": system.realisation, "refreshes": memory.refreshes.tolist()},
-        poisson=system)
-    return checked(trajectory, system) if keep_all else trajectory
+
+    def call(y0, steps, states, iterations, keep):
+        return run(y0, g, h, steps, form, work, memory, solver, Record(states, iterations, keep))
+
+    return direct_trajectory(system, g, h, n_steps, x0, keep_all, call,
+                             "closed-euler" if g.size == 1 else "closed-euler-composition",
+                             lambda: {"gammas": g.tolist(), "newton_tolerance": tol,
+                                      "newton_max_iterations": max_iter,
+                                      "realisation": system.realisation,
+                                      "refreshes": memory.refreshes.tolist()})
