@@ -3,7 +3,8 @@
 Names load lazily (numba is imported only when an integrator runs):
 `integrate`, `integrate_ensemble` (RKHP, explicit tableaux), `integrate_taylor` (THP, paper
 Thm 5.1), `integrate_classical`, `integrate_midpoint` (peers), `integrate_spray_euler` (RKHP
-Euler and its compositions on the spray realisation, direct form), `Trajectory`, `states_at`
+Euler and its compositions on the spray realisation, direct form), `integrate_closed_euler` (the
+same on the constant, lie-poisson and log-canonical families), `Trajectory`, `states_at`
 (states at chosen times).
 """
 
@@ -18,6 +19,7 @@ _LAZY = {
     "integrate_classical": "rkhp.integrators.classical",
     "integrate_midpoint": "rkhp.integrators.classical",
     "integrate_spray_euler": "rkhp.integrators.spray_euler",
+    "integrate_closed_euler": "rkhp.integrators.closed_euler",
     "Trajectory": "rkhp.integrators.trajectory",
     "states_at": "rkhp.integrators.output_times",
     "TimedStates": "rkhp.integrators.output_times",

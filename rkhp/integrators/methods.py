@@ -140,24 +140,34 @@ def composed_order(composition, base, condition_class: str) -> int:
 
 
 def direct_euler(system, tableau) -> bool:
-    """Whether Euler substeps on `system` run in the direct form of the Poisson-spray realisation
-    (`rkhp.integrators.spray_euler`): the tableau is RKHP Euler and the system has the full spray
-    realisation (family general, symmetric), whose tapes the direct form evaluates."""
+    """Whether Euler substeps on `system` run in a direct form: the tableau is RKHP Euler and the
+    system has the full Poisson-spray realisation (family general, symmetric;
+    `rkhp.integrators.spray_euler`) or the symmetric realisation of a family whose base is in
+    closed form (constant, lie-poisson, log-canonical; `rkhp.integrators.closed_euler`), and the
+    direct form can evaluate its tapes."""
     if tableau is None or tableau.stages != 1 or tableau.A_float[0][0] != 0.0 or tableau.b_float[0] != 1.0:
         return False
-    if system.family != "general" or system.realisation != "symmetric":
-        return False
-    from .spray_euler import direct_form_available
+    return _direct_form(system) is not None
 
-    return direct_form_available(system)
+
+def _direct_form(system):
+    """The entry of the direct Euler form that takes `system` (None: none does)."""
+    if system.realisation != "symmetric":
+        return None
+    if system.family == "general":
+        from .spray_euler import direct_form_available, integrate_spray_euler
+
+        return integrate_spray_euler if direct_form_available(system) else None
+    from .closed_euler import KINDS, closed_form_available, integrate_closed_euler
+
+    return integrate_closed_euler if system.family in KINDS and closed_form_available(system) else None
 
 
 def _direct(system, gammas, h, n_steps, x0, name: str):
     """The run of `direct_euler`'s substeps gammas h, named `name` (docs/compositions.md)."""
-    from .spray_euler import integrate_spray_euler
     from .trajectory import checked
 
-    return checked(replace(integrate_spray_euler(system, gammas, h, n_steps, x0), method=name), system)
+    return checked(replace(_direct_form(system)(system, gammas, h, n_steps, x0), method=name), system)
 
 
 def condition_class(system) -> str:

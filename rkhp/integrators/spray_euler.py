@@ -529,6 +529,16 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     return Failure.OK, it
 
 
+@nb.njit(inline="always", **NJIT_NORC)
+def add_increment(y, low, dy, n):
+    """y + low += dy, the state kept as a double-double (Knuth's two-sum per component)."""
+    for k in range(n):
+        a, b = y[k], low[k] + dy[k]
+        total = a + b
+        bb = total - a
+        y[k], low[k] = total, (a - (total - bb)) + (b - bb)
+
+
 @nb.njit(**NJIT_NORC)
 def run(y0, gammas, h, n_steps, tapes, work, memory, solver, record):
     """The composed loop: n_steps steps from y0, each the Euler substeps gammas[0] h,
@@ -572,12 +582,7 @@ def run(y0, gammas, h, n_steps, tapes, work, memory, solver, record):
             if cause != Failure.OK:
                 record.iterations[step] = total
                 return step, cause
-            for k in range(n):
-                # y + low += dy, kept as a double-double (Knuth's two-sum)
-                a, b = y[k], low[k] + work.dy[k]
-                total_k = a + b
-                bb = total_k - a
-                y[k], low[k] = total_k, (a - (total_k - bb)) + (b - bb)
+            add_increment(y, low, work.dy, n)
         record.iterations[step] = total
         cause = state_failure(y, solver.domain)
         if cause != Failure.OK:
@@ -677,17 +682,39 @@ def integrate_spray_euler(system, gammas, h, n_steps, x0=None, keep_all: bool = 
     g = check_gammas(gammas)
     h, n_steps = check_step(h, n_steps, system.dim)
     n = system.dim
-    y0 = system.start(x0)
     work = euler_work(tapes, n)
     memory = substep_memory(g.size, n)
     rest = (tapes, work, memory, Solver(float(tol), int(max_iter), system.domain_code))
+
+    def call(y0, steps, states, iterations, keep):
+        return run(y0, g, h, steps, *rest, Record(states, iterations, keep))
+
+    return direct_trajectory(system, g, h, n_steps, x0, keep_all, call,
+                             "spray-euler" if g.size == 1 else "spray-euler-composition",
+                             lambda: {"gammas": g.tolist(), "newton_tolerance": tol,
+                                      "newton_max_iterations": max_iter,
+                                      "realisation": system.realisation,
+                                      "nodes": memory.nodes.tolist(),
+                                      "refreshes": memory.refreshes.tolist()})
+
+
+def direct_trajectory(system, g, h, n_steps, x0, keep_all, call, method, extra) -> Trajectory:
+    """The Trajectory of a direct Euler form's compiled loop, shared by the direct forms
+    (`rkhp.integrators.closed_euler`): ``call(y0, steps, states, iterations, keep_all)`` runs
+    the loop and returns (completed steps, Failure); it is called once with no step (compile
+    time: numba's compile or cache load), then timed. Times advance by h sum(g) a step; states
+    y_0..y_k with keep_all, else y_0 and the last state; `extra()` is read after the run. With
+    keep_all, a run that diverged ends before the state that diverged (trajectory.checked):
+    without it only y_0 and the last state are kept."""
+    n = system.dim
+    y0 = system.start(x0)
     t0 = time.perf_counter()
-    run(y0, g, h, 0, *rest, Record(np.zeros((1, n)), np.zeros(1, np.int64), True))
+    call(y0, 0, np.zeros((1, n)), np.zeros(1, np.int64), True)
     compile_seconds = time.perf_counter() - t0
     states = np.empty((n_steps + 1 if keep_all else 1, n))
     iterations = np.zeros(max(n_steps, 1), dtype=np.int64)
     t0 = time.perf_counter()
-    done, cause = run(y0, g, h, n_steps, *rest, Record(states, iterations, bool(keep_all)))
+    done, cause = call(y0, n_steps, states, iterations, bool(keep_all))
     run_seconds = time.perf_counter() - t0
     cause = Failure(cause)
     failed = cause != Failure.OK
@@ -700,11 +727,5 @@ def integrate_spray_euler(system, gammas, h, n_steps, x0=None, keep_all: bool = 
         times=times, states=kept, newton_iterations=iterations[: done + failed],
         cause=cause, status=failure_status(cause, done, step, system.domain) if failed else "ok",
         failed_step=done if failed else None, compile_seconds=compile_seconds,
-        run_seconds=run_seconds, method="spray-euler" if g.size == 1 else "spray-euler-composition",
-        system=system.name,
-        extra={"gammas": g.tolist(), "newton_tolerance": tol, "newton_max_iterations": max_iter,
-               "realisation": system.realisation, "nodes": memory.nodes.tolist(),
-               "refreshes": memory.refreshes.tolist()}, poisson=system)
-    # divergence (rkhp.integrators.trajectory.checked) needs every state; without keep_all only
-    # y_0 and the last state are kept
+        run_seconds=run_seconds, method=method, system=system.name, extra=extra(), poisson=system)
     return checked(trajectory, system) if keep_all else trajectory

@@ -1,0 +1,579 @@
+"""The RKHP Euler step in direct form on the families whose symmetric birealisation is in closed
+form (constant, lie-poisson, log-canonical; docs/theory.md §4, §5, §12), and compositions of it.
+
+The RKHP Euler step of size h solves alpha(x, p) = y0 with p = h grad H(x) and returns
+y1 = beta(x, p) = alpha(x, -p). On these families alpha(x, p) = y0 solves for x in closed form,
+so the step is one system of n equations in an unknown z, with x and y1 explicit in z:
+
+- constant pi (alpha = x - pi p / 2): z = p, x = y0 + pi z / 2, y1 = y0 + pi z (the implicit
+  midpoint rule);
+- lie-poisson (alpha = phi(K) x, phi(z) = z / (1 - e^-z), K(p) x = -pi(x) p, K_ik =
+  -sum_j C_ijk p_j): z = p, x = psi(K) y0 with psi(z) = (1 - e^-z) / z, and y1 = phi(-K) psi(K) y0
+  = e^-K y0 (a coadjoint orbit is kept whatever z is);
+- log-canonical (alpha_i = x_i exp(-(1/2) sum_j lambda_ij x_j p_j)): z = x o p (componentwise),
+  u = lambda z, x_i = y0_i e^(u_i / 2), y1_i = y0_i e^(u_i), p = z / x (the Casimirs
+  sum_i k_i log x_i, k lambda = 0, are kept whatever z is).
+
+The equation is z = G(x(z)) with G(x) = h grad H(x) (constant, lie-poisson) or x o h grad H(x)
+(log-canonical): values and first derivatives of H only (`rkhp.taylor.scalar`), no jets. It is
+solved by quasi-Newton iterations z += B (G(x(z)) - z) from B = M^-1, M = I - G'(y0) x'(0)
+(x'(0) = pi(y0) / 2 for the first two families, diag(y0) lambda / 2 for log-canonical; Hess H by
+differences of the gradient, `rkhp.integrators.spray_euler._hessian`), a chord matrix that
+contracts by O(h^2) an iteration, improved by Broyden's update of B from each correction and the
+change of the residual it brought (measured on RKHP Euler: 4.3 iterations a step against 6.6 for
+the plain chord iterations on the rigid body at h = 0.1, 5.8 against 8.1 on Lotka–Volterra,
+4.1 against 4.6 on toda:12 at h = 0.05).
+B is built once per substep of a composition and kept, with its updates, across steps (rebuilt
+when its contraction grows, `REFRESH_CONTRACTION`, `rkhp.integrators.spray_euler.SLOW_CONTRACTION`).
+Each substep starts from z extrapolated over the same substep of the previous steps (`HISTORY`,
+as the spray's direct form, docs/general-poisson.md "The Euler step in direct form").
+
+e^-K y0 and psi(K) y0 are the power series sum_m (-K)^m y0 / m! and sum_m (-K)^m y0 / (m + 1)!
+by products with K stored by its non-zero entries (O(nnz(C)) a product), under the guard of the
+family's phi (|K|_F < 0.9 * 2 pi, `rkhp.taylor.composites.phimv`): a substep beyond it fails as
+the engine's Newton iteration does on the NaN that phi gives there (NEWTON_NON_FINITE).
+
+Compiled data: `ClosedForm` (the family's structure and H's tape), `ClosedWork` (work arrays),
+`ChordMemory` (what each substep keeps across steps, B included); `run` is the compiled composed loop,
+`integrate_closed_euler` the Python entry.
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from typing import NamedTuple
+
+import numpy as np
+
+from ..base.bounds import check_step
+from ..base.errors import InputError
+from ..taylor.compiler import NJIT_NORC
+from ..taylor.compiler import numba as nb
+from ..taylor.elementary import TWO_PI
+from ..taylor.linalg import lu_factor, lu_solve
+from ..taylor.scalar import SCALAR_CODES, shared
+from ..taylor.tape import Tape
+from .composed import Record, Solver
+from .engine import max_abs, state_failure
+from .failure import Failure
+from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE
+from .spray_euler import (
+    HISTORY,
+    RATE_MARGIN,
+    SLOW_CONTRACTION,
+    STAGNATION,
+    _gradient,
+    _hessian,
+    _weight,
+    add_increment,
+    check_gammas,
+    direct_trajectory,
+)
+from .trajectory import Trajectory
+
+CONSTANT, LIE_POISSON, LOG_CANONICAL = 0, 1, 2
+"""The families of `ClosedForm.kind`."""
+KINDS = {"constant": CONSTANT, "lie-poisson": LIE_POISSON, "log-canonical": LOG_CANONICAL}
+PHI_GUARD = 0.9 * TWO_PI
+"""The bound on |K|_F of the family's phi (`rkhp.taylor.composites.phimv`), kept here so that
+the direct form fails where the engine does."""
+REFRESH_CONTRACTION = 0.05
+"""A substep whose first two iterations contracted by more than this at its previous step
+rebuilds B before iterating: the chord matrix built at y0 contracts by O(h^2) (measured 0.004
+on the rigid body, 0.0004 on toda:12, 0.02 on Lotka–Volterra, tj4 at h = 0.1, 0.05, 0.1), and
+goes stale as the state moves along its orbit (without Broyden's update 0.1 to 0.2 on
+Lotka–Volterra after a few steps, where each iteration then gains a decade only); a rebuild
+costs 2 n gradients of H."""
+BROYDEN_FLOOR = 2.0**-30
+"""Broyden's update uses a correction only above this (relative to max(1, |y0|)): below, the
+change of the residual is dominated by its rounding."""
+SERIES_TERMS = 64
+"""Terms of the series of e^-K at most (|K|_F < PHI_GUARD needs about 40 for round-off)."""
+
+
+class ClosedForm(NamedTuple):
+    """The structure of a system of a closed-form family, and H's plain tape (`hamiltonian`,
+    over the 2n inputs (x, p), p unused).
+
+    kind: CONSTANT, LIE_POISSON or LOG_CANONICAL; matrix (n, n): pi (constant), lambda
+    (log-canonical), zeros (lie-poisson); lie-poisson's K(p) by its entries that are not
+    identically zero: pairs (e, 2) the (i, k) of entry e, K_ik = sum over r in
+    starts[e]..starts[e+1]-1 of coefs[r] p[cols[r]] (coefs = -C_ijk, cols = j)."""
+
+    kind: int
+    matrix: np.ndarray
+    pairs: np.ndarray
+    starts: np.ndarray
+    cols: np.ndarray
+    coefs: np.ndarray
+    hamiltonian: Tape
+
+
+class ClosedWork(NamedTuple):
+    """Work arrays (n: dimension, e: entries of K).
+
+    W (slots, n + 1): H's tape slots, values and first derivatives (`rkhp.taylor.scalar`);
+    z (n): the unknown; xbar (n): the point x of the step (alpha(x, p) = y0); g (n): grad H(xbar);
+    dy (n): the substep's increment y1 - y0; v, kv (n): a term of the series and its product by
+    K; kval (e): the entries of K; hess, jac (n, n): Hess H and x'(0) at the refresh point (then
+    the chord matrix's inverse, before it is copied into the memory); res, tmp (n): the residual
+    (then the correction) and lu_solve's work vector; last, step, by (n): the previous residual,
+    the previous correction and a product, for Broyden's update; perm (n) int64: the row order
+    of the chord matrix's factors; y, y_low (n): the state as the double-double y + y_low
+    (`run`)."""
+
+    W: np.ndarray
+    z: np.ndarray
+    xbar: np.ndarray
+    g: np.ndarray
+    dy: np.ndarray
+    v: np.ndarray
+    kv: np.ndarray
+    kval: np.ndarray
+    hess: np.ndarray
+    jac: np.ndarray
+    res: np.ndarray
+    tmp: np.ndarray
+    last: np.ndarray
+    step: np.ndarray
+    by: np.ndarray
+    perm: np.ndarray
+    y: np.ndarray
+    y_low: np.ndarray
+
+
+class ChordMemory(NamedTuple):
+    """What substep i of a composition keeps from one step to the next (index i first).
+
+    z_hist (s, HISTORY, n): its last solutions, newest first; count (s,) int64: how many;
+    inverse (s, n, n): the inverse of its chord matrix, with Broyden's updates; ready (s,) int64:
+    1 once it exists; rate (s,): the contraction of its first two iterations, last measured (1: none yet);
+    refreshes (s,) int64: how many times the matrix was built in this run."""
+
+    z_hist: np.ndarray
+    count: np.ndarray
+    inverse: np.ndarray
+    ready: np.ndarray
+    rate: np.ndarray
+    refreshes: np.ndarray
+
+
+def closed_work(form: ClosedForm, n: int) -> ClosedWork:
+    """The work arrays for dimension n."""
+    def vec():
+        return np.zeros(n)
+
+    return ClosedWork(np.zeros((form.hamiltonian.n_slots, n + 1)), vec(), vec(), vec(), vec(), vec(),
+                      vec(), np.zeros(form.pairs.shape[0]), np.zeros((n, n)), np.zeros((n, n)),
+                      vec(), vec(), vec(), vec(), vec(), np.zeros(n, np.int64), vec(), vec())
+
+
+def chord_memory(s: int, n: int) -> ChordMemory:
+    """The memory of s substeps in dimension n (empty: every substep starts cold)."""
+    return ChordMemory(np.zeros((s, HISTORY, n)), np.zeros(s, np.int64), np.zeros((s, n, n)),
+                       np.zeros(s, np.int64), np.ones(s), np.zeros(s, np.int64))
+
+
+# ----------------------------------------------------------------------------------------------
+# compiled
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _exp_series(y0, form, work, n):
+    """Lie-poisson: K(work.z) into work.kval, then work.dy := e^-K y0 - y0 and work.xbar :=
+    psi(K) y0 by their power series (see the module), summed until the next terms' bound is
+    below round-off. Returns Failure.OK, or NEWTON_NON_FINITE when |K|_F is not below PHI_GUARD
+    (or not finite)."""
+    norm = 0.0
+    for e in range(form.pairs.shape[0]):
+        acc = 0.0
+        for r in range(form.starts[e], form.starts[e + 1]):
+            acc += form.coefs[r] * work.z[form.cols[r]]
+        work.kval[e] = acc
+        norm += acc * acc
+    norm = math.sqrt(norm)
+    if not norm < PHI_GUARD:
+        return Failure.NEWTON_NON_FINITE
+    size0 = 0.0
+    for k in range(n):
+        work.v[k] = y0[k]
+        work.dy[k] = 0.0
+        work.xbar[k] = y0[k]
+        size0 += y0[k] * y0[k]
+    bound = 2.0**-106 * size0  # (2^-53 |y0|_2)^2
+    for m in range(1, SERIES_TERMS + 1):
+        for k in range(n):
+            work.kv[k] = 0.0
+        for e in range(form.pairs.shape[0]):
+            work.kv[form.pairs[e, 0]] -= work.kval[e] * work.v[form.pairs[e, 1]]
+        size = 0.0
+        for k in range(n):
+            t = work.kv[k] / m
+            work.v[k] = t
+            work.dy[k] += t
+            work.xbar[k] += t / (m + 1)
+            size += t * t
+        # the tail after term m is at most |v_m|_2 q / (1 - q) <= |v_m|_2, q = |K|_2 / (m + 1)
+        if 2.0 * norm <= m + 1 and size <= bound:
+            return Failure.OK
+    return Failure.NEWTON_NON_FINITE
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _point(y0, form, work, n):
+    """work.xbar (x with alpha(x, p) = y0) and work.dy (y1 - y0) from work.z (see the module);
+    returns Failure.OK or the series' failure."""
+    if form.kind == LIE_POISSON:
+        return _exp_series(y0, form, work, n)
+    M = form.matrix
+    for i in range(n):
+        u = 0.0
+        for j in range(n):
+            u += M[i, j] * work.z[j]
+        if form.kind == CONSTANT:
+            work.xbar[i] = y0[i] + 0.5 * u
+            work.dy[i] = u
+        else:
+            work.xbar[i] = y0[i] * math.exp(0.5 * u)
+            work.dy[i] = y0[i] * math.expm1(u)
+    return Failure.OK
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _target(hs, form, work, n):
+    """work.res := G(work.xbar) (see the module) with step hs."""
+    _gradient(form, work, work.xbar, n)
+    for k in range(n):
+        gk = hs * work.g[k]
+        work.res[k] = work.xbar[k] * gk if form.kind == LOG_CANONICAL else gk
+
+
+@nb.njit(**NJIT_NORC)
+def _refresh(i, y0, hs, form, work, memory, n):
+    """Substep i's chord matrix M = I - G'(y0) x'(0) with step hs, its inverse into the memory
+    (its contraction, until measured, taken as REFRESH_CONTRACTION); Failure.OK or SINGULAR."""
+    memory.refreshes[i] += 1
+    memory.rate[i] = REFRESH_CONTRACTION  # until measured: a bound that triggers no rebuild
+    D, H = work.jac, work.hess
+    for a in range(n):
+        for b in range(n):
+            D[a, b] = 0.0
+    if form.kind == LIE_POISSON:
+        # x'(0) = pi(y0) / 2, pi(y0)_ij = sum_k C_ijk y0_k = -sum_k coefs y0_k
+        for e in range(form.pairs.shape[0]):
+            row, k = form.pairs[e, 0], form.pairs[e, 1]
+            for r in range(form.starts[e], form.starts[e + 1]):
+                D[row, form.cols[r]] -= 0.5 * form.coefs[r] * y0[k]
+    else:
+        for a in range(n):
+            for b in range(n):
+                D[a, b] = 0.5 * form.matrix[a, b] * (y0[a] if form.kind == LOG_CANONICAL else 1.0)
+    _hessian(form, work, y0, n)
+    if form.kind == LOG_CANONICAL:
+        # G'(y0) = h (diag(grad H) + diag(y0) Hess H)
+        _gradient(form, work, y0, n)
+        for a in range(n):
+            for b in range(n):
+                H[a, b] *= y0[a]
+            H[a, a] += work.g[a]
+    M = memory.inverse[i]
+    for a in range(n):
+        for b in range(n):
+            acc = 0.0
+            for r in range(n):
+                acc += H[a, r] * D[r, b]
+            M[a, b] = (1.0 if a == b else 0.0) - hs * acc
+    if not lu_factor(M, work.perm):
+        return Failure.SINGULAR
+    for b in range(n):  # the inverse, column by column, into work.jac
+        for a in range(n):
+            work.res[a] = 1.0 if a == b else 0.0
+        lu_solve(M, work.perm, work.res, work.tmp)
+        for a in range(n):
+            D[a, b] = work.res[a]
+    for a in range(n):
+        for b in range(n):
+            M[a, b] = D[a, b]
+    memory.ready[i] = 1
+    return Failure.OK
+
+
+@nb.njit(**NJIT_NORC)
+def _predict(i, y0, hs, form, work, memory, n):
+    """work.z from substep i's previous solutions (their polynomial extrapolation in the step
+    index, `rkhp.integrators.spray_euler._weight`), or G(y0) without any."""
+    count = memory.count[i]
+    if count == 0:
+        for k in range(n):
+            work.xbar[k] = y0[k]
+        _target(hs, form, work, n)
+        for k in range(n):
+            work.z[k] = work.res[k]
+        return
+    for k in range(n):
+        acc = 0.0
+        for r in range(count):
+            acc += _weight(count, r) * memory.z_hist[i, r, k]
+        work.z[k] = acc
+
+
+@nb.njit(**NJIT_NORC)
+def _remember(i, memory, work, n):
+    """Push the converged z of substep i into its history."""
+    for r in range(HISTORY - 1, 0, -1):
+        for k in range(n):
+            memory.z_hist[i, r, k] = memory.z_hist[i, r - 1, k]
+    for k in range(n):
+        memory.z_hist[i, 0, k] = work.z[k]
+    memory.count[i] = min(memory.count[i] + 1, HISTORY)
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _broyden(B, work, n):
+    """Broyden's update of B ~ F'(z)^-1 (F(z) = z - G(x(z)), residual r = -F) from the last
+    correction s = work.step and the change of F, q = work.last - work.res:
+    B += (s - B q) (s^T B) / (s^T B q), skipped when s^T B q vanishes."""
+    for a in range(n):
+        acc = 0.0
+        for b in range(n):
+            acc += B[a, b] * (work.last[b] - work.res[b])
+        work.by[a] = acc
+    den = 0.0
+    for a in range(n):
+        den += work.step[a] * work.by[a]
+    if not abs(den) > 0.0:
+        return
+    for a in range(n):
+        work.by[a] = (work.step[a] - work.by[a]) / den
+    for b in range(n):
+        sb = 0.0
+        for a in range(n):
+            sb += work.step[a] * B[a, b]
+        for a in range(n):
+            B[a, b] += work.by[a] * sb
+
+
+@nb.njit(**NJIT_NORC)
+def closed_substep(i, y0, hs, form, work, memory, solver):
+    """One Euler substep of step hs in direct form from y0 (substep i of the composition, its
+    memory): its increment y1 - y0 into work.dy; returns (Failure, iterations).
+
+    Starts from the extrapolated z; iterates z += B r, r = G(x(z)) - z, B updated by `_broyden`
+    from the second iteration on; builds B afresh at the substep's first call, when its last
+    measured contraction exceeds REFRESH_CONTRACTION, and when an iteration contracts by more
+    than SLOW_CONTRACTION (once per substep). Stops when the correction, or from the second
+    iteration on its predicted successor t / (1 - t) |d| (t = RATE_MARGIN theta, theta the
+    measured contraction: Broyden's iterations contract unevenly; without the margin, a constant
+    pi's step stopped 4e-15 off the midpoint equation), is at most solver.tol max(1, |y0|), or
+    when corrections at round-off stop halving (`rkhp.integrators.spray_euler.STAGNATION`); then
+    x and y1 are taken at the final z. The first iteration predicts nothing: the previous step's
+    first contraction, which the spray's direct form uses there, is no bound once Broyden's
+    update has improved B (measured below 1e-4 on the rigid body)."""
+    n = y0.shape[0]
+    scale = max(1.0, max_abs(y0))
+    _predict(i, y0, hs, form, work, memory, n)
+    fresh = False
+    if memory.ready[i] == 0 or memory.rate[i] > REFRESH_CONTRACTION:
+        cause = _refresh(i, y0, hs, form, work, memory, n)
+        if cause != Failure.OK:
+            return cause, 0
+        fresh = True
+    previous = np.inf
+    since = 0
+    it = 0
+    converged = False
+    while it < solver.max_iter:
+        it += 1
+        since += 1
+        cause = _point(y0, form, work, n)
+        if cause != Failure.OK:
+            return cause, it
+        _target(hs, form, work, n)
+        for k in range(n):
+            work.res[k] -= work.z[k]
+        if since >= 2 and previous > BROYDEN_FLOOR * scale:
+            _broyden(memory.inverse[i], work, n)
+        size = 0.0
+        for k in range(n):
+            acc = 0.0
+            for b in range(n):
+                acc += memory.inverse[i, k, b] * work.res[b]
+            work.last[k] = work.res[k]
+            work.step[k] = acc
+            work.z[k] += acc
+            if not abs(acc) <= size:
+                size = abs(acc)
+        if not size < np.inf:
+            return Failure.NEWTON_NON_FINITE, it
+        if size > 1e8 * scale:
+            return Failure.NEWTON_DIVERGED, it
+        theta = size / previous if since >= 2 else np.inf  # no prediction from one correction
+        if since == 2:
+            memory.rate[i] = theta
+        bound = RATE_MARGIN * theta
+        predicted = bound / (1.0 - bound) * size if bound < 0.5 else np.inf
+        if size <= solver.tol * scale or predicted <= solver.tol * scale:
+            converged = True
+            break
+        if since >= 2 and size >= 0.5 * previous and size <= STAGNATION * scale:
+            converged = True
+            break
+        if since >= 2 and not fresh and theta > SLOW_CONTRACTION and size > 1e3 * solver.tol * scale:
+            fresh = True
+            cause = _refresh(i, y0, hs, form, work, memory, n)
+            if cause != Failure.OK:
+                return cause, it
+            since = 0
+        previous = size
+    if not converged:
+        return Failure.NEWTON_NO_CONVERGENCE, it
+    cause = _point(y0, form, work, n)
+    if cause != Failure.OK:
+        return cause, it
+    _remember(i, memory, work, n)
+    return Failure.OK, it
+
+
+@nb.njit(**NJIT_NORC)
+def run(y0, gammas, h, n_steps, form, work, memory, solver, record):
+    """The composed loop: n_steps steps from y0, each the Euler substeps gammas[0] h,
+    gammas[1] h, ... in direct form (`closed_substep`), substep i warm-started from substep i of
+    the previous step (`memory`, emptied here first), all in compiled code; the state carried as
+    a double-double (`rkhp.integrators.spray_euler.add_increment`).
+
+    solver: (tol, max_iter, domain code) as `rkhp.integrators.composed.Solver`; record: states
+    (n_steps + 1, n) with keep_all (states[k] = y_k), else (1, n) (the last state), iterations
+    (n_steps,) int64 (iterations of each step, all its substeps), as
+    `rkhp.integrators.composed.Record`. Returns (completed steps, Failure of the step after them
+    or Failure.OK)."""
+    n = y0.shape[0]
+    s = gammas.shape[0]
+    y, low = work.y, work.y_low
+    for k in range(n):
+        y[k] = y0[k]
+        low[k] = 0.0
+        record.states[0, k] = y0[k]
+    for i in range(s):
+        memory.count[i] = 0
+        memory.ready[i] = 0
+        memory.rate[i] = 1.0
+        memory.refreshes[i] = 0
+    for step in range(n_steps):
+        total = 0
+        for i in range(s):
+            cause, it = closed_substep(i, y, gammas[i] * h, form, work, memory, solver)
+            total += it
+            if cause != Failure.OK:
+                record.iterations[step] = total
+                return step, cause
+            add_increment(y, low, work.dy, n)
+        record.iterations[step] = total
+        cause = state_failure(y, solver.domain)
+        if cause != Failure.OK:
+            return step, cause
+        row = step + 1 if record.keep_all else 0
+        for k in range(n):
+            record.states[row, k] = y[k]
+    return n_steps, Failure.OK
+
+
+# ----------------------------------------------------------------------------------------------
+# Python
+
+
+_FORMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+"""`closed_form` of the systems seen, while they live."""
+
+
+def _lie_entries(C: np.ndarray):
+    """K(p)'s entries that are not identically zero, as `ClosedForm`'s pairs, starts, cols, coefs."""
+    n = C.shape[0]
+    pairs, starts, cols, coefs = [], [0], [], []
+    for i in range(n):
+        for k in range(n):
+            js = np.flatnonzero(C[i, :, k])
+            if js.size:
+                pairs.append((i, k))
+                cols += js.tolist()
+                coefs += (-C[i, js, k]).tolist()
+                starts.append(len(cols))
+    return (np.array(pairs, np.int64).reshape(-1, 2), np.array(starts, np.int64),
+            np.array(cols, np.int64), np.array(coefs, np.float64))
+
+
+def closed_form(system) -> ClosedForm:
+    """The data of the direct form for a system of the constant, lie-poisson or log-canonical
+    family with the symmetric realisation (the family's base birealisation itself); InputError
+    otherwise. The structure is read back from the system's pi, which is constant, linear
+    (pi(x)_ij = sum_k C_ijk x_k) or lambda_ij x_i x_j on these families. Kept per system (a run
+    of a few steps spends its time in Python, and `direct_euler` and the run each ask for it)."""
+    form = _FORMS.get(system)
+    if form is None:
+        form = _FORMS[system] = _read_form(system)
+    return form
+
+
+def _read_form(system) -> ClosedForm:
+    """`closed_form`, read from the system."""
+    if system.family not in KINDS or system.realisation != "symmetric":
+        raise InputError(f"{system.name}: the closed-form direct Euler step needs the family "
+                         f"constant, lie-poisson or log-canonical with the symmetric realisation; "
+                         f"this system is {system.family}, realisation {system.realisation}")
+    h = system.h_tape
+    if h.main != 0 or any(int(code) not in SCALAR_CODES for code in h.ops[:, 0]):
+        raise InputError(f"{system.name}: the direct Euler step evaluates + - * / and the "
+                         f"functions of mathematical text; the Hamiltonian's tape holds another "
+                         f"operation")
+    n, kind = system.dim, KINDS[system.family]
+    matrix = np.zeros((n, n))
+    C = np.zeros((n, n, n))
+    if kind == CONSTANT:
+        matrix = np.array(system.poisson(np.zeros(n)), dtype=np.float64)
+    elif kind == LOG_CANONICAL:
+        matrix = np.array(system.poisson(np.ones(n)), dtype=np.float64)
+    else:
+        for k in range(n):
+            C[:, :, k] = system.poisson(np.eye(n)[k])
+    return ClosedForm(kind, np.ascontiguousarray(matrix), *_lie_entries(C), shared(Tape(*h)))
+
+
+def closed_form_available(system) -> bool:
+    """Whether `closed_form` accepts `system`."""
+    try:
+        closed_form(system)
+    except InputError:
+        return False
+    return True
+
+
+def integrate_closed_euler(system, gammas, h, n_steps, x0=None, keep_all: bool = True, *,
+                           tol: float = NEWTON_TOLERANCE,
+                           max_iter: int = NEWTON_MAX_ITERATIONS) -> Trajectory:
+    """Integrate `system` (family constant, lie-poisson or log-canonical, symmetric realisation)
+    by n_steps steps of the composition of RKHP Euler steps gammas[0] h, gammas[1] h, ... (in
+    that order), each in direct form (see the module); h may be negative. gammas = (1,) is RKHP
+    Euler.
+
+    Returns a Trajectory whose times advance by h sum(gammas) a step; states y_0..y_k with
+    keep_all, else y_0 and the last state; newton_iterations: iterations per step (all
+    substeps); a failed run keeps the states before the failing step and names it.
+    InputError for another family or realisation, or bad arguments.
+    """
+    form = closed_form(system)
+    g = check_gammas(gammas)
+    h, n_steps = check_step(h, n_steps, system.dim)
+    n = system.dim
+    work = closed_work(form, n)
+    memory = chord_memory(g.size, n)
+    solver = Solver(float(tol), int(max_iter), system.domain_code)
+
+    def call(y0, steps, states, iterations, keep):
+        return run(y0, g, h, steps, form, work, memory, solver, Record(states, iterations, keep))
+
+    return direct_trajectory(system, g, h, n_steps, x0, keep_all, call,
+                             "closed-euler" if g.size == 1 else "closed-euler-composition",
+                             lambda: {"gammas": g.tolist(), "newton_tolerance": tol,
+                                      "newton_max_iterations": max_iter,
+                                      "realisation": system.realisation,
+                                      "refreshes": memory.refreshes.tolist()})

@@ -1,0 +1,141 @@
+"""The RKHP Euler step in direct form on the closed-form families, and its compositions
+(rkhp.integrators.closed_euler; docs/compositions.md "The cost of a substep").
+
+Values from outside the code: the engine's RKHP Euler step (alpha solved by Newton on Taylor jets
+of H o alpha, `rkhp.integrators.rkhp_method`) and its composed loop (`rkhp.integrators.composed`),
+the implicit midpoint rule's own equation (RKHP Euler on a constant pi, docs/theory.md §5), the
+symmetry of RKHP Euler with a symmetric birealisation (docs/theory.md §12: Phi_-h o Phi_h = id),
+the Casimirs of each family, and the orders 4 and 6 of tj4 and kahan-li6 against a DOP853
+reference (`rkhp.studies.converge`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rkhp.base.errors import InputError
+from rkhp.integrators.closed_euler import closed_form, integrate_closed_euler
+from rkhp.integrators.composed import integrate_composition
+from rkhp.integrators.failure import Failure
+from rkhp.integrators.methods import direct_euler, integrate, resolve_method
+from rkhp.integrators.rkhp_method import integrate as engine_integrate
+from rkhp.studies.converge import converge
+from rkhp.systems import get_system
+from rkhp.systems.families import family_system
+from rkhp.tableaux.compositions import load_composition
+from rkhp.taylor.tape import functions as f
+
+#: a constant pi of rank 2 on R^3 (Casimir k . x, k = (1, 2, 4)) with a non-quadratic H
+CONSTANT_PI = np.array([[0.0, 1.0, -0.5], [-1.0, 0.0, 0.25], [0.5, -0.25, 0.0]])
+
+
+def constant_system():
+    return family_system("constant", CONSTANT_PI,
+                         lambda x: 0.5 * (x[0] * x[0] + x[1] * x[1]) - f.cos(x[2]) + 0.1 * x[0] * x[1] * x[2],
+                         name="constant-3", x0=(0.3, -0.2, 0.5), t_final=1.0)
+
+
+SYSTEMS = {"rigid-body": 0.1, "toda:12": 0.05, "lotka-volterra": 0.1, "volterra-lattice:7": 0.05,
+           "constant-3": 0.1}
+
+
+def system_named(name):
+    return constant_system() if name == "constant-3" else get_system(name)
+
+
+@pytest.mark.parametrize("name", sorted(SYSTEMS))
+def test_euler_is_the_engine_euler(name):
+    """40 steps; measured (largest difference / largest |y|): rigid-body 1.8e-14, toda:12
+    4.5e-15, lotka-volterra 5.4e-15, volterra-lattice:7 1.3e-14, constant-3 2.3e-15."""
+    system, h = system_named(name), SYSTEMS[name]
+    direct = integrate_closed_euler(system, (1.0,), h, 40)
+    engine = engine_integrate(system, "euler", h, 40)
+    assert direct.ok and engine.ok
+    assert np.abs(direct.states - engine.states).max() < 5e-14 * np.abs(engine.states).max()
+    assert np.abs(direct.states[-1] - system.x0).max() > 1e-3  # the run moved
+    np.testing.assert_allclose(direct.times, engine.times, rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("name", ["rigid-body", "toda:12", "lotka-volterra"])
+def test_a_composition_is_the_engine_composition(name):
+    system, h = system_named(name), SYSTEMS[name]
+    tj4 = load_composition("tj4")
+    direct = integrate_closed_euler(system, tj4.gamma_float, h, 20)
+    engine = integrate_composition(system, tj4, h, 20)
+    assert direct.ok and engine.ok
+    assert np.abs(direct.states - engine.states).max() < 5e-14 * np.abs(engine.states).max()
+
+
+def test_on_a_constant_pi_euler_is_the_implicit_midpoint_rule():
+    system = constant_system()
+    run = integrate_closed_euler(system, (1.0,), 0.1, 30)
+    for y0, y1 in zip(run.states[:-1], run.states[1:], strict=True):
+        residual = y1 - y0 - 0.1 * CONSTANT_PI @ system.grad_hamiltonian(0.5 * (y0 + y1))
+        assert np.abs(residual).max() < 1e-15
+
+
+@pytest.mark.parametrize("name", ["rigid-body", "toda:12", "lotka-volterra", "volterra-lattice:7"])
+def test_backward_steps_return_to_the_start(name):
+    system, h = system_named(name), SYSTEMS[name]
+    for gammas in ((1.0,), load_composition("tj4").gamma_float):
+        forward = integrate_closed_euler(system, gammas, h, 100)
+        back = integrate_closed_euler(system, gammas[::-1], -h, 100, x0=forward.final_state)
+        assert forward.ok and back.ok
+        assert np.abs(forward.final_state - system.x0).max() > 1e-2
+        assert np.abs(back.final_state - system.x0).max() < 1e-13 * max(1.0, np.abs(system.x0).max())
+
+
+@pytest.mark.parametrize("name", ["volterra-lattice:7", "toda:12", "constant-3"])
+def test_casimirs_are_kept_to_round_off(name):
+    system, h = system_named(name), SYSTEMS[name]
+    assert system.casimirs
+    run = integrate_closed_euler(system, load_composition("kahan-li6").gamma_float, h, 200)
+    c = np.array([system.casimir_values(x) for x in run.states])
+    assert run.ok and np.abs(c - c[0]).max() < 1e-13 * max(1.0, np.abs(c[0]).max())
+
+
+def test_the_orders_of_tj4_and_kahan_li6_on_toda():
+    study = converge("toda:12", ("tj4", "kahan-li6"))
+    verdicts = {m.method: (m.expected_order, m.verdict) for m in study.methods}
+    assert verdicts == {"tj4": (4, "confirmed"), "kahan-li6": (6, "confirmed")}
+
+
+@pytest.mark.parametrize("name", ["rigid-body", "toda:12", "lotka-volterra", "pendulum"])
+def test_euler_and_its_compositions_are_routed_here(name):
+    system = get_system(name)
+    for method in ("euler", "suzuki4"):
+        m = resolve_method(method)
+        assert direct_euler(system, m.tableau)
+        run = m.integrate(system, 0.1, 5)
+        gammas = (1.0,) if method == "euler" else m.composition.gamma_float
+        assert run.method == method
+        np.testing.assert_array_equal(run.states, integrate_closed_euler(system, gammas, 0.1, 5).states)
+    assert not direct_euler(system, resolve_method("rk4").tableau)
+
+
+@pytest.mark.parametrize("realisation", ["shifted", "truncated:3"])
+def test_other_realisations_run_in_the_engine(realisation):
+    system = get_system("rigid-body", realisation)
+    assert not direct_euler(system, resolve_method("euler").tableau)
+    with pytest.raises(InputError):
+        closed_form(system)
+    assert integrate(system, "euler", 0.1, 3).ok
+
+
+def test_a_step_beyond_the_guard_of_phi_fails_with_a_cause():
+    run = integrate_closed_euler(get_system("rigid-body"), (1.0,), 40.0, 5)
+    assert not run.ok and run.cause == Failure.NEWTON_NON_FINITE
+    assert run.failed_step == 0 and len(run.states) == 1
+    assert run.status.startswith("failed at step 0")
+
+
+def test_a_solve_that_does_not_converge_fails_with_a_cause():
+    run = integrate_closed_euler(get_system("toda:12"), (1.0,), 0.05, 5, max_iter=1)
+    assert run.cause == Failure.NEWTON_NO_CONVERGENCE and run.failed_step == 0
+
+
+def test_a_failed_run_is_one_line_and_exit_1(run_cli):
+    code, out, err = run_cli("integrate", "rigid-body", "--method", "tj4", "--h", "40", "--t-final", "120")
+    assert code == 1
+    assert len(err.strip().splitlines()) == 1 and "Newton" in err
