@@ -294,6 +294,18 @@ def check_trajectory(steps, dim: int, what: str = "the run") -> None:
     check_memory(trajectory_bytes(steps, dim), f"{what} ({steps} steps in dimension {dim})")
 
 
+#: steps of all the trajectories of one study (`bench`: repeats x starts x steps x methods); at
+#: the engine's 10^6 to 10^7 steps per second, 10^11 steps are hours of work
+MAX_WORK_STEPS = 10**11
+
+
+def check_work(steps: int, what: str) -> None:
+    """Work whose size is known before it starts, refused with the estimate above MAX_WORK_STEPS."""
+    if steps > MAX_WORK_STEPS:
+        raise InputError(f"{what} would take about {steps:.2g} steps of the integrators (hours to years); "
+                         f"the limit is {MAX_WORK_STEPS:.0e}")
+
+
 #: bytes per tree of an enumeration: the tree objects and tables (290 measured at order 15)
 BYTES_PER_TREE = 500
 #: bytes per tree that `rkhp trees` prints (1.7 KB measured: trees --order 15 --format json)
