@@ -164,8 +164,8 @@ def test_case(case, server, tmp_path):
     assert "Traceback" not in stderr, stderr[-3000:]
     assert answer["status"] == status, (answer["status"], stderr[-3000:])
     if status:
-        lines = stderr.split("\n")
-        assert len(lines) == 2 and lines[1] == "" and lines[0].startswith("rkhp: ") and lines[0][6:].strip(), stderr[-3000:]
+        line, _, rest = stderr.partition("\n")
+        assert rest == "" and stderr.endswith("\n") and line.startswith("rkhp: ") and line[6:].strip(), stderr[-3000:]
     assert answer["wall"] <= bound, f"{answer['wall']:.1f} s > {bound} s"
     after = _snapshot(folder)
     created = set(after) - set(before)
