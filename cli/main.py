@@ -34,8 +34,25 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
 }
 
 
+class _Interrupt(BaseException):
+    """Ctrl-C on its way out of click, which would print an empty line on stderr for a
+    KeyboardInterrupt before its Abort."""
+
+
 class LazyGroup(click.Group):
     """A group whose subcommands are imported on first use, and whose errors are one line."""
+
+    def make_context(self, *args, **kwargs):
+        try:
+            return super().make_context(*args, **kwargs)
+        except KeyboardInterrupt:
+            raise _Interrupt from None
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt:
+            raise _Interrupt from None
 
     def list_commands(self, ctx):
         return list(COMMANDS)
@@ -68,7 +85,7 @@ class LazyGroup(click.Group):
         except click.exceptions.NoArgsIsHelpError as exc:  # bare `rkhp`: the help, on stdout
             click.echo(exc.ctx.get_help())
             _exit(0)
-        except click.exceptions.Abort:
+        except (click.exceptions.Abort, _Interrupt):
             _interrupted()
         except click.UsageError as exc:
             _fail(f"rkhp: error: {one_line(exc.format_message())}", 2)

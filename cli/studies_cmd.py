@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from rkhp.base import bounds
+from rkhp.base.errors import InputError
 from rkhp.base.tables import booktabs
 from rkhp.studies.plots import check_plot_path, data_path
 
@@ -45,6 +46,11 @@ METHODS_HELP = (METHOD_HELP + " Repeat or separate by commas. Default: euler, pa
 
 
 def _names(values) -> tuple[str, ...]:
+    """The names of the --method values; a value that names none (`--method ""`) is refused, not
+    read as "the default methods"."""
+    for value in values:
+        if not value.replace(",", "").strip():
+            raise InputError(f"--method {value!r}: no method named")
     return tuple(v.strip() for value in values for v in value.split(",") if v.strip())
 
 

@@ -57,19 +57,33 @@ def child(request: dict) -> None:
     raise SystemExit(0)
 
 
+def _leave(code) -> None:
+    """End the case's process as `sys.exit(code)` would, without the interpreter's finalization
+    (the server's modules: a fifth of a second per case); the session is killed after it anyway."""
+    if code is not None and not isinstance(code, int):
+        print(code, file=sys.stderr)
+        code = 1
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except Exception:
+            pass
+    os._exit(code or 0)
+
+
 def serve(request: dict) -> dict:
     start = time.perf_counter()
     pid = os.fork()
     if pid == 0:
         try:
             child(request)
-        except SystemExit:
-            raise
+        except SystemExit as exc:
+            _leave(exc.code)
         except BaseException:
             import traceback
 
             traceback.print_exc()
-            raise SystemExit(1) from None
+            _leave(1)
     deadline = start + request["wall_seconds"]
     while True:
         done, code, usage = os.wait4(pid, os.WNOHANG)

@@ -151,13 +151,19 @@ def parse_int(text: str, what: str) -> int:
     return int(s)
 
 
+#: a number as the options take it: ASCII decimal digits (Python's float() also reads other
+#: scripts' digits and underscores, which no other reader of rkhp accepts)
+DECIMAL = re.compile(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")
+
+
 def parse_float(text: str, what: str) -> float:
-    """A finite float written as a number (nan and inf are refused)."""
+    """A finite float written as a decimal number (nan and inf are refused)."""
     s = text.strip()
-    try:
-        x = float(s) if len(s) <= 100 else math.nan
-    except ValueError:
-        raise InputError(f"{what}: expected a number, got {_shown(s)}") from None
+    if len(s) > 100 or not DECIMAL.fullmatch(s):
+        if s.lower().lstrip("+-") in ("nan", "inf", "infinity"):
+            raise InputError(f"{what}: expected a finite number, got {_shown(s)}")
+        raise InputError(f"{what}: expected a number, got {_shown(s)}")
+    x = float(s)
     if not math.isfinite(x):
         raise InputError(f"{what}: expected a finite number, got {_shown(s)}")
     return x
@@ -288,6 +294,18 @@ def check_trajectory(steps, dim: int, what: str = "the run") -> None:
     check_memory(trajectory_bytes(steps, dim), f"{what} ({steps} steps in dimension {dim})")
 
 
+#: steps of all the trajectories of one study (`bench`: repeats x starts x steps x methods); at
+#: the engine's 10^6 to 10^7 steps per second, 10^11 steps are hours of work
+MAX_WORK_STEPS = 10**11
+
+
+def check_work(steps: int, what: str) -> None:
+    """Work whose size is known before it starts, refused with the estimate above MAX_WORK_STEPS."""
+    if steps > MAX_WORK_STEPS:
+        raise InputError(f"{what} would take about {steps:.2g} steps of the integrators (hours to years); "
+                         f"the limit is {MAX_WORK_STEPS:.0e}")
+
+
 #: bytes per tree of an enumeration: the tree objects and tables (290 measured at order 15)
 BYTES_PER_TREE = 500
 #: bytes per tree that `rkhp trees` prints (1.7 KB measured: trees --order 15 --format json)
@@ -309,22 +327,39 @@ def check_output_path(path, suffixes: tuple[str, ...] = (), what: str = "output 
     if suffixes and path.suffix.lower() not in suffixes:
         raise InputError(f"{what} {path}: unknown extension {path.suffix or '(none)'}; "
                          f"the name must end in {' or '.join(suffixes)}")
+    try:  # a name too long, a loop of links: OSError from any of these
+        return _checked_output_path(path, what)
+    except OSError as exc:
+        raise InputError(f"{what} {_shown(str(path))}: {exc.strerror or exc}") from None
+
+
+def _probe(folder: Path, what: str, path: Path) -> None:
+    """Create and remove an empty file in the folder: a folder that takes no file although access()
+    says it is writable (/proc, a read-only mount, for root) is refused now, not after the work."""
+    import tempfile
+
+    try:
+        fd, name = tempfile.mkstemp(prefix=".rkhp-probe.", suffix=".tmp", dir=folder)
+    except OSError as exc:
+        raise InputError(f"{what} {path}: cannot write in the folder {folder} ({exc.strerror or exc})") from None
+    os.close(fd)
+    os.unlink(name)
+
+
+def _checked_output_path(path: Path, what: str) -> Path:
     folder = path.parent
     if not folder.is_dir():
         reason = "is not a folder" if folder.exists() else "does not exist"
         raise InputError(f"{what} {path}: the folder {folder} {reason}")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise InputError(f"{what} {path}: the folder {folder} is not writable")
+    _probe(folder, what, path)
     if path.is_symlink():
         return path  # never followed: rkhp.base.files refuses it or replaces the link itself
     if path.is_dir():
         raise InputError(f"{what} {path}: is a folder")
     if path.exists():
-        try:
-            mode = path.stat().st_mode
-        except OSError as exc:
-            raise InputError(f"{what} {path}: {exc.strerror or exc}") from None
-        if not stat.S_ISREG(mode):
+        if not stat.S_ISREG(path.stat().st_mode):
             raise InputError(f"{what} {path}: not a regular file (a device or a pipe)")
         if not os.access(path, os.W_OK):
             raise InputError(f"{what} {path}: not writable")

@@ -158,7 +158,24 @@ def parse_document(text: str, where: str, kind: str) -> dict:
     if not isinstance(data, dict):
         raise InputError(f"{where}: expected a {'JSON object' if kind == 'json' else 'TOML table'} of keys, "
                          f"got {type(data).__name__}")
+    if kind == "json":
+        _no_surrogates(data, where)
     return data
+
+
+def _no_surrogates(value, where: str) -> None:
+    """JSON's \\ud800 escapes make strings that are not text (they have no UTF-8): refused, in keys and
+    values at every level (at most MAX_NESTING, checked before)."""
+    items = [*value, *value.values()] if isinstance(value, dict) else value if isinstance(value, list) else ()
+    for item in items:
+        if isinstance(item, str):
+            try:
+                item.encode("utf-8")
+            except UnicodeEncodeError:
+                raise InputError(f"{where}: a string holds a lone surrogate escape (\\ud800 to \\udfff): "
+                                 f"not text") from None
+        else:
+            _no_surrogates(item, where)
 
 
 def load_document(path, what: str = "file") -> dict:

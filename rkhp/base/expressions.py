@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import ast
 import math
+import re
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -85,6 +86,26 @@ def _refuse(where: str, text: str, reason: str):
     return InputError(f"{where}: cannot read {_shown(text)}: {reason}")
 
 
+#: a number token: a digit (or a point and a digit) not inside a name, up to the end of the literal
+_NUMBER_TOKEN = re.compile(r"(?<![\w.])\.?[0-9](?:[eE][+-]|[\w.])*")
+#: the numbers of the grammar: integers and decimals in ASCII digits, with an optional exponent
+_DECIMAL = re.compile(r"([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")
+
+
+def _lexical(text: str, where: str) -> None:
+    """What Python's parser reads but the grammar does not have, refused before it is parsed: other
+    characters than ASCII (Python reads a fullwidth x1 as x1), comments (`x1 # x2` would be x1)
+    and numbers other than decimals (0x10, 1_000, 0o7, 1j)."""
+    odd = next((c for c in text if ord(c) > 127), None)
+    if odd is not None:
+        raise _refuse(where, text, f"character U+{ord(odd):04X} is not allowed (ASCII only)")
+    if "#" in text:
+        raise _refuse(where, text, "'#' is not allowed (no comments)")
+    bad = next((m.group() for m in _NUMBER_TOKEN.finditer(text) if not _DECIMAL.fullmatch(m.group())), None)
+    if bad is not None:
+        raise _refuse(where, text, f"{bad} is not a decimal number")
+
+
 def _tree(text: str, where: str, limits: Limits) -> ast.expr:
     """The checked-size AST of `text` (`^` read as power)."""
     if not isinstance(text, str):
@@ -96,6 +117,7 @@ def _tree(text: str, where: str, limits: Limits) -> ast.expr:
         raise InputError(f"{where}: empty expression")
     if "\x00" in text:
         raise _refuse(where, text, "NUL character")
+    _lexical(text, where)
     try:
         with warnings.catch_warnings():  # "invalid decimal literal" and the like: one line, ours
             warnings.simplefilter("ignore")

@@ -406,6 +406,9 @@ def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=
                                 *(resolve_peer(p) for p in peers)])
     integrators = [m for m in curves_of if m.kind != "scipy"]
     solvers = [m for m in curves_of if m.kind == "scipy"]
+    bounds.check_work(repeats * (ensemble or 1) * sum(steps) * len(integrators),
+                      f"the bench ({repeats} repeats x {ensemble or 1} starts x {sum(steps)} steps x "
+                      f"{len(integrators)} methods)")
     if ensemble is None:
         ref = reference(system, t_final)
         if executor is None or executor.kind == "in-process":

@@ -139,17 +139,20 @@ def plot_stress(stress, path, record: dict | None = None, force: bool = False) -
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     rows = []
     for run in (*stress.long_run.runs, stress.long_run.peer):
-        x = range(1, len(run.casimir_windows) + 1)
         style = "s--" if run is stress.long_run.peer else "o-"
-        axes[0].semilogy(x, [max(v, 1e-17) for v in run.casimir_windows], style, label=run.method)
-        axes[1].semilogy(x, [max(v, 1e-17) for v in run.energy_windows], style, label=run.method)
-        rows += _points("max Casimir error per window", run.method, x, run.casimir_windows)
-        rows += _points("max energy error per window", run.method, x, run.energy_windows)
+        for ax, what, values in ((axes[0], "Casimir", run.casimir_windows), (axes[1], "energy", run.energy_windows)):
+            if values:  # a system without a Casimir (or a run that failed at once) has no windows
+                x = range(1, len(values) + 1)
+                ax.semilogy(x, [max(v, 1e-17) for v in values], style, label=run.method)
+                rows += _points(f"max {what} error per window", run.method, x, values)
     for ax, what in zip(axes, ("Casimir", "energy"), strict=True):
         ax.set_xlabel(f"window (of {stress.long_run.windows}, {stress.long_run.steps} steps in all)")
         ax.set_ylabel(f"max {what} error in window")
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
+        if ax.lines:
+            ax.legend(fontsize=7)
+        else:
+            ax.text(0.5, 0.5, f"no {what} data", transform=ax.transAxes, ha="center")
     fig.suptitle(f"long run, {stress.system}, h = {stress.long_run.h:g}", fontsize=9)
     _save(fig, path, rows, record, force)
     return path

@@ -315,6 +315,26 @@ def field_generators(expr) -> set:
             | {f for f in expr.atoms(sympy.Function) if not f.is_Rational})
 
 
+def degree_bound(generator) -> int | None:
+    """A cheap upper bound on the degree over Q of a generator, where one is known without its
+    minimal polynomial (whose degree-N computation takes minutes for N in the thousands): q for a
+    radical a^(p/q) of a rational a; phi(4q) for cos or sin of a rational multiple p/q of pi."""
+    import sympy
+
+    if isinstance(generator, sympy.Pow) and generator.exp.is_Rational and generator.base.is_Rational:
+        return int(generator.exp.q)
+    if isinstance(generator, sympy.cos | sympy.sin):
+        ratio = generator.args[0] / sympy.pi
+        if ratio.is_Rational:
+            return int(sympy.totient(4 * ratio.q))
+    return None
+
+
+#: a generator whose degree bound exceeds this is refused without its minimal polynomial (it
+#: would be refused anyway unless the bound is far from the degree)
+MAX_DEGREE_BOUND = 4 * MAX_FIELD_DEGREE
+
+
 def number_field(values):
     """Q(generators of the values), None for Q itself; NoNumberField when its degree exceeds
     MAX_FIELD_DEGREE or sympy cannot build it."""
@@ -327,6 +347,10 @@ def number_field(values):
     generators = sorted({g for x in irrational for g in field_generators(x)}, key=sympy.default_sort_key)
     if not generators:
         return None
+    for g in generators:
+        bound = degree_bound(g)
+        if bound is not None and bound > MAX_DEGREE_BOUND:
+            raise NoNumberField(f"their number field has degree up to {bound} > {MAX_FIELD_DEGREE} ({g})")
     try:
         degree = math.prod(sympy.minimal_polynomial(g).as_poly().degree() for g in generators)
     except Exception as exc:  # sympy's failures have no common base class
