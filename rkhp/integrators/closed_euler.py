@@ -57,8 +57,9 @@ from ..taylor.tape import Tape
 from .composed import Record, Solver
 from .engine import max_abs, state_failure
 from .failure import Failure
-from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE
+from .newton import NEWTON_MAX_ITERATIONS
 from .spray_euler import (
+    DIRECT_TOLERANCE,
     HISTORY,
     RATE_MARGIN,
     SLOW_CONTRACTION,
@@ -548,7 +549,7 @@ def closed_form_available(system) -> bool:
 
 
 def integrate_closed_euler(system, gammas, h, n_steps, x0=None, keep_all: bool = True, *,
-                           tol: float = NEWTON_TOLERANCE,
+                           tol: float = DIRECT_TOLERANCE,
                            max_iter: int = NEWTON_MAX_ITERATIONS) -> Trajectory:
     """Integrate `system` (family constant, lie-poisson or log-canonical, symmetric realisation)
     by n_steps steps of the composition of RKHP Euler steps gammas[0] h, gammas[1] h, ... (in
