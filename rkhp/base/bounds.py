@@ -15,6 +15,7 @@ import numbers
 import os
 import re
 import stat
+import tempfile
 from pathlib import Path
 
 from .errors import InputError
@@ -336,8 +337,6 @@ def check_output_path(path, suffixes: tuple[str, ...] = (), what: str = "output 
 def _probe(folder: Path, what: str, path: Path) -> None:
     """Create and remove an empty file in the folder: a folder that takes no file although access()
     says it is writable (/proc, a read-only mount, for root) is refused now, not after the work."""
-    import tempfile
-
     try:
         fd, name = tempfile.mkstemp(prefix=".rkhp-probe.", suffix=".tmp", dir=folder)
     except OSError as exc:
