@@ -146,20 +146,18 @@ def letters(base_order: int, base_symmetric: bool, max_weight: int) -> tuple[int
     return (1, *range(base_order + 1, max_weight + 1, step))
 
 
+def words_of_weight(weights: tuple[int, ...], weight: int) -> list[tuple[int, ...]]:
+    """Every word over the letters (by weight) whose weights sum to `weight` (compositions of
+    `weight` into parts from `weights`)."""
+    layers: list[list[tuple[int, ...]]] = [[()]]
+    for total in range(1, weight + 1):
+        layers.append([(k, *rest) for k in weights if k <= total for rest in layers[total - k]])
+    return layers[weight]
+
+
 def words(weights: tuple[int, ...], max_weight: int) -> list[tuple[int, ...]]:
-    """Every word over the letters (by weight) of weight at most `max_weight`, shortest first."""
-    out = [()]
-    frontier = [()]
-    while frontier:
-        nxt = []
-        for w in frontier:
-            total = sum(w)
-            for k in weights:
-                if total + k <= max_weight:
-                    nxt.append((*w, k))
-        out += nxt
-        frontier = nxt
-    return out
+    """Every word over the letters (by weight) of weight at most `max_weight`, lightest first."""
+    return [w for p in range(max_weight + 1) for w in words_of_weight(weights, p)]
 
 
 def _dps(digits: int | None) -> int:
@@ -187,24 +185,29 @@ def _residual_sum(gamma, digits):
         return sum((_mp(g) for g in gamma), mpmath.mpf(0)) - 1
 
 
-def product_coefficients(gamma, weights: tuple[int, ...], max_weight: int) -> dict:
-    """Coefficients of prod_i exp(sum_k gamma_i^k F_k) over the words of weight <= max_weight
-    (exact for Fractions, mpmath numbers otherwise)."""
-    all_words = words(weights, max_weight)
-    coeff = {(): 1 if isinstance(gamma[0], Fraction) else mpmath.mpf(1)}
-    for g in gamma:
-        powers = [g ** k for k in range(max_weight + 1)]
-        new = {}
-        for w in all_words:
-            acc = 0
-            for cut in range(len(w) + 1):
-                head, tail = w[:cut], w[cut:]
-                if head in coeff:
-                    acc += coeff[head] * powers[sum(tail)] / math.factorial(len(tail))
-            if acc:
-                new[w] = acc
-        coeff = new
-    return coeff
+def product_coefficients(gamma, weights: tuple[int, ...], max_weight: int):
+    """The coefficients of prod_i exp(sum_k gamma_i^k F_k) (docs/compositions.md), weight after
+    weight: yields, for p = 1 .. max_weight, a dict word -> coefficient over the words of weight p
+    (exact for Fractions, mpmath numbers otherwise). A word's coefficient after substep i sums the
+    coefficients of its heads after substep i - 1 times those of its tail in the i-th exponential,
+    gamma_i^weight(tail) / len(tail)!; the heads weigh at most p, so each weight needs only the
+    lighter ones, and a caller that stops at a failing weight computes no heavier word."""
+    one = 1 if isinstance(gamma[0], Fraction) else mpmath.mpf(1)
+    powers = [[g ** k for k in range(max_weight + 1)] for g in gamma]
+    # after[i][w]: coefficient of w in the product of the first i exponentials
+    after = [{(): one} for _ in range(len(gamma) + 1)]
+    for p in range(1, max_weight + 1):
+        layer = words_of_weight(weights, p)
+        for i in range(1, len(gamma) + 1):
+            before, now, pw = after[i - 1], after[i], powers[i - 1]
+            for w in layer:
+                acc = 0
+                for cut in range(len(w) + 1):
+                    head = before.get(w[:cut])
+                    if head:
+                        acc += head * pw[p - sum(w[:cut])] / math.factorial(len(w) - cut)
+                now[w] = acc
+        yield p, {w: after[-1][w] for w in layer}
 
 
 def _target(w: tuple[int, ...], exact: bool):
@@ -225,15 +228,10 @@ def composition_order(comp: Composition, base_order: int = 2, base_symmetric: bo
     weights = letters(base_order, base_symmetric, top)
     with mpmath.workdps(_dps(digits)):
         gamma = list(comp.gamma) if exact else [_mp(g) for g in comp.gamma]
-        coeff = product_coefficients(gamma, weights, top)
         tol = 0 if exact else _tolerance(digits)
-        by_weight: dict[int, list] = {}
-        for w in words(weights, top):
-            if w:
-                by_weight.setdefault(sum(w), []).append(abs(coeff.get(w, 0) - _target(w, exact)))
         order, count, failing = 0, 0, None
-        for p in range(1, top + 1):
-            residuals = by_weight.get(p, [])
+        for p, coeff in product_coefficients(gamma, weights, top):
+            residuals = [abs(c - _target(w, exact)) for w, c in coeff.items()]
             count += len(residuals)
             worst = max(residuals, default=0)
             if worst > tol:
