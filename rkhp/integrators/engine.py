@@ -18,7 +18,7 @@ compiled data are small named groups (docs/engine.md "The state of the step loop
 `SystemTapes` (the four tapes), `rkhp.taylor.jets.JetSpace`, `Method` (A, b, h), `Solver`,
 `StageSolve`, `Record` (where a run writes), `StepBuffers` (every work array of the step loop,
 allocated once by `step_buffers`; the scalars kept between towers and steps in the named slots
-MEMO_HISTORY ... MEMO_JACOBIAN_KEPT of its memo). A run ends
+MEMO_HISTORY ... MEMO_STAGE_NEWTON_FAILS of its memo). A run ends
 with a `rkhp.integrators.failure.Failure`; `state_failure` is the one step validator (finite
 values, the system's domain) of every integrator.
 """
@@ -75,7 +75,9 @@ MEMO_STALLED = 8
 """1 once the sweeps have stalled in this run: every tower then solves the stages by `_stage_newton`."""
 MEMO_JACOBIAN_KEPT = 9
 """1 while StepBuffers.stage_newton holds a factorised Jacobian (`_stage_newton`)."""
-MEMO_SIZE = 10
+MEMO_STAGE_NEWTON_FAILS = 10
+"""The `_stage_newton` solves of this step that found no solution (`implicit_tower`)."""
+MEMO_SIZE = 11
 """The number of memo slots."""
 
 
@@ -95,7 +97,7 @@ class StepBuffers(NamedTuple):
     alpha, Jalpha: the tower's results; x, delta, res (n): Newton's iterate, correction and
     residual; LU (n, n), perm (n,) int64, v (n): the linear solve's (`solve_small`); hist (3, n):
     psi of the three previous steps; memo (MEMO_SIZE,): the scalars kept from one tower or step to
-    the next, each in its named slot (MEMO_HISTORY ... MEMO_JACOBIAN_KEPT); y, y_next (n): the
+    the next, each in its named slot (MEMO_HISTORY ... MEMO_STAGE_NEWTON_FAILS); y, y_next (n): the
     state before and after the step; Gx (n): the point where G is expanded
     (implicit stages); changes (jet degree + 1,): per degree k of G, the weighted change of its
     coefficients at their last sweep (`_stage`, `implicit_tower`); weights (s, jet size): the
@@ -185,6 +187,11 @@ times the coefficients, divided by that accuracy, is below it."""
 STAGE_NEWTON_HALVINGS = 30
 """Most halvings of a correction of `_stage_newton` before it gives up (no decrease of the
 residual along the correction: no solution near the iterate)."""
+STAGE_NEWTON_FAILS_PER_STEP = 2
+"""Most `_stage_newton` solves that may fail in one step: after them the step's towers only sweep,
+so a step whose stages have no solution near its iterates ends after its Newton iterations
+(NEWTON_NO_CONVERGENCE or STAGES_NO_CONVERGENCE) at the cost of sweeps, not of a solve (each a
+forward-difference Jacobian of up to STAGE_NEWTON_MAX_UNKNOWNS columns) per iteration."""
 STAGE_NEWTON_CONTRACTION = 0.5
 """A correction of `_stage_newton` with a kept (earlier) Jacobian larger than this times the
 previous one refreshes the Jacobian (the chord iteration converges too slowly)."""
@@ -766,7 +773,9 @@ def implicit_tower(x0, method, tapes, space, buf, jacobian, stage, first, bound)
     When the sweeps stall (a non-finite one, stage.max_sweeps of them while settling, or half as
     many in one step without converging), the stages are solved by `_stage_newton`, and from
     then on in the run every tower solves them so (MEMO_STALLED; docs/implicit.md "When the
-    sweeps stall") until it finds no solution, where the sweeps take over again.
+    sweeps stall") until it finds no solution, where the sweeps take over again; at most
+    STAGE_NEWTON_FAILS_PER_STEP such solves may find nothing in one step, after which its towers
+    only sweep.
 
     Returns (Failure, sweeps, converged): STAGES_NO_CONVERGENCE when the sweeps stalled while
     settling (or went non-finite) and `_stage_newton` found no solution; a step whose sweeps
@@ -790,6 +799,7 @@ def implicit_tower(x0, method, tapes, space, buf, jacobian, stage, first, bound)
     if first:
         _stage_measure(x0, A, b, h, tapes, space, buf)
         memo[MEMO_EFFECT] = np.inf
+        memo[MEMO_STAGE_NEWTON_FAILS] = 0.0
     factor = memo[MEMO_FACTOR]
     for k in range(n):
         buf.delta[k] = x0[k] - buf.Gx[k]
@@ -827,6 +837,7 @@ def implicit_tower(x0, method, tapes, space, buf, jacobian, stage, first, bound)
             _psi_alpha(x0, b, h, tapes, space, buf, jacobian)
             return Failure.OK, 0, True
         memo[MEMO_STALLED] = 0.0  # no solution found by Newton here: back to the sweeps
+        memo[MEMO_STAGE_NEWTON_FAILS] += 1.0
     sweeps = 0
     converged = False
     if top == 0:
@@ -873,10 +884,13 @@ def implicit_tower(x0, method, tapes, space, buf, jacobian, stage, first, bound)
         stalled = not np.isfinite(effect) or (
             sweeps >= stage.max_sweeps if settle else memo[MEMO_SWEEPS] >= stage.max_sweeps // 2)
         if stalled:
-            if _stage_newton(x0, A, h, D, tapes, space, buf):
-                memo[MEMO_STALLED] = 1.0
-                converged = True
-                break
+            # at most STAGE_NEWTON_FAILS_PER_STEP solves that find nothing in one step
+            if settle or memo[MEMO_STAGE_NEWTON_FAILS] < STAGE_NEWTON_FAILS_PER_STEP:
+                if _stage_newton(x0, A, h, D, tapes, space, buf):
+                    memo[MEMO_STALLED] = 1.0
+                    converged = True
+                    break
+                memo[MEMO_STAGE_NEWTON_FAILS] += 1.0
             if settle or not np.isfinite(effect):
                 return Failure.STAGES_NO_CONVERGENCE, sweeps, False
             # no solution found by Newton here: the sweeps go on from where they were
