@@ -252,23 +252,26 @@ def _compositions_dir():
 
 
 @lru_cache(maxsize=1)
+def _builtin_files() -> tuple[tuple[str, dict], ...]:
+    """(file name, its keys) of every built-in composition, in file-name order."""
+    return tuple((entry.name, tomllib.loads(entry.read_text(encoding="utf-8")))
+                 for entry in sorted(_compositions_dir().iterdir(), key=lambda p: p.name)
+                 if entry.name.endswith(".toml"))
+
+
+@lru_cache(maxsize=1)
 def _registry() -> dict[str, str]:
     """name or alias (lower case) -> file name of every built-in composition."""
     out = {}
-    for entry in sorted(_compositions_dir().iterdir(), key=lambda p: p.name):
-        if entry.name.endswith(".toml"):
-            data = tomllib.loads(entry.read_text(encoding="utf-8"))
-            for key in (data.get("name", entry.name[:-5]), *data.get("aliases", ())):
-                out[key.lower()] = entry.name
+    for file, data in _builtin_files():
+        for key in (data.get("name", file[:-5]), *data.get("aliases", ())):
+            out[key.lower()] = file
     return out
 
 
 def builtin_compositions() -> list[str]:
-    """Names of the built-in compositions, in file-name order."""
-    names = {}
-    for file in _registry().values():
-        names[file] = None
-    return [load_composition(file[:-5]).name for file in names]
+    """Names of the built-in compositions, in file-name order (their coefficients not parsed)."""
+    return [data.get("name", file[:-5]) for file, data in _builtin_files()]
 
 
 def is_composition_name(spec: str) -> bool:
@@ -288,9 +291,8 @@ def load_composition(spec: str) -> Composition:
     """A built-in composition by name or alias, or a composition file (.toml/.json)."""
     key = spec.lower()
     if key in _registry():
-        entry = _compositions_dir().joinpath(_registry()[key])
-        data = tomllib.loads(entry.read_text(encoding="utf-8"))
-        return composition_from_dict(data, entry.name[:-5], f"built-in {entry.name}")
+        file = _registry()[key]
+        return composition_from_dict(dict(_builtin_files())[file], file[:-5], f"built-in {file}")
     path = Path(spec)
     if not path.is_file():
         raise InputError(f"no composition named {spec!r}")
