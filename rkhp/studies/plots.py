@@ -164,7 +164,7 @@ def plot_phase(tableaux, realisation: str, z_max: float, path, record: dict | No
     one line per method, over 0 < z <= z_max (docs/stability.md); the data beside it."""
     import numpy as np
 
-    from ..tableaux.stability import rotation_angle
+    from ..tableaux.stability import rotation_angles
 
     path = check_plot_path(path, force=force)
     plt = _pyplot()
@@ -174,7 +174,7 @@ def plot_phase(tableaux, realisation: str, z_max: float, path, record: dict | No
     top.plot(zs, exact, "k:", label="exact flow (z mod 2 pi)")
     rows = _points("theta(z)", "exact flow", zs, exact)
     for t in tableaux:
-        theta = np.array([np.nan if (v := rotation_angle(t, float(z), realisation)) is None else v for z in zs])
+        theta = np.array([np.nan if v is None else v for v in rotation_angles(t, [float(z) for z in zs], realisation)])
         line, = top.plot(zs, theta, label=t.name)
         with np.errstate(invalid="ignore"):
             bottom.semilogy(zs, np.abs(theta - zs), color=line.get_color(), label=t.name)

@@ -460,7 +460,7 @@ def wrap_limit_numeric(tableau: Tableau) -> Number | None:
 
     zs = np.arange(1, int(WRAP_SCAN_Z * 1000) + 1) / 1000.0
     with np.errstate(all="ignore"):
-        theta = np.array([rotation_angle(tableau, float(z)) for z in zs])
+        theta = np.array(rotation_angles(tableau, [float(z) for z in zs]))
     falls = np.nonzero(np.diff(theta) < -1e-10)[0]  # a fall beyond round-off near theta = pi
     if not len(falls):
         return None
@@ -566,13 +566,15 @@ def _dm_dz(A, b, m, z):
     return sum(b[i] * (w[i] + z * m[i] * dms[i] / 2) for i in range(s))
 
 
-def branch_point(A, z_target):
+def branch_point(A, z_target, start=None):
     """The point m(z_target) of the branch through m(0) = 0 (predictor along the tangent, Newton
-    corrector, step halved where the corrector fails or jumps); None where the branch has ended
-    (past its fold) before z_target, or z_target is within about 1e-8 of the fold. Call under mpmath.workdps(DIGITS)."""
+    corrector, step halved where the corrector fails or jumps), continued from ``start`` (a point
+    (m, z) of the branch with z <= z_target; default (0, 0)); None where the branch has ended
+    (past its fold) before z_target, or z_target is within about 1e-8 of the fold. Call under
+    mpmath.workdps(DIGITS)."""
     s = A.rows
-    m, z = mpmath.matrix([0] * s), mpmath.mpf(0)
-    dz = min(mpmath.mpf(1) / 16, z_target)
+    m, z = start if start is not None else (mpmath.matrix([0] * s), mpmath.mpf(0))
+    dz = min(mpmath.mpf(1) / 16, z_target - z) if z_target > z else mpmath.mpf(0)
     while z < z_target:
         dz = min(dz, z_target - z)
         predicted = m + dz * _tangent(A, m, z)
@@ -1212,23 +1214,43 @@ def step_matrix_shifted(tableau: Tableau, z: float):
 def rotation_angle(tableau: Tableau, z: float, realisation: str = "symmetric") -> float | None:
     """theta(z) in float64: 2 arctan(m(z)/2) (symmetric realisation; None where an implicit
     tableau's branch has no solution at z), arccos(tr R/2) (shifted; None where |tr R| > 2)."""
+    return rotation_angles(tableau, [z], realisation)[0]
+
+
+def rotation_angles(tableau: Tableau, zs, realisation: str = "symmetric") -> list[float | None]:
+    """`rotation_angle` at each z of the increasing ``zs``; an implicit tableau's branch (symmetric
+    realisation) is continued from one z to the next, and once it has ended (past its fold) every
+    later z has no solution."""
     if realisation == "shifted":
-        R = step_matrix_shifted(tableau, z)
-        tr = None if R is None else float(R.trace())
-        return math.acos(tr / 2) if tr is not None and abs(tr) <= 2 else None
+        angles = []
+        for z in zs:
+            R = step_matrix_shifted(tableau, z)
+            tr = None if R is None else float(R.trace())
+            angles.append(math.acos(tr / 2) if tr is not None and abs(tr) <= 2 else None)
+        return angles
     A, b = tableau.A_float, tableau.b_float
     s = tableau.stages
+
+    def angle(ms, z):
+        return 2.0 * math.atan(z * sum(b[i] * (1 + ms[i] ** 2 / 4) for i in range(s)) / 2)
+
     if tableau.is_explicit:
-        ms = [0.0] * s
-        for i in range(s):
-            ms[i] = z * sum(A[i][j] * (1 + ms[j] ** 2 / 4) for j in range(i))
-    else:
-        with mpmath.workdps(25):
-            point = branch_point(_mp_tableau(tableau)[0], mpmath.mpf(z))
-        if point is None:
-            return None
-        ms = [float(x) for x in point]
-    return 2.0 * math.atan(z * sum(b[i] * (1 + ms[i] ** 2 / 4) for i in range(s)) / 2)
+        angles = []
+        for z in zs:
+            ms = [0.0] * s
+            for i in range(s):
+                ms[i] = z * sum(A[i][j] * (1 + ms[j] ** 2 / 4) for j in range(i))
+            angles.append(angle(ms, z))
+        return angles
+    angles, start = [], None
+    with mpmath.workdps(25):
+        A_mp = _mp_tableau(tableau)[0]
+        for z in zs:
+            target = mpmath.mpf(z)
+            point = None if start is False else branch_point(A_mp, target, start)
+            start = False if point is None else (point, target)
+            angles.append(None if point is None else angle([float(x) for x in point], z))
+    return angles
 
 
 def phase_coefficients_numeric(A, b, n: int):
