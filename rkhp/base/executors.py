@@ -418,6 +418,11 @@ class LoopbackCluster:
         self.workers = workers
 
 
+#: how long a process of `loopback_cluster` may take to stop once terminated before it is killed
+#: (a worker whose scheduler has gone keeps reconnecting past SIGTERM)
+STOP_SECONDS = 3
+
+
 @contextmanager
 def loopback_cluster(workers: int = 2, threads: int = 1, start_seconds: float = 120):
     """``with loopback_cluster(2) as cluster:`` a scheduler and ``workers`` single-process workers
@@ -458,7 +463,7 @@ def loopback_cluster(workers: int = 2, threads: int = 1, start_seconds: float = 
                 proc.terminate()
             for proc in procs:
                 try:
-                    proc.wait(timeout=15)
+                    proc.wait(timeout=STOP_SECONDS)
                 except subprocess.TimeoutExpired:
                     proc.kill()
                     proc.wait()
