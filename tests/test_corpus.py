@@ -1,4 +1,4 @@
-"""The independent hostile corpus (issue 25): several hundred cases, written as data.
+"""The independent hostile corpus: several hundred cases, written as data.
 
 tests/data/hostile_corpus.jsonl holds one case per line, written without reference to the code
 under test or to tests/test_hostile.py (a second, independent check of the same promise):

@@ -164,8 +164,8 @@ def test_ctrl_c_through_the_command_line(delay):
         assert len(err.strip().splitlines()) == 1
 
 
-#: commands that run for seconds, each interrupted at 20 seeded random moments (start-up, imports
-#: and compiled kernels included): issue 25's acceptance
+#: commands that run for seconds, each interrupted at 20 seeded random moments (imports and
+#: compiled kernels included)
 LONG_COMMANDS = {
     "integrate": ("integrate", "rigid-body", "--method", "paper-three-stage", "--steps", "2000000"),
     "converge": ("converge", "pendulum", "--method", "euler", "--steps", "20", "--refinements", "16"),
