@@ -8,6 +8,7 @@ from rkhp.base import bounds
 from rkhp.base.errors import InputError
 from rkhp.base.tables import booktabs
 from rkhp.studies.plots import check_plot_path, data_path
+from rkhp.studies.reference import KINDS as REFERENCE_KINDS
 
 from .options import (
     METHOD_HELP,
@@ -109,11 +110,16 @@ def _f(x, digits=2) -> str:
               help="Numbers of steps N1,N2,... (one value: the coarsest, doubled --refinements times).")
 @click.option("--refinements", type=integer(0, bounds.MAX_REFINEMENTS, "K"),
               help="Halvings of h after the coarsest step (default 6, from N = 20).")
+@click.option("--reference", "reference_kind", type=click.Choice(REFERENCE_KINDS), default="auto", show_default=True,
+              help="Reference solution: the closed form where there is one, else DOP853 (auto); mpmath: "
+                   "a Taylor-series solve at 26 digits for the problems given by expressions "
+                   "(docs/theory.md §6).")
 @click.option("--plot", type=PLOT_FILE, help="Log-log plot of error against h (.png, .svg, .pdf).")
 @force_option()
 @executor_options("runs")
 @format_option("table", "json", "csv", "latex")
-def converge(system, methods, x0, realisation, t_final, steps, refinements, plot, force, workers, scheduler, fmt):
+def converge(system, methods, x0, realisation, t_final, steps, refinements, reference_kind, plot, force, workers,
+             scheduler, fmt):
     """Empirical convergence: global error at T against h, observed and expected orders, verdicts."""
     from rkhp.base.executors import open_executor
     from rkhp.studies.converge import converge as run
@@ -124,7 +130,7 @@ def converge(system, methods, x0, realisation, t_final, steps, refinements, plot
     compile_notice(_kinds(resolved), fmt != "json", sys_)
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("converge", total=len(resolved) * len(counts))
-        study = run(sys_, resolved, counts, t_final, executor=executor,
+        study = run(sys_, resolved, counts, t_final, executor=executor, reference_kind=reference_kind,
                     on_run=lambda done, _: bar.update(task, completed=done))
     if plot and not study.interrupted:
         from rkhp.studies.plots import plot_convergence

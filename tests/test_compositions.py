@@ -162,6 +162,12 @@ CONFIRMING = [
     ("nambu", "tj4,suzuki4,tj6,kahan-li6", ["--steps", "20", "--refinements", "3"]),
     ("nambu", "kahan-li8", ["--steps", "12,15,18,21,25,30"]),
     ("nambu", "tj8", ["--steps", "80,100,125,160"]),
+    # order 10 and kahan-li8's 8 below DOP853's accuracy: the mpmath reference (docs/compositions.md)
+    ("nambu", "sofroniou-spaletta10", ["--reference", "mpmath", "--steps", "16,19,23,27,32"]),
+    ("charged-particle", "sofroniou-spaletta10", ["--reference", "mpmath", "--t-final", "3",
+                                                  "--steps", "6,7,8,9,10,11,12"]),
+    ("charged-particle", "kahan-li8", ["--reference", "mpmath", "--t-final", "3",
+                                       "--steps", "16,19,23,27,32,38"]),
 ]
 
 

@@ -449,3 +449,36 @@ def test_converge_on_spec_file_system_with_tableau_file(tmp_path):
     rkhp_m, classical_m = data["methods"]
     assert (rkhp_m["expected_order"], classical_m["expected_order"]) == (4, 1)  # degenerate vs general order
     assert rkhp_m["verdict"] == classical_m["verdict"] == "confirmed"
+
+
+def test_the_mpmath_reference_keeps_the_invariants_and_agrees_with_dop853():
+    """The 26-digit reference of nambu (H and the Casimir C = (x1^2 + x2^2)/2 + x3^4/4 are first
+    integrals) and of the charged particle (H = cos x1 + sin x2): the invariants at x(T) equal
+    those at x0 to a few ulps, and DOP853 agrees within its own error estimate."""
+    from rkhp.studies.reference import dop853_reference, reference
+
+    nambu, particle = get_system("nambu"), get_system("charged-particle")
+    ref = reference(nambu, 2.0, kind="mpmath")
+    assert ref.kind == "mpmath" and ref.error_estimate < 1e-15
+    def casimir(x):
+        return (x[0] ** 2 + x[1] ** 2) / 2 + x[2] ** 4 / 4
+
+    def energy(x):
+        return x[0] ** 2 / 4 + x[1] ** 2 / 2 + 3 * x[2] ** 2 / 4
+
+    assert abs(casimir(ref.state) - casimir(nambu.x0)) < 1e-15 and abs(energy(ref.state) - energy(nambu.x0)) < 1e-15
+    check = dop853_reference(nambu, 2.0)
+    assert np.linalg.norm(ref.state - check.state) < check.error_estimate
+    ref = reference(particle, 2.0, kind="mpmath")
+    y, y0 = ref.state, particle.x0
+    assert abs(np.cos(y[0]) + np.sin(y[1]) - (np.cos(y0[0]) + np.sin(y0[1]))) < 1e-15
+
+
+def test_the_reference_option_refuses_what_it_cannot_give(run_cli):
+    cases = [("converge", "rigid-body", "--reference", "mpmath"),  # no expressions: a closed form instead
+             ("converge", "nambu", "--reference", "exact"),
+             ("converge", "charged-particle", "--reference", "mpmath", "--t-final", "1e6"),
+             ("converge", "nambu", "--reference", "quad")]
+    for args in cases:
+        code, _, err = run_cli(*args, "--method", "euler")
+        assert code == 2 and len(err.strip().splitlines()) == 1, (args, err)

@@ -194,19 +194,19 @@ def _with_local_order(row: ConvergenceRow, p) -> ConvergenceRow:
 
 
 def converge(system, methods, steps=None, t_final=None, refinements=None, on_run=None,
-             executor=None) -> ConvergenceStudy:
+             executor=None, reference_kind: str = "auto") -> ConvergenceStudy:
     """Run a convergence study of ``methods`` (names of :mod:`rkhp.integrators.methods` or Methods; the
     defaults when empty) on ``system`` (a name, a spec file or a PoissonSystem) up to ``t_final``
     (default: the system's). The runs are independent tasks on ``executor`` (rkhp.base.executors;
     default: in this process), ``on_run(done, total)`` after each; the reference is computed here,
-    once. Ctrl-C during the runs ends the study early: ``interrupted`` is then True and the tables
-    hold the rows finished before it."""
+    once, of ``reference_kind`` (`rkhp.studies.reference.KINDS`). Ctrl-C during the runs ends the
+    study early: ``interrupted`` is then True and the tables hold the rows finished before it."""
     system = resolve_system(system)
     methods = require_steps(resolve_methods(methods))
     t_final = check_t_final(system.t_final if t_final is None else t_final)
     counts = step_counts(steps, refinements)
     bounds.check_trajectory(max(counts), system.dim, "the finest run")
-    ref = reference(system, t_final)
+    ref = reference(system, t_final, kind=reference_kind)
     results, interrupted = study_rows(methods, system, ref, counts, t_final, on_run, executor)
     return ConvergenceStudy(system.name, system.realisation, bool(system.degenerate), t_final, ref, results,
                             condition_class(system), tuple(float(v) for v in system.x0), interrupted)

@@ -8,6 +8,14 @@
 - ``dop853``: scipy's DOP853 at rtol 1e-13, atol 1e-15, with its error estimated by a second,
   tighter solve (rtol 2.5e-14, atol 1e-16): the estimate is the distance between the two (at least
   10 eps |x(T)|), and the tighter solve is the reference.
+- ``mpmath``: the vector field pi(x) grad H(x) of a problem given by expressions
+  (`rkhp.systems.problems`), differentiated by sympy and evaluated in mpmath, integrated by
+  mpmath's Taylor-series solver (``mpmath.odefun``) at MP_DIGITS and at MP_DIGITS + MP_CHECK_DIGITS
+  digits: the second is the reference, rounded once to float64; its estimate is eps |x(T)| (the
+  rounding) plus the distance between the two solves. Chosen, never automatic
+  (``rkhp converge --reference mpmath``): where an order above 8 must be seen below DOP853's
+  accuracy. The horizon is bounded before the solves: at most MAX_MPMATH_STEPS steps of a DOP853
+  probe (rtol 1e-10) to T.
 
 No error at or below ``error_estimate`` (times a safety factor, see :data:`MEASURABLE_FACTOR`) is
 reported as a measurement by the studies.
@@ -21,6 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..base.errors import InputError, NumericalFailure
+from ..systems.problems import PROBLEMS, expressions, problem_data
+from ..systems.structure import symbols_of
 
 EPS = float(np.finfo(float).eps)
 #: steps of one DOP853 reference solve (about a minute), and the steps after which the number
@@ -29,6 +39,16 @@ MAX_REFERENCE_STEPS = 200_000
 PROBE_STEPS = 100
 MEASURABLE_FACTOR = 10.0
 """An error counts as a measurement only above MEASURABLE_FACTOR x the reference's error estimate."""
+
+#: digits of the mpmath reference solve, and how many more its check solve carries
+MP_DIGITS = 20
+MP_CHECK_DIGITS = 6
+#: most steps of a DOP853 probe (rtol 1e-10) to T for an mpmath reference (about 10 s at 26
+#: digits on the charged particle, T = 10, 2026-11-28)
+MAX_MPMATH_STEPS = 2000
+PROBE_TOLERANCE = 1e-10
+#: the kinds ``reference`` may be asked for ("auto": exact where there is one, else dop853)
+KINDS = ("auto", "exact", "dop853", "mpmath")
 
 LOOSE = (1e-13, 1e-15)
 TIGHT = (2.5e-14, 1e-16)
@@ -113,9 +133,82 @@ def exact_reference(system, t_final: float) -> Reference:
     return Reference("exact", float(t_final), state, estimate, detail)
 
 
-def reference(system, t_final: float, x0=None) -> Reference:
-    """The best available reference for ``system`` from ``x0`` (default start) at ``t_final``."""
+def _probe_steps(system, t_final: float, x0) -> int:
+    """Steps of DOP853 at rtol PROBE_TOLERANCE to ``t_final``; InputError past MAX_MPMATH_STEPS."""
+    from scipy.integrate import DOP853
+
+    f = system.vector_field
+    solver = DOP853(lambda t, x: f(x), 0.0, x0, float(t_final), rtol=PROBE_TOLERANCE, atol=PROBE_TOLERANCE)
+    steps = 0
+    while solver.status == "running":
+        solver.step()
+        steps += 1
+        if steps > MAX_MPMATH_STEPS:
+            raise InputError(f"T = {t_final:g} is too long for an mpmath reference of {system.name}: more than "
+                             f"{MAX_MPMATH_STEPS} steps of a DOP853 probe; give a smaller --t-final")
+    if solver.status != "finished":
+        raise NumericalFailure(f"reference probe (DOP853) failed on {system.name}")
+    return steps
+
+
+def symbolic_field(system):
+    """(symbols, pi(x) grad H(x) as sympy expressions) of a problem of `rkhp.systems.problems`;
+    InputError for a system that is not given by expressions there."""
+    import sympy
+
+
+    data = problem_data(system.name) if system.name.partition(":")[0] in PROBLEMS else None
+    if data is None:
+        raise InputError(f"an mpmath reference needs the expressions of the system: {system.name} has none "
+                         f"(it is available for {', '.join(PROBLEMS)})")
+    entries, H, _ = expressions(data)
+    symbols = symbols_of(data.dim)
+    grad = [sympy.diff(H, x) for x in symbols]
+    field = [sum((row[j] * grad[j] for j in range(data.dim)), sympy.Integer(0)) for row in entries]
+    at_start = np.array([float(e.subs(dict(zip(symbols, system.x0, strict=True)))) for e in field])
+    if not np.allclose(at_start, system.vector_field(np.asarray(system.x0, dtype=float)), rtol=1e-12, atol=1e-14):
+        raise InputError(f"{system.name} is not the problem of that name: no mpmath reference for it")
+    return symbols, field
+
+
+def mpmath_reference(system, t_final: float, x0=None) -> Reference:
+    """x(T) by mpmath's Taylor-series solver at MP_DIGITS + MP_CHECK_DIGITS digits, checked against
+    a solve at MP_DIGITS (module docstring)."""
+    import mpmath
+    import sympy
+
+    x0 = np.asarray(system.x0 if x0 is None else x0, dtype=float)
+    _probe_steps(system, t_final, x0)
+    symbols, field = symbolic_field(system)
+    f = sympy.lambdify(symbols, field, modules="mpmath")
+    solves = []
+    for digits in (MP_DIGITS, MP_DIGITS + MP_CHECK_DIGITS):
+        with mpmath.workdps(digits):
+            solution = mpmath.odefun(lambda t, y: f(*y), 0, [mpmath.mpf(float(v)) for v in x0])
+            solves.append([+v for v in solution(mpmath.mpf(float(t_final)))])
+    with mpmath.workdps(MP_DIGITS + MP_CHECK_DIGITS):
+        gap = float(mpmath.sqrt(mpmath.fsum((a - b) ** 2 for a, b in zip(*solves, strict=True))))
+    state = np.array([float(v) for v in solves[1]])
+    if not np.all(np.isfinite(state)):
+        raise NumericalFailure(f"reference solve (mpmath) on {system.name} is not finite")
+    estimate = EPS * float(np.linalg.norm(state)) + gap
+    detail = (f"mpmath Taylor series (odefun) at {MP_DIGITS + MP_CHECK_DIGITS} digits, rounded once; error "
+              f"estimated as eps |x(T)| plus its distance to a solve at {MP_DIGITS} digits ({gap:.1e})")
+    return Reference("mpmath", float(t_final), state, estimate, detail)
+
+
+def reference(system, t_final: float, x0=None, kind: str = "auto") -> Reference:
+    """The reference of ``kind`` (KINDS; "auto": the closed form where ``system`` has one and
+    starts from its default ``x0``, else DOP853) for ``system`` from ``x0`` at ``t_final``."""
+    if kind not in KINDS:
+        raise InputError(f"unknown reference {kind!r}; choose one of {', '.join(KINDS)}")
     default_start = x0 is None or np.array_equal(np.asarray(x0, dtype=float), np.asarray(system.x0, dtype=float))
-    if getattr(system, "exact_solution", None) is not None and default_start:
+    exact = getattr(system, "exact_solution", None) is not None and default_start
+    if kind == "mpmath":
+        return mpmath_reference(system, t_final, x0)
+    if kind == "exact" and not exact:
+        raise InputError(f"{system.name} has no closed-form solution from this start; choose --reference "
+                         "dop853 or mpmath")
+    if exact and kind != "dop853":
         return exact_reference(system, t_final)
     return dop853_reference(system, t_final, x0)
