@@ -89,6 +89,35 @@ def test_euler_is_the_symmetric_rkhp_method_and_others_are_not():
     assert fails == {"paper-two-stage": 4, "paper-three-stage": 6, "gauss2": 6, "rk4": 6}
 
 
+def test_a_symmetric_rkhp_method_of_order_4_with_three_stages():
+    """tables/symmetric-nodes-o4-s3: A = [[0], [g], [-g]], b = (1 - 2B, B, B), g = 1/2, B = 2/3
+    (docs/compositions.md): every even-order row of S_h vanishes for any g and B, and 6 B g^2 = 1
+    gives symmetric order 4. Checked exactly (orders, symmetry to order 8), numerically (40 steps
+    of h = 0.25 forward and 40 back on the charged particle, a non-affine pi: back to x0 to
+    round-off, where paper-three-stage misses by 3e-10), and as a composition base: the triple
+    jump of a symmetric order-4 base has order 6 (Yoshida 1990)."""
+    import dataclasses
+
+    from rkhp.systems import get_system
+    from rkhp.tableaux.compositions import class_composition_orders
+    from rkhp.tableaux.verification import verify
+
+    tab = load_tableau("symmetric-nodes-o4-s3")
+    result = verify(tab, precision="exact")
+    assert (result.orders["symmetric"], result.orders["degenerate"], result.orders["general"]) == (4, 3, 1)
+    assert rkhp_symmetry(tab).symmetric and rkhp_symmetry(tab).checked_up_to == 8
+    system = get_system("charged-particle")
+    gaps = {}
+    for name in ("symmetric-nodes-o4-s3", "paper-three-stage"):
+        forward = integrate(system, name, 0.25, 40).states[-1]
+        back = integrate(dataclasses.replace(system, x0=forward), name, -0.25, 40).states[-1]
+        gaps[name] = float(np.abs(back - system.x0).max())
+    assert gaps["symmetric-nodes-o4-s3"] < 1e-13 < 1e-11 < gaps["paper-three-stage"]
+    g = "1/(2 - 2^(1/5))"
+    jump = composition_from_dict({"gamma": [g, f"1 - 2*{g}", g], "base": "symmetric-nodes-o4-s3"}, "jump", "test")
+    assert class_composition_orders(jump, tab)["symmetric"].order == 6
+
+
 def test_the_exact_flow_is_symmetric_in_the_relations():
     """The exact flow's S_h is odd in h: its even-order parts are relations, i.e. every symmetric
     condition of even order has weights summing to zero (e(t) gamma(t) = 1)."""
