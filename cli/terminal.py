@@ -57,6 +57,15 @@ def ignore_late_interrupts() -> None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     except ValueError:  # not the main thread
         pass
+    _forget_unhandled_interrupt()
+
+
+def _forget_unhandled_interrupt() -> None:
+    """CPython records a KeyboardInterrupt that leaves code run from text (`exec` of a string:
+    dataclasses and namedtuple build their methods so, during imports) as unhandled even when it
+    is caught afterwards, and at exit then ends the process by SIGINT (status -2 after the one
+    line). Running a constant text resets that record (Python/pythonrun.c, run_eval_code_obj)."""
+    exec("None")  # noqa: S102 - a constant, not input
 
 
 def silence_stdout() -> None:

@@ -184,7 +184,7 @@ def test_ctrl_c_at_random_moments_is_never_a_traceback(command):
     import random
 
     moments = random.Random(f"ctrl-c {command}")
-    outcomes, killed = [], []
+    outcomes = []
     for _ in range(20):
         delay = moments.uniform(0.5, 4.0)
         proc = _start_interruptible(LONG_COMMANDS[command])
@@ -192,16 +192,12 @@ def test_ctrl_c_at_random_moments_is_never_a_traceback(command):
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=120)
         assert "Traceback" not in err, (delay, err[-3000:])
-        assert proc.returncode in (130, 0, -signal.SIGINT), (delay, proc.returncode, err[-3000:])
+        assert proc.returncode in (130, 0), (delay, proc.returncode, err[-3000:])
         if proc.returncode:  # one line: "rkhp: interrupted", perhaps saying what is shown
             assert err.endswith("\n") and err.count("\n") == 1 and err.startswith("rkhp: interrupted"), \
                 (delay, err[-3000:])
-        if proc.returncode == -signal.SIGINT:
-            killed.append(round(delay, 2))
         outcomes.append(proc.returncode)
-    assert 130 in outcomes or killed  # the moments fall inside the run, not all after it
-    if killed:  # seen on a loaded machine about 1 s after the start: the line, then death by SIGINT
-        pytest.xfail(f"ended by SIGINT (status -2, not 130) after its line, Ctrl-C at {killed} s")
+    assert 130 in outcomes  # the moments fall inside the run, not all after it
 
 
 # --------------------------------------------------------------------------- blow-ups
