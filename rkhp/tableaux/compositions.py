@@ -155,11 +155,6 @@ def words_of_weight(weights: tuple[int, ...], weight: int) -> list[tuple[int, ..
     return layers[weight]
 
 
-def words(weights: tuple[int, ...], max_weight: int) -> list[tuple[int, ...]]:
-    """Every word over the letters (by weight) of weight at most `max_weight`, lightest first."""
-    return [w for p in range(max_weight + 1) for w in words_of_weight(weights, p)]
-
-
 def _dps(digits: int | None) -> int:
     return EXACT_DIGITS + 15 if digits is None else digits + 15
 
