@@ -19,6 +19,7 @@ import json
 import os
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple
 
@@ -34,7 +35,9 @@ WALL_GUARD = 60.0
 class Case(NamedTuple):
     """A hostile input: the command's arguments, the files it reads, the exit status expected.
 
-    Arguments and file texts may contain ``{d}``: the case's folder (absolute path).
+    Arguments and file texts may contain ``{d}``: the case's folder (absolute path). A file text
+    may be a function returning it: a large text is then built by the test that writes it, not by
+    every test process collecting the corpus.
     """
 
     name: str
@@ -42,6 +45,10 @@ class Case(NamedTuple):
     files: dict = {}
     status: int = 2
     env: dict = {}
+
+
+#: a file's text, or a function returning it (built by the test that writes the file)
+Text = str | bytes | Callable[[], str]
 
 
 class Link(str):
@@ -88,7 +95,7 @@ def jsondoc(doc: dict, **changes) -> str:
     return json.dumps(merged)
 
 
-def spec(name: str, text: str, command: str = "check", suffix: str = ".toml", status: int = 2) -> Case:
+def spec(name: str, text: Text, command: str = "check", suffix: str = ".toml", status: int = 2) -> Case:
     """A spec-file case: `rkhp check FILE --samples 1` (or integrate, converge...)."""
     file = "s" + suffix
     args = {"check": ("check", file, "--samples", "1"),
@@ -96,7 +103,7 @@ def spec(name: str, text: str, command: str = "check", suffix: str = ".toml", st
     return Case(name, args, {file: text}, status)
 
 
-def tableau(name: str, text: str, suffix: str = ".toml", status: int = 2) -> Case:
+def tableau(name: str, text: Text, suffix: str = ".toml", status: int = 2) -> Case:
     return Case(name, ("verify", "t" + suffix), {"t" + suffix: text}, status)
 
 
@@ -283,7 +290,7 @@ def _spec_cases() -> list[Case]:
         spec("poisson-inf", "poisson = [[0, inf], [-inf, 0]]\n" + toml(PENDULUM, poisson=None)),
         spec("lambda-strings", toml(LOTKA, **{"lambda": [["0", "1", "2"], ["-1", "0", "1"], ["-2", "-1", "0"]]})),
         spec("lambda-not-antisymmetric", toml(LOTKA, **{"lambda": [[0, 1, 2], [1, 0, 1], [-2, -1, 0]]})),
-        spec("dimension-huge", toml(PENDULUM, poisson=[[0] * 3000] * 3000, x0=[0.0] * 3000, hamiltonian="x1")),
+        spec("dimension-huge", lambda: toml(PENDULUM, poisson=[[0] * 3000] * 3000, x0=[0.0] * 3000, hamiltonian="x1")),
     ]
 
 
@@ -342,7 +349,7 @@ def _file_cases() -> list[Case]:
         tableau("tableau-empty", toml(RK4, A=[], b=[])),
         tableau("tableau-A-string", toml(RK4, A="0")),
         tableau("tableau-dict-entry", jsondoc(RK4, b=[{"x": 1}, 0, 0, 0]), ".json"),
-        tableau("tableau-huge-stages", toml({"A": [["0"] * 3000] * 3000, "b": ["0"] * 3000})),
+        tableau("tableau-huge-stages", lambda: toml({"A": [["0"] * 3000] * 3000, "b": ["0"] * 3000})),
         tableau("tableau-txt-huge-index", "k b[k]\n999999999999 1\nk j A[k,j]\n0 0 0\n", ".txt"),
         tableau("tableau-txt-no-sections", "hello\n", ".txt"),
         tableau("tableau-unknown-suffix", "A = []", ".yaml"),
