@@ -2,32 +2,45 @@
 
 from __future__ import annotations
 
+import os
+
 import click
 
-from .options import console, emit_json, format_option, progress
+from rkhp.base import bounds
+
+from .options import console, emit_json, format_option, integer, progress
 from .render import compact_table, print_table
 
 
+def _default_jobs() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
 @click.command("compile")
+@click.option("--jobs", type=integer(1, bounds.MAX_WORKERS, name="N"), default=None,
+              help="Processes compiling side by side (default: the cores this process may use).")
 @format_option("table", "json")
-def compile_(fmt):
+def compile_(jobs, fmt):
     """Compile the integrator kernels of every built-in family now, into the cache (docs/engine.md)."""
-    from rkhp.integrators.ahead import compile_ahead, tape_classes
+    from rkhp.integrators.ahead import compile_ahead
     from rkhp.taylor.compiler import numba
 
     with progress(fmt != "json") as bar:
-        task = bar.add_task("compiling the integrator kernels", total=len(tape_classes()))
-        done = compile_ahead(on_class=lambda item: bar.update(task, advance=1))
-    report = {"cache_dir": str(numba.config.CACHE_DIR),
-              "classes": [item._asdict() for item in done],
-              "seconds": sum(item.seconds for item in done), "cpu_seconds": sum(item.cpu_seconds for item in done)}
+        task = bar.add_task("compiling the integrator kernels", total=None)
+        run = compile_ahead(jobs or _default_jobs(),
+                            on_part=lambda done, total: bar.update(task, completed=done, total=total))
+    report = {"cache_dir": str(numba.config.CACHE_DIR), "jobs": run.jobs,
+              "classes": [item._asdict() for item in run.classes],
+              "seconds": run.seconds, "cpu_seconds": sum(item.cpu_seconds for item in run.classes)}
     if fmt == "json":
         emit_json(report)
         return
-    table = compact_table(f"Integrator kernels in numba's cache ({report['cache_dir']})")
+    title = f"Integrator kernels in numba's cache ({report['cache_dir']}), {run.jobs} process" + \
+        ("es" if run.jobs > 1 else "") + f", {run.seconds:.1f} s"
+    table = compact_table(title)
     for col in ("tape class", "systems", "compiled now", "seconds", "CPU seconds"):
         table.add_column(col)
-    for item in done:
+    for item in run.classes:
         compiled = ", ".join(k.rsplit(".", 1)[1] for k in item.compiled) or "- (cached)"
         table.add_row(item.tape_class, ", ".join(item.systems), compiled, f"{item.seconds:.1f}",
                       f"{item.cpu_seconds:.1f}")

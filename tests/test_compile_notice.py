@@ -150,8 +150,9 @@ def test_compiling_ahead_leaves_no_run_of_a_builtin_system_cold():
     classes = tape_classes()
     assert sorted(cls.__name__ for cls in classes) == ["Tape", "Tape_phimv", "Tape_spray"]
     assert sorted(n for names in classes.values() for n in names) == sorted(builtin_systems())
-    done = compile_ahead()
-    assert [item.tape_class for item in done] == [cls.__name__ for cls in classes]
+    run = compile_ahead(jobs=2)
+    assert [item.tape_class for item in run.classes] == [cls.__name__ for cls in classes]
+    assert 1 <= run.jobs <= 2
     for name in builtin_systems():
         assert not cold_start(tuple(KERNELS), type(get_system(name).h_tape)), name
     args = [sys.executable, "-m", "rkhp", "integrate", "charged-particle", "--method", "rk4", "--steps", "10"]

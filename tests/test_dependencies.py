@@ -123,3 +123,66 @@ def test_inlined_function_gives_the_same_values():
 
     for x in (0.0, 0.5, -1.25, 3.0):
         assert twice(x) == poly(x, 4) - 2.0 * poly(-x, 3)
+
+
+def test_numba_cache_save_has_the_form_the_lock_expects():
+    """Fails loudly when a numba release changes the cache save that rkhp.taylor.compiler locks:
+    the lock is then not applied and `rkhp compile` runs in one process."""
+    from numba.core import caching
+
+    from rkhp.taylor.compiler import _save_locked, cache_save_precondition, parallel_compiles_safe
+
+    missing = cache_save_precondition()
+    assert not missing, (f"numba {metadata.version('numba')}'s cache save changed; rkhp.taylor.compiler's "
+                         f"lock is not applied: {'; '.join(missing)}")
+    assert caching.IndexDataCacheFile.save is _save_locked
+    assert parallel_compiles_safe()
+
+
+def test_cache_save_precondition_sees_a_changed_save():
+    from rkhp.taylor.compiler import cache_save_precondition
+
+    class IndexDataCacheFile:
+        def save(self, key, data):
+            self._save_data(self._data_name(1), data)  # no index: another form
+
+    module = types.SimpleNamespace(__name__="fake_numba_caching", IndexDataCacheFile=IndexDataCacheFile)
+    missing = cache_save_precondition(module)
+    assert any("save does not use exactly" in m for m in missing), missing
+    assert any("has no _load_index" in m for m in missing), missing
+    assert cache_save_precondition(types.SimpleNamespace(__name__="empty")) == ["empty has no IndexDataCacheFile"]
+
+
+def _save_entries(folder: str, first: int, count: int) -> None:
+    """Save ``count`` entries, keys first..first+count-1, each with its own key as data, into the
+    index of one function in ``folder`` (a process of the race test below)."""
+    from numba.core.caching import IndexDataCacheFile
+
+    import rkhp.taylor.compiler  # noqa: F401 - the locked save
+
+    cache_file = IndexDataCacheFile(folder, "kernel", ("stamp", 1))
+    for key in range(first, first + count):
+        cache_file.save(("signature", key), {"key": key, "payload": "x" * 20_000})
+
+
+def test_processes_saving_into_one_index_lose_nothing(tmp_path):
+    """Four processes save 40 versions each of one function at once: every version is in the index
+    and its data file holds that version (numba's unlocked save loses entries and can point one
+    version at another's data)."""
+    import multiprocessing
+
+    from numba.core.caching import IndexDataCacheFile
+
+    context = multiprocessing.get_context("spawn")
+    workers = [context.Process(target=_save_entries, args=(str(tmp_path), 1000 * k, 40)) for k in range(4)]
+    for worker in workers:
+        worker.start()
+    for worker in workers:
+        worker.join(120)
+        assert worker.exitcode == 0
+    cache_file = IndexDataCacheFile(str(tmp_path), "kernel", ("stamp", 1))
+    keys = [("signature", 1000 * k + i) for k in range(4) for i in range(40)]
+    assert sorted(cache_file._load_index()) == sorted(keys)
+    for key in keys:
+        assert cache_file.load(key)["key"] == key[1]
+    assert not list(tmp_path.glob("*.tmp.*"))

@@ -478,3 +478,33 @@ def test_api_tableau_from_plain_numbers():
     assert tab.A[1][0] == Fraction(1, 2) and rkhp.verify(tab).orders["general"] == 2
     with pytest.raises(InputError):
         rkhp.Tableau("bad", [[0, 0], ["x", 0]], [0, 1])
+
+
+def test_ctrl_c_stops_a_compile_in_several_processes_at_once(tmp_path):
+    """Ctrl-C on a terminal (SIGINT to the whole process group) during `rkhp compile --jobs 2` on
+    an empty cache: status 130 and one line within seconds, not after the running compiles, and
+    no process of the group left."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"))
+    proc = subprocess.Popen([sys.executable, "-m", "rkhp", "compile", "--jobs", "2"], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.monotonic() + 60
+    while proc.poll() is None and len(_children(proc.pid)) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(2.0)  # both compiling
+    assert proc.poll() is None
+    os.killpg(proc.pid, signal.SIGINT)
+    start = time.monotonic()
+    out, err = proc.communicate(timeout=60)
+    assert time.monotonic() - start < 10
+    assert proc.returncode == 130 and err.strip().splitlines() == ["rkhp: interrupted"], err
+    time.sleep(0.5)
+    with pytest.raises(ProcessLookupError):
+        os.killpg(proc.pid, 0)
+
+
+def _children(pid: int) -> list[int]:
+    """The child processes of ``pid`` (Linux: /proc/PID/task/*/children)."""
+    found = []
+    for task in Path(f"/proc/{pid}/task").glob("*/children"):
+        found += [int(c) for c in task.read_text().split()]
+    return found

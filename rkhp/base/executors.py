@@ -225,6 +225,17 @@ class LocalProcesses:
     def close(self) -> None:
         self._pool.shutdown(wait=True, cancel_futures=True)
 
+    def terminate(self) -> None:
+        """Stop the workers now, running tasks included (their results are lost): for tasks whose
+        partial work is worth nothing, after an interrupt or an error."""
+        stop = getattr(self._pool, "terminate_workers", None)  # Python 3.14
+        if stop is not None:
+            stop()
+            return
+        for process in list((getattr(self._pool, "_processes", None) or {}).values()):
+            process.terminate()
+        self._pool.shutdown(wait=True, cancel_futures=True)
+
 
 # ----------------------------------------------------------------------------- a Dask cluster
 

@@ -6,6 +6,10 @@ numba compiles a kernel once per class of tapes (`rkhp.taylor.tape.tape_class`: 
 operations the interpreter must know), so one system per class stands for its whole family: one
 step of each kind of method (`AHEAD_METHODS`), the compiled Hamiltonian of the studies and the
 vector field of the scipy peers compile every entry kernel of `rkhp.integrators.kernels`.
+
+Each of those runs on one system is a part (`AHEAD_PARTS`); the parts are independent and run
+in ``jobs`` processes side by side when numba's cache saves are locked
+(`rkhp.taylor.compiler.parallel_compiles_safe`), else one after the other in this process.
 """
 
 from __future__ import annotations
@@ -13,23 +17,46 @@ from __future__ import annotations
 import time
 from typing import NamedTuple
 
+from ..base.executors import InProcess, LocalProcesses, run_all
 from .kernels import KERNELS, cold_start
 from .methods import resolve_method
 
 #: one method of each kind, explicit and implicit RKHP being two specialisations of the step loop;
 #: tj4, a composition of Euler steps: the composed loop, or on the spray realisation its direct form
 AHEAD_METHODS = ("rk4", "gauss2", "thp2", "classical:rk4", "implicit-midpoint", "tj4")
+#: the parts of a class's compile: the Hamiltonian first (it compiles the class's tape interpreter,
+#: which every other part links in), each of `AHEAD_METHODS`, the composed loop of tj4 (on the
+#: spray realisation too, where tj4 itself runs direct) and the scipy peers' vector field
+HAMILTONIAN, COMPOSED, VECTOR_FIELD = "hamiltonian", "composed:tj4", "vector-field"
+AHEAD_PARTS = (HAMILTONIAN, *AHEAD_METHODS, COMPOSED, VECTOR_FIELD)
 
 
 class Compiled(NamedTuple):
     """One class of tapes made ready: the built-in systems that use it, the entry kernels that
-    were missing from the cache (empty: nothing to do), and the wall and CPU seconds it took."""
+    were missing from the cache (empty: nothing to do), and the wall and CPU seconds its parts
+    took, summed over the processes that ran them."""
 
     tape_class: str
     systems: tuple[str, ...]
     compiled: tuple[str, ...]
     seconds: float
     cpu_seconds: float
+
+
+class PartTime(NamedTuple):
+    """The wall and CPU seconds one part took in the process that ran it."""
+
+    seconds: float
+    cpu_seconds: float
+
+
+class AheadRun(NamedTuple):
+    """A whole compile: each class (`Compiled`), the processes that ran the parts and its wall
+    seconds (with ``jobs`` above 1, less than the sum of the classes' seconds)."""
+
+    classes: tuple[Compiled, ...]
+    jobs: int
+    seconds: float
 
 
 def tape_classes() -> dict[type, tuple[str, ...]]:
@@ -42,39 +69,89 @@ def tape_classes() -> dict[type, tuple[str, ...]]:
     return {cls: tuple(names) for cls, names in out.items()}
 
 
-def prepare(system) -> None:
-    """Run every entry kernel once on ``system`` (one step of each of `AHEAD_METHODS`)."""
+def prepare_part(system, part: str) -> None:
+    """Run the entry kernels of one of `AHEAD_PARTS` once on ``system`` (one step)."""
     import numpy as np
 
-    from ..tableaux.compositions import load_composition
-    from .classical import vector_field
-    from .composed import integrate_composition
-    from .energy import hamiltonian_values
-
     h = system.t_final / 1000
-    for name in AHEAD_METHODS:
-        resolve_method(name).integrate(system, h, 1)
-    integrate_composition(system, load_composition("tj4"), h, 1)  # on the spray too (tj4 runs direct there)
-    hamiltonian_values(system, np.array([system.x0]))
-    vector_field(system)(system.x0)
+    if part == HAMILTONIAN:
+        from .energy import hamiltonian_values
+
+        hamiltonian_values(system, np.array([system.x0]))
+    elif part == COMPOSED:
+        from ..tableaux.compositions import load_composition
+        from .composed import integrate_composition
+
+        integrate_composition(system, load_composition("tj4"), h, 1)
+    elif part == VECTOR_FIELD:
+        from .classical import vector_field
+
+        vector_field(system)(system.x0)
+    else:
+        resolve_method(part).integrate(system, h, 1)
 
 
-def compile_ahead(on_class=None) -> list[Compiled]:
-    """Fill numba's cache for every class of `tape_classes`, one after the other (numba's cache
-    index of a kernel is one file: processes compiling side by side would overwrite each other's
-    entries). ``on_class(Compiled)`` is called after each class (progress)."""
+def timed_part(system_name: str, part: str) -> PartTime:
+    """`prepare_part` on a built-in system, timed (a task of a pool: arguments by name)."""
     from ..systems import get_system
 
-    done = []
-    for cls, names in tape_classes().items():
-        cold = cold_start(tuple(KERNELS), cls)
-        start, cpu = time.perf_counter(), time.process_time()
-        prepare(get_system(names[0]))  # also when nothing is cold: a specialisation may be missing
-        item = Compiled(cls.__name__, names, cold.kernels, time.perf_counter() - start, time.process_time() - cpu)
-        done.append(item)
-        if on_class is not None:
-            on_class(item)
-    return done
+    start, cpu = time.perf_counter(), time.process_time()
+    prepare_part(get_system(system_name), part)
+    return PartTime(time.perf_counter() - start, time.process_time() - cpu)
 
 
-__all__ = ["AHEAD_METHODS", "Compiled", "tape_classes", "prepare", "compile_ahead"]
+class AheadTask(NamedTuple):
+    """One part on the built-in system standing for its class (the arguments of `timed_part`)."""
+
+    system: str
+    part: str
+
+
+def ahead_tasks(classes: dict[type, tuple[str, ...]]) -> list[AheadTask]:
+    """The tasks of every class: first each class's Hamiltonian, which compiles its tape
+    interpreter, then the other parts class by class, so that a process compiling one class's
+    interpreter rarely runs beside a part that links it in (it would compile it again)."""
+    firsts = [AheadTask(names[0], HAMILTONIAN) for names in classes.values()]
+    rest = [AheadTask(names[0], part) for names in classes.values() for part in AHEAD_PARTS if part != HAMILTONIAN]
+    return firsts + rest
+
+
+def _class_times(system: str, tasks: list[AheadTask], times: list[PartTime]) -> PartTime:
+    """The seconds of the parts run on ``system``, summed."""
+    spent = [t for task, t in zip(tasks, times) if task.system == system]
+    return PartTime(sum(t.seconds for t in spent), sum(t.cpu_seconds for t in spent))
+
+
+def compile_ahead(jobs: int = 1, on_part=None) -> AheadRun:
+    """Fill numba's cache for every class of `tape_classes`, the parts in ``jobs`` processes.
+
+    One process (this one) when numba's cache saves are not locked (processes compiling side by
+    side would overwrite each other's index entries) or when no entry kernel is cold (the parts
+    then only load, and a cold specialisation is rare). ``on_part(done, total)`` is called after
+    each part (progress). Each class runs also when nothing is cold: a specialisation may be
+    missing."""
+    from ..taylor.compiler import parallel_compiles_safe
+
+    classes = tape_classes()
+    cold = {cls: cold_start(tuple(KERNELS), cls) for cls in classes}
+    tasks = ahead_tasks(classes)
+    if not parallel_compiles_safe() or not any(cold.values()):
+        jobs = 1  # nothing cold: loading the cache once costs less than in each process
+    jobs = max(1, min(jobs, len(tasks)))
+    start = time.perf_counter()
+    executor = LocalProcesses(jobs) if jobs > 1 else InProcess()
+    try:
+        times = run_all(executor, timed_part, tasks, on_part)
+    except BaseException:
+        if jobs > 1:
+            executor.terminate()  # a part cut short saved nothing (numba saves whole files)
+        raise
+    finally:
+        executor.close()
+    done = tuple(Compiled(cls.__name__, names, cold[cls].kernels, *_class_times(names[0], tasks, times))
+                 for cls, names in classes.items())
+    return AheadRun(done, jobs, time.perf_counter() - start)
+
+
+__all__ = ["AHEAD_METHODS", "AHEAD_PARTS", "Compiled", "PartTime", "AheadRun", "AheadTask", "tape_classes",
+           "prepare_part", "timed_part", "ahead_tasks", "compile_ahead"]

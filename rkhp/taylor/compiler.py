@@ -6,6 +6,10 @@ still run the old interpreter. So the cache lives in a user folder named by a ha
 compiled source (`rkhp/taylor/*.py` and `rkhp/integrators/*.py`, read as files, not imported):
 $XDG_CACHE_HOME/rkhp/numba/<hash> (default ~/.cache/rkhp/numba/<hash>). A NUMBA_CACHE_DIR set by
 the user is respected. Every compiled module imports numba and its settings from here.
+
+numba's own writes to that cache are made safe for processes compiling side by side
+(`_save_locked`), and its inliner cheaper (`_cheap_inlining`); each patch is applied only to the
+form of numba it was checked on (tests/test_dependencies.py fails loudly on another).
 """
 
 from __future__ import annotations
@@ -31,8 +35,13 @@ def cache_dir() -> Path:
 
 import copy  # noqa: E402
 
+try:
+    import fcntl
+except ImportError:  # not POSIX: numba's saves stay unlocked, and rkhp compiles in one process
+    fcntl = None
+
 import numba  # noqa: E402
-from numba.core import inline_closurecall  # noqa: E402
+from numba.core import caching, inline_closurecall  # noqa: E402
 from numba.extending import overload  # noqa: E402
 
 if not os.environ.get("NUMBA_CACHE_DIR"):
@@ -147,6 +156,76 @@ if (not getattr(inline_closurecall.InlineWorker, "rkhp_cheap_inlining", False)
         and not inlining_precondition()):
     _cheap_inlining(inline_closurecall.InlineWorker)
 
+
+#: the names numba's `IndexDataCacheFile.save` uses, in the form the locked save was checked on
+#: (numba 0.68): load the index, pick a free data name, save the index, then the data
+CACHE_SAVE_NAMES = ("_load_index", "KeyError", "set", "values", "itertools", "count", "_data_name",
+                    "_save_index", "_save_data")
+#: the lock file, one per cache folder of a source file
+CACHE_LOCK_NAME = ".rkhp-save.lock"
+
+
+def cache_save_precondition(module=caching) -> list[str]:
+    """What `_locked_cache_saves` expects of numba's cache module and does not find (empty: all):
+    `IndexDataCacheFile` with numba's own ``save`` of the form above and the helpers it calls,
+    and POSIX file locks (``fcntl``)."""
+    index_file = getattr(module, "IndexDataCacheFile", None)
+    if index_file is None:
+        return [f"{module.__name__} has no IndexDataCacheFile"]
+    save = getattr(index_file, "rkhp_original_save", getattr(index_file, "save", None))
+    missing = []
+    if getattr(getattr(save, "__code__", None), "co_names", ()) != CACHE_SAVE_NAMES:
+        missing.append(f"IndexDataCacheFile.save does not use exactly {CACHE_SAVE_NAMES}")
+    missing += [f"IndexDataCacheFile has no {name}" for name in ("_load_index", "_save_index", "_save_data",
+                                                                   "_data_name") if not hasattr(index_file, name)]
+    if fcntl is None:
+        missing.append("no fcntl (POSIX file locks) on this platform")
+    return missing
+
+
+def _free_data_name(cache_file, overloads: dict) -> str:
+    """The first data file name that the index ``overloads`` does not use (numba's numbering)."""
+    used = set(overloads.values())
+    number = 1
+    while cache_file._data_name(number) in used:
+        number += 1
+    return cache_file._data_name(number)
+
+
+def _save_locked(cache_file, key, data) -> None:
+    """numba's `IndexDataCacheFile.save` under an exclusive lock of the cache folder, data first.
+
+    numba reads the index, picks a free data file name, writes the index, then the data. Two
+    processes saving new versions of one function at once (``rkhp compile --jobs``, test processes,
+    workers of a pool on a cold cache) can both pick the same name: one index entry then names the
+    other process's machine code. Under the lock the read, the pick and both writes of one save
+    happen alone; the data is written before the index names it, so a reader finds an entry only
+    once its code is in place (both writes replace their file atomically, as numba's do)."""
+    with open(os.path.join(cache_file._cache_path, CACHE_LOCK_NAME), "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        overloads = cache_file._load_index()
+        name = overloads.get(key) or _free_data_name(cache_file, overloads)
+        cache_file._save_data(name, data)
+        if overloads.get(key) != name:
+            overloads[key] = name
+            cache_file._save_index(overloads)
+
+
+def _locked_cache_saves(index_file) -> None:
+    index_file.rkhp_original_save = index_file.save
+    index_file.save = _save_locked
+    index_file.rkhp_locked_saves = True
+
+
+if (not getattr(caching.IndexDataCacheFile, "rkhp_locked_saves", False)
+        and not cache_save_precondition()):
+    _locked_cache_saves(caching.IndexDataCacheFile)
+
+
+def parallel_compiles_safe() -> bool:
+    """Whether processes may compile into one cache side by side (numba's saves are locked)."""
+    return bool(getattr(caching.IndexDataCacheFile, "rkhp_locked_saves", False))
+
 NJIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 """Every compiled function: cached on disk, no GIL, IEEE arithmetic, numpy's error model.
 Calls between compiled functions pass integers as np.int64(...), never as bare literals: numba
@@ -182,5 +261,5 @@ def is_cached(kernel, signature: str | None = None) -> bool:
     return any(signature in str(key[0]) for key in entries)
 
 
-__all__ = ["numba", "overload", "cache_dir", "is_cached", "inlining_precondition", "NJIT", "NJIT_NORC",
-           "NJIT_NRT"]
+__all__ = ["numba", "overload", "cache_dir", "is_cached", "inlining_precondition", "cache_save_precondition",
+           "parallel_compiles_safe", "NJIT", "NJIT_NORC", "NJIT_NRT"]
