@@ -2,42 +2,19 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import pytest
 
 
 @pytest.fixture
 def run_cli():
-    """Run `rkhp ARGS`; return (exit status, stdout, stderr). In this process, by click's test
-    runner, when the hashing is fixed (PYTHONHASHSEED=0, as `make test` runs): what the separate
-    process would print, without its start-up (docs/_ext/doccode.py runs the docs' commands so);
-    else in a fresh `python -m rkhp` process. A test of the process itself (signals, imports,
-    limits) starts one of its own."""
+    """Run `rkhp ARGS`; return (exit status, stdout, stderr): in this process under
+    PYTHONHASHSEED=0, else in a fresh one (tests/cli_run.py)."""
+    from cli_run import rkhp
 
     def run(*args: str, timeout: float = 600):
-        if sys.flags.hash_randomization == 0:
-            return _in_process(args)
-        proc = subprocess.run([sys.executable, "-m", "rkhp", *args], capture_output=True,
-                              text=True, timeout=timeout)
-        return proc.returncode, proc.stdout, proc.stderr
+        return tuple(rkhp(*args, timeout=timeout))
 
     return run
-
-
-def _in_process(args) -> tuple[int, str, str]:
-    """`rkhp ARGS` by click's test runner: a crash is status 1 with its traceback on stderr, as
-    Python prints it for an uncaught exception."""
-    import traceback
-
-    from click.testing import CliRunner
-    from rkhp_cli.main import rkhp
-
-    result = CliRunner().invoke(rkhp, list(args), prog_name="rkhp", catch_exceptions=True)
-    if result.exception is not None and not isinstance(result.exception, SystemExit):
-        return 1, result.stdout, result.stderr + "".join(traceback.format_exception(result.exception))
-    return result.exit_code, result.stdout, result.stderr
 
 
 @pytest.fixture

@@ -10,12 +10,10 @@ ellipsis (``lobatto-ii…``) leaves no such token.
 from __future__ import annotations
 
 import json
-import os
 import re
-import subprocess
-import sys
 
 import pytest
+from cli_run import rkhp
 
 _SEPARATORS = re.compile(r"[\s│┃─━┏┓┗┛┡┩└┘┼╇┳┻┴┬├┤╈╋]+")
 
@@ -73,10 +71,8 @@ def missing(doc, text: str) -> list:
     return out
 
 
-def _run(*args: str, cwd=None) -> str:
-    env = dict(os.environ, COLUMNS="80")
-    proc = subprocess.run([sys.executable, "-m", "rkhp", *args], capture_output=True, text=True,
-                          env=env, cwd=cwd, timeout=600)
+def _run(*args: str) -> str:
+    proc = rkhp(*args, env={"COLUMNS": "80"})
     assert proc.returncode == 0, proc.stderr
     return proc.stdout
 

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from fractions import Fraction
 
 import numpy as np
 import pytest
+from cli_run import rkhp
 
 from rkhp.base.errors import InputError
 from rkhp.base.modular import (
@@ -329,7 +328,7 @@ def test_regeneration_reproduces_the_shipped_data_to_order_eight():
 
 
 def _rkhp(*args):
-    return subprocess.run([sys.executable, "-m", "rkhp", *args], capture_output=True, text=True)
+    return rkhp(*args)
 
 
 def test_cli_relations_json():

@@ -10,12 +10,11 @@ a zero elementary weight (so its condition is violated by exactly 1).
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_run import rkhp
 
 from rkhp.base.executors import open_executor
 from rkhp.search.driver import SearchOptions, search
@@ -182,8 +181,7 @@ def test_recognise_numbers():
 
 
 def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "rkhp", *args], capture_output=True, text=True,
-                          timeout=300)
+    return rkhp(*args, timeout=300)
 
 
 @pytest.mark.parametrize("args", [["--stages", "0"], ["--stages", "2", "--order", "0"],
