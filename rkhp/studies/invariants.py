@@ -4,20 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-COMPILED_FROM = 20_000
-"""From this many states on, H is evaluated by the compiled loop
-(:func:`rkhp.integrators.energy.hamiltonian_values`); below, by the system's own evaluation
-(about 27 us per state on the rigid body), which spares short studies a cold compilation of the
-loop (about 7 s CPU measured)."""
-
-
-def energies(system, states) -> np.ndarray:
-    """H at every row of ``states``."""
-    if len(states) >= COMPILED_FROM:
-        from ..integrators.energy import hamiltonian_values
-
-        return hamiltonian_values(system, states)
-    return np.fromiter((system.hamiltonian(x) for x in states), dtype=float, count=len(states))
+from ..integrators.trajectory import energies
 
 
 def invariant_deviations(system, states) -> tuple[np.ndarray, np.ndarray]:
