@@ -219,3 +219,16 @@ def test_random_tableaux_round_trip(tmp_path_factory, data, suffix):
     path = tmp_path_factory.mktemp("rt") / f"t{suffix}"
     save_tableau(t, path)
     assert load_file(path) == t
+
+
+def test_expression_entries_are_read_once_and_refusals_never_kept():
+    """An expression entry read again (the compositions repeat theirs) is the same exact number;
+    a refused text is refused again, naming the new place."""
+    from rkhp.tableaux.tableau import parse_entry
+
+    first = parse_entry("1/(2 - 2^(1/3))", "a")
+    again = parse_entry(" 1/(2 - 2^(1/3)) ", "b")
+    assert sympy.simplify(first - 1 / (2 - sympy.cbrt(2))) == 0 and again == first
+    for where in ("first place", "second place"):
+        with pytest.raises(InputError, match=f"^{where}: not a real algebraic number"):
+            parse_entry("log(2)", where)

@@ -109,6 +109,13 @@ def _check_decimal(s: str, where: str) -> None:
         raise InputError(f"{where}: the exponent of {s[:40]!r} is beyond +-{MAX_DECIMAL_EXPONENT}")
 
 
+#: entries read from expression texts in this process, by text (a value is immutable and depends on
+#: the text alone; a refused text is never kept): sympy's radsimp of a nested radical costs tens of
+#: milliseconds, and the compositions repeat their coefficients (tj8's are products of tj4's)
+_EXPRESSION_ENTRIES: dict[str, object] = {}
+MAX_KNOWN_EXPRESSIONS = 1024
+
+
 def _parse_text(text: str, where: str):
     s = text.strip()
     if _DECIMAL.match(s):
@@ -123,8 +130,13 @@ def _parse_text(text: str, where: str):
         return Fraction(num, den)
     if s.lower().lstrip("+-") in ("nan", "inf", "infinity"):
         raise InputError(f"{where}: non-finite value {text!r}")
-    expr = parse_expression(s, (), where=where, limits=ENTRY_LIMITS)
-    return _exact_expression(expr, where, text)
+    known = _EXPRESSION_ENTRIES.get(s)
+    if known is not None:
+        return known
+    value = _exact_expression(parse_expression(s, (), where=where, limits=ENTRY_LIMITS), where, text)
+    if len(_EXPRESSION_ENTRIES) < MAX_KNOWN_EXPRESSIONS:
+        _EXPRESSION_ENTRIES[s] = value
+    return value
 
 
 def _exact_expression(expr, where: str, text: str):
