@@ -167,9 +167,11 @@ def _render(result, save, certificate=None) -> None:
         if not result.found.exact:
             con.print(f"(entries shown to {SHOWN_DIGITS} digits; all {result.options.digits} "
                       "with --format json or --save)")
-        con.print(f"residual {data['residual']:.3g}; principal error (order "
-                  f"{result.found.order + 1}) {data['principal_error']:.6g}")
         ver = result.found.verification
+        principal = data["principal_error"]
+        con.print(f"residual {data['residual']:.3g}; principal error (order {result.found.order + 1}) "
+                  + (f"{principal:.6g}" if principal is not None else
+                     "- (no conditions of that order known for the class)"))
         orders = ", ".join(f"{cls} {'>= ' if ver.is_lower_bound(cls) else ''}{n}"
                            for cls, n in ver.orders.items())
         con.print(f"verified orders: {orders}; decided by: {data['decided_by']}")
