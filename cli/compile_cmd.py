@@ -2,18 +2,12 @@
 
 from __future__ import annotations
 
-import os
-
 import click
 
 from rkhp.base import bounds
 
 from .options import console, emit_json, format_option, integer, progress
 from .render import compact_table, print_table
-
-
-def _default_jobs() -> int:
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
 @click.command("compile")
@@ -27,7 +21,7 @@ def compile_(jobs, fmt):
 
     with progress(fmt != "json") as bar:
         task = bar.add_task("compiling the integrator kernels", total=None)
-        run = compile_ahead(jobs or _default_jobs(),
+        run = compile_ahead(jobs,
                             on_part=lambda done, total: bar.update(task, completed=done, total=total))
     report = {"cache_dir": str(numba.config.CACHE_DIR), "jobs": run.jobs,
               "classes": [item._asdict() for item in run.classes],

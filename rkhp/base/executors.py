@@ -54,6 +54,13 @@ MAX_LOCAL_WORKERS = 256
 _ADDRESS = re.compile(r"((tcp|tls|ws|wss|ucx)://)?(\[[0-9A-Fa-f:.]{2,60}\]|[A-Za-z0-9_.\-]{1,200}):([0-9]{1,5})")
 
 
+def available_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the platform tells it)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
 class Task(Protocol):
     """A submitted task: its result (re-raising the task's exception) and whether it finished."""
 

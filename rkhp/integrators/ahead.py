@@ -17,7 +17,7 @@ from __future__ import annotations
 import time
 from typing import NamedTuple
 
-from ..base.executors import InProcess, LocalProcesses, run_all
+from ..base.executors import InProcess, LocalProcesses, available_cores, run_all
 from .kernels import KERNELS, cold_start
 from .methods import resolve_method
 
@@ -122,8 +122,9 @@ def _class_times(system: str, tasks: list[AheadTask], times: list[PartTime]) -> 
     return PartTime(sum(t.seconds for t in spent), sum(t.cpu_seconds for t in spent))
 
 
-def compile_ahead(jobs: int = 1, on_part=None) -> AheadRun:
-    """Fill numba's cache for every class of `tape_classes`, the parts in ``jobs`` processes.
+def compile_ahead(jobs: int | None = None, on_part=None) -> AheadRun:
+    """Fill numba's cache for every class of `tape_classes`, the parts in ``jobs`` processes
+    (default: one per core this process may use).
 
     One process (this one) when numba's cache saves are not locked (processes compiling side by
     side would overwrite each other's index entries) or when no entry kernel is cold (the parts
@@ -135,6 +136,7 @@ def compile_ahead(jobs: int = 1, on_part=None) -> AheadRun:
     classes = tape_classes()
     cold = {cls: cold_start(tuple(KERNELS), cls) for cls in classes}
     tasks = ahead_tasks(classes)
+    jobs = jobs or available_cores()
     if not parallel_compiles_safe() or not any(cold.values()):
         jobs = 1  # nothing cold: loading the cache once costs less than in each process
     jobs = max(1, min(jobs, len(tasks)))

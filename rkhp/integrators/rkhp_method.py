@@ -10,7 +10,6 @@ time.
 
 from __future__ import annotations
 
-import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 
@@ -18,7 +17,7 @@ import numpy as np
 
 from ..base.bounds import check_step
 from ..base.errors import InputError, NumericalFailure
-from ..base.executors import run_all
+from ..base.executors import available_cores, run_all
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE, STAGE_MAX_SWEEPS
 from .trajectory import Trajectory, checked
@@ -185,7 +184,7 @@ def _ensemble_chunk(system, A, b, h, n_steps, x0s, tol, max_iter, stage, threads
     finals = np.zeros_like(x0s)
     done = np.zeros(m, dtype=np.int64)
     codes = np.zeros(m, dtype=np.int64)
-    threads = threads or len(os.sched_getaffinity(0))
+    threads = threads or available_cores()
     bounds = np.linspace(0, m, min(threads, max(m, 1)) + 1).astype(int)
 
     def batch(lo, hi):
