@@ -7,14 +7,20 @@ import numpy as np
 from ..integrators.trajectory import energies
 
 
+def energy_deviations(system, states) -> np.ndarray:
+    """Per state: |H(x_n) - H(x_0)| (H by the compiled loop on a long trajectory,
+    `rkhp.integrators.trajectory.energies`)."""
+    values = energies(system, np.asarray(states, dtype=float))
+    return np.abs(values - values[0])
+
+
 def invariant_deviations(system, states) -> tuple[np.ndarray, np.ndarray]:
     """Per state: max over the Casimirs of |C(x_n) - C(x_0)|, and |H(x_n) - H(x_0)|.
 
     A system without Casimirs (e.g. a symplectic one) gets zeros for the first array.
     """
     states = np.asarray(states, dtype=float)
-    energy = energies(system, states)
-    energy = np.abs(energy - energy[0])
+    energy = energy_deviations(system, states)
     casimir = np.zeros(len(states))
     for C in system.casimirs:
         values = np.fromiter((C(x) for x in states), dtype=float, count=len(states))

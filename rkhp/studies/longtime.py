@@ -17,8 +17,8 @@ import numpy as np
 
 from ..base.errors import InputError
 from ..integrators.methods import Method, resolve_method
-from ..integrators.trajectory import energies
 from .bench import solve_peer
+from .invariants import energy_deviations
 
 #: samples of the running maximum, log-spaced in t
 SAMPLES = 60
@@ -68,13 +68,6 @@ def fit_exponent(times, errors, t_final: float) -> float | None:
     return float(np.polyfit(np.log(t[keep]), np.log(e[keep]), 1)[0])
 
 
-def _energy_errors(system, states) -> np.ndarray:
-    """|H(y_n) - H(y_0)| along a trajectory (y_0 its first state; H by the compiled loop on a
-    long one, `rkhp.integrators.trajectory.energies`)."""
-    values = energies(system, np.ascontiguousarray(states, dtype=np.float64))
-    return np.abs(values - values[0])
-
-
 def energy_growth(system, method, h: float, steps: int, tolerance: float = 1e-10) -> Growth:
     """Run `method` (an RKHP or other fixed-step method: `steps` steps of size h; a scipy method:
     to t = h * steps at rtol `tolerance`) and fit the growth of its energy error."""
@@ -85,7 +78,7 @@ def energy_growth(system, method, h: float, steps: int, tolerance: float = 1e-10
         sol = solve_peer(system, m.solver, np.asarray(system.x0, dtype=float), t_final, tolerance)
         if not sol.success:
             return Growth(m.name, None, None, tolerance, (), (), None, f"failed: {sol.message}")
-        err = _energy_errors(system, sol.y.T)
+        err = energy_deviations(system, sol.y.T)
         errors = running_max_at(sol.t, err, times)
         return Growth(m.name, None, None, tolerance, tuple(times), tuple(errors),
                       fit_exponent(times, errors, t_final), "ok")
@@ -94,7 +87,7 @@ def energy_growth(system, method, h: float, steps: int, tolerance: float = 1e-10
         return Growth(m.name, h, steps, None, (), (), None, run.status)
     stride = max(1, steps // 200_000)  # the running maximum over at least 2 10^5 points
     states = run.states[::stride]
-    err = _energy_errors(system, states)
+    err = energy_deviations(system, states)
     errors = running_max_at(run.times[::stride], err, times)
     return Growth(m.name, h, steps, None, tuple(times), tuple(errors), fit_exponent(times, errors, t_final), "ok")
 

@@ -156,7 +156,6 @@ def symbolic_field(system):
     InputError for a system that is not given by expressions there."""
     import sympy
 
-
     data = problem_data(system.name) if system.name.partition(":")[0] in PROBLEMS else None
     if data is None:
         raise InputError(f"an mpmath reference needs the expressions of the system: {system.name} has none "
