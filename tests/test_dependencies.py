@@ -186,3 +186,82 @@ def test_processes_saving_into_one_index_lose_nothing(tmp_path):
     for key in keys:
         assert cache_file.load(key)["key"] == key[1]
     assert not list(tmp_path.glob("*.tmp.*"))
+
+
+def test_numba_cache_locator_has_the_form_rkhp_refines():
+    """Fails loudly when a numba release changes how its cache finds a function's folder or checks
+    its source: rkhp's locator is then not used, and each checkout compiles for itself."""
+    from numba.core import caching
+
+    from rkhp.taylor.compiler import SourcesLocator, locator_precondition
+
+    missing = locator_precondition()
+    assert not missing, (f"numba {metadata.version('numba')}'s cache locators changed; rkhp's SourcesLocator "
+                         f"is not used: {'; '.join(missing)}")
+    assert caching.CacheImpl._locator_classes[0] is SourcesLocator
+
+
+def test_locator_precondition_sees_a_changed_cache_module():
+    from numba.core import caching
+
+    from rkhp.taylor.compiler import locator_precondition
+
+    class TimeStamped(caching.UserProvidedCacheLocator):
+        def get_source_stamp(self):
+            return Path(self._py_file).stat().st_mtime  # numba's older stamp: differs between copies
+
+    stamped = types.SimpleNamespace(CacheImpl=types.SimpleNamespace(_locator_classes=[TimeStamped]),
+                                    UserProvidedCacheLocator=TimeStamped)
+    assert locator_precondition(stamped) == ["UserProvidedCacheLocator.get_source_stamp does not hash the "
+                                             "source file's content"]
+    renamed = types.SimpleNamespace(CacheImpl=types.SimpleNamespace(_locator_classes=(TimeStamped,)))
+    assert locator_precondition(renamed) == ["CacheImpl._locator_classes is not a list holding "
+                                             "UserProvidedCacheLocator"]
+
+
+SHARED_COMPILE = """
+import json, sys
+import rkhp
+from rkhp.taylor.linalg import lu_factor
+import numpy as np
+from rkhp.taylor.compiler import is_cached
+before = is_cached(lu_factor)
+A = np.array([[0.0, 2.0], [3.0, 1.0]])
+assert lu_factor(A, np.zeros(2, np.int64))
+print(json.dumps({"package": rkhp.__file__, "cached_before": before,
+                  "hits": sum(lu_factor.stats.cache_hits.values()),
+                  "misses": sum(lu_factor.stats.cache_misses.values())}))
+"""
+
+
+def _run_in_copy(copy: Path, environ: dict) -> dict:
+    import json
+    import subprocess
+
+    out = subprocess.run([sys.executable, "-c", SHARED_COMPILE], capture_output=True, text=True, timeout=300,
+                         env=dict(environ, PYTHONPATH=str(copy)), cwd=copy)
+    assert out.returncode == 0, out.stderr
+    report = json.loads(out.stdout)
+    assert report["package"] == str(copy / "rkhp" / "__init__.py")
+    return report
+
+
+def test_two_copies_of_the_sources_share_one_compile(tmp_path):
+    """A kernel compiled by one checkout of rkhp is loaded, not compiled, by another checkout of the
+    same sources elsewhere on disk (rkhp's cache folder); in a user's NUMBA_CACHE_DIR, numba's own
+    locator keeps one folder per path, and the second copy compiles again."""
+    import os
+    import shutil
+
+    copies = [tmp_path / name for name in ("first", "second")]
+    for copy in copies:
+        shutil.copytree(ROOT / "rkhp", copy / "rkhp", ignore=shutil.ignore_patterns("__pycache__"))
+    environ = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    shared = dict(environ, XDG_CACHE_HOME=str(tmp_path / "home-cache"))
+    first, second = (_run_in_copy(copy, shared) for copy in copies)
+    assert (first["cached_before"], first["misses"]) == (False, 1)
+    assert (second["cached_before"], second["hits"], second["misses"]) == (True, 1, 0)
+
+    users = dict(environ, NUMBA_CACHE_DIR=str(tmp_path / "users-cache"))
+    first, second = (_run_in_copy(copy, users) for copy in copies)
+    assert (first["misses"], second["cached_before"], second["misses"]) == (1, False, 1)

@@ -1,34 +1,52 @@
 """numba as rkhp compiles with it: the cache folder and the compile settings.
 
-numba checks only the time stamp of the file that defines a cached function, not of the files
+numba checks only the file that defines a cached function (a hash of its content), not the files
 whose functions it calls: after an edit of `rkhp/taylor/interpreter.py`, the cached engine would
 still run the old interpreter. So the cache lives in a user folder named by a hash of every
-compiled source (`rkhp/taylor/*.py` and `rkhp/integrators/*.py`, read as files, not imported):
-$XDG_CACHE_HOME/rkhp/numba/<hash> (default ~/.cache/rkhp/numba/<hash>). A NUMBA_CACHE_DIR set by
-the user is respected. Every compiled module imports numba and its settings from here.
+compiled source (`rkhp/taylor/*.py` and `rkhp/integrators/*.py`, read as files, not imported)
+and of the numba and llvmlite versions: $XDG_CACHE_HOME/rkhp/numba/<hash> (default
+~/.cache/rkhp/numba/<hash>). Inside it a module's kernels are found by its package folder's name,
+not by its path on disk (`SourcesLocator`), so every checkout or installation of the same sources
+shares one compile. A NUMBA_CACHE_DIR set by the user is respected (with numba's own locator).
+Every compiled module imports numba and its settings from here.
 
 numba's own writes to that cache are made safe for processes compiling side by side
-(`_save_locked`), and its inliner cheaper (`_cheap_inlining`); each patch is applied only to the
-form of numba it was checked on (tests/test_dependencies.py fails loudly on another).
+(`_save_locked`), its inliner cheaper (`_cheap_inlining`), and its cache shared by every copy of
+the same sources (`SourcesLocator`); each patch is applied only to the form of numba it was
+checked on (tests/test_dependencies.py fails loudly on another).
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 #: the folders whose *.py files are compiled by numba (their hash names the cache folder)
 COMPILED_SOURCES = ("taylor", "integrators")
 
 
+#: the rkhp package folder
+PACKAGE = Path(__file__).resolve().parent.parent
+#: the distributions whose versions name the cache folder with the sources (numba discards an index
+#: written by another numba version: two environments sharing a folder would recompile in turn)
+COMPILER_DISTRIBUTIONS = ("numba", "llvmlite")
+
+
 def cache_dir() -> Path:
-    package = Path(__file__).resolve().parent.parent
+    """rkhp's numba cache folder: named by a hash of the compiled sources and of the versions of
+    `COMPILER_DISTRIBUTIONS` (read from their metadata, not imported)."""
     digest = hashlib.sha256()
     for folder in COMPILED_SOURCES:
-        for path in sorted((package / folder).glob("*.py")):
+        for path in sorted((PACKAGE / folder).glob("*.py")):
             digest.update(f"{folder}/{path.name}".encode())
             digest.update(path.read_bytes())
+    for name in COMPILER_DISTRIBUTIONS:
+        try:
+            digest.update(f"{name}=={version(name)}".encode())
+        except PackageNotFoundError:  # a numba run from its source tree: the sources name the folder
+            digest.update(f"{name}==?".encode())
     base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
     return base / "rkhp" / "numba" / digest.hexdigest()[:16]
 
@@ -44,8 +62,10 @@ import numba  # noqa: E402
 from numba.core import caching, inline_closurecall  # noqa: E402
 from numba.extending import overload  # noqa: E402
 
-if not os.environ.get("NUMBA_CACHE_DIR"):
-    numba.config.CACHE_DIR = str(cache_dir())
+#: rkhp's cache folder when numba uses it (None: the user's NUMBA_CACHE_DIR)
+RKHP_CACHE_DIR = None if os.environ.get("NUMBA_CACHE_DIR") else str(cache_dir())
+if RKHP_CACHE_DIR is not None:
+    numba.config.CACHE_DIR = RKHP_CACHE_DIR
 
 
 class _OneMemo:
@@ -226,6 +246,59 @@ def parallel_compiles_safe() -> bool:
     """Whether processes may compile into one cache side by side (numba's saves are locked)."""
     return bool(getattr(caching.IndexDataCacheFile, "rkhp_locked_saves", False))
 
+
+def is_compiled_source(py_file: str) -> bool:
+    """Whether ``py_file`` is one of rkhp's compiled sources (a .py file of `COMPILED_SOURCES`)."""
+    path = Path(py_file).resolve()
+    return path.suffix == ".py" and path.parent.name in COMPILED_SOURCES and path.parent.parent == PACKAGE
+
+
+#: numba's locator of a user's cache folder, which `SourcesLocator` refines (a numba without it
+#: fails `locator_precondition`, and the class is then never used)
+_USER_FOLDER_LOCATOR = getattr(caching, "UserProvidedCacheLocator", object)
+
+
+class SourcesLocator(_USER_FOLDER_LOCATOR):
+    """numba's cache locator for rkhp's compiled sources: a module's kernels are kept in
+    `RKHP_CACHE_DIR`/<its package folder> (``taylor``, ``integrators``), where numba's own locator
+    names the folder by a hash of the source file's absolute path. `RKHP_CACHE_DIR` is named by the
+    sources and the compiler's versions (`cache_dir`), and numba checks a cached function against
+    a hash of its file's content, so another clone, another virtual environment or ``pip install
+    .`` beside ``pip install -e .`` of the same sources loads what any of them compiled. Other
+    functions, and every function while the cache is a user's NUMBA_CACHE_DIR, are left to numba's
+    locators (`from_function` answers None)."""
+
+    def __init__(self, py_func, py_file):
+        super().__init__(py_func, py_file)
+        self._cache_path = os.path.join(numba.config.CACHE_DIR, Path(py_file).resolve().parent.name)
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        if RKHP_CACHE_DIR is None or numba.config.CACHE_DIR != RKHP_CACHE_DIR or not is_compiled_source(py_file):
+            return None
+        return super().from_function(py_func, py_file)
+
+
+def locator_precondition(module=caching) -> list[str]:
+    """What `SourcesLocator` expects of numba's cache module and does not find (empty: all):
+    the list of locators that `CacheImpl` tries in turn, holding `UserProvidedCacheLocator`, and
+    a source stamp that is a hash of the file's content (numba 0.68; a time stamp would differ
+    between two copies of one file, and each would discard the other's index)."""
+    impl = getattr(module, "CacheImpl", None)
+    classes = getattr(impl, "_locator_classes", None)
+    base = getattr(module, "UserProvidedCacheLocator", None)
+    if not isinstance(classes, list) or base is None or base not in classes:
+        return ["CacheImpl._locator_classes is not a list holding UserProvidedCacheLocator"]
+    stamp = getattr(getattr(base, "get_source_stamp", None), "__code__", None)
+    if stamp is None or "_hash_source_file" not in stamp.co_names:
+        return ["UserProvidedCacheLocator.get_source_stamp does not hash the source file's content"]
+    return []
+
+
+if not locator_precondition() and SourcesLocator not in caching.CacheImpl._locator_classes:
+    caching.CacheImpl._locator_classes.insert(0, SourcesLocator)
+
+
 NJIT = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 """Every compiled function: cached on disk, no GIL, IEEE arithmetic, numpy's error model.
 Calls between compiled functions pass integers as np.int64(...), never as bare literals: numba
@@ -262,4 +335,5 @@ def is_cached(kernel, signature: str | None = None) -> bool:
 
 
 __all__ = ["numba", "overload", "cache_dir", "is_cached", "inlining_precondition", "cache_save_precondition",
-           "parallel_compiles_safe", "NJIT", "NJIT_NORC", "NJIT_NRT"]
+           "parallel_compiles_safe", "is_compiled_source", "SourcesLocator", "locator_precondition",
+           "NJIT", "NJIT_NORC", "NJIT_NRT"]
