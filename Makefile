@@ -9,11 +9,14 @@ DOCS_STAMP := $(VENV)/.docs-installed
 
 install: $(STAMP)
 
-# constraints.txt: the versions the test suite passed with (docs/development.md)
+# constraints.txt: the versions the test suite passed with (docs/development.md). The installed
+# modules' bytecode is written by compileall on every core (pip writes it one file at a time);
+# it must be written here: under PYTHONDONTWRITEBYTECODE no process writes it at import.
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -c constraints.txt -e '.[test,distributed]'
+	$(PY) -m pip install --quiet --no-compile -c constraints.txt -e '.[test,distributed]'
+	$(PY) -m compileall -q -j 0 "$$($(PY) -c 'import sysconfig; print(sysconfig.get_path("purelib"))')"
 	$(VENV)/bin/rkhp compile  # numba's cache: no run waits for a compile (docs/engine.md)
 	touch $(STAMP)
 
