@@ -3,11 +3,12 @@ PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+COMPILED := $(VENV)/.compiled
 DOCS_STAMP := $(VENV)/.docs-installed
 
 .PHONY: install demo test test-all bench lint docs check-install clean
 
-install: $(STAMP)
+install: $(STAMP) $(COMPILED)
 
 # constraints.txt: the versions the test suite passed with (docs/development.md). The installed
 # modules' bytecode is written by compileall on every core (pip writes it one file at a time);
@@ -17,14 +18,18 @@ $(STAMP): pyproject.toml constraints.txt
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet --no-compile -c constraints.txt -e '.[test,distributed]'
 	$(PY) -m compileall -q -j 0 "$$($(PY) -c 'import sysconfig; print(sysconfig.get_path("purelib"))')"
-	$(VENV)/bin/rkhp compile  # numba's cache: no run waits for a compile (docs/engine.md)
 	touch $(STAMP)
 
-# The main job: the kernels compiled (again after an edit of the compiled sources), the paper's
-# Table 1, an exact order check, a seeded search that finds the paper's "one stage less than RK4",
-# and a convergence study of the RKHP methods on the rigid body.
-demo: install
+# numba's cache filled for the compiled sources as they are, so that no run (and no test process)
+# waits for a compile; again after an edit of them (a new cache folder: docs/engine.md)
+$(COMPILED): $(STAMP) $(wildcard rkhp/taylor/*.py rkhp/integrators/*.py)
 	$(VENV)/bin/rkhp compile
+	touch $(COMPILED)
+
+# The main job: the kernels compiled (by install), the paper's Table 1, an exact order check, a
+# seeded search that finds the paper's "one stage less than RK4", and a convergence study of the
+# RKHP methods on the rigid body.
+demo: install
 	$(VENV)/bin/rkhp conditions --order 5 --degenerate
 	$(VENV)/bin/rkhp verify paper-three-stage
 	$(VENV)/bin/rkhp search --stages 3 --degenerate --seed 0 --optimize error
@@ -33,16 +38,14 @@ demo: install
 	@echo "rkhp is installed in $(CURDIR)/$(VENV): run it as $(VENV)/bin/rkhp (e.g. $(VENV)/bin/rkhp --help),"
 	@echo "or put it on your PATH for this shell: source $(VENV)/bin/activate"
 
-# rkhp compile first (a no-op on a full cache): the test processes then never compile the same
-# kernel side by side. -n auto: one test process per core (pytest-xdist); PYTHONHASHSEED=0: the
-# docs' rkhp commands run in the test process (docs/_ext/doccode.py) with the hashing of the
-# separate process they stand for.
+# The kernels compiled by install: the test processes then never compile the same kernel side by
+# side. -n auto: one test process per core (pytest-xdist); PYTHONHASHSEED=0: the docs' rkhp
+# commands run in the test process (docs/_ext/doccode.py) with the hashing of the separate process
+# they stand for.
 test: install
-	$(VENV)/bin/rkhp compile --format json > /dev/null
 	PYTHONHASHSEED=0 $(PY) -m pytest -m "not slow" -q -p no:cacheprovider -n auto
 
 test-all: install $(DOCS_STAMP)
-	$(VENV)/bin/rkhp compile --format json > /dev/null
 	PYTHONHASHSEED=0 $(PY) -m pytest -q -p no:cacheprovider -n auto
 
 $(DOCS_STAMP): $(STAMP)
