@@ -24,7 +24,7 @@ class Ran(NamedTuple):
 def rkhp(*args: str, env: dict[str, str] | None = None, timeout: float = 600) -> Ran:
     """``rkhp ARGS`` with the variables of ``env`` added to the environment."""
     if sys.flags.hash_randomization == 0:
-        return _in_process(args, env)
+        return in_process(args, env)
     import os
 
     proc = subprocess.run([sys.executable, "-m", "rkhp", *args], capture_output=True, text=True,
@@ -32,7 +32,7 @@ def rkhp(*args: str, env: dict[str, str] | None = None, timeout: float = 600) ->
     return Ran(proc.returncode, proc.stdout, proc.stderr)
 
 
-def _in_process(args, env) -> Ran:
+def in_process(args, env) -> Ran:
     """By click's test runner: a crash is status 1 with its traceback on stderr, as Python prints
     it for an uncaught exception."""
     import traceback

@@ -172,3 +172,80 @@ def test_rkhp_compile_on_an_empty_cache_compiles_every_class(tmp_path):
         assert "rkhp.integrators.engine.rkhp_run" in item["compiled"], item
     args = [sys.executable, "-m", "rkhp", "integrate", "nambu", "--method", "gauss2", "--steps", "10"]
     assert NOTICE not in _stderr_on_a_terminal(args, env, timeout=600)
+
+
+# ----------------------------------------------------------------------------- other versions' folders
+
+
+def _folder(path, files: dict[str, int]) -> int:
+    """A folder holding files of the given sizes; their total size."""
+    for name, size in files.items():
+        (path / name).parent.mkdir(parents=True, exist_ok=True)
+        (path / name).write_bytes(b"x" * size)
+    return sum(files.values())
+
+
+def test_prune_removes_the_folders_of_other_versions_only(tmp_path):
+    from rkhp.taylor.compiler import cache_dir, prune_other_versions
+
+    root = tmp_path / "rkhp" / "numba"
+    current = root / cache_dir().name
+    kept = _folder(current, {"taylor/interpreter.run_tape-1.py311.nbi": 10})
+    old = _folder(root / "0123456789abcdef", {"taylor/a.nbi": 100, "integrators/b.nbc": 2000})
+    older = _folder(root / "fedcba9876543210", {"c.nbc": 7})
+    _folder(root / "notes", {"readme": 3})  # not a name rkhp gives
+    _folder(root / "0123456789ABCDEF", {"d": 4})  # upper case: not a name rkhp gives
+    (root / "00000000000000aa").write_bytes(b"a file, not a folder")
+    outside = tmp_path / "elsewhere"
+    _folder(outside, {"e": 5})
+    (root / "00000000000000bb").symlink_to(outside, target_is_directory=True)
+
+    pruned = prune_other_versions(current)
+
+    assert pruned.folders == (str(root / "0123456789abcdef"), str(root / "fedcba9876543210"))
+    assert pruned.bytes == old + older == 2107
+    assert sorted(p.name for p in root.iterdir()) == ["00000000000000aa", "00000000000000bb", "0123456789ABCDEF",
+                                                      cache_dir().name, "notes"]
+    assert (outside / "e").read_bytes() == b"xxxxx"
+    assert (current / "taylor/interpreter.run_tape-1.py311.nbi").stat().st_size == kept
+    assert prune_other_versions(current) == (tuple(), 0)
+    assert prune_other_versions(tmp_path / "nothing" / cache_dir().name) == (tuple(), 0)
+
+
+def _compile_command(monkeypatch, rkhp_cache_dir, *args):
+    """`rkhp compile ARGS` in this process, rkhp's cache folder set to ``rkhp_cache_dir`` and the
+    compile itself left out (tested above with the real cache)."""
+    from cli_run import in_process
+
+    from rkhp.integrators import ahead
+    from rkhp.taylor import compiler
+
+    monkeypatch.setattr(compiler, "RKHP_CACHE_DIR", rkhp_cache_dir)
+    monkeypatch.setattr(ahead, "compile_ahead", lambda jobs=None, on_part=None: ahead.AheadRun((), 1, 0.0))
+    return in_process(["compile", *args], None)
+
+
+def test_rkhp_compile_prune_reports_what_it_removed(tmp_path, monkeypatch):
+    from rkhp.taylor.compiler import cache_dir
+
+    root = tmp_path / "rkhp" / "numba"
+    current = root / cache_dir().name
+    _folder(current, {"kept": 1})
+    _folder(root / "0123456789abcdef", {"a": 1500, "b": 500})
+    ran = _compile_command(monkeypatch, str(current), "--prune", "--format", "json")
+    assert ran.returncode == 0, ran.output
+    report = json.loads(ran.stdout)
+    assert report["pruned"] == {"folders": [str(root / "0123456789abcdef")], "bytes": 2000}
+    assert sorted(p.name for p in root.iterdir()) == [current.name]
+    ran = _compile_command(monkeypatch, str(current), "--prune")
+    assert ran.returncode == 0 and ran.stdout.rstrip().endswith("No cache folders of other versions to remove.")
+    ran = _compile_command(monkeypatch, str(current), "--format", "json")
+    assert json.loads(ran.stdout)["pruned"] is None
+
+
+def test_rkhp_compile_prune_leaves_a_user_cache_folder_alone(tmp_path, monkeypatch):
+    (tmp_path / "0123456789abcdef").mkdir()
+    ran = _compile_command(monkeypatch, None, "--prune")
+    assert ran.returncode == 2
+    assert len(ran.stderr.strip().splitlines()) == 1 and "NUMBA_CACHE_DIR" in ran.stderr
+    assert (tmp_path / "0123456789abcdef").is_dir()

@@ -20,8 +20,11 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
+import shutil
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
+from typing import NamedTuple
 
 #: the folders whose *.py files are compiled by numba (their hash names the cache folder)
 COMPILED_SOURCES = ("taylor", "integrators")
@@ -49,6 +52,47 @@ def cache_dir() -> Path:
             digest.update(f"{name}==?".encode())
     base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
     return base / "rkhp" / "numba" / digest.hexdigest()[:16]
+
+
+#: the name `cache_dir` gives a cache folder: 16 hex digits of the hash
+CACHE_FOLDER_NAME = re.compile(r"[0-9a-f]{16}")
+
+
+class Pruned(NamedTuple):
+    """The cache folders of other versions that `prune_other_versions` removed, and the bytes
+    their files held."""
+
+    folders: tuple[str, ...]
+    bytes: int
+
+
+def other_versions(current: Path) -> list[Path]:
+    """The cache folders beside ``current`` (a `cache_dir`) that other versions of the compiled
+    sources or of the compiler named: folders (not links) whose names have the form of
+    `cache_dir`'s, other than ``current``."""
+    root = current.parent
+    if not root.is_dir():
+        return []
+    return sorted(path for path in root.iterdir()
+                  if path.name != current.name and CACHE_FOLDER_NAME.fullmatch(path.name)
+                  and path.is_dir() and not path.is_symlink())
+
+
+def folder_bytes(folder: Path) -> int:
+    """The bytes of the files under ``folder`` (links not followed)."""
+    return sum(os.lstat(os.path.join(top, name)).st_size
+               for top, _, names in os.walk(folder) for name in names)
+
+
+def prune_other_versions(current: Path) -> Pruned:
+    """Remove the cache folders of other versions (`other_versions`): each version of the
+    sources or of numba compiles into a folder of its own, and nothing else removes the old ones.
+    An environment still running another version compiles it again on its next run."""
+    folders = other_versions(current)
+    size = sum(folder_bytes(folder) for folder in folders)
+    for folder in folders:
+        shutil.rmtree(folder)
+    return Pruned(tuple(str(folder) for folder in folders), size)
 
 
 import copy  # noqa: E402
@@ -334,6 +378,7 @@ def is_cached(kernel, signature: str | None = None) -> bool:
     return any(signature in str(key[0]) for key in entries)
 
 
-__all__ = ["numba", "overload", "cache_dir", "is_cached", "inlining_precondition", "cache_save_precondition",
+__all__ = ["numba", "overload", "cache_dir", "Pruned", "other_versions", "folder_bytes",
+           "prune_other_versions", "is_cached", "inlining_precondition", "cache_save_precondition",
            "parallel_compiles_safe", "is_compiled_source", "SourcesLocator", "locator_precondition",
            "NJIT", "NJIT_NORC", "NJIT_NRT"]
