@@ -602,12 +602,14 @@ def _psi_at(b, h, space, buf, top):
         psi[k] = acc
 
 
-@nb.njit(**NJIT_NORC)
+@nb.njit(inline="always", **NJIT_NORC)
 def _sweep_residual(u, r, x0, A, h, D, tapes, space, buf, M):
     """r = P(u) - u, P one Gauss-Seidel sweep of every stage at degree D (`_stage`) of the
     coefficients u of the stage polynomials G (degree < D, M = counts[D - 1] each, flattened over
     (stage, component, coefficient)); G := P(u). Returns the max-norm of r (inf if non-finite).
-    P and the Picard sweeps of `implicit_tower` have the same fixed points: the stage equations."""
+    P and the Picard sweeps of `implicit_tower` have the same fixed points: the stage equations.
+    Inlined, as `_sweep_jacobian`, into `_stage_newton`, their only caller: a compiled unit of its
+    own would compile the interpreter it calls once more (docs/engine.md "Compile time")."""
     G = buf.G
     s, n = G.shape[0], G.shape[1]
     q = 0
@@ -631,7 +633,7 @@ def _sweep_residual(u, r, x0, A, h, D, tapes, space, buf, M):
     return size
 
 
-@nb.njit(**NJIT_NORC)
+@nb.njit(inline="always", **NJIT_NORC)
 def _sweep_jacobian(x0, A, h, D, tapes, space, buf, M):
     """work.J := the Jacobian of `_sweep_residual` at work.u (whose residual is work.r) by forward
     differences, step sqrt(eps) times max(1, |u_c|), factorised in place; False if singular."""

@@ -165,7 +165,7 @@ def _spray_field(op, W, D, space, S, deg, y_row):
     run_rows(tape, lo, hi, W, D, space, S, deg)
 
 
-@nb.njit(**NJIT_NORC)
+@nb.njit(inline="always", **NJIT_NORC)
 def spray(tape, r, W, D, space, S, deg):
     """alpha and beta of the Poisson-spray realisation (docs/theory.md §9.3) at degree D.
 
@@ -181,7 +181,7 @@ def spray(tape, r, W, D, space, S, deg):
     accurate enough, or the iteration does not converge): a numerical failure, never a wrong value.
 
     Scratch rows from SCRATCH_BASE: the stage values Y (SPRAY_MAX_NODES * k rows), then their
-    X (as many).
+    X (as many). Inlined into the interpreter (its one call site, `rkhp.taylor.interpreter`).
     """
     ops, args = tape.ops, tape.args
     out, start, n = ops[r, 1], ops[r, 2], ops[r, 4]

@@ -111,10 +111,11 @@ def _dispatch(codes):
     return first_or_others
 
 
-@overload(_composite, jit_options=dict(_nrt=False, error_model="numpy"))
+@overload(_composite, inline="always", jit_options=dict(_nrt=False, error_model="numpy"))
 def _composite_kernels(tape, r, W, D, space, S, deg):
     """`_composite` compiled for the tape's class with the kernels of its composite codes only
-    (`rkhp.taylor.tape.Tape`, `_dispatch`)."""
+    (`rkhp.taylor.tape.Tape`, `_dispatch`), inlined into the interpreter: a compiled unit of its
+    own would optimise its kernels once more (docs/engine.md "Compile time")."""
     return _dispatch(tape.instance_class.composites)
 
 
