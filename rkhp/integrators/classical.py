@@ -34,6 +34,7 @@ from ..taylor.compiler import NJIT
 from ..taylor.compiler import numba as nb
 from ..taylor.interpreter import TapeWork, run_tape, tape_work
 from ..taylor.jets import JetSpace, jet_space
+from ..taylor.linalg import lu_factor, lu_solve
 from ..taylor.tape import Tape
 from .engine import state_failure
 from .failure import Failure, failure_status
@@ -83,6 +84,14 @@ def _field(x, ws, out):
         out[i] = acc
 
 
+@nb.njit(inline="always", **NJIT)
+def _record(states, row, x):
+    """states[row] := x, entry by entry (numpy's row assignment would compile its shape-error
+    message: seconds of a cold start)."""
+    for q in range(x.shape[0]):
+        states[row, q] = x[q]
+
+
 @nb.njit(**NJIT)
 def _rk_loop(ws, A, b, h, n_steps, x0, domain, states):
     """Explicit RK steps; returns (steps done, Failure)."""
@@ -91,7 +100,7 @@ def _rk_loop(ws, A, b, h, n_steps, x0, domain, states):
     K = np.empty((s, n))
     xi = np.empty(n)
     x = x0.copy()
-    states[0] = x
+    _record(states, 0, x)
     for k in range(n_steps):
         for i in range(s):
             for q in range(n):
@@ -110,13 +119,15 @@ def _rk_loop(ws, A, b, h, n_steps, x0, domain, states):
         cause = state_failure(x, domain)
         if cause != Failure.OK:
             return k, cause
-        states[k + 1] = x
+        _record(states, k + 1, x)
     return n_steps, Failure.OK
 
 
 @nb.njit(**NJIT)
 def _midpoint_loop(ws, h, n_steps, x0, domain, tol, max_it, states, newton):
-    """Implicit midpoint steps, Newton on the midpoint; returns (steps done, Failure)."""
+    """Implicit midpoint steps, Newton on the midpoint; returns (steps done, Failure). The Newton
+    matrix is factorised by the engine's LU pair (`rkhp.taylor.linalg`; numpy's det and inv
+    would compile their LAPACK wrappers and shape-error messages: seconds of a cold start)."""
     n = x0.shape[0]
     x = x0.copy()
     m = np.empty(n)
@@ -124,9 +135,10 @@ def _midpoint_loop(ws, h, n_steps, x0, domain, tol, max_it, states, newton):
     fp = np.empty(n)
     fm = np.empty(n)
     J = np.empty((n, n))
-    inv = np.empty((n, n))
+    perm = np.empty(n, dtype=np.int64)
+    tmp = np.empty(n)
     y = np.empty(n)
-    states[0] = x
+    _record(states, 0, x)
     for k in range(n_steps):
         _field(x, ws, g)
         for q in range(n):
@@ -150,19 +162,17 @@ def _midpoint_loop(ws, h, n_steps, x0, domain, tol, max_it, states, newton):
                     _field(y, ws, fm)
                     for q in range(n):
                         J[q, j] = (1.0 if q == j else 0.0) - 0.5 * h * (fp[q] - fm[q]) / (2.0 * d)
-                if abs(np.linalg.det(J)) < 1e-300:
+                if not lu_factor(J, perm):
                     return k, Failure.SINGULAR
-                inv[:, :] = np.linalg.inv(J)
                 fresh = False
             _field(m, ws, g)
             size = 0.0
             scale = 1.0
             for q in range(n):
                 y[q] = m[q] - x[q] - 0.5 * h * g[q]
+            lu_solve(J, perm, y, tmp)
             for q in range(n):
-                dq = 0.0
-                for j in range(n):
-                    dq += inv[q, j] * y[j]
+                dq = y[q]
                 if not math.isfinite(dq):
                     return k, Failure.NEWTON_NON_FINITE
                 m[q] -= dq
@@ -183,7 +193,7 @@ def _midpoint_loop(ws, h, n_steps, x0, domain, tol, max_it, states, newton):
         cause = state_failure(x, domain)
         if cause != Failure.OK:
             return k, cause
-        states[k + 1] = x
+        _record(states, k + 1, x)
     return n_steps, Failure.OK
 
 

@@ -400,7 +400,8 @@ def _spray_stages(op, W, D, space, S, deg):
                 gap = max(gap, abs(alpha[k] - previous[k]))
             if gap <= SPRAY_AGREEMENT * scale:
                 break
-        previous[:] = alpha
+        for k in range(n):  # a loop: numpy's slice assignment compiles its shape-error message
+            previous[k] = alpha[k]
         warm = True
         q += 1
     if D == 0:
@@ -412,7 +413,7 @@ def _spray_stages(op, W, D, space, S, deg):
     Js = np.empty((q, n, n))
     for j in range(q):
         _jacobian(op, W, space, S, deg, np.int64(Ys + j * n), Js[j], work, False)
-    if not np.array_equal(Js, newton.Js):
+    if not _same_matrices(Js, newton.Js):
         if not _newton_matrix(AW, Js, q, n, newton.LU, newton.perm):
             return 0
     for i in range(q):
@@ -440,6 +441,21 @@ def _spray_stages(op, W, D, space, S, deg):
                         acc += Js[j, i, k] * rvec[j * n + k]
                     S[Xs + j * n + i, m] += acc
     return q
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _same_matrices(A, B):
+    """Whether two stacks of matrices are equal entry by entry (as np.array_equal: NaN differs
+    from itself), without numpy's comparison of arrays, which compiles its shape-error message
+    (seconds of a cold start)."""
+    if A.shape != B.shape:
+        return False
+    for j in range(A.shape[0]):
+        for i in range(A.shape[1]):
+            for k in range(A.shape[2]):
+                if not A[j, i, k] == B[j, i, k]:
+                    return False
+    return True
 
 
 @nb.njit(**NJIT_NORC)
