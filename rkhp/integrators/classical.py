@@ -284,8 +284,10 @@ def integrate_classical(system, tableau, h, n_steps, x0=None) -> Trajectory:
     h, n_steps = check_step(h, n_steps, system.dim)
     if not tableau.is_explicit:
         raise InputError(f"tableau {tableau.name} is {tableau.kind}; the classical peer needs an explicit one")
-    A = np.ascontiguousarray(tableau.A_float, dtype=np.float64)
-    b = np.ascontiguousarray(tableau.b_float, dtype=np.float64)
+    # writable copies (a tableau's arrays are read-only): the array types of `_verify`'s call, so
+    # that numba compiles one specialisation of the loop, not two
+    A = np.array(tableau.A_float, dtype=np.float64)
+    b = np.array(tableau.b_float, dtype=np.float64)
     x = system.start(x0)
     ws = _workspace(system)
     domain = system.domain_code
