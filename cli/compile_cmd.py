@@ -51,14 +51,18 @@ def compile_(jobs, prune, fmt):
 
 def _prune():
     """The other versions' cache folders removed (`rkhp.taylor.compiler.prune_other_versions`);
-    bad input when the cache is the user's NUMBA_CACHE_DIR, whose folders rkhp does not name."""
+    bad input when the cache is the user's NUMBA_CACHE_DIR, whose folders rkhp does not name, or
+    when a folder cannot be removed."""
     from rkhp.base.errors import InputError
     from rkhp.taylor import compiler
 
     if compiler.RKHP_CACHE_DIR is None:
         raise InputError("--prune removes rkhp's own cache folders, but numba's cache is NUMBA_CACHE_DIR "
                          f"({compiler.numba.config.CACHE_DIR}): remove what you no longer need there yourself")
-    return compiler.prune_other_versions(Path(compiler.RKHP_CACHE_DIR))
+    try:
+        return compiler.prune_other_versions(Path(compiler.RKHP_CACHE_DIR))
+    except OSError as exc:
+        raise InputError(exc.strerror) from None
 
 
 def _pruned_line(pruned) -> str:

@@ -15,6 +15,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -249,3 +250,31 @@ def test_rkhp_compile_prune_leaves_a_user_cache_folder_alone(tmp_path, monkeypat
     assert ran.returncode == 2
     assert len(ran.stderr.strip().splitlines()) == 1 and "NUMBA_CACHE_DIR" in ran.stderr
     assert (tmp_path / "0123456789abcdef").is_dir()
+
+
+def test_a_folder_that_cannot_be_removed_is_one_line(tmp_path, monkeypatch):
+    import shutil
+
+    from rkhp.taylor import compiler
+
+    root = tmp_path / "rkhp" / "numba"
+    current = root / compiler.cache_dir().name
+    _folder(root / "0123456789abcdef", {"a": 1})
+    _folder(root / "fedcba9876543210", {"b": 1})
+
+    remove = shutil.rmtree
+
+    def refuse(path, *args, **kwargs):
+        if Path(path).name == "fedcba9876543210":
+            raise PermissionError(13, "Permission denied")
+        remove(path)
+
+    monkeypatch.setattr(compiler.shutil, "rmtree", refuse)
+    line = f"cannot remove the cache folder {root / 'fedcba9876543210'} (Permission denied); 1 of 2 removed before it"
+    with pytest.raises(OSError) as caught:
+        compiler.prune_other_versions(current)
+    assert caught.value.strerror == line
+    assert sorted(p.name for p in root.iterdir()) == ["fedcba9876543210"]
+    _folder(root / "0123456789abcdef", {"a": 1})
+    ran = _compile_command(monkeypatch, str(current), "--prune")
+    assert ran.returncode == 2 and ran.stderr.strip().splitlines() == [f"rkhp: error: {line}"], ran.stderr

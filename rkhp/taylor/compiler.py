@@ -18,6 +18,7 @@ checked on (tests/test_dependencies.py fails loudly on another).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import re
@@ -79,19 +80,31 @@ def other_versions(current: Path) -> list[Path]:
 
 
 def folder_bytes(folder: Path) -> int:
-    """The bytes of the files under ``folder`` (links not followed)."""
-    return sum(os.lstat(os.path.join(top, name)).st_size
-               for top, _, names in os.walk(folder) for name in names)
+    """The bytes of the files under ``folder`` (links not followed; a file removed meanwhile
+    counts 0)."""
+    total = 0
+    for top, _, names in os.walk(folder):
+        for name in names:
+            with contextlib.suppress(FileNotFoundError):
+                total += os.lstat(os.path.join(top, name)).st_size
+    return total
 
 
 def prune_other_versions(current: Path) -> Pruned:
     """Remove the cache folders of other versions (`other_versions`): each version of the
     sources or of numba compiles into a folder of its own, and nothing else removes the old ones.
-    An environment still running another version compiles it again on its next run."""
+    An environment still running another version compiles it again on its next run. A folder
+    that cannot be removed: OSError naming it and how many were removed before it."""
     folders = other_versions(current)
     size = sum(folder_bytes(folder) for folder in folders)
-    for folder in folders:
-        shutil.rmtree(folder)
+    for done, folder in enumerate(folders):
+        try:
+            shutil.rmtree(folder)
+        except FileNotFoundError:
+            continue  # removed meanwhile (another process pruning)
+        except OSError as exc:
+            raise OSError(exc.errno, f"cannot remove the cache folder {folder} ({exc.strerror or exc}); "
+                          f"{done} of {len(folders)} removed before it") from None
     return Pruned(tuple(str(folder) for folder in folders), size)
 
 
