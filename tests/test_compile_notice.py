@@ -116,10 +116,10 @@ def test_the_notice_follows_the_progress_rules(tmp_path):
 
 
 @pytest.mark.parametrize("args, seconds", [
-    (["integrate", "rigid-body", "--method", "rk4", "--steps", "100"], 14),  # run_tape 4.8 + rkhp_run 9.1
-    (["converge", "rigid-body", "--method", "classical:rk4"], 13),  # run_tape 4.8 + _rk_loop 6.8 + H loop 1.0
-    (["check", "rigid-body"], 5),  # run_tape 4.8
-    (["check", "nambu"], 48),  # run_tape 4.8 + the spray kernel 43
+    (["integrate", "rigid-body", "--method", "rk4", "--steps", "100"], 8),  # run_tape 2.6 + rkhp_run 5.7
+    (["converge", "rigid-body", "--method", "classical:rk4"], 5),  # run_tape 2.6 + _rk_loop 1.5 + H loop 0.7
+    (["check", "rigid-body"], 3),  # run_tape 2.6
+    (["check", "nambu"], 20),  # run_tape 2.6 + the spray kernel 17.4
 ])
 def test_commands_say_so_before_compiling(tmp_path, args, seconds):
     shown = _stderr_on_a_terminal([sys.executable, "-m", "rkhp", *args], _fresh_cache(tmp_path), until=b" s\r\n")

@@ -27,35 +27,36 @@ class Kernel(NamedTuple):
     ``seconds``: CPU seconds of one core (numba 0.68, one core of an AMD EPYC, a fresh process
     with an empty cache, the rigid body), kernels compiled in the order below, so each figure leaves
     out what the kernels before it had already compiled: `python benchmarks/compile.py --kernels`
-    (docs/engine.md "Compile time"). The figures weigh the compile notice; they are not limits."""
+    (docs/engine.md "Compile time"; the smaller of two runs on 2026-11-28). The figures weigh the
+    compile notice; they are not limits."""
 
     module: str
     name: str
     seconds: float
 
 
-TAPE = Kernel("rkhp.taylor.interpreter", "run_tape", 4.8)
+TAPE = Kernel("rkhp.taylor.interpreter", "run_tape", 2.6)
 
-COMPOSITE_SECONDS: dict[str, float] = {"spray": 43.0, "phimv": 2.4}
+COMPOSITE_SECONDS: dict[str, float] = {"spray": 17.4, "phimv": 1.1}
 """Cold compile seconds that a composite operation adds to a run whose tapes hold it (a tape class,
 `rkhp.taylor.tape.Tape.composites`; numba compiles its kernel into the interpreter): the
-interpreter's extra compile with that class, in the units of the table above: the compile time of
-`run_tape` with that class over its compile time on the rigid body (numba's compile events, fresh
-cache), times `TAPE`'s figure; the entry kernels that link the interpreter in compile longer too
-(not counted)."""
+interpreter's extra compile with that class, CPU seconds of `run_tape` compiled for that class
+(nambu, heavy-top) less for the rigid body's (numba's compile events, one fresh process with an
+empty cache per system, 2026-11-28); the entry kernels that link the interpreter in compile
+longer too (not counted)."""
 
 KERNELS: dict[str, tuple[Kernel, ...]] = {
     "tape": (TAPE,),
-    "invariants": (Kernel("rkhp.integrators.energy", "_hamiltonian_loop", 1.0),),
-    "rkhp": (Kernel("rkhp.integrators.engine", "rkhp_run", 9.1),),
+    "invariants": (Kernel("rkhp.integrators.energy", "_hamiltonian_loop", 0.7),),
+    "rkhp": (Kernel("rkhp.integrators.engine", "rkhp_run", 5.7),),
     "taylor": (),  # THP runs the tape interpreter from Python
-    "classical": (Kernel("rkhp.integrators.classical", "_rk_loop", 6.8),),
-    "implicit-midpoint": (Kernel("rkhp.integrators.classical", "_midpoint_loop", 7.6),),
-    "scipy": (Kernel("rkhp.integrators.classical", "_field", 1.1),),  # bench's peers: the compiled field
+    "classical": (Kernel("rkhp.integrators.classical", "_rk_loop", 1.5),),
+    "implicit-midpoint": (Kernel("rkhp.integrators.classical", "_midpoint_loop", 3.2),),
+    "scipy": (Kernel("rkhp.integrators.classical", "_field", 1.0),),  # bench's peers: the compiled field
     # compositions: the composed loop over the engine's step (the figure: rkhp_run's, whose step it
     # inlines); on the spray realisation the direct Euler form runs instead (compiled by `rkhp
     # compile`; its tapes are not of the system's class, so the notice does not count it)
-    "composition": (Kernel("rkhp.integrators.composed", "composed_run", 9.1),),
+    "composition": (Kernel("rkhp.integrators.composed", "composed_run", 5.7),),
 }
 """Entry kernels per kind (the tape interpreter is added to every run)."""
 
