@@ -79,7 +79,7 @@ from rkhp.integrators.classical import integrate_classical, integrate_midpoint, 
 from rkhp.integrators.energy import hamiltonian_values
 from rkhp.systems import get_system
 from rkhp.tableaux.files import load_tableau
-KERNELS = ("run_tape", "_hamiltonian_loop", "rkhp_run", "_rk_loop", "_midpoint_loop", "_field")
+KERNELS = ("run_tape", "_hamiltonian_loop", "rkhp_run", "_rk_loop", "_midpoint_loop", "_field", "_field_call")
 start, out = {}, {}
 class Timer(event.Listener):
     def on_start(self, ev):
@@ -151,6 +151,12 @@ def measure(tree: Path, work: Path, repeats: int, step_runs: int) -> dict:
             "us_per_step": {m: min(r[m] for r in runs) for m in STEP_METHODS}}
 
 
+def _least(rounds: list[dict], kernel: str) -> str:
+    """The smallest compile CPU of `kernel` over the rounds, or "-" for a version without it."""
+    seconds = [r["kernels"][kernel] for r in rounds if kernel in r["kernels"]]
+    return f"{min(seconds):6.2f}" if seconds else f"{'-':>6s}"
+
+
 def measure_kernels(tree: Path, work: Path) -> dict:
     """CPU seconds of each entry kernel's cold compile (one process, empty cache), one version."""
     cache = Path(tempfile.mkdtemp(prefix="numba-", dir=work))
@@ -204,8 +210,7 @@ def main() -> None:
             names = list(results["after (this tree)"][0]["kernels"])
             print("cold compile CPU of each entry kernel (s, minima): " + ", ".join(names))
             for name, rounds in results.items():
-                print(f"{name:24s} " + " ".join(f"{min(r['kernels'][k] for r in rounds):6.2f}"
-                                                for k in names))
+                print(f"{name:24s} " + " ".join(_least(rounds, k) for k in names))
     finally:
         shutil.rmtree(work, ignore_errors=True)
 

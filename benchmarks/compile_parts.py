@@ -19,8 +19,8 @@ import tempfile
 
 PARTS_CODE = """
 import json
-from rkhp.integrators.ahead import ahead_tasks, tape_classes, timed_part
-for task in ahead_tasks(tape_classes()):
+from rkhp.integrators.ahead import ahead_phases, tape_classes, timed_part
+for task in [task for phase in ahead_phases(tape_classes()) for task in phase]:
     spent = timed_part(task.system, task.part)
     print(json.dumps({"system": task.system, "part": task.part, "seconds": spent.seconds,
                       "cpu_seconds": spent.cpu_seconds}), flush=True)

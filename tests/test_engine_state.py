@@ -108,3 +108,53 @@ def test_the_dispatch_of_several_composite_codes_runs_each_kernel():
         own = evaluate(tape, inputs, 1, tape.n_inputs)
         recast = evaluate(every(*tape), inputs, 1, tape.n_inputs)
         assert all(np.array_equal(a, b) for a, b in zip(own, recast, strict=True)), name
+
+
+def test_the_entry_kernels_take_plain_tapes_whatever_the_class():
+    """The step loops call the interpreter of a system's class through its address
+    (`rkhp.taylor.interpreter.Interpreter`) and see plain tapes, so one compiled version serves
+    every class: after runs on the rigid body (no composite operation), toda (phimv) and
+    charged-particle (spray), no entry kernel's signature names a composite class but those
+    compiled per class (the interpreter, the field scipy calls), and the interpreter has one
+    version per class; each run keeps its own system's energy."""
+    import numpy as np
+
+    from rkhp.integrators.kernels import KERNELS, TAPE, _dispatcher
+    from rkhp.integrators.methods import resolve_method
+    from rkhp.systems import get_system
+
+    for name in ("rigid-body", "toda", "charged-particle"):
+        system = get_system(name)
+        for method in ("rk4", "classical:rk4"):
+            trajectory = resolve_method(method).integrate(system, system.t_final / 1000, 2)
+            assert np.isfinite(trajectory.states).all() and trajectory.states.shape == (3, system.dim)
+            h0, h2 = (system.hamiltonian(x) for x in trajectory.states[[0, 2]])
+            assert abs(h2 - h0) < 1e-8 * max(1.0, abs(h0)), (name, method)
+    entry = {_dispatcher(k) for kernels in KERNELS.values() for k in kernels if not k.per_class}
+    for kernel in entry:
+        for signature in kernel.signatures:
+            assert "Tape_" not in str(signature), (kernel, signature)
+    classes = {str(sig[0]).split("(")[0] for sig in _dispatcher(TAPE).signatures}
+    assert {"Tape", "Tape_phimv", "Tape_spray"} <= classes
+
+
+def test_an_interpreter_is_made_only_for_the_plain_tape_layout():
+    """The address of the interpreter compiled for a class is called as the plain tape's: made
+    only when both have one machine layout."""
+    from typing import NamedTuple
+
+    import numpy as np
+
+    from rkhp.systems import get_system
+    from rkhp.taylor.compiler import numba as nb
+    from rkhp.taylor.interpreter import _interpreter, as_plain, tape_work
+    from rkhp.taylor.jets import jet_space
+
+    class Other(NamedTuple):
+        ops: np.ndarray
+
+    tape, space = get_system("charged-particle").h_tape, jet_space(2, 3)
+    types = [nb.typeof(x) for x in (as_plain(tape), space, tape_work((tape,), 1))]
+    assert _interpreter(nb.typeof(tape), *types)._numba_type_.signature.args[0] == types[0]
+    with pytest.raises(TypeError, match="not laid out as"):
+        _interpreter(nb.typeof(Other(np.zeros((1, 1), np.int64))), *types)

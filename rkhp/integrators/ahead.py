@@ -2,14 +2,20 @@
 built-in systems use, so that no run waits for a compile its user did not ask for (`rkhp
 compile`, run by `make install`; docs/engine.md "Compile time").
 
-numba compiles a kernel once per class of tapes (`rkhp.taylor.tape.tape_class`: the composite
-operations the interpreter must know), so one system per class stands for its whole family: one
-step of each kind of method (`AHEAD_METHODS`), the compiled Hamiltonian of the studies and the
-vector field of the scipy peers compile every entry kernel of `rkhp.integrators.kernels`.
+numba compiles the tape interpreter once per class of tapes (`rkhp.taylor.tape.tape_class`: the
+composite operations it must know), and the entry kernels of `rkhp.integrators.kernels` once for
+every class (they take plain tapes and call the class's interpreter through its address:
+`rkhp.taylor.interpreter.Interpreter`), except the direct forms of some families' methods. So
+one system per class stands for its whole family: one step of each kind of method
+(`AHEAD_METHODS`), the compiled Hamiltonian of the studies and the vector field of the scipy
+peers compile every kernel a run of that family needs.
 
-Each of those runs on one system is a part (`AHEAD_PARTS`); the parts are independent and run
-in ``jobs`` processes side by side when numba's cache saves are locked
-(`rkhp.taylor.compiler.parallel_compiles_safe`), else one after the other in this process.
+Each of those runs on one system is a part (`AHEAD_PARTS`); the parts run in ``jobs`` processes
+side by side when numba's cache saves are locked (`rkhp.taylor.compiler.parallel_compiles_safe`),
+else one after the other in this process, in two phases (`ahead_phases`): the parts that compile
+(every class's Hamiltonian and direct forms, the first class's other parts: the shared kernels),
+then the other classes' other parts, which load them (two processes compiling one kernel side by
+side would each compile it).
 """
 
 from __future__ import annotations
@@ -24,11 +30,15 @@ from .methods import resolve_method
 #: one method of each kind, explicit and implicit RKHP being two specialisations of the step loop;
 #: tj4, a composition of Euler steps: the composed loop, or on the spray realisation its direct form
 AHEAD_METHODS = ("rk4", "gauss2", "thp2", "classical:rk4", "implicit-midpoint", "tj4")
-#: the parts of a class's compile: the Hamiltonian first (it compiles the class's tape interpreter,
-#: which every other part links in), each of `AHEAD_METHODS`, the composed loop of tj4 (on the
+#: the parts of a class's compile: the Hamiltonian (it compiles the class's tape interpreter),
+#: each of `AHEAD_METHODS`, the composed loop of tj4 (on the
 #: spray realisation too, where tj4 itself runs direct) and the scipy peers' vector field
 HAMILTONIAN, COMPOSED, VECTOR_FIELD = "hamiltonian", "composed:tj4", "vector-field"
 AHEAD_PARTS = (HAMILTONIAN, *AHEAD_METHODS, COMPOSED, VECTOR_FIELD)
+#: the parts that compile kernels of a class's or family's own (tj4: the direct Euler forms of the
+#: spray realisation and of closed-form families; the scipy peers' field, which links the
+#: interpreter in); the others' kernels are shared by every class
+FAMILY_PARTS = ("tj4", VECTOR_FIELD)
 
 
 class Compiled(NamedTuple):
@@ -107,13 +117,18 @@ class AheadTask(NamedTuple):
     part: str
 
 
-def ahead_tasks(classes: dict[type, tuple[str, ...]]) -> list[AheadTask]:
-    """The tasks of every class: first each class's Hamiltonian, which compiles its tape
-    interpreter, then the other parts class by class, so that a process compiling one class's
-    interpreter rarely runs beside a part that links it in (it would compile it again)."""
-    firsts = [AheadTask(names[0], HAMILTONIAN) for names in classes.values()]
-    rest = [AheadTask(names[0], part) for names in classes.values() for part in AHEAD_PARTS if part != HAMILTONIAN]
-    return firsts + rest
+def ahead_phases(classes: dict[type, tuple[str, ...]]) -> tuple[list[AheadTask], list[AheadTask]]:
+    """The tasks of every class in two phases. First what compiles: each class's Hamiltonian (its
+    tape interpreter), each class's `FAMILY_PARTS` (its family's direct forms) and the first
+    class's other parts (the kernels shared by all classes); then the other classes' other parts,
+    which load the shared kernels (that every kind of run finds them for every class)."""
+    firsts = [names[0] for names in classes.values()]
+    shared = [part for part in AHEAD_PARTS if part != HAMILTONIAN and part not in FAMILY_PARTS]
+    compiling = ([AheadTask(first, HAMILTONIAN) for first in firsts]
+                 + [AheadTask(first, part) for part in FAMILY_PARTS for first in firsts]
+                 + [AheadTask(firsts[0], part) for part in shared])
+    loading = [AheadTask(first, part) for first in firsts[1:] for part in shared]
+    return compiling, loading
 
 
 def _class_times(system: str, tasks: list[AheadTask], times: list[PartTime]) -> PartTime:
@@ -122,9 +137,16 @@ def _class_times(system: str, tasks: list[AheadTask], times: list[PartTime]) -> 
     return PartTime(sum(t.seconds for t in spent), sum(t.cpu_seconds for t in spent))
 
 
+def _progress(on_part, before: int, total: int):
+    """`on_part` told of a phase's parts as parts of the whole run (None: no progress)."""
+    if on_part is None:
+        return None
+    return lambda done, _: on_part(before + done, total)
+
+
 def compile_ahead(jobs: int | None = None, on_part=None) -> AheadRun:
     """Fill numba's cache for every class of `tape_classes`, the parts in ``jobs`` processes
-    (default: one per core this process may use).
+    (default: one per core this process may use), phase after phase (`ahead_phases`).
 
     One process (this one) when numba's cache saves are not locked (processes compiling side by
     side would overwrite each other's index entries) or when no entry kernel is cold (the parts
@@ -135,15 +157,18 @@ def compile_ahead(jobs: int | None = None, on_part=None) -> AheadRun:
 
     classes = tape_classes()
     cold = {cls: cold_start(tuple(KERNELS), cls) for cls in classes}
-    tasks = ahead_tasks(classes)
+    phases = ahead_phases(classes)
+    tasks = [task for phase in phases for task in phase]
     jobs = jobs or available_cores()
     if not parallel_compiles_safe() or not any(cold.values()):
         jobs = 1  # nothing cold: loading the cache once costs less than in each process
     jobs = max(1, min(jobs, len(tasks)))
     start = time.perf_counter()
     executor = LocalProcesses(jobs) if jobs > 1 else InProcess()
+    times: list[PartTime] = []
     try:
-        times = run_all(executor, timed_part, tasks, on_part)
+        for phase in phases:
+            times += run_all(executor, timed_part, phase, _progress(on_part, len(times), len(tasks)))
     except BaseException:
         if jobs > 1:
             executor.terminate()  # a part cut short saved nothing (numba saves whole files)
@@ -155,5 +180,5 @@ def compile_ahead(jobs: int | None = None, on_part=None) -> AheadRun:
     return AheadRun(done, jobs, time.perf_counter() - start)
 
 
-__all__ = ["AHEAD_METHODS", "AHEAD_PARTS", "Compiled", "PartTime", "AheadRun", "AheadTask", "tape_classes",
-           "prepare_part", "timed_part", "ahead_tasks", "compile_ahead"]
+__all__ = ["AHEAD_METHODS", "AHEAD_PARTS", "FAMILY_PARTS", "Compiled", "PartTime", "AheadRun", "AheadTask",
+           "tape_classes", "prepare_part", "timed_part", "ahead_phases", "compile_ahead"]

@@ -32,7 +32,7 @@ from ..base.bounds import check_step
 from ..base.errors import InputError, NumericalFailure
 from ..taylor.compiler import NJIT
 from ..taylor.compiler import numba as nb
-from ..taylor.interpreter import TapeWork, run_tape, tape_work
+from ..taylor.interpreter import Interpreter, TapeWork, as_plain, interpreter, run_tape, tape_work
 from ..taylor.jets import JetSpace, jet_space
 from ..taylor.linalg import lu_factor, lu_solve
 from ..taylor.tape import Tape
@@ -46,8 +46,8 @@ MIDPOINT_MAX_ITERATIONS = 30
 
 
 class FieldWork(NamedTuple):
-    """What the compiled field evaluates with: the H and alpha tapes, first-order jets in n
-    variables, and the interpreter's work arrays for each tape (`_workspace`)."""
+    """What the compiled field evaluates with: the H and alpha tapes (plain), first-order jets in
+    n variables, and the interpreter's work arrays for each tape (`_workspace`)."""
 
     htape: Tape
     atape: Tape
@@ -56,13 +56,23 @@ class FieldWork(NamedTuple):
     wa: TapeWork
 
 
+class Field(NamedTuple):
+    """The compiled field's arguments: the interpreter of the system's class of tapes
+    (`rkhp.taylor.interpreter.Interpreter`; an argument of its own, so that numba types the work
+    arrays in C at each call of the field from Python) and the work."""
+
+    run: Interpreter
+    work: FieldWork
+
+
 # ----------------------------------------------------------------------------------------------
 # compiled kernels
 
 
 @nb.njit(inline="always", **NJIT)
-def _field(x, ws, out):
-    """out = pi(x) grad H(x): grad H from the H tape, pi = D^T - D from the alpha tape."""
+def _field(x, run, ws, out):
+    """out = pi(x) grad H(x) by `run`, the interpreter of the tapes' class: grad H from the H tape,
+    pi = D^T - D from the alpha tape."""
     htape, atape, space, wh, wa = ws.htape, ws.atape, ws.space, ws.wh, ws.wa
     n = x.shape[0]
     Wh, Wa = wh.W, wa.W
@@ -73,8 +83,8 @@ def _field(x, ws, out):
         Wh[i, 1 + i] = 1.0
         Wa[i, 0] = x[i]
         Wa[n + i, 1 + i] = 1.0
-    run_tape(htape, np.int64(1), space, wh)
-    run_tape(atape, np.int64(1), space, wa)
+    run(htape, np.int64(1), space, wh)
+    run(atape, np.int64(1), space, wa)
     ho = htape.outputs[0]
     ao = atape.outputs
     for i in range(n):
@@ -82,6 +92,14 @@ def _field(x, ws, out):
         for j in range(n):
             acc += (Wa[ao[j], 1 + i] - Wa[ao[i], 1 + j]) * Wh[ho, 1 + j]
         out[i] = acc
+
+
+@nb.njit(**NJIT)
+def _field_call(x, ws, out):
+    """`_field` with the interpreter linked in (tapes of their class, one compiled version per
+    class): the field that scipy calls once per point, where passing a first-class interpreter
+    would cost microseconds per call."""
+    _field(x, run_tape, ws, out)
 
 
 @nb.njit(inline="always", **NJIT)
@@ -93,7 +111,7 @@ def _record(states, row, x):
 
 
 @nb.njit(**NJIT)
-def _rk_loop(ws, A, b, h, n_steps, x0, domain, states):
+def _rk_loop(run, ws, A, b, h, n_steps, x0, domain, states):
     """Explicit RK steps; returns (steps done, Failure)."""
     n = x0.shape[0]
     s = b.shape[0]
@@ -110,7 +128,7 @@ def _rk_loop(ws, A, b, h, n_steps, x0, domain, states):
                 if a != 0.0:
                     for q in range(n):
                         xi[q] += a * K[j, q]
-            _field(xi, ws, K[i])
+            _field(xi, run, ws, K[i])
         for i in range(s):
             w = h * b[i]
             if w != 0.0:
@@ -124,7 +142,7 @@ def _rk_loop(ws, A, b, h, n_steps, x0, domain, states):
 
 
 @nb.njit(**NJIT)
-def _midpoint_loop(ws, h, n_steps, x0, domain, tol, max_it, states, newton):
+def _midpoint_loop(run, ws, h, n_steps, x0, domain, tol, max_it, states, newton):
     """Implicit midpoint steps, Newton on the midpoint; returns (steps done, Failure). The Newton
     matrix is factorised by the engine's LU pair (`rkhp.taylor.linalg`; numpy's det and inv
     would compile their LAPACK wrappers and shape-error messages: seconds of a cold start)."""
@@ -140,7 +158,7 @@ def _midpoint_loop(ws, h, n_steps, x0, domain, tol, max_it, states, newton):
     y = np.empty(n)
     _record(states, 0, x)
     for k in range(n_steps):
-        _field(x, ws, g)
+        _field(x, run, ws, g)
         for q in range(n):
             m[q] = x[q] + 0.5 * h * g[q]
         fresh = True
@@ -157,15 +175,15 @@ def _midpoint_loop(ws, h, n_steps, x0, domain, tol, max_it, states, newton):
                     for q in range(n):
                         y[q] = m[q]
                     y[j] = m[j] + d
-                    _field(y, ws, fp)
+                    _field(y, run, ws, fp)
                     y[j] = m[j] - d
-                    _field(y, ws, fm)
+                    _field(y, run, ws, fm)
                     for q in range(n):
                         J[q, j] = (1.0 if q == j else 0.0) - 0.5 * h * (fp[q] - fm[q]) / (2.0 * d)
                 if not lu_factor(J, perm):
                     return k, Failure.SINGULAR
                 fresh = False
-            _field(m, ws, g)
+            _field(m, run, ws, g)
             size = 0.0
             scale = 1.0
             for q in range(n):
@@ -201,17 +219,24 @@ def _midpoint_loop(ws, h, n_steps, x0, domain, tol, max_it, states, newton):
 # Python API
 
 
-def _workspace(system):
-    """The H and alpha tapes, first-order jets in n variables, and work arrays for each tape."""
+def _workspace(system) -> Field:
+    """The interpreter of the system's tapes, and its H and alpha tapes, first-order jets in n
+    variables and work arrays for each tape."""
     space = jet_space(system.dim, 1)
     ht, at = system.h_tape, system.alpha_tape
-    return FieldWork(ht, at, space, tape_work((ht,), space.size), tape_work((at,), space.size))
+    work = FieldWork(as_plain(ht), as_plain(at), space, tape_work((ht,), space.size), tape_work((at,), space.size))
+    return Field(interpreter(ht), work)
+
+
+def _class_work(system, field: Field) -> FieldWork:
+    """The work of `field` with the system's tapes of their class (`_field_call`'s)."""
+    return field.work._replace(htape=system.h_tape, atape=system.alpha_tape)
 
 
 _VERIFIED: set[str] = set()
 
 
-def _verify(name: str, system, ws) -> None:
+def _verify(name: str, system, field: Field) -> None:
     """Once per process and kernel, compare a compiled kernel with the system's own evaluation
     (``system.vector_field``, ``system.hamiltonian``, through ``rkhp.taylor.interpreter.evaluate``).
 
@@ -228,12 +253,12 @@ def _verify(name: str, system, ws) -> None:
     states = np.empty((2, x.size))
     if name == "field":
         got, want = np.empty(x.size), f
-        _field(x, ws, got)
+        _field_call(x, _class_work(system, field), got)
     elif name == "rk":
-        _rk_loop(ws, np.zeros((1, 1)), np.ones(1), h, 1, x, 0, states)
+        _rk_loop(*field, np.zeros((1, 1)), np.ones(1), h, 1, x, 0, states)
         got, want = states[1], x + h * f
     else:
-        _midpoint_loop(ws, h, 1, x, 0, NEWTON_TOLERANCE, MIDPOINT_MAX_ITERATIONS, states,
+        _midpoint_loop(*field, h, 1, x, 0, NEWTON_TOLERANCE, MIDPOINT_MAX_ITERATIONS, states,
                        np.zeros(1, dtype=np.int64))
         got = states[1]
         want = x + h * np.asarray(system.vector_field((x + got) / 2), dtype=np.float64)
@@ -289,13 +314,13 @@ def integrate_classical(system, tableau, h, n_steps, x0=None) -> Trajectory:
     A = np.array(tableau.A_float, dtype=np.float64)
     b = np.array(tableau.b_float, dtype=np.float64)
     x = system.start(x0)
-    ws = _workspace(system)
+    field = _workspace(system)
     domain = system.domain_code
     states = np.empty((n_steps + 1, x.size))
     started = time.perf_counter()
-    compile_s = _warm_up(_rk_loop, (ws, A, b, h, 1, x, domain, np.empty((2, x.size))))
-    _verify("rk", system, ws)
-    k_done, cause = _rk_loop(ws, A, b, h, n_steps, x, domain, states)
+    compile_s = _warm_up(_rk_loop, (*field, A, b, h, 1, x, domain, np.empty((2, x.size))))
+    _verify("rk", system, field)
+    k_done, cause = _rk_loop(*field, A, b, h, n_steps, x, domain, states)
     newton = np.zeros(n_steps, dtype=np.int64)
     return _trajectory(system, f"classical {tableau.name}", h, k_done, cause, states, newton, started, compile_s)
 
@@ -319,28 +344,29 @@ def integrate_midpoint(system, h, n_steps, x0=None) -> Trajectory:
     """
     h, n_steps = check_step(h, n_steps, system.dim)
     x = system.start(x0)
-    ws = _workspace(system)
+    field = _workspace(system)
     domain = system.domain_code
     states = np.empty((n_steps + 1, x.size))
     newton = np.zeros(n_steps, dtype=np.int64)
     tol, max_it = NEWTON_TOLERANCE, MIDPOINT_MAX_ITERATIONS
     started = time.perf_counter()
-    compile_s = _warm_up(_midpoint_loop, (ws, h, 1, x, domain, tol, max_it, np.empty((2, x.size)),
+    compile_s = _warm_up(_midpoint_loop, (*field, h, 1, x, domain, tol, max_it, np.empty((2, x.size)),
                                           np.zeros(1, dtype=np.int64)))
-    _verify("midpoint", system, ws)
-    k_done, cause = _midpoint_loop(ws, h, n_steps, x, domain, tol, max_it, states, newton)
+    _verify("midpoint", system, field)
+    k_done, cause = _midpoint_loop(*field, h, n_steps, x, domain, tol, max_it, states, newton)
     extra = {"newton_tolerance": tol, "newton_max_iterations": max_it}
     return _trajectory(system, "implicit midpoint", h, k_done, cause, states, newton, started, compile_s, extra)
 
 
 def vector_field(system):
     """The compiled Poisson vector field ``x -> pi(x) grad H(x)`` of a system (docs/theory.md §4)."""
-    ws = _workspace(system)
-    _verify("field", system, ws)
+    field = _workspace(system)
+    _verify("field", system, field)
+    work = _class_work(system, field)
 
     def f(x):
         out = np.empty(system.dim)
-        _field(np.ascontiguousarray(x, dtype=np.float64), ws, out)
+        _field_call(np.ascontiguousarray(x, dtype=np.float64), work, out)
         return out
 
     return f

@@ -24,6 +24,7 @@ from .engine import (
     Method,
     Record,
     Solver,
+    interpreted,
     rkhp_step,
     state_failure,
     step_buffers,
@@ -76,9 +77,11 @@ def _swap_history(buf, memory, i, n, into_buffers):
 
 
 @nb.njit(**NJIT_NORC)
-def composed_run(y0, method, n_steps, tapes, space, buf, memory, solver, record):
-    """Integrate n_steps composed steps from y0 (the explicit base tableau of `method`); returns
-    (number of completed steps, Failure of the step after them or Failure.OK)."""
+def composed_run(y0, method, n_steps, run, tapes, space, buf, memory, solver, record):
+    """Integrate n_steps composed steps from y0 (the explicit base tableau of `method`), the
+    tapes evaluated by `run` (their class's interpreter); returns (number of completed steps,
+    Failure of the step after them or Failure.OK)."""
+    program = interpreted(tapes, run)
     n = y0.shape[0]
     y = buf.y
     for k in range(n):
@@ -91,7 +94,7 @@ def composed_run(y0, method, n_steps, tapes, space, buf, memory, solver, record)
         total = 0
         for i in range(method.sizes.shape[0]):
             _swap_history(buf, memory, i, n, True)
-            cause, it, _ = rkhp_step(Method(method.A, method.b, method.sizes[i]), tapes, space, buf,
+            cause, it, _ = rkhp_step(Method(method.A, method.b, method.sizes[i]), program, space, buf,
                                      solver, None)
             _swap_history(buf, memory, i, n, False)
             total += it
@@ -123,19 +126,19 @@ def integrate_composition(system, composition, h, n_steps, x0=None, *, keep_all:
     tol = NEWTON_TOLERANCE if tol is None else float(tol)
     max_iter = NEWTON_MAX_ITERATIONS if max_iter is None else int(max_iter)
     y0 = system.start(x0)
-    tapes, space = engine_data(system, len(b), stage_solve(base, A))
+    tapes, run, space = engine_data(system, len(b), stage_solve(base, A))
     buf = step_buffers(tapes, system.dim, len(b), space)
     method = Substeps(A, b, h * np.asarray(composition.gamma_float, dtype=np.float64))
     memory = substep_memory(composition.substeps, system.dim)
     solver = Solver(tol, max_iter, system.domain_code)
     t0 = time.perf_counter()
-    composed_run(y0, method, 0, tapes, space, buf, memory, solver,
+    composed_run(y0, method, 0, run, tapes, space, buf, memory, solver,
                  Record(np.zeros((1, y0.size)), np.zeros(1, np.int64), True))
     compile_seconds = time.perf_counter() - t0
     rows = n_steps + 1 if keep_all else 1
     record = Record(np.empty((rows, y0.size)), np.zeros(max(n_steps, 1), np.int64), keep_all)
     t0 = time.perf_counter()
-    done, cause = composed_run(y0, method, n_steps, tapes, space, buf, memory, solver, record)
+    done, cause = composed_run(y0, method, n_steps, run, tapes, space, buf, memory, solver, record)
     run_seconds = time.perf_counter() - t0
     failed = cause != Failure.OK
     states = record.states[: done + 1] if keep_all else record.states[:1]

@@ -32,7 +32,8 @@ import numpy as np
 from ..systems.core import DOMAINS
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
-from ..taylor.interpreter import TapeWork, run_tape, tape_work
+from ..taylor.interpreter import Interpreter, TapeWork, tape_work
+from ..taylor.jets import JetSpace
 from ..taylor.linalg import lu_factor, lu_solve
 from ..taylor.ops import COMPOSE_ARG
 from ..taylor.tape import Tape
@@ -82,12 +83,35 @@ MEMO_SIZE = 11
 
 
 class SystemTapes(NamedTuple):
-    """The tapes of a system over the 2n inputs (x, p): f = H o alpha, H, alpha, beta."""
+    """The tapes of a system over the 2n inputs (x, p): f = H o alpha, H, alpha, beta (plain
+    tapes: `rkhp.taylor.interpreter.as_plain`)."""
 
     f: Tape
     h: Tape
     alpha: Tape
     beta: Tape
+
+
+class Interpreted(NamedTuple):
+    """The tapes of `SystemTapes` and the interpreter of their class
+    (`rkhp.taylor.interpreter.Interpreter`, called as ``tapes.run(tape, D, space, work)``), as
+    the step loop uses them: built in compiled code (`interpreted`), since numba types a tuple
+    holding the interpreter in Python, about 0.2 ms at each call of a kernel from Python."""
+
+    f: Tape
+    h: Tape
+    alpha: Tape
+    beta: Tape
+    run: Interpreter
+
+
+class EngineData(NamedTuple):
+    """What the compiled engine evaluates a system with: its tapes (plain), the interpreter of
+    their class and the jet space (`rkhp.integrators.rkhp_method.engine_data`)."""
+
+    tapes: SystemTapes
+    run: Interpreter
+    space: JetSpace
 
 
 class StepBuffers(NamedTuple):
@@ -163,11 +187,13 @@ class Solver(NamedTuple):
 
 class Record(NamedTuple):
     """Where a run writes: states (all, or the last in row 0), Newton iterations per step (summed
-    over its substeps in a composed run), and whether every state is kept."""
+    over its substeps in a composed run), whether every state is kept, and the stage sweeps per
+    step of an RKHP run (None in the runs that do not count them)."""
 
     states: np.ndarray
     iterations: np.ndarray
     keep_all: bool
+    sweeps: np.ndarray | None = None
 
 
 STAGE_NEWTON_ITERATIONS = 30
@@ -295,7 +321,7 @@ def _stage(i, x0, A, h, D, j_end, tapes, space, buf, rate):
                 for m in range(M):
                     W[n + k, m] += c * G[j, k, m]
     tape = tapes.h if zero_row else tapes.f
-    run_tape(tape, D, space, buf.work)
+    tapes.run(tape, D, space, buf.work)
     g = tape.outputs[0]
     changes, weights = buf.changes, buf.weights
     lo = 0
@@ -346,7 +372,7 @@ def _alpha(x0, tapes, space, buf, jacobian):
         W[n + k, 0] = psi[k]
         for l in range(n):
             W[n + k, 1 + l] = Jpsi[k, l] if jacobian else 0.0
-    run_tape(tapes.alpha, extra, space, buf.work)
+    tapes.run(tapes.alpha, extra, space, buf.work)
     for k in range(n):
         a = tapes.alpha.outputs[k]
         buf.alpha[k] = W[a, 0]
@@ -415,13 +441,13 @@ def _stage_measure(x0, A, b, h, tapes, space, buf):
     W = buf.work.W
     n = x0.shape[0]
     _set_p(W, x0, n)
-    run_tape(tapes.f, np.int64(1), space, buf.work)
+    tapes.run(tapes.f, np.int64(1), space, buf.work)
     g = tapes.f.outputs[0]
     c = 0.0
     for k in range(n):
         c += abs(W[g, 1 + k])
     _set_p(W, x0, n)
-    run_tape(tapes.alpha, np.int64(1), space, buf.work)
+    tapes.run(tapes.alpha, np.int64(1), space, buf.work)
     pi = 0.0
     for k in range(n):
         row = 0.0
@@ -945,7 +971,7 @@ def rkhp_step(method, tapes, space, buf, solver, stage):
                 res[k] = 2.0 * hist[0, k] - hist[1, k]
             else:
                 res[k] = hist[0, k]
-        _polish(res, tapes.alpha, space, buf, scale, np.int64(1), np.bool_(True))
+        _polish(res, tapes, space, buf, scale, np.int64(1), np.bool_(True))
         if not np.isfinite(max_abs(x)):
             for k in range(n):
                 x[k] = y[k]
@@ -1006,7 +1032,7 @@ def rkhp_step(method, tapes, space, buf, solver, stage):
         if newton_done:
             return Failure.STAGES_NO_CONVERGENCE, it, sweeps
         return Failure.NEWTON_NO_CONVERGENCE, it, sweeps
-    _polish(res, tapes.alpha, space, buf, scale, np.int64(1), np.bool_(False))
+    _polish(res, tapes, space, buf, scale, np.int64(1), np.bool_(False))
     for k in range(n):
         hist[2, k] = hist[1, k]
         hist[1, k] = hist[0, k]
@@ -1016,14 +1042,14 @@ def rkhp_step(method, tapes, space, buf, solver, stage):
     for k in range(n):
         W[k, 0] = x[k]
         W[n + k, 0] = res[k]
-    run_tape(tapes.beta, np.int64(0), space, buf.work)
+    tapes.run(tapes.beta, np.int64(0), space, buf.work)
     for k in range(n):
         buf.y_next[k] = W[tapes.beta.outputs[k], 0]
     return Failure.OK, it, sweeps
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _polish(p, atape, space, buf, scale, iterations, exact):
+def _polish(p, tapes, space, buf, scale, iterations, exact):
     """Solve alpha(x, p) = y for x = buf.x with p fixed by at most `iterations` cheap steps (no
     tower): with `exact`, Newton steps (J := d_x alpha(x, p) by degree-1 jets); otherwise steps
     with the given approximate J = buf.Jalpha (the last tower's), from values of alpha only.
@@ -1044,9 +1070,9 @@ def _polish(p, atape, space, buf, scale, iterations, exact):
                 for l in range(n):
                     W[k, 1 + l] = 1.0 if k == l else 0.0
                     W[n + k, 1 + l] = 0.0
-        run_tape(atape, degree, space, buf.work)
+        tapes.run(tapes.alpha, degree, space, buf.work)
         for k in range(n):
-            a = atape.outputs[k]
+            a = tapes.alpha.outputs[k]
             alpha[k] = y[k] - W[a, 0]
             if exact:
                 for l in range(n):
@@ -1073,13 +1099,21 @@ def state_failure(y, domain):
     return Failure.OK
 
 
+@nb.njit(inline="always", **NJIT_NORC)
+def interpreted(tapes, run):
+    """`Interpreted`: the system's tapes and their interpreter `run`, in compiled code."""
+    return Interpreted(tapes.f, tapes.h, tapes.alpha, tapes.beta, run)
+
+
 @nb.njit(**NJIT_NORC)
-def rkhp_run(y0, method, n_steps, tapes, space, buf, solver, stage, record, sweeps):
-    """Integrate n_steps from y0 into `record`: states[k] = y_k (keep_all) or states[0] = the last
-    state; iterations[k], sweeps[k]: Newton iterations and stage sweeps of step k.
+def rkhp_run(y0, method, n_steps, run, tapes, space, buf, solver, stage, record):
+    """Integrate n_steps from y0 into `record`, the tapes evaluated by `run` (their class's
+    interpreter): states[k] = y_k (keep_all) or states[0] = the last state; iterations[k],
+    sweeps[k]: Newton iterations and stage sweeps of step k.
 
     Returns (number of completed steps, Failure of the step after them or Failure.OK).
     """
+    program = interpreted(tapes, run)
     n = y0.shape[0]
     y = buf.y
     for k in range(n):
@@ -1089,9 +1123,9 @@ def rkhp_run(y0, method, n_steps, tapes, space, buf, solver, stage, record, swee
     for k in range(n):
         record.states[0, k] = y[k]
     for step in range(n_steps):
-        cause, it, done = rkhp_step(method, tapes, space, buf, solver, stage)
+        cause, it, done = rkhp_step(method, program, space, buf, solver, stage)
         record.iterations[step] = it
-        sweeps[step] = done
+        record.sweeps[step] = done
         if cause == Failure.OK:
             cause = state_failure(buf.y_next, solver.domain)
         if cause != Failure.OK:

@@ -86,17 +86,20 @@ def implicit_degree(order: int) -> int:
 
 
 def engine_data(system, stages: int, stage):
-    """(tapes, jet space) for the compiled engine: jets in n variables of degree s + 1 (explicit)
-    or the stage degree (implicit)."""
+    """`rkhp.integrators.engine.EngineData`: the tapes, interpreter and jet space for the
+    compiled engine, jets in n variables of degree s + 1 (explicit) or the stage degree
+    (implicit)."""
+    from ..taylor.interpreter import as_plain, interpreter
     from ..taylor.jets import jet_space
-    from .engine import SystemTapes
+    from .engine import EngineData, SystemTapes
 
     degree = stage.degree if stage.degree > 0 else stages + 1
     space = jet_space(system.dim, degree)
     if len(space.pa) > MAX_PRODUCT_PAIRS:
         raise InputError(f"the method needs Taylor polynomials of degree {degree} in "
                          f"{system.dim} variables ({len(space.pa)} product terms): too large")
-    return SystemTapes(system.f_tape, system.h_tape, system.alpha_tape, system.beta_tape), space
+    plain = [as_plain(t) for t in (system.f_tape, system.h_tape, system.alpha_tape, system.beta_tape)]
+    return EngineData(SystemTapes(*plain), interpreter(system.f_tape), space)
 
 
 def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLERANCE,
@@ -117,19 +120,19 @@ def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLER
     y0 = system.start(x0)
     A, b = tableau_arrays(tableau)
     stage = stage_solve(tableau, A, stage_degree)
-    tapes, space = engine_data(system, len(b), stage)
+    tapes, run, space = engine_data(system, len(b), stage)
     buf = step_buffers(tapes, system.dim, len(b), space, stage.degree)
     method, solver = Method(A, b, h), Solver(float(tol), int(max_iter), system.domain_code)
-    rest = (tapes, space, buf, solver, compiled_stage(stage))
+    rest = (run, tapes, space, buf, solver, compiled_stage(stage))
     t0 = time.perf_counter()
-    rkhp_run(y0, method, 0, *rest, Record(np.zeros((1, y0.size)), np.zeros(1, np.int64), True),
-             np.zeros(1, np.int64))
+    one = np.zeros(1, np.int64)
+    rkhp_run(y0, method, 0, *rest, Record(np.zeros((1, y0.size)), one, True, one))
     compile_seconds = time.perf_counter() - t0
     states = np.empty((n_steps + 1, y0.size))
     iterations = np.zeros(max(n_steps, 1), dtype=np.int64)
     sweeps = np.zeros(max(n_steps, 1), dtype=np.int64)
     t0 = time.perf_counter()
-    done, cause = rkhp_run(y0, method, n_steps, *rest, Record(states, iterations, True), sweeps)
+    done, cause = rkhp_run(y0, method, n_steps, *rest, Record(states, iterations, True, sweeps))
     run_seconds = time.perf_counter() - t0
     failed = cause != Failure.OK
     return checked(Trajectory(
@@ -178,7 +181,7 @@ def _ensemble_chunk(system, A, b, h, n_steps, x0s, tol, max_iter, stage, threads
     """(final states, steps done, Failure codes) of the trajectories from ``x0s``, in threads."""
     from .engine import Method, Record, Solver, rkhp_run, step_buffers
 
-    tapes, space = engine_data(system, len(b), stage)
+    tapes, run, space = engine_data(system, len(b), stage)
     method, solver = Method(A, b, h), Solver(tol, max_iter, system.domain_code)
     m = len(x0s)
     finals = np.zeros_like(x0s)
@@ -192,10 +195,10 @@ def _ensemble_chunk(system, A, b, h, n_steps, x0s, tol, max_iter, stage, threads
         iterations = np.zeros(max(n_steps, 1), dtype=np.int64)
         sweeps = np.zeros(max(n_steps, 1), dtype=np.int64)
         buf = step_buffers(tapes, system.dim, len(b), space, stage.degree)
-        record = Record(last, iterations, False)
+        record = Record(last, iterations, False, sweeps)
         for t in range(lo, hi):
-            done[t], codes[t] = rkhp_run(x0s[t], method, n_steps, tapes, space, buf, solver,
-                                         compiled_stage(stage), record, sweeps)
+            done[t], codes[t] = rkhp_run(x0s[t], method, n_steps, run, tapes, space, buf, solver,
+                                         compiled_stage(stage), record)
             finals[t] = last[0]
 
     with ThreadPoolExecutor(max_workers=len(bounds) - 1) as pool:

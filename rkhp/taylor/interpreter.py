@@ -9,6 +9,10 @@ rows go to `rkhp.taylor.rows.rows` (inlined); each composite row to its kernel
 Sub-programs (rows before `tape.main`) run only when a composite kernel runs them. Degree 0 is
 the value-only path (W[:, 0]), the same code with one coefficient per slot.
 
+Compiled code calls the interpreter through :class:`Interpreter`, `run_tape` for one class of
+tapes as a first-class function: a call through its address, so that a compiled unit does not
+link the interpreter's code in and optimise it once more (docs/engine.md "Compile time").
+
 `evaluate` is the Python-level helper (values, or values and the Jacobian by forward mode).
 """
 
@@ -16,6 +20,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numba.experimental.function_type  # noqa: F401  (numba's boxing and calls of FunctionType)
 import numpy as np
 
 from .compiler import NJIT_NORC, overload
@@ -24,6 +29,7 @@ from .composites import phimv, spray
 from .jets import jet_space
 from .ops import FIRST_COMPOSITE, PHIMV, SPRAY
 from .rows import rows
+from .tape import Tape
 
 
 class TapeWork(NamedTuple):
@@ -117,6 +123,69 @@ def _composite_kernels(tape, r, W, D, space, S, deg):
     (`rkhp.taylor.tape.Tape`, `_dispatch`), inlined into the interpreter: a compiled unit of its
     own would optimise its kernels once more (docs/engine.md "Compile time")."""
     return _dispatch(tape.instance_class.composites)
+
+
+class Interpreter:
+    """`run_tape` compiled for one class of tapes, passed to compiled code as a first-class
+    function (numba's `FunctionType`) that takes plain tapes (:func:`as_plain`).
+
+    A compiled caller calls it through the address of its C-callable wrapper instead of linking
+    its code in: numba optimises and generates the code of each compiled unit with the units it
+    calls linked in, so every unit that called the interpreter compiled it again, seconds per unit
+    with the spray kernel. And since the caller sees plain tapes and this one function type
+    whatever the class, its code does not depend on the class: the step loops are compiled once
+    for every class (docs/engine.md "Compile time"). The class only chooses which compiled
+    interpreter the address is; a tape of any class has the plain tape's machine layout (checked
+    when the interpreter is made). The interpreter raises nothing, so nothing is lost by the
+    wrapper, which reports exceptions instead of raising them.
+
+    numba types it by its `_numba_type_` and takes the address from `__wrapper_address__` (its
+    protocol for first-class functions), both kept, so that passing it costs microseconds; it is
+    an argument of its own where a kernel is called often from Python (numba types a tuple
+    holding it in Python, not in C). Called in compiled code as ``run(tape, D, space, work)``;
+    made by :func:`interpreter`."""
+
+    def __init__(self, signature, compiled):
+        self._numba_type_ = nb.types.FunctionType(signature)
+        self._compiled = compiled
+        self._address = 0
+
+    def __wrapper_address__(self) -> int:
+        if not self._address:
+            compiled = run_tape.get_compile_result(self._compiled)
+            self._address = compiled.library.get_pointer_to_function(
+                compiled.fndesc.llvm_cfunc_wrapper_name)
+        return self._address
+
+
+def as_plain(tape) -> Tape:
+    """The same tape as a plain `Tape`, its class erased from the type compiled code sees (the
+    class chooses the :class:`Interpreter`)."""
+    return Tape(*tape)
+
+
+def _interpreter(tape_type, plain_type, space_type, work_type) -> Interpreter:
+    layout = nb.core.registry.cpu_target.target_context.get_value_type
+    if str(layout(tape_type)) != str(layout(plain_type)):
+        raise TypeError(f"{tape_type} is not laid out as {plain_type}: no first-class interpreter")
+    none, int64 = nb.types.none, nb.types.int64
+    return Interpreter(none(plain_type, int64, space_type, work_type),
+                       none(tape_type, int64, space_type, work_type))
+
+
+_INTERPRETERS: dict[type, Interpreter] = {}
+
+
+def interpreter(tape) -> Interpreter:
+    """The :class:`Interpreter` of `tape`'s class (with any `JetSpace` and :class:`TapeWork`
+    arrays: their types are those of every space and work), one per class in a process;
+    compiled, or loaded from numba's cache, on its first call from compiled code."""
+    cls = type(tape)
+    if cls not in _INTERPRETERS:
+        typeof = nb.typeof
+        _INTERPRETERS[cls] = _interpreter(typeof(tape), typeof(as_plain(tape)), typeof(jet_space(0, 0)),
+                                          typeof(tape_work((tape,), 1)))
+    return _INTERPRETERS[cls]
 
 
 def evaluate(tape, inputs: np.ndarray, degree: int = 0, n_vars: int = 0):
