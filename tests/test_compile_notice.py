@@ -116,10 +116,10 @@ def test_the_notice_follows_the_progress_rules(tmp_path):
 
 
 @pytest.mark.parametrize("args, seconds", [
-    (["integrate", "rigid-body", "--method", "rk4", "--steps", "100"], 8),  # run_tape 2.6 + rkhp_run 5.7
-    (["converge", "rigid-body", "--method", "classical:rk4"], 5),  # run_tape 2.6 + _rk_loop 1.5 + H loop 0.7
-    (["check", "rigid-body"], 3),  # run_tape 2.6
-    (["check", "nambu"], 20),  # run_tape 2.6 + the spray kernel 17.4
+    (["integrate", "rigid-body", "--method", "rk4", "--steps", "100"], 8),  # run_tape 2.9 + rkhp_run 5.5
+    (["converge", "rigid-body", "--method", "classical:rk4"], 4),  # run_tape 2.9 + _rk_loop 1.3 + H loop 0.3
+    (["check", "rigid-body"], 3),  # run_tape 2.9
+    (["check", "nambu"], 20),  # run_tape 2.9 + the spray kernel 17.4
 ])
 def test_commands_say_so_before_compiling(tmp_path, args, seconds):
     shown = _stderr_on_a_terminal([sys.executable, "-m", "rkhp", *args], _fresh_cache(tmp_path), until=b" s\r\n")

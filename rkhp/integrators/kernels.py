@@ -27,7 +27,7 @@ class Kernel(NamedTuple):
     ``seconds``: CPU seconds of one core (numba 0.68, one core of an AMD EPYC, a fresh process
     with an empty cache, the rigid body), kernels compiled in the order below, so each figure leaves
     out what the kernels before it had already compiled: `python benchmarks/compile.py --kernels`
-    (docs/engine.md "Compile time"; the smaller of two runs on 2026-11-28). The figures weigh the
+    (docs/engine.md "Compile time"; one run on 2026-11-28). The figures weigh the
     compile notice; they are not limits."""
 
     module: str
@@ -38,7 +38,7 @@ class Kernel(NamedTuple):
     others take plain tapes and serve every class."""
 
 
-TAPE = Kernel("rkhp.taylor.interpreter", "run_tape", 2.6, per_class=True)
+TAPE = Kernel("rkhp.taylor.interpreter", "run_tape", 2.9, per_class=True)
 
 COMPOSITE_SECONDS: dict[str, float] = {"spray": 17.4, "phimv": 1.1}
 """Cold compile seconds that a composite operation adds to a run whose tapes hold it (a tape class,
@@ -50,17 +50,17 @@ empty cache per system, 2026-11-28); the entry kernels call the interpreter thro
 
 KERNELS: dict[str, tuple[Kernel, ...]] = {
     "tape": (TAPE,),
-    "invariants": (Kernel("rkhp.integrators.energy", "_hamiltonian_loop", 0.7),),
-    "rkhp": (Kernel("rkhp.integrators.engine", "rkhp_run", 5.7),),
+    "invariants": (Kernel("rkhp.integrators.energy", "_hamiltonian_loop", 0.3),),
+    "rkhp": (Kernel("rkhp.integrators.engine", "rkhp_run", 5.5),),
     "taylor": (),  # THP runs the tape interpreter from Python
-    "classical": (Kernel("rkhp.integrators.classical", "_rk_loop", 1.5),),
-    "implicit-midpoint": (Kernel("rkhp.integrators.classical", "_midpoint_loop", 3.2),),
+    "classical": (Kernel("rkhp.integrators.classical", "_rk_loop", 1.3),),
+    "implicit-midpoint": (Kernel("rkhp.integrators.classical", "_midpoint_loop", 3.0),),
     # the bench's peers: the compiled field (the interpreter linked in: a kernel per class)
     "scipy": (Kernel("rkhp.integrators.classical", "_field_call", 1.0, per_class=True),),
     # compositions: the composed loop over the engine's step (the figure: rkhp_run's, whose step it
     # inlines); on the spray realisation the direct Euler form runs instead (compiled by `rkhp
     # compile`; its tapes are not of the system's class, so the notice does not count it)
-    "composition": (Kernel("rkhp.integrators.composed", "composed_run", 5.7),),
+    "composition": (Kernel("rkhp.integrators.composed", "composed_run", 5.5),),
 }
 """Entry kernels per kind (the tape interpreter is added to every run)."""
 
