@@ -31,8 +31,8 @@ from .methods import resolve_method
 #: tj4, a composition of Euler steps: the composed loop, or on the spray realisation its direct form
 AHEAD_METHODS = ("rk4", "gauss2", "thp2", "classical:rk4", "implicit-midpoint", "tj4")
 #: the parts of a class's compile: the Hamiltonian (it compiles the class's tape interpreter),
-#: each of `AHEAD_METHODS`, the composed loop of tj4 (on the
-#: spray realisation too, where tj4 itself runs direct) and the scipy peers' vector field
+#: each of `AHEAD_METHODS`, the composed loop of tj4 (on the spray realisation too, where tj4
+#: itself runs direct) and the scipy peers' vector field
 HAMILTONIAN, COMPOSED, VECTOR_FIELD = "hamiltonian", "composed:tj4", "vector-field"
 AHEAD_PARTS = (HAMILTONIAN, *AHEAD_METHODS, COMPOSED, VECTOR_FIELD)
 #: the parts that compile kernels of a class's or family's own (tj4: the direct Euler forms of the

@@ -46,8 +46,9 @@ MIDPOINT_MAX_ITERATIONS = 30
 
 
 class FieldWork(NamedTuple):
-    """What the compiled field evaluates with: the H and alpha tapes (plain), first-order jets in
-    n variables, and the interpreter's work arrays for each tape (`_workspace`)."""
+    """What the compiled field evaluates with: the H and alpha tapes (plain for the loops, of
+    their class for `_field_call`), first-order jets in n variables, and the interpreter's work
+    arrays for each tape (`_workspace`)."""
 
     htape: Tape
     atape: Tape
