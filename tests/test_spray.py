@@ -23,7 +23,7 @@ from rkhp.systems.check import check_birealisation
 from rkhp.systems.problems import as_general
 from rkhp.taylor.collocation import average_error_constant, collocation
 from rkhp.taylor.composites import SPRAY_BERNOULLI_MAJORANT
-from rkhp.taylor.interpreter import run_tape, tape_work
+from rkhp.taylor.interpreter import interpreter, tape_work
 from rkhp.taylor.jets import jet_space
 from rkhp.taylor.ops import ADD, CONST, DIV, EXP, MUL, MULC, POWI, SPRAY, SUB
 from rkhp.taylor.tape import degree_in
@@ -152,7 +152,7 @@ def _jets(tape, point, seeds, degree):
     if degree > 0:
         for i in range(len(point)):
             work.W[i, 1 + i] = seeds[i]
-    run_tape(tape, np.int64(degree), space, work)
+    interpreter(tape)(tape, degree, space, work)
     return work.W[tape.outputs, : space.size].copy()
 
 

@@ -10,9 +10,9 @@ import pytest
 import sympy
 
 from rkhp.taylor import tape as tp
-from rkhp.taylor.interpreter import evaluate, run_tape, tape_work
+from rkhp.taylor.interpreter import evaluate, interpreter, tape_work
 from rkhp.taylor.jets import jet_space, monomials
-from rkhp.taylor.ops import BY_NAME, COMPOSITE, DERIVED, FUNCTION, OPS, PHIMV
+from rkhp.taylor.ops import BY_NAME, COMPOSITE, DERIVED, FUNCTION, OPS, PHIMV, SPRAY
 
 DEGREES = range(0, 7)
 X, Y = sympy.symbols("x y", real=True)
@@ -68,7 +68,7 @@ def _jet(tape, D):
     work = tape_work((tape,), space.size)
     if D:
         work.W[0, 1] = work.W[1, 2] = 1.0  # x = 0 + dx, y = 0 + dy
-    run_tape(tape, D, space, work)
+    interpreter(tape)(tape, D, space, work)
     return work.W[tape.outputs[0]].copy()
 
 
@@ -136,13 +136,14 @@ def test_subprograms_are_recorded_apart_and_not_run_by_the_main_loop():
 
 def test_a_subprogram_runs_on_jets_as_a_composite_kernel_runs_it():
     """run_rows evaluates a sub-program's rows on its own slots, as often as asked: X(y, p) =
-    cos(y) p at two points, as degree-2 jets in (y, p), against the derivatives by hand."""
+    cos(y) p at two points, as degree-2 jets in (y, p), against the derivatives by hand. The tape
+    is of the spray class, as the spray kernel's tapes are: the compiled run_rows it calls."""
     from rkhp.taylor.rows import run_rows, subprogram_at
 
     builder = tp.TapeBuilder(2)
     x, p = builder.inputs()
     sub = builder.subprogram(2, lambda v: [tp.cos(v[0]) * v[1]])
-    tape = builder.finish([x])
+    tape = tp.tape_class((SPRAY,))(*builder.finish([x]))
     lo, hi, first_in, n_in, first_out, n_out, _ = subprogram_at(np.array(sub.operands()), 0)
     assert (lo, hi, n_in, n_out) == (sub.lo, sub.hi, 2, 1)
     space = jet_space(2, 2)

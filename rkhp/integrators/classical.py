@@ -230,7 +230,9 @@ def _workspace(system) -> Field:
 
 
 def _class_work(system, field: Field) -> FieldWork:
-    """The work of `field` with the system's tapes of their class (`_field_call`'s)."""
+    """The work of `field` with the system's tapes of their class (`_field_call`'s), their
+    interpreter loaded first: `_field_call` links in that version (`Interpreter.load`)."""
+    field.run.load()
     return field.work._replace(htape=system.h_tape, atape=system.alpha_tape)
 
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..base.bounds import check_step
 from ..base.errors import InputError
-from ..taylor.interpreter import run_tape, tape_work
+from ..taylor.interpreter import interpreter, tape_work
 from ..taylor.jets import jet_space, monomials
 from ..trees.rooted import trees_up_to
 from .engine import state_failure
@@ -55,7 +55,7 @@ class _Tower:
         work = tape_work((tape,), space.size)
         for i, jet in enumerate(inputs):
             work.W[i, : len(jet)] = jet[: space.size]
-        run_tape(tape, np.int64(degree), space, work)
+        interpreter(tape)(tape, degree, space, work)
         return work.W[tape.outputs]
 
     def _x_jet(self, x0, k: int, size: int) -> np.ndarray:

@@ -13,7 +13,9 @@ Compiled code calls the interpreter through :class:`Interpreter`, `run_tape` for
 tapes as a first-class function: a call through its address, so that a compiled unit does not
 link the interpreter's code in and optimise it once more (docs/engine.md "Compile time").
 
-`evaluate` is the Python-level helper (values, or values and the Jacobian by forward mode).
+Python calls the interpreter of a tape's class too (``interpreter(tape)(tape, D, space, work)``),
+so that one compiled interpreter per class serves every caller. `evaluate` is the Python-level
+helper (values, or values and the Jacobian by forward mode).
 """
 
 from __future__ import annotations
@@ -150,12 +152,26 @@ class Interpreter:
         self._compiled = compiled
         self._address = 0
 
-    def __wrapper_address__(self) -> int:
+    def load(self) -> int:
+        """Compile the interpreter for this class, or load it from numba's cache, once in a
+        process; returns the address of its wrapper. Every caller of the class then uses this
+        one version: numba finds it for a call from Python and for a compiled unit that links
+        `run_tape` in, where the first of those would otherwise compile, and cache, a copy of its
+        own (numba caches a version compiled for the arguments' types under another key)."""
         if not self._address:
             compiled = run_tape.get_compile_result(self._compiled)
             self._address = compiled.library.get_pointer_to_function(
                 compiled.fndesc.llvm_cfunc_wrapper_name)
         return self._address
+
+    def __wrapper_address__(self) -> int:
+        return self.load()
+
+    def __call__(self, tape, D, space, work) -> None:
+        """``run_tape(tape, D, space, work)`` from Python, `tape` of this class, on the
+        interpreter :meth:`load` makes ready."""
+        self.load()
+        run_tape(tape, np.int64(D), space, work)
 
 
 def as_plain(tape) -> Tape:
@@ -202,7 +218,7 @@ def evaluate(tape, inputs: np.ndarray, degree: int = 0, n_vars: int = 0):
     if degree > 0:
         for i in range(len(inputs)):
             work.W[i, 1 + i] = 1.0
-    run_tape(tape, np.int64(degree), space, work)
+    interpreter(tape)(tape, degree, space, work)
     out = work.W[tape.outputs]
     if degree == 0:
         return out[:, 0].copy()
