@@ -1217,6 +1217,26 @@ def rotation_angle(tableau: Tableau, z: float, realisation: str = "symmetric") -
     return rotation_angles(tableau, [z], realisation)[0]
 
 
+def _explicit_angles(A, b, zs) -> list[float]:
+    """theta(z) = 2 arctan(m(z)/2) of an explicit tableau at every z of ``zs`` at once: the stage
+    maps m_i = z sum_j<i a_ij (1 + m_j^2/4) (docs/theory.md §13) as arrays over z, summed in the
+    order of j as one z at a time would, arctan per z by `math.atan`."""
+    import numpy as np
+
+    z = np.asarray(zs, dtype=np.float64)
+    weights = []  # 1 + m_j^2/4 of the stages so far
+    for row in A:
+        acc = np.zeros_like(z)
+        for a, w in zip(row, weights):
+            acc = acc + a * w
+        m = z * acc
+        weights.append(1 + m ** 2 / 4)
+    total = np.zeros_like(z)
+    for bi, w in zip(b, weights, strict=True):
+        total = total + bi * w
+    return [2.0 * math.atan(t / 2) for t in (z * total).tolist()]
+
+
 def rotation_angles(tableau: Tableau, zs, realisation: str = "symmetric") -> list[float | None]:
     """`rotation_angle` at each z of the increasing ``zs``; an implicit tableau's branch (symmetric
     realisation) is continued from one z to the next, and once it has ended (past its fold) every
@@ -1235,13 +1255,7 @@ def rotation_angles(tableau: Tableau, zs, realisation: str = "symmetric") -> lis
         return 2.0 * math.atan(z * sum(b[i] * (1 + ms[i] ** 2 / 4) for i in range(s)) / 2)
 
     if tableau.is_explicit:
-        angles = []
-        for z in zs:
-            ms = [0.0] * s
-            for i in range(s):
-                ms[i] = z * sum(A[i][j] * (1 + ms[j] ** 2 / 4) for j in range(i))
-            angles.append(angle(ms, z))
-        return angles
+        return _explicit_angles(A, b, zs)
     angles, start = [], None
     with mpmath.workdps(25):
         A_mp = _mp_tableau(tableau)[0]
