@@ -10,14 +10,16 @@ DOCS_STAMP := $(VENV)/.docs-installed
 
 install: $(STAMP) $(COMPILED)
 
-# constraints.txt: the versions the test suite passed with (docs/development.md). The installed
-# modules' bytecode is written by compileall on every core (pip writes it one file at a time);
-# it must be written here: under PYTHONDONTWRITEBYTECODE no process writes it at import.
+# constraints.txt: the versions the test suite passed with (docs/development.md). The bytecode of
+# the installed modules (but the packages' own tests, pip and setuptools, which no run imports)
+# and of rkhp's sources is written by compileall on every core (pip writes it one file at a
+# time); it must be written here: under PYTHONDONTWRITEBYTECODE no process writes it at import.
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet --no-compile -c constraints.txt -e '.[test,distributed]'
-	$(PY) -m compileall -q -j 0 "$$($(PY) -c 'import sysconfig; print(sysconfig.get_path("purelib"))')"
+	$(PY) -m compileall -q -j 0 -x '/(tests?|pip|setuptools)/' \
+		"$$($(PY) -c 'import sysconfig; print(sysconfig.get_path("purelib"))')" rkhp cli
 	touch $(STAMP)
 
 # numba's cache filled for the compiled sources as they are, so that no run (and no test process)
