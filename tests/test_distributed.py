@@ -69,6 +69,7 @@ def test_scheduler_choice():
 def test_unreachable_scheduler_is_one_line_exit_2():
     rc, _, err = _rkhp("search", "--stages", "2", "--order", "2", env={"DASK_SCHEDULER_ADDRESS": "tcp://127.0.0.1:1"})
     assert rc == 2 and len(err.strip().splitlines()) == 1 and "cannot reach the Dask scheduler" in err
+    assert "connection refused" in err  # nothing listens on port 1: told at once, not after Dask's retries
 
 
 # ----------------------------------------------------------------------------- on a cluster of two workers
