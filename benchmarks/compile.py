@@ -20,15 +20,18 @@ same interpreter and numba are measured:
   tableaux linking it;
 - us/step: the rigid body at h = 0.05, 1000 steps, with the paper's three-stage method, RKHP
   Euler and the implicit gauss2 (`STEP_METHODS`), warm: CPU seconds of the process around each
-  run (the fairer figure on a loaded machine), the minimum over the repeats;
+  run (the fairer figure on a loaded machine), the minimum over the repeats in a process; the
+  versions' step processes alternate (one of each in turn, `--step-runs` turns a round), and the
+  minimum and the median over a version's processes are printed, so that neither a burst of
+  load nor one process's placement in memory falls on one version only;
 - with --kernels, the cold compile of each entry kernel of `rkhp.integrators.kernels`, in the order
   of its table (each figure leaves out what the kernels before it compiled), in one fresh process
   with an empty cache: CPU seconds from numba's compile event of the kernel to its end, the
   figures behind the compile notice's estimates.
 
-Versions alternate within a round and the minimum over the rounds (and over the step processes
-of a round) is printed, so that a burst of load on a shared machine does not fall on one version
-only; the load average is printed too.
+Versions alternate within a round, and the minimum over the rounds of the cold and warm runs is
+printed, so that a burst of load on a shared machine does not fall on one version only; the load
+average is printed too.
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ import json
 import os
 import resource
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -132,23 +136,25 @@ def run(tree: Path, args: list[str], cache: Path) -> tuple[float, float, str]:
     return wall, cpu, proc.stdout
 
 
-def measure(tree: Path, work: Path, repeats: int, step_runs: int) -> dict:
-    """Cold and warm converge, and us/step (the minimum of `step_runs` processes), of one version
-    (one round)."""
+def measure(tree: Path, work: Path) -> dict:
+    """Cold and warm converge, and the cold start of each class of tapes, of one version (one
+    round); the numba cache that the warm run used is kept for the step timings."""
     cache = Path(tempfile.mkdtemp(prefix="numba-", dir=work))
     cold = run(tree, ["-m", "rkhp", *COMMAND], cache)
     warm = run(tree, ["-m", "rkhp", *COMMAND], cache)
-    runs = [json.loads(run(tree, ["-c", STEP_CODE % repeats, *STEP_METHODS], cache)[2])
-            for _ in range(step_runs)]
-    shutil.rmtree(cache)
     families = {}
     for system in FAMILIES:
-        cache = Path(tempfile.mkdtemp(prefix="numba-", dir=work))
+        family_cache = Path(tempfile.mkdtemp(prefix="numba-", dir=work))
         command = [part.format(system=system) for part in FAMILY_COMMAND]
-        families[system] = run(tree, ["-m", "rkhp", *command], cache)[1]
-        shutil.rmtree(cache)
-    return {"cold": cold[:2], "warm": warm[:2], "families": families,
-            "us_per_step": {m: min(r[m] for r in runs) for m in STEP_METHODS}}
+        families[system] = run(tree, ["-m", "rkhp", *command], family_cache)[1]
+        shutil.rmtree(family_cache)
+    return {"cold": cold[:2], "warm": warm[:2], "families": families, "cache": cache}
+
+
+def step_costs(tree: Path, cache: Path, repeats: int) -> dict:
+    """us/step of each of `STEP_METHODS` in one warm process of a version: the minimum over
+    `repeats` runs."""
+    return json.loads(run(tree, ["-c", STEP_CODE % repeats, *STEP_METHODS], cache)[2])
 
 
 def _least(rounds: list[dict], kernel: str) -> str:
@@ -172,7 +178,7 @@ def main() -> None:
                         help="a further commit to measure (repeatable)")
     parser.add_argument("--rounds", type=int, default=2, help="rounds (minimum taken; default 2)")
     parser.add_argument("--repeats", type=int, default=5, help="runs per step timing (default 5)")
-    parser.add_argument("--step-runs", type=int, default=3,
+    parser.add_argument("--step-runs", type=int, default=5,
                         help="processes per round for the step timings (default 3)")
     parser.add_argument("--kernels", action="store_true",
                         help="also each entry kernel's cold compile CPU (a process per round)")
@@ -185,22 +191,32 @@ def main() -> None:
         versions["after (this tree)"] = assemble(work / "after", None)
         results: dict[str, list[dict]] = {name: [] for name in versions}
         loads = [os.getloadavg()[0]]
+        steps: dict[str, list[dict]] = {name: [] for name in versions}
         for _ in range(options.rounds):
             for name, tree in versions.items():
-                results[name].append(measure(tree, work, options.repeats, options.step_runs))
+                results[name].append(measure(tree, work))
                 if options.kernels:
                     results[name][-1]["kernels"] = measure_kernels(tree, work)
                 loads.append(os.getloadavg()[0])
+            for _ in range(options.step_runs):  # one process of each version in turn
+                for name, tree in versions.items():
+                    steps[name].append(step_costs(tree, results[name][-1]["cache"], options.repeats))
+            loads.append(os.getloadavg()[0])
         print(f"machine: {os.cpu_count()} CPUs, load average {min(loads):.1f} to {max(loads):.1f} "
               f"during the runs; `rkhp {' '.join(COMMAND)}`, minima over {options.rounds} rounds")
-        print(f"{'version':24s} {'cold wall':>10s} {'cold CPU':>9s} {'warm wall':>10s} {'warm CPU':>9s}  "
-              + "  ".join(f"{m:>17s}" for m in STEP_METHODS) + " (us/step)")
+        print(f"{'version':24s} {'cold wall':>10s} {'cold CPU':>9s} {'warm wall':>10s} {'warm CPU':>9s}")
         for name, rounds in results.items():
             cold = [min(r["cold"][k] for r in rounds) for k in (0, 1)]
             warm = [min(r["warm"][k] for r in rounds) for k in (0, 1)]
-            steps = [min(r["us_per_step"][m] for r in rounds) for m in STEP_METHODS]
-            print(f"{name:24s} {cold[0]:9.1f}s {cold[1]:8.1f}s {warm[0]:9.2f}s {warm[1]:8.2f}s  "
-                  + "  ".join(f"{v:17.2f}" for v in steps))
+            print(f"{name:24s} {cold[0]:9.1f}s {cold[1]:8.1f}s {warm[0]:9.2f}s {warm[1]:8.2f}s")
+        processes = options.rounds * options.step_runs
+        print(f"us/step, minimum and median over {processes} processes per version (the versions' "
+              f"processes alternating), each the minimum of {options.repeats} runs of 1000 steps")
+        print(f"{'version':24s} " + " ".join(f"{m:>21s}" for m in STEP_METHODS))
+        for name, runs in steps.items():
+            print(f"{name:24s} " + " ".join(
+                f"{min(r[m] for r in runs):10.2f}{statistics.median(r[m] for r in runs):11.2f}"
+                for m in STEP_METHODS))
         print(f"cold start CPU (s, minima) of `rkhp {' '.join(FAMILY_COMMAND)}` per class of tapes")
         print(f"{'version':24s} " + " ".join(f"{system:>16s}" for system in FAMILIES))
         for name, rounds in results.items():
