@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -70,6 +72,21 @@ def test_unreachable_scheduler_is_one_line_exit_2():
     rc, _, err = _rkhp("search", "--stages", "2", "--order", "2", env={"DASK_SCHEDULER_ADDRESS": "tcp://127.0.0.1:1"})
     assert rc == 2 and len(err.strip().splitlines()) == 1 and "cannot reach the Dask scheduler" in err
     assert "connection refused" in err  # nothing listens on port 1: told at once, not after Dask's retries
+
+
+def test_unknown_scheduler_host_is_one_line_at_once():
+    host = "no-such-host.invalid"  # RFC 2606: a name that never resolves
+    try:
+        socket.getaddrinfo(host, 8786)
+    except socket.gaierror as exc:
+        if exc.errno != socket.EAI_NONAME:
+            pytest.skip(f"this machine's resolver answers {exc} (not 'no such name')")
+    else:
+        pytest.skip(f"this machine's resolver gives {host} an address")
+    start = time.perf_counter()
+    rc, _, err = _rkhp("search", "--stages", "2", "--order", "2", "--scheduler", f"tcp://{host}:8786")
+    assert rc == 2 and len(err.strip().splitlines()) == 1 and "unknown host" in err, err
+    assert time.perf_counter() - start < 5  # not Dask's 10 s of retries
 
 
 # ----------------------------------------------------------------------------- on a cluster of two workers

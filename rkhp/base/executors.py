@@ -334,12 +334,17 @@ class DaskCluster:
         self._client.close()
 
 
+#: getaddrinfo's answers that a host name has no address (not a resolver that failed for now)
+_NO_SUCH_HOST = {getattr(socket, name) for name in ("EAI_NONAME", "EAI_NODATA") if hasattr(socket, name)}
+
+
 def _refuse_early(address: str, seconds: float) -> None:
     """ConnectionRefusedError when the scheduler's host refuses a TCP connection to its port
-    (nothing listens there), which Dask's client would retry until its timeout; nothing when the
-    connection opens (the scheduler logs a connection closed before its handshake) or fails
-    otherwise, or after a fifth of ``seconds`` (Dask's own connection then says what it finds).
-    Schemes over TCP only (not ucx)."""
+    (nothing listens there), socket.gaierror when the resolver answers that the host name has no
+    address (`_NO_SUCH_HOST`): failures that Dask's client would retry until its timeout. Nothing
+    when the connection opens (the scheduler logs a connection closed before its handshake) or
+    fails otherwise, or after a fifth of ``seconds`` (Dask's own connection then says what it
+    finds). Schemes over TCP only (not ucx)."""
     match = _ADDRESS.fullmatch(address)
     if match is None or match.group(2) == "ucx":
         return
@@ -348,14 +353,18 @@ def _refuse_early(address: str, seconds: float) -> None:
             return
     except ConnectionRefusedError:
         raise
+    except socket.gaierror as exc:
+        if exc.errno in _NO_SUCH_HOST:
+            raise
     except OSError:
         return
 
 
 def _connect(address: str, seconds: float):
     """A distributed Client of the scheduler at ``address``, or InputError in one line within
-    about ``seconds``: an address Dask cannot use (no port, an unknown scheme), a refused or
-    unanswered connection (a refused one at once: `_refuse_early`), a server that is not a Dask
+    about ``seconds``: an address Dask cannot use (no port, an unknown scheme), an unknown host, a
+    refused or unanswered connection (an unknown host or a refused connection at once:
+    `_refuse_early`), a server that is not a Dask
     scheduler. The connection runs in a thread that is abandoned if it has not answered after 1.5
     ``seconds`` (some failures never answer: a server that accepts and is silent)."""
     from distributed import Client
@@ -381,6 +390,9 @@ def _connect(address: str, seconds: float):
         if isinstance(error, ConnectionRefusedError):
             raise InputError(f"cannot reach the Dask scheduler at {address}: connection refused "
                              "(nothing listens on that port)") from None
+        if isinstance(error, socket.gaierror) and error.errno in _NO_SUCH_HOST:
+            raise InputError(f"cannot reach the Dask scheduler at {address}: unknown host "
+                             "(the name has no address)") from None
         if isinstance(error, (OSError, TimeoutError)):
             raise InputError(f"cannot reach the Dask scheduler at {address} within {seconds:g} s "
                              f"({type(error).__name__})") from None
