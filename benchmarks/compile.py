@@ -179,7 +179,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=2, help="rounds (minimum taken; default 2)")
     parser.add_argument("--repeats", type=int, default=5, help="runs per step timing (default 5)")
     parser.add_argument("--step-runs", type=int, default=5,
-                        help="processes per round for the step timings (default 3)")
+                        help="step processes of each version per round, alternating (default 5)")
     parser.add_argument("--kernels", action="store_true",
                         help="also each entry kernel's cold compile CPU (a process per round)")
     options = parser.parse_args()

@@ -13,7 +13,6 @@ import os
 import socket
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -83,10 +82,9 @@ def test_unknown_scheduler_host_is_one_line_at_once():
             pytest.skip(f"this machine's resolver answers {exc} (not 'no such name')")
     else:
         pytest.skip(f"this machine's resolver gives {host} an address")
-    start = time.perf_counter()
     rc, _, err = _rkhp("search", "--stages", "2", "--order", "2", "--scheduler", f"tcp://{host}:8786")
+    # told by the probe before Dask's client, not "within 10 s" after its retries
     assert rc == 2 and len(err.strip().splitlines()) == 1 and "unknown host" in err, err
-    assert time.perf_counter() - start < 5  # not Dask's 10 s of retries
 
 
 # ----------------------------------------------------------------------------- on a cluster of two workers

@@ -364,9 +364,9 @@ def _connect(address: str, seconds: float):
     """A distributed Client of the scheduler at ``address``, or InputError in one line within
     about ``seconds``: an address Dask cannot use (no port, an unknown scheme), an unknown host, a
     refused or unanswered connection (an unknown host or a refused connection at once:
-    `_refuse_early`), a server that is not a Dask
-    scheduler. The connection runs in a thread that is abandoned if it has not answered after 1.5
-    ``seconds`` (some failures never answer: a server that accepts and is silent)."""
+    `_refuse_early`), a server that is not a Dask scheduler. The connection runs in a thread that
+    is abandoned if it has not answered after 1.5 ``seconds`` (some failures never answer: a
+    server that accepts and is silent)."""
     from distributed import Client
 
     outcome: dict = {}
