@@ -41,14 +41,15 @@ demo: install
 	@echo "or put it on your PATH for this shell: source $(VENV)/bin/activate"
 
 # The kernels compiled by install: the test processes then never compile the same kernel side by
-# side. -n auto: one test process per core (pytest-xdist); PYTHONHASHSEED=0: the docs' rkhp
-# commands run in the test process (docs/_ext/doccode.py) with the hashing of the separate process
-# they stand for.
+# side. -n auto: one test process per core (pytest-xdist); --dist worksteal: a process that has
+# run its share takes tests queued for the other (docs/development.md); PYTHONHASHSEED=0: the
+# docs' rkhp commands run in the test process (docs/_ext/doccode.py) with the hashing of the
+# separate process they stand for.
 test: install
-	PYTHONHASHSEED=0 $(PY) -m pytest -m "not slow" -q -p no:cacheprovider -n auto
+	PYTHONHASHSEED=0 $(PY) -m pytest -m "not slow" -q -p no:cacheprovider -n auto --dist worksteal
 
 test-all: install $(DOCS_STAMP)
-	PYTHONHASHSEED=0 $(PY) -m pytest -q -p no:cacheprovider -n auto
+	PYTHONHASHSEED=0 $(PY) -m pytest -q -p no:cacheprovider -n auto --dist worksteal
 
 $(DOCS_STAMP): $(STAMP)
 	$(PY) -m pip install --quiet -c constraints.txt -e '.[test,docs]'
