@@ -52,9 +52,10 @@ def engine_loop(system, gammas, h: float, steps: int):
     `rkhp.integrators.composed.integrate_composition` makes it."""
     tableau = rkhp_method.resolve_tableau("euler")
     A, b = rkhp_method.tableau_arrays(tableau)
-    tapes, run, space = rkhp_method.engine_data(system, len(b), rkhp_method.stage_solve(tableau, A))
+    tapes, interpreter, space = rkhp_method.engine_data(system, len(b), rkhp_method.stage_solve(tableau, A))
     n = system.dim
-    args = (np.array(system.x0), composed.Substeps(A, b, h * np.array(gammas)), steps, run, tapes, space,
+    args = (np.array(system.x0), composed.Substeps(A, b, h * np.array(gammas)), steps, interpreter.address,
+            tapes, space,
             engine.step_buffers(tapes, n, len(b), space),
             composed.substep_memory(len(gammas), n),
             composed.Solver(NEWTON_TOLERANCE, NEWTON_MAX_ITERATIONS, system.domain_code),

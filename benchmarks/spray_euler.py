@@ -55,9 +55,9 @@ def engine_loop(system, h: float, steps: int):
     tableau = rkhp_method.resolve_tableau("euler")
     A, b = rkhp_method.tableau_arrays(tableau)
     stage = rkhp_method.stage_solve(tableau, A)
-    tapes, run, space = rkhp_method.engine_data(system, len(b), stage)
+    tapes, interpreter, space = rkhp_method.engine_data(system, len(b), stage)
     n = system.dim
-    args = (np.array(system.x0), engine.Method(A, b, h), steps, run, tapes, space,
+    args = (np.array(system.x0), engine.Method(A, b, h), steps, interpreter.address, tapes, space,
             engine.step_buffers(tapes, n, len(b), space),
             engine.Solver(NEWTON_TOLERANCE, NEWTON_MAX_ITERATIONS, system.domain_code),
             rkhp_method.compiled_stage(stage),

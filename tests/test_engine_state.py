@@ -155,6 +155,41 @@ def test_an_interpreter_is_made_only_for_the_plain_tape_layout():
 
     tape, space = get_system("charged-particle").h_tape, jet_space(2, 3)
     types = [nb.typeof(x) for x in (as_plain(tape), space, tape_work((tape,), 1))]
-    assert _interpreter(nb.typeof(tape), *types)._numba_type_.signature.args[0] == types[0]
+    assert _interpreter(nb.typeof(tape), *types[1:])._compiled.args[0] == nb.typeof(tape)
     with pytest.raises(TypeError, match="not laid out as"):
-        _interpreter(nb.typeof(Other(np.zeros((1, 1), np.int64))), *types)
+        _interpreter(nb.typeof(Other(np.zeros((1, 1), np.int64))), *types[1:])
+    readonly = np.zeros((1, 5), np.int64)
+    readonly.flags.writeable = False
+    with pytest.raises(TypeError, match="not laid out as"):
+        _interpreter(nb.typeof(type(tape)(readonly, *tape[1:])), *types[1:])
+
+
+def test_a_call_at_an_address_takes_only_the_plain_signature():
+    """`run_at` calls the interpreter at an address with the arguments every interpreter is
+    compiled for: with the plain charged particle's H tape (of the spray class) it gives
+    H = cos x1 + sin x2 (GeometricProblems.jl's MasslessChargedParticle); a tape of another
+    machine layout (a read-only array) is a typing error, never a call."""
+    import numpy as np
+    from numba.core.errors import TypingError
+
+    from rkhp.systems import get_system
+    from rkhp.taylor.compiler import numba as nb
+    from rkhp.taylor.interpreter import as_plain, interpreter, run_at, tape_work
+    from rkhp.taylor.jets import jet_space
+
+    @nb.njit
+    def h_at(address, tape, space, work):
+        run_at(address, tape, 0, space, work)
+        return work.W[tape.outputs[0], 0]
+
+    system = get_system("charged-particle")
+    tape, space = system.h_tape, jet_space(0, 0)
+    work = tape_work((tape,), space.size)
+    x = np.array([0.3, -1.1])
+    work.W[: x.size, 0] = x
+    want = np.cos(x[0]) + np.sin(x[1])
+    assert abs(h_at(interpreter(tape).address, as_plain(tape), space, work) - want) <= 1e-14 * abs(want)
+    ops = tape.ops.copy()
+    ops.flags.writeable = False
+    with pytest.raises(TypingError, match="plain tape"):
+        h_at(1, as_plain(tape)._replace(ops=ops), space, work)

@@ -32,7 +32,7 @@ from ..base.bounds import check_step
 from ..base.errors import InputError, NumericalFailure
 from ..taylor.compiler import NJIT
 from ..taylor.compiler import numba as nb
-from ..taylor.interpreter import Interpreter, TapeWork, as_plain, interpreter, run_tape, tape_work
+from ..taylor.interpreter import TapeWork, as_plain, interpreter, run_at, tape_work
 from ..taylor.jets import JetSpace, jet_space
 from ..taylor.linalg import lu_factor, lu_solve
 from ..taylor.tape import Tape
@@ -46,9 +46,8 @@ MIDPOINT_MAX_ITERATIONS = 30
 
 
 class FieldWork(NamedTuple):
-    """What the compiled field evaluates with: the H and alpha tapes (plain for the loops, of
-    their class for `_field_call`), first-order jets in n variables, and the interpreter's work
-    arrays for each tape (`_workspace`)."""
+    """What the compiled field evaluates with: the H and alpha tapes (plain), first-order jets in
+    n variables, and the interpreter's work arrays for each tape (`_workspace`)."""
 
     htape: Tape
     atape: Tape
@@ -58,11 +57,10 @@ class FieldWork(NamedTuple):
 
 
 class Field(NamedTuple):
-    """The compiled field's arguments: the interpreter of the system's class of tapes
-    (`rkhp.taylor.interpreter.Interpreter`; an argument of its own, so that numba types the work
-    arrays in C at each call of the field from Python) and the work."""
+    """The compiled field's arguments: the address of the interpreter of the system's class of
+    tapes (`rkhp.taylor.interpreter.Interpreter.address`) and the work."""
 
-    run: Interpreter
+    run: int
     work: FieldWork
 
 
@@ -72,8 +70,8 @@ class Field(NamedTuple):
 
 @nb.njit(inline="always", **NJIT)
 def _field(x, run, ws, out):
-    """out = pi(x) grad H(x) by `run`, the interpreter of the tapes' class: grad H from the H tape,
-    pi = D^T - D from the alpha tape."""
+    """out = pi(x) grad H(x) by the interpreter of the tapes' class at the address `run`: grad H
+    from the H tape, pi = D^T - D from the alpha tape."""
     htape, atape, space, wh, wa = ws.htape, ws.atape, ws.space, ws.wh, ws.wa
     n = x.shape[0]
     Wh, Wa = wh.W, wa.W
@@ -84,8 +82,8 @@ def _field(x, run, ws, out):
         Wh[i, 1 + i] = 1.0
         Wa[i, 0] = x[i]
         Wa[n + i, 1 + i] = 1.0
-    run(htape, np.int64(1), space, wh)
-    run(atape, np.int64(1), space, wa)
+    run_at(run, htape, np.int64(1), space, wh)
+    run_at(run, atape, np.int64(1), space, wa)
     ho = htape.outputs[0]
     ao = atape.outputs
     for i in range(n):
@@ -96,11 +94,9 @@ def _field(x, run, ws, out):
 
 
 @nb.njit(**NJIT)
-def _field_call(x, ws, out):
-    """`_field` with the interpreter linked in (tapes of their class, one compiled version per
-    class): the field that scipy calls once per point, where passing a first-class interpreter
-    would cost microseconds per call."""
-    _field(x, run_tape, ws, out)
+def _field_call(x, run, ws, out):
+    """`_field` as a kernel: the field that scipy calls once per point."""
+    _field(x, run, ws, out)
 
 
 @nb.njit(inline="always", **NJIT)
@@ -221,19 +217,13 @@ def _midpoint_loop(run, ws, h, n_steps, x0, domain, tol, max_it, states, newton)
 
 
 def _workspace(system) -> Field:
-    """The interpreter of the system's tapes, and its H and alpha tapes, first-order jets in n
-    variables and work arrays for each tape."""
+    """The address of the interpreter of the system's tapes (compiled or loaded from numba's
+    cache here), and its H and alpha tapes, first-order jets in n variables and work arrays for
+    each tape."""
     space = jet_space(system.dim, 1)
     ht, at = system.h_tape, system.alpha_tape
     work = FieldWork(as_plain(ht), as_plain(at), space, tape_work((ht,), space.size), tape_work((at,), space.size))
-    return Field(interpreter(ht), work)
-
-
-def _class_work(system, field: Field) -> FieldWork:
-    """The work of `field` with the system's tapes of their class (`_field_call`'s), their
-    interpreter loaded first: `_field_call` links in that version (`Interpreter.load`)."""
-    field.run.load()
-    return field.work._replace(htape=system.h_tape, atape=system.alpha_tape)
+    return Field(interpreter(ht).address, work)
 
 
 _VERIFIED: set[str] = set()
@@ -256,7 +246,7 @@ def _verify(name: str, system, field: Field) -> None:
     states = np.empty((2, x.size))
     if name == "field":
         got, want = np.empty(x.size), f
-        _field_call(x, _class_work(system, field), got)
+        _field_call(x, *field, got)
     elif name == "rk":
         _rk_loop(*field, np.zeros((1, 1)), np.ones(1), h, 1, x, 0, states)
         got, want = states[1], x + h * f
@@ -317,11 +307,12 @@ def integrate_classical(system, tableau, h, n_steps, x0=None) -> Trajectory:
     A = np.array(tableau.A_float, dtype=np.float64)
     b = np.array(tableau.b_float, dtype=np.float64)
     x = system.start(x0)
+    started = time.perf_counter()
     field = _workspace(system)
     domain = system.domain_code
     states = np.empty((n_steps + 1, x.size))
-    started = time.perf_counter()
-    compile_s = _warm_up(_rk_loop, (*field, A, b, h, 1, x, domain, np.empty((2, x.size))))
+    loaded = time.perf_counter() - started  # the class's interpreter, compiled or loaded
+    compile_s = loaded + _warm_up(_rk_loop, (*field, A, b, h, 1, x, domain, np.empty((2, x.size))))
     _verify("rk", system, field)
     k_done, cause = _rk_loop(*field, A, b, h, n_steps, x, domain, states)
     newton = np.zeros(n_steps, dtype=np.int64)
@@ -347,14 +338,15 @@ def integrate_midpoint(system, h, n_steps, x0=None) -> Trajectory:
     """
     h, n_steps = check_step(h, n_steps, system.dim)
     x = system.start(x0)
+    started = time.perf_counter()
     field = _workspace(system)
     domain = system.domain_code
     states = np.empty((n_steps + 1, x.size))
     newton = np.zeros(n_steps, dtype=np.int64)
     tol, max_it = NEWTON_TOLERANCE, MIDPOINT_MAX_ITERATIONS
-    started = time.perf_counter()
-    compile_s = _warm_up(_midpoint_loop, (*field, h, 1, x, domain, tol, max_it, np.empty((2, x.size)),
-                                          np.zeros(1, dtype=np.int64)))
+    loaded = time.perf_counter() - started  # the class's interpreter, compiled or loaded
+    compile_s = loaded + _warm_up(_midpoint_loop, (*field, h, 1, x, domain, tol, max_it, np.empty((2, x.size)),
+                                                   np.zeros(1, dtype=np.int64)))
     _verify("midpoint", system, field)
     k_done, cause = _midpoint_loop(*field, h, n_steps, x, domain, tol, max_it, states, newton)
     extra = {"newton_tolerance": tol, "newton_max_iterations": max_it}
@@ -365,11 +357,11 @@ def vector_field(system):
     """The compiled Poisson vector field ``x -> pi(x) grad H(x)`` of a system (docs/theory.md §4)."""
     field = _workspace(system)
     _verify("field", system, field)
-    work = _class_work(system, field)
+    run, work = field
 
     def f(x):
         out = np.empty(system.dim)
-        _field_call(np.ascontiguousarray(x, dtype=np.float64), work, out)
+        _field_call(np.ascontiguousarray(x, dtype=np.float64), run, work, out)
         return out
 
     return f

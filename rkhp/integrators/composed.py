@@ -79,7 +79,7 @@ def _swap_history(buf, memory, i, n, into_buffers):
 @nb.njit(**NJIT_NORC)
 def composed_run(y0, method, n_steps, run, tapes, space, buf, memory, solver, record):
     """Integrate n_steps composed steps from y0 (the explicit base tableau of `method`), the
-    tapes evaluated by `run` (their class's interpreter); returns (number of completed steps,
+    tapes evaluated by the interpreter of their class at the address `run`; returns (number of completed steps,
     Failure of the step after them or Failure.OK)."""
     program = interpreted(tapes, run)
     n = y0.shape[0]
@@ -126,12 +126,13 @@ def integrate_composition(system, composition, h, n_steps, x0=None, *, keep_all:
     tol = NEWTON_TOLERANCE if tol is None else float(tol)
     max_iter = NEWTON_MAX_ITERATIONS if max_iter is None else int(max_iter)
     y0 = system.start(x0)
-    tapes, run, space = engine_data(system, len(b), stage_solve(base, A))
+    tapes, interpreter, space = engine_data(system, len(b), stage_solve(base, A))
     buf = step_buffers(tapes, system.dim, len(b), space)
     method = Substeps(A, b, h * np.asarray(composition.gamma_float, dtype=np.float64))
     memory = substep_memory(composition.substeps, system.dim)
     solver = Solver(tol, max_iter, system.domain_code)
     t0 = time.perf_counter()
+    run = interpreter.address
     composed_run(y0, method, 0, run, tapes, space, buf, memory, solver,
                  Record(np.zeros((1, y0.size)), np.zeros(1, np.int64), True))
     compile_seconds = time.perf_counter() - t0

@@ -14,7 +14,7 @@ import numpy as np
 from ..base.errors import NumericalFailure
 from ..taylor.compiler import NJIT
 from ..taylor.compiler import numba as nb
-from ..taylor.interpreter import as_plain, interpreter, tape_work
+from ..taylor.interpreter import as_plain, interpreter, run_at, tape_work
 from ..taylor.jets import jet_space
 
 #: whether the compiled loop has been compared with a system's own evaluation in this process
@@ -23,7 +23,7 @@ _VERIFIED: set[str] = set()
 
 @nb.njit(**NJIT)
 def _hamiltonian_loop(run, htape, space, states, work, out):
-    """out[r] = H(states[r]) by `run`, the interpreter of the tape's class."""
+    """out[r] = H(states[r]) by the interpreter of the tape's class at the address `run`."""
     n = states.shape[1]
     ho = htape.outputs[0]
     W = work.W
@@ -31,7 +31,7 @@ def _hamiltonian_loop(run, htape, space, states, work, out):
         W[:, :] = 0.0
         for i in range(n):
             W[i, 0] = states[r, i]
-        run(htape, np.int64(0), space, work)
+        run_at(run, htape, np.int64(0), space, work)
         out[r] = W[ho, 0]
 
 
@@ -41,7 +41,7 @@ def hamiltonian_values(system, states) -> np.ndarray:
     space = jet_space(0, 0)
     ht = system.h_tape
     out = np.empty(len(states))
-    _hamiltonian_loop(interpreter(ht), as_plain(ht), space, states, tape_work((ht,), space.size), out)
+    _hamiltonian_loop(interpreter(ht).address, as_plain(ht), space, states, tape_work((ht,), space.size), out)
     if "hamiltonian" not in _VERIFIED and len(out):
         want = system.hamiltonian(states[0])
         if not abs(out[0] - want) <= 1e-12 * max(1.0, abs(want)):

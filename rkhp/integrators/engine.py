@@ -32,7 +32,7 @@ import numpy as np
 from ..systems.core import DOMAINS
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
-from ..taylor.interpreter import Interpreter, TapeWork, tape_work
+from ..taylor.interpreter import Interpreter, TapeWork, run_at, tape_work
 from ..taylor.jets import JetSpace
 from ..taylor.linalg import lu_factor, lu_solve
 from ..taylor.ops import COMPOSE_ARG
@@ -93,24 +93,24 @@ class SystemTapes(NamedTuple):
 
 
 class Interpreted(NamedTuple):
-    """The tapes of `SystemTapes` and the interpreter of their class
-    (`rkhp.taylor.interpreter.Interpreter`, called as ``tapes.run(tape, D, space, work)``), as
-    the step loop uses them: built in compiled code (`interpreted`), since numba types a tuple
-    holding the interpreter in Python, about 0.2 ms at each call of a kernel from Python."""
+    """The tapes of `SystemTapes` and the address of their class's interpreter
+    (`rkhp.taylor.interpreter.Interpreter.address`), as the step loop uses them: a tape is
+    evaluated as ``run_at(tapes.run, tape, D, space, work)`` (`rkhp.taylor.interpreter.run_at`)."""
 
     f: Tape
     h: Tape
     alpha: Tape
     beta: Tape
-    run: Interpreter
+    run: int
 
 
 class EngineData(NamedTuple):
     """What the compiled engine evaluates a system with: its tapes (plain), the interpreter of
-    their class and the jet space (`rkhp.integrators.rkhp_method.engine_data`)."""
+    their class (compiled engine code takes its address) and the jet space
+    (`rkhp.integrators.rkhp_method.engine_data`)."""
 
     tapes: SystemTapes
-    run: Interpreter
+    interpreter: Interpreter
     space: JetSpace
 
 
@@ -321,7 +321,7 @@ def _stage(i, x0, A, h, D, j_end, tapes, space, buf, rate):
                 for m in range(M):
                     W[n + k, m] += c * G[j, k, m]
     tape = tapes.h if zero_row else tapes.f
-    tapes.run(tape, D, space, buf.work)
+    run_at(tapes.run, tape, D, space, buf.work)
     g = tape.outputs[0]
     changes, weights = buf.changes, buf.weights
     lo = 0
@@ -372,7 +372,7 @@ def _alpha(x0, tapes, space, buf, jacobian):
         W[n + k, 0] = psi[k]
         for l in range(n):
             W[n + k, 1 + l] = Jpsi[k, l] if jacobian else 0.0
-    tapes.run(tapes.alpha, extra, space, buf.work)
+    run_at(tapes.run, tapes.alpha, extra, space, buf.work)
     for k in range(n):
         a = tapes.alpha.outputs[k]
         buf.alpha[k] = W[a, 0]
@@ -441,13 +441,13 @@ def _stage_measure(x0, A, b, h, tapes, space, buf):
     W = buf.work.W
     n = x0.shape[0]
     _set_p(W, x0, n)
-    tapes.run(tapes.f, np.int64(1), space, buf.work)
+    run_at(tapes.run, tapes.f, np.int64(1), space, buf.work)
     g = tapes.f.outputs[0]
     c = 0.0
     for k in range(n):
         c += abs(W[g, 1 + k])
     _set_p(W, x0, n)
-    tapes.run(tapes.alpha, np.int64(1), space, buf.work)
+    run_at(tapes.run, tapes.alpha, np.int64(1), space, buf.work)
     pi = 0.0
     for k in range(n):
         row = 0.0
@@ -1042,7 +1042,7 @@ def rkhp_step(method, tapes, space, buf, solver, stage):
     for k in range(n):
         W[k, 0] = x[k]
         W[n + k, 0] = res[k]
-    tapes.run(tapes.beta, np.int64(0), space, buf.work)
+    run_at(tapes.run, tapes.beta, np.int64(0), space, buf.work)
     for k in range(n):
         buf.y_next[k] = W[tapes.beta.outputs[k], 0]
     return Failure.OK, it, sweeps
@@ -1070,7 +1070,7 @@ def _polish(p, tapes, space, buf, scale, iterations, exact):
                 for l in range(n):
                     W[k, 1 + l] = 1.0 if k == l else 0.0
                     W[n + k, 1 + l] = 0.0
-        tapes.run(tapes.alpha, degree, space, buf.work)
+        run_at(tapes.run, tapes.alpha, degree, space, buf.work)
         for k in range(n):
             a = tapes.alpha.outputs[k]
             alpha[k] = y[k] - W[a, 0]
@@ -1101,14 +1101,14 @@ def state_failure(y, domain):
 
 @nb.njit(inline="always", **NJIT_NORC)
 def interpreted(tapes, run):
-    """`Interpreted`: the system's tapes and their interpreter `run`, in compiled code."""
+    """`Interpreted`: the system's tapes and the address `run` of their interpreter."""
     return Interpreted(tapes.f, tapes.h, tapes.alpha, tapes.beta, run)
 
 
 @nb.njit(**NJIT_NORC)
 def rkhp_run(y0, method, n_steps, run, tapes, space, buf, solver, stage, record):
-    """Integrate n_steps from y0 into `record`, the tapes evaluated by `run` (their class's
-    interpreter): states[k] = y_k (keep_all) or states[0] = the last state; iterations[k],
+    """Integrate n_steps from y0 into `record`, the tapes evaluated by the interpreter of their
+    class at the address `run`: states[k] = y_k (keep_all) or states[0] = the last state; iterations[k],
     sweeps[k]: Newton iterations and stage sweeps of step k.
 
     Returns (number of completed steps, Failure of the step after them or Failure.OK).

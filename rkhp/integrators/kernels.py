@@ -34,8 +34,8 @@ class Kernel(NamedTuple):
     name: str
     seconds: float
     per_class: bool = False
-    """Compiled for each class of tapes (the interpreter, and a kernel that links it in); the
-    others take plain tapes and serve every class."""
+    """Compiled for each class of tapes (the interpreter); the others take plain tapes and serve
+    every class."""
 
 
 TAPE = Kernel("rkhp.taylor.interpreter", "run_tape", 2.9, per_class=True)
@@ -45,7 +45,7 @@ COMPOSITE_SECONDS: dict[str, float] = {"spray": 17.4, "phimv": 1.1}
 `rkhp.taylor.tape.Tape.composites`; numba compiles its kernel into the interpreter): the
 interpreter's extra compile with that class, CPU seconds of `run_tape` compiled for that class
 (nambu, heavy-top) less for the rigid body's (numba's compile events, one fresh process with an
-empty cache per system, 2026-11-28); the entry kernels call the interpreter through its address
+empty cache per system, 2026-11-28); the entry kernels call the interpreter at its address
 (`rkhp.taylor.interpreter.Interpreter`), so it adds nothing to theirs."""
 
 KERNELS: dict[str, tuple[Kernel, ...]] = {
@@ -55,8 +55,8 @@ KERNELS: dict[str, tuple[Kernel, ...]] = {
     "taylor": (),  # THP runs the tape interpreter from Python
     "classical": (Kernel("rkhp.integrators.classical", "_rk_loop", 1.3),),
     "implicit-midpoint": (Kernel("rkhp.integrators.classical", "_midpoint_loop", 3.0),),
-    # the bench's peers: the compiled field (the interpreter linked in: a kernel per class)
-    "scipy": (Kernel("rkhp.integrators.classical", "_field_call", 1.0, per_class=True),),
+    # the bench's peers: the compiled field that scipy calls
+    "scipy": (Kernel("rkhp.integrators.classical", "_field_call", 1.0),),
     # compositions: the composed loop over the engine's step (the figure: rkhp_run's, whose step it
     # inlines); on the spray realisation the direct Euler form runs instead (compiled by `rkhp
     # compile`; its tapes are not of the system's class, so the notice does not count it)

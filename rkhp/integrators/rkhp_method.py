@@ -120,11 +120,11 @@ def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLER
     y0 = system.start(x0)
     A, b = tableau_arrays(tableau)
     stage = stage_solve(tableau, A, stage_degree)
-    tapes, run, space = engine_data(system, len(b), stage)
+    tapes, interpreter, space = engine_data(system, len(b), stage)
     buf = step_buffers(tapes, system.dim, len(b), space, stage.degree)
     method, solver = Method(A, b, h), Solver(float(tol), int(max_iter), system.domain_code)
-    rest = (run, tapes, space, buf, solver, compiled_stage(stage))
     t0 = time.perf_counter()
+    rest = (interpreter.address, tapes, space, buf, solver, compiled_stage(stage))
     one = np.zeros(1, np.int64)
     rkhp_run(y0, method, 0, *rest, Record(np.zeros((1, y0.size)), one, True, one))
     compile_seconds = time.perf_counter() - t0
@@ -181,7 +181,8 @@ def _ensemble_chunk(system, A, b, h, n_steps, x0s, tol, max_iter, stage, threads
     """(final states, steps done, Failure codes) of the trajectories from ``x0s``, in threads."""
     from .engine import Method, Record, Solver, rkhp_run, step_buffers
 
-    tapes, run, space = engine_data(system, len(b), stage)
+    tapes, interpreter, space = engine_data(system, len(b), stage)
+    run = interpreter.address
     method, solver = Method(A, b, h), Solver(tol, max_iter, system.domain_code)
     m = len(x0s)
     finals = np.zeros_like(x0s)

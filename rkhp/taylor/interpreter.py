@@ -9,9 +9,9 @@ rows go to `rkhp.taylor.rows.rows` (inlined); each composite row to its kernel
 Sub-programs (rows before `tape.main`) run only when a composite kernel runs them. Degree 0 is
 the value-only path (W[:, 0]), the same code with one coefficient per slot.
 
-Compiled code calls the interpreter through :class:`Interpreter`, `run_tape` for one class of
-tapes as a first-class function: a call through its address, so that a compiled unit does not
-link the interpreter's code in and optimise it once more (docs/engine.md "Compile time").
+Compiled code calls the interpreter of a class of tapes at its address (:class:`Interpreter`,
+:func:`run_at`), so that a compiled unit does not link the interpreter's code in and optimise it
+once more (docs/engine.md "The interpreter through its address").
 
 Python calls the interpreter of a tape's class too (``interpreter(tape)(tape, D, space, work)``),
 so that one compiled interpreter per class serves every caller. `evaluate` is the Python-level
@@ -20,10 +20,13 @@ helper (values, or values and the Jacobian by forward mode).
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
-import numba.experimental.function_type  # noqa: F401  (numba's boxing and calls of FunctionType)
 import numpy as np
+from numba.core import cgutils
+from numba.core.errors import TypingError
+from numba.extending import intrinsic
 
 from .compiler import NJIT_NORC, overload
 from .compiler import numba as nb
@@ -31,7 +34,7 @@ from .composites import phimv, spray
 from .jets import jet_space
 from .ops import FIRST_COMPOSITE, PHIMV, SPRAY
 from .rows import rows
-from .tape import Tape
+from .tape import Tape, record
 
 
 class TapeWork(NamedTuple):
@@ -127,44 +130,77 @@ def _composite_kernels(tape, r, W, D, space, S, deg):
     return _dispatch(tape.instance_class.composites)
 
 
+@functools.cache
+def plain_signature():
+    """The signature every compiled interpreter is called with, ``none(tape, int64, space,
+    work)``: numba's types of a plain `Tape`, a `JetSpace` and :class:`TapeWork` arrays (those of
+    every tape, space and work arrays the library makes)."""
+    tape = record(1, lambda x, p: [x[0]])
+    typeof = nb.typeof
+    return nb.types.none(typeof(tape), nb.types.int64, typeof(jet_space(0, 0)), typeof(tape_work((tape,), 1)))
+
+
+@intrinsic
+def run_at(typingctx, address, tape, D, space, work):
+    """``run_tape(tape, D, space, work)`` in compiled code by the interpreter compiled at
+    `address` (:attr:`Interpreter.address`): a call of its function in numba's own calling
+    convention, its arguments of :func:`plain_signature` (a typing error otherwise)."""
+    signature = plain_signature()
+    if not isinstance(address, nb.types.Integer) or not isinstance(D, nb.types.Integer):
+        raise TypingError(f"run_at(address, tape, D, space, work) takes integers for address and D, "
+                          f"not {address} and {D}")
+    if (tape, space, work) != (signature.args[0], signature.args[2], signature.args[3]):
+        raise TypingError(f"run_at takes a plain tape, a jet space and work arrays, not {tape}, {space}, {work}")
+
+    def codegen(context, builder, sig, args):
+        call_conv = context.call_conv
+        callee = builder.inttoptr(args[0], call_conv.get_function_type(
+            signature.return_type, signature.args).as_pointer())
+        degree = context.cast(builder, args[2], D, nb.types.int64)
+        status, _ = call_conv.call_function(builder, callee, signature.return_type, signature.args,
+                                            [args[1], degree, args[3], args[4]])
+        with cgutils.if_unlikely(builder, status.is_error):
+            call_conv.return_status_propagate(builder, status)
+        return context.get_dummy_value()
+
+    return nb.types.none(address, tape, D, space, work), codegen
+
+
 class Interpreter:
-    """`run_tape` compiled for one class of tapes, passed to compiled code as a first-class
-    function (numba's `FunctionType`) that takes plain tapes (:func:`as_plain`).
+    """`run_tape` compiled for one class of tapes, called in compiled code at its address
+    (:attr:`address`, an integer argument; :func:`run_at`) with plain tapes (:func:`as_plain`).
 
-    A compiled caller calls it through the address of its C-callable wrapper instead of linking
-    its code in: numba optimises and generates the code of each compiled unit with the units it
-    calls linked in, so every unit that called the interpreter compiled it again, seconds per unit
-    with the spray kernel. And since the caller sees plain tapes and this one function type
-    whatever the class, its code does not depend on the class: the step loops are compiled once
-    for every class (docs/engine.md "Compile time"). The class only chooses which compiled
-    interpreter the address is; a tape of any class has the plain tape's machine layout (checked
-    when the interpreter is made). The interpreter raises nothing, so nothing is lost by the
-    wrapper, which reports exceptions instead of raising them.
+    A compiled caller calls it at its address instead of linking its code in: numba optimises
+    and generates the code of each compiled unit with the units it calls linked in, so every unit
+    that called the interpreter compiled it again, seconds per unit with the spray kernel. And
+    since the caller sees plain tapes and an integer whatever the class, its code does not
+    depend on the class: the step loops are compiled once for every class (docs/engine.md "The
+    interpreter through its address"). The class only chooses which compiled interpreter the
+    address is; every class is compiled for arguments with the plain signature's machine layout
+    (:func:`plain_signature`, checked when the interpreter is made). The call is the one numba
+    makes to a function it links, so an error status would reach the caller as from a linked
+    function (the interpreter raises nothing). Made by :func:`interpreter`."""
 
-    numba types it by its `_numba_type_` and takes the address from `__wrapper_address__` (its
-    protocol for first-class functions), both kept, so that passing it costs microseconds; it is
-    an argument of its own where a kernel is called often from Python (numba types a tuple
-    holding it in Python, not in C). Called in compiled code as ``run(tape, D, space, work)``;
-    made by :func:`interpreter`."""
-
-    def __init__(self, signature, compiled):
-        self._numba_type_ = nb.types.FunctionType(signature)
+    def __init__(self, compiled):
         self._compiled = compiled
         self._address = 0
 
     def load(self) -> int:
         """Compile the interpreter for this class, or load it from numba's cache, once in a
-        process; returns the address of its wrapper. Every caller of the class then uses this
-        one version: numba finds it for a call from Python and for a compiled unit that links
-        `run_tape` in, where the first of those would otherwise compile, and cache, a copy of its
-        own (numba caches a version compiled for the arguments' types under another key)."""
+        process; returns its address. Every caller of the class then uses this one version:
+        numba finds it for a call from Python and for a compiled unit that links `run_tape` in,
+        where the first of those would otherwise compile, and cache, a copy of its own (numba
+        caches a version compiled for the arguments' types under another key)."""
         if not self._address:
             compiled = run_tape.get_compile_result(self._compiled)
-            self._address = compiled.library.get_pointer_to_function(
-                compiled.fndesc.llvm_cfunc_wrapper_name)
+            self._address = compiled.library.get_pointer_to_function(compiled.fndesc.llvm_func_name)
+            if not self._address:
+                raise RuntimeError(f"numba gave no address for the interpreter {self._compiled}")
         return self._address
 
-    def __wrapper_address__(self) -> int:
+    @property
+    def address(self) -> int:
+        """The address of the compiled interpreter (:meth:`load`), for :func:`run_at`."""
         return self.load()
 
     def __call__(self, tape, D, space, work) -> None:
@@ -180,27 +216,28 @@ def as_plain(tape) -> Tape:
     return Tape(*tape)
 
 
-def _interpreter(tape_type, plain_type, space_type, work_type) -> Interpreter:
-    layout = nb.core.registry.cpu_target.target_context.get_value_type
-    if str(layout(tape_type)) != str(layout(plain_type)):
-        raise TypeError(f"{tape_type} is not laid out as {plain_type}: no first-class interpreter")
-    none, int64 = nb.types.none, nb.types.int64
-    return Interpreter(none(plain_type, int64, space_type, work_type),
-                       none(tape_type, int64, space_type, work_type))
+def _interpreter(tape_type, space_type, work_type) -> Interpreter:
+    """The interpreter for tapes of numba type `tape_type`, whose members must be the plain
+    tape's (so that its machine layout is the plain tape's), with the plain signature's space and
+    work types."""
+    plain = plain_signature()
+    if (space_type, work_type) != (plain.args[2], plain.args[3]):
+        raise TypeError(f"{space_type}, {work_type}: not the interpreter's jet space and work arrays")
+    if tuple(getattr(tape_type, "types", ())) != tuple(plain.args[0].types):
+        raise TypeError(f"{tape_type} is not laid out as {plain.args[0]}: no interpreter at an address")
+    return Interpreter(nb.types.none(tape_type, nb.types.int64, space_type, work_type))
 
 
 _INTERPRETERS: dict[type, Interpreter] = {}
 
 
 def interpreter(tape) -> Interpreter:
-    """The :class:`Interpreter` of `tape`'s class (with any `JetSpace` and :class:`TapeWork`
-    arrays: their types are those of every space and work), one per class in a process;
-    compiled, or loaded from numba's cache, on its first call from compiled code."""
+    """The :class:`Interpreter` of `tape`'s class, one per class in a process; compiled, or
+    loaded from numba's cache, when its address is first asked for."""
     cls = type(tape)
     if cls not in _INTERPRETERS:
         typeof = nb.typeof
-        _INTERPRETERS[cls] = _interpreter(typeof(tape), typeof(as_plain(tape)), typeof(jet_space(0, 0)),
-                                          typeof(tape_work((tape,), 1)))
+        _INTERPRETERS[cls] = _interpreter(typeof(tape), typeof(jet_space(0, 0)), typeof(tape_work((tape,), 1)))
     return _INTERPRETERS[cls]
 
 
