@@ -36,9 +36,8 @@ AHEAD_METHODS = ("rk4", "gauss2", "thp2", "classical:rk4", "implicit-midpoint", 
 HAMILTONIAN, COMPOSED, VECTOR_FIELD = "hamiltonian", "composed:tj4", "vector-field"
 AHEAD_PARTS = (HAMILTONIAN, *AHEAD_METHODS, COMPOSED, VECTOR_FIELD)
 #: the parts that compile kernels of a class's or family's own (tj4: the direct Euler forms of the
-#: spray realisation and of closed-form families; the scipy peers' field, which links the
-#: interpreter in); the others' kernels are shared by every class
-FAMILY_PARTS = ("tj4", VECTOR_FIELD)
+#: spray realisation and of closed-form families); the others' kernels are shared by every class
+FAMILY_PARTS = ("tj4",)
 
 
 class Compiled(NamedTuple):
