@@ -29,12 +29,16 @@ from .methods import resolve_method
 
 #: one method of each kind, explicit and implicit RKHP being two specialisations of the step loop;
 #: tj4, a composition of Euler steps: the composed loop, or on the spray realisation its direct form
-AHEAD_METHODS = ("rk4", "gauss2", "thp2", "classical:rk4", "implicit-midpoint", "tj4")
+AHEAD_METHODS = ("gauss2", "tj4", "rk4", "implicit-midpoint", "classical:rk4", "thp2")
 #: the parts of a class's compile: the Hamiltonian (it compiles the class's tape interpreter),
 #: each of `AHEAD_METHODS`, the composed loop of tj4 (on the spray realisation too, where tj4
-#: itself runs direct) and the scipy peers' vector field
+#: itself runs direct) and the scipy peers' vector field. After the Hamiltonian (every other part
+#: calls the interpreter), the costliest cold compile first (each part's CPU seconds:
+#: `benchmarks/compile_parts.py`, docs/engine.md "Compile time"): the processes take the parts in
+#: this order, so that the long ones start early and the processes finish together.
 HAMILTONIAN, COMPOSED, VECTOR_FIELD = "hamiltonian", "composed:tj4", "vector-field"
-AHEAD_PARTS = (HAMILTONIAN, *AHEAD_METHODS, COMPOSED, VECTOR_FIELD)
+AHEAD_PARTS = (HAMILTONIAN, "gauss2", "tj4", COMPOSED, "rk4", "implicit-midpoint", "classical:rk4",
+               VECTOR_FIELD, "thp2")
 #: the parts that compile kernels of a class's or family's own (tj4: the direct Euler forms of the
 #: spray realisation and of closed-form families); the others' kernels are shared by every class
 FAMILY_PARTS = ("tj4",)
@@ -116,17 +120,36 @@ class AheadTask(NamedTuple):
     part: str
 
 
+def _compiles(first: str, part: str, firsts: list[str], family_firsts: set[str]) -> bool:
+    """Whether `part` on `first` (a class's system) compiles kernels no part before it in the
+    first phase compiles: a family part on the first class of its direct form, a shared part on
+    the first class."""
+    if part in FAMILY_PARTS:
+        return first in family_firsts
+    return first == firsts[0]
+
+
 def ahead_phases(classes: dict[type, tuple[str, ...]]) -> tuple[list[AheadTask], list[AheadTask]]:
     """The tasks of every class in two phases. First what compiles: each class's Hamiltonian (its
-    tape interpreter), each class's `FAMILY_PARTS` (its family's direct forms) and the first
-    class's other parts (the kernels shared by all classes); then the other classes' other parts,
-    which load the shared kernels (that every kind of run finds them for every class)."""
+    tape interpreter), then in the order of `AHEAD_PARTS` the first class's other parts (the
+    kernels shared by all classes) and the `FAMILY_PARTS` of the first class of each direct Euler
+    form (`rkhp.integrators.methods.direct_form`: the classes of one form share its kernel); then
+    the other parts, which load those kernels (that every kind of run finds them for every
+    class)."""
+    from ..systems import get_system
+    from .methods import direct_form
+
     firsts = [names[0] for names in classes.values()]
-    shared = [part for part in AHEAD_PARTS if part != HAMILTONIAN and part not in FAMILY_PARTS]
-    compiling = ([AheadTask(first, HAMILTONIAN) for first in firsts]
-                 + [AheadTask(first, part) for part in FAMILY_PARTS for first in firsts]
-                 + [AheadTask(firsts[0], part) for part in shared])
-    loading = [AheadTask(first, part) for first in firsts[1:] for part in shared]
+    forms: dict = {}
+    for first in firsts:
+        forms.setdefault(direct_form(get_system(first)), first)
+    family_firsts = {first for form, first in forms.items() if form is not None}
+    compiling = [AheadTask(first, HAMILTONIAN) for first in firsts]
+    loading = []
+    for part in AHEAD_PARTS[1:]:
+        for first in firsts:
+            task = AheadTask(first, part)
+            (compiling if _compiles(first, part, firsts, family_firsts) else loading).append(task)
     return compiling, loading
 
 

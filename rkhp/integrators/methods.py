@@ -147,10 +147,10 @@ def direct_euler(system, tableau) -> bool:
     direct form can evaluate its tapes."""
     if tableau is None or tableau.stages != 1 or tableau.A_float[0][0] != 0.0 or tableau.b_float[0] != 1.0:
         return False
-    return _direct_form(system) is not None
+    return direct_form(system) is not None
 
 
-def _direct_form(system):
+def direct_form(system):
     """The entry of the direct Euler form that takes `system` (None: none does)."""
     if system.realisation != "symmetric":
         return None
@@ -167,7 +167,7 @@ def _direct(system, gammas, h, n_steps, x0, name: str):
     """The run of `direct_euler`'s substeps gammas h, named `name` (docs/compositions.md)."""
     from .trajectory import checked
 
-    return checked(replace(_direct_form(system)(system, gammas, h, n_steps, x0), method=name), system)
+    return checked(replace(direct_form(system)(system, gammas, h, n_steps, x0), method=name), system)
 
 
 def condition_class(system) -> str:
