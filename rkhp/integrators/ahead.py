@@ -25,7 +25,7 @@ from typing import NamedTuple
 
 from ..base.executors import InProcess, LocalProcesses, available_cores, run_all
 from .kernels import KERNELS, cold_start
-from .methods import resolve_method
+from .methods import direct_form, resolve_method
 
 #: one method of each kind, explicit and implicit RKHP being two specialisations of the step loop;
 #: tj4, a composition of Euler steps: the composed loop, or on the spray realisation its direct form
@@ -137,7 +137,6 @@ def ahead_phases(classes: dict[type, tuple[str, ...]]) -> tuple[list[AheadTask],
     the other parts, which load those kernels (that every kind of run finds them for every
     class)."""
     from ..systems import get_system
-    from .methods import direct_form
 
     firsts = [names[0] for names in classes.values()]
     forms: dict = {}
