@@ -147,21 +147,19 @@ def test_an_interpreter_is_made_only_for_the_plain_tape_layout():
 
     from rkhp.systems import get_system
     from rkhp.taylor.compiler import numba as nb
-    from rkhp.taylor.interpreter import _interpreter, as_plain, tape_work
-    from rkhp.taylor.jets import jet_space
+    from rkhp.taylor.interpreter import _interpreter
 
     class Other(NamedTuple):
         ops: np.ndarray
 
-    tape, space = get_system("charged-particle").h_tape, jet_space(2, 3)
-    types = [nb.typeof(x) for x in (as_plain(tape), space, tape_work((tape,), 1))]
-    assert _interpreter(nb.typeof(tape), *types[1:])._compiled.args[0] == nb.typeof(tape)
+    tape = get_system("charged-particle").h_tape
+    assert _interpreter(nb.typeof(tape))._compiled.args[0] == nb.typeof(tape)
     with pytest.raises(TypeError, match="not laid out as"):
-        _interpreter(nb.typeof(Other(np.zeros((1, 1), np.int64))), *types[1:])
+        _interpreter(nb.typeof(Other(np.zeros((1, 1), np.int64))))
     readonly = np.zeros((1, 5), np.int64)
     readonly.flags.writeable = False
     with pytest.raises(TypeError, match="not laid out as"):
-        _interpreter(nb.typeof(type(tape)(readonly, *tape[1:])), *types[1:])
+        _interpreter(nb.typeof(type(tape)(readonly, *tape[1:])))
 
 
 def test_a_call_at_an_address_takes_only_the_plain_signature():

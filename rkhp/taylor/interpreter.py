@@ -216,16 +216,14 @@ def as_plain(tape) -> Tape:
     return Tape(*tape)
 
 
-def _interpreter(tape_type, space_type, work_type) -> Interpreter:
+def _interpreter(tape_type) -> Interpreter:
     """The interpreter for tapes of numba type `tape_type`, whose members must be the plain
-    tape's (so that its machine layout is the plain tape's), with the plain signature's space and
-    work types."""
+    tape's (so that its machine layout is the plain tape's), with the plain signature's jet space
+    and work arrays (:func:`plain_signature`)."""
     plain = plain_signature()
-    if (space_type, work_type) != (plain.args[2], plain.args[3]):
-        raise TypeError(f"{space_type}, {work_type}: not the interpreter's jet space and work arrays")
     if tuple(getattr(tape_type, "types", ())) != tuple(plain.args[0].types):
         raise TypeError(f"{tape_type} is not laid out as {plain.args[0]}: no interpreter at an address")
-    return Interpreter(nb.types.none(tape_type, nb.types.int64, space_type, work_type))
+    return Interpreter(plain.replace(args=(tape_type, *plain.args[1:])))
 
 
 _INTERPRETERS: dict[type, Interpreter] = {}
@@ -236,8 +234,7 @@ def interpreter(tape) -> Interpreter:
     loaded from numba's cache, when its address is first asked for."""
     cls = type(tape)
     if cls not in _INTERPRETERS:
-        typeof = nb.typeof
-        _INTERPRETERS[cls] = _interpreter(typeof(tape), typeof(jet_space(0, 0)), typeof(tape_work((tape,), 1)))
+        _INTERPRETERS[cls] = _interpreter(nb.typeof(tape))
     return _INTERPRETERS[cls]
 
 
