@@ -628,14 +628,15 @@ def _psi_at(b, h, space, buf, top):
         psi[k] = acc
 
 
-@nb.njit(inline="always", **NJIT_NORC)
+@nb.njit(**NJIT_NORC)
 def _sweep_residual(u, r, x0, A, h, D, tapes, space, buf, M):
     """r = P(u) - u, P one Gauss-Seidel sweep of every stage at degree D (`_stage`) of the
     coefficients u of the stage polynomials G (degree < D, M = counts[D - 1] each, flattened over
     (stage, component, coefficient)); G := P(u). Returns the max-norm of r (inf if non-finite).
     P and the Picard sweeps of `implicit_tower` have the same fixed points: the stage equations.
-    Inlined, as `_sweep_jacobian`, into `_stage_newton`, their only caller: a compiled unit of its
-    own would compile the interpreter it calls once more (docs/engine.md "Compile time")."""
+    A compiled unit of its own, called at three sites of `_stage_newton` (with `_sweep_jacobian`,
+    inlined there): inlined, each site would compile the stages' sweep again (docs/engine.md
+    "Compile time"); a call costs nothing beside a sweep's interpreter calls."""
     G = buf.G
     s, n = G.shape[0], G.shape[1]
     q = 0
