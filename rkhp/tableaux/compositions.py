@@ -381,16 +381,26 @@ class CompositionVerification:
                 "claimed_order": c.claimed_order, "claim": self.claim}
 
 
-def class_composition_orders(comp: Composition, base) -> dict[str, CompositionOrder]:
+def class_composition_orders(comp: Composition, base, known: tuple[CompositionOrder, ...] = ()
+                             ) -> dict[str, CompositionOrder]:
     """The order of `comp` with the RKHP method `base` (a Tableau) on each realisation class: q is
     the base's order in the class; the base's modified field is odd in h on the symmetric class
-    when the base is a symmetric RKHP method (docs/compositions.md)."""
+    when the base is a symmetric RKHP method (docs/compositions.md). The order depends only on q
+    and that symmetry: it is computed once for each such pair, and not at all for a pair of
+    `known` (orders of `comp` already computed to MAX_COMPOSITION_ORDER, e.g. its own)."""
     from .symmetry import rkhp_symmetry
     from .verification import class_orders
 
     orders = class_orders(base)
     symmetric = rkhp_symmetry(base).symmetric
-    return {cls: composition_order(comp, q, cls == "symmetric" and symmetric) for cls, q in orders.items()}
+    done = {(o.base_order, o.base_symmetric): o for o in known}
+    by_class = {}
+    for cls, q in orders.items():
+        pair = (q, cls == "symmetric" and symmetric)
+        if pair not in done:
+            done[pair] = composition_order(comp, *pair)
+        by_class[cls] = done[pair]
+    return by_class
 
 
 def verify_composition(comp: Composition) -> CompositionVerification:
@@ -405,4 +415,4 @@ def verify_composition(comp: Composition) -> CompositionVerification:
     if comp.claimed_order is not None:
         claim = "confirmed" if own.order >= comp.claimed_order else "overstated"
     return CompositionVerification(comp, own, symmetry.symmetric, symmetry.checked_up_to,
-                                   class_composition_orders(comp, base), claim)
+                                   class_composition_orders(comp, base, (own,)), claim)
