@@ -44,6 +44,8 @@ def lu_factor(A, perm):
                 A[i, c] = f
                 for j in range(c + 1, k1):
                     A[i, j] -= f * A[c, j]
+        if k1 == n:  # the last panel: nothing to its right (a matrix of one panel: the classical loop)
+            break
         for p in range(k0 + 1, k1):
             for q in range(k0, p):
                 f = A[p, q]
