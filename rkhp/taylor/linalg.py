@@ -1,6 +1,7 @@
-"""Small dense linear algebra in compiled code, without allocation: the LU factorisation with
-partial pivoting of the spray kernel's Newton matrices (`rkhp.taylor.composites`) and of the
-engine's Newton solve (`rkhp.integrators.engine.solve_small`)."""
+"""Dense linear algebra in compiled code, without allocation: the LU factorisation with partial
+pivoting of the spray kernel's Newton matrices (`rkhp.taylor.composites`), of the engine's Newton
+solve (`rkhp.integrators.engine.solve_small`), of the direct Euler steps' chord matrices and of the
+stage Newton solve's Jacobian (hundreds of unknowns: `rkhp.integrators.engine._stage_newton`)."""
 
 from __future__ import annotations
 
