@@ -6,6 +6,7 @@ Every command module registers here with one line: name -> (module, function, on
 
 from __future__ import annotations
 
+import gc
 import importlib
 import sys
 from typing import NamedTuple
@@ -189,10 +190,19 @@ def rkhp():
     """
 
 
+#: the garbage collector's thresholds in an `rkhp` process (Python's are 700, 10, 10): a command
+#: imports and keeps hundreds of thousands of objects (numba, sympy, scipy), and at Python's
+#: young-generation threshold the collector runs hundreds of times in one command, its fuller
+#: collections scanning them again each time
+GC_THRESHOLDS = (50_000, 20, 10)
+
+
 def main() -> None:
-    """The `rkhp` command: the group, then no Ctrl-C past the chosen exit status."""
+    """The `rkhp` command: the collector's thresholds (`GC_THRESHOLDS`), the group, then no
+    Ctrl-C past the chosen exit status."""
     from .terminal import ignore_late_interrupts
 
+    gc.set_threshold(*GC_THRESHOLDS)
     try:
         rkhp.main(prog_name="rkhp")
     except KeyboardInterrupt:
