@@ -7,6 +7,14 @@ import gc
 import pytest
 
 
+def pytest_configure(config):
+    """The collector's thresholds of an `rkhp` process (`rkhp_cli.main.GC_THRESHOLDS`): the
+    commands that tests run in this process run as in their own."""
+    from rkhp_cli.main import GC_THRESHOLDS
+
+    gc.set_threshold(*GC_THRESHOLDS)
+
+
 def pytest_runtest_teardown(item, nextitem):
     """After a test file's last test, the objects alive then (imported modules, numba's loaded
     kernels, sympy's caches: millions in a test process) leave the garbage collector's
