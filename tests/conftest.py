@@ -19,7 +19,7 @@ def pytest_runtest_teardown(item, nextitem):
     """After a test file's last test, the objects alive then (imported modules, numba's loaded
     kernels, sympy's caches: millions in a test process) leave the garbage collector's
     generations (`gc.freeze`): its full collections then scan only what later tests made, not
-    everything each earlier module left alive. What the tests run is unchanged; a cycle left for
+    everything the earlier files left alive. What the tests run is unchanged; a cycle left for
     the collector at that moment is kept until the process ends."""
     if nextitem is None or nextitem.path != item.path:
         gc.freeze()
