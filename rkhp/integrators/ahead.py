@@ -6,9 +6,9 @@ numba compiles the tape interpreter once per class of tapes (`rkhp.taylor.tape.t
 composite operations it must know), and the entry kernels of `rkhp.integrators.kernels` once for
 every class (they take plain tapes and call the class's interpreter through its address:
 `rkhp.taylor.interpreter.Interpreter`), except the direct forms of some families' methods. So
-one system per class stands for its whole family: one step of each kind of method
-(`AHEAD_METHODS`), the compiled Hamiltonian of the studies and the vector field of the scipy
-peers compile every kernel a run of that family needs.
+one system per class stands for its whole family: one step of each kind of method, the compiled
+Hamiltonian of the studies and the vector field of the scipy peers compile every kernel a run of
+that family needs.
 
 Each of those runs on one system is a part (`AHEAD_PARTS`); the parts run in ``jobs`` processes
 side by side when numba's cache saves are locked (`rkhp.taylor.compiler.parallel_compiles_safe`),
@@ -27,15 +27,14 @@ from ..base.executors import InProcess, LocalProcesses, available_cores, run_all
 from .kernels import KERNELS, cold_start
 from .methods import direct_form, resolve_method
 
-#: one method of each kind, explicit and implicit RKHP being two specialisations of the step loop;
-#: tj4, a composition of Euler steps: the composed loop, or on the spray realisation its direct form
-AHEAD_METHODS = ("gauss2", "tj4", "rk4", "implicit-midpoint", "classical:rk4", "thp2")
-#: the parts of a class's compile: the Hamiltonian (it compiles the class's tape interpreter),
-#: each of `AHEAD_METHODS`, the composed loop of tj4 (on the spray realisation too, where tj4
-#: itself runs direct) and the scipy peers' vector field. After the Hamiltonian (every other part
-#: calls the interpreter), the costliest cold compile first (each part's CPU seconds:
-#: `benchmarks/compile_parts.py`, docs/engine.md "Compile time"): the processes take the parts in
-#: this order, so that the long ones start early and the processes finish together.
+#: the parts of a class's compile: the Hamiltonian (it compiles the class's tape interpreter), one
+#: step of each kind of method (explicit and implicit RKHP being two specialisations of the step
+#: loop; tj4, a composition of Euler steps: the composed loop, or its direct form where the family
+#: has one), the composed loop of tj4 (on those families too) and the scipy peers' vector field.
+#: After the Hamiltonian (every other part calls the interpreter), the costliest cold compile first
+#: (each part's CPU seconds: `benchmarks/compile_parts.py`, docs/engine.md "Compile time"): the
+#: processes take the parts in this order, so that the long ones start early and the processes
+#: finish together.
 HAMILTONIAN, COMPOSED, VECTOR_FIELD = "hamiltonian", "composed:tj4", "vector-field"
 AHEAD_PARTS = (HAMILTONIAN, "gauss2", "tj4", COMPOSED, "rk4", "implicit-midpoint", "classical:rk4",
                VECTOR_FIELD, "thp2")
@@ -201,5 +200,5 @@ def compile_ahead(jobs: int | None = None, on_part=None) -> AheadRun:
     return AheadRun(done, jobs, time.perf_counter() - start)
 
 
-__all__ = ["AHEAD_METHODS", "AHEAD_PARTS", "FAMILY_PARTS", "Compiled", "PartTime", "AheadRun", "AheadTask",
+__all__ = ["AHEAD_PARTS", "FAMILY_PARTS", "Compiled", "PartTime", "AheadRun", "AheadTask",
            "tape_classes", "prepare_part", "timed_part", "ahead_phases", "compile_ahead"]
