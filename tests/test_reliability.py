@@ -221,6 +221,26 @@ def test_growth_that_keeps_the_energy_is_no_divergence(tmp_path):
     assert traj.ok and traj.states[-1, 0] > 1e4
 
 
+@pytest.mark.parametrize("bad, expected", [
+    ((0, 0, math.inf), 0), ((3, 1, math.nan), 3), ((7, 1, -math.inf), 7),
+    ((5, 1, 149.0), None),  # |y| at most GROWTH = 100 times |y_0| = 1.5: not grown
+    ((5, 0, 1e9), None),  # q grown, H = p^2/2 - cos q still bounded: no divergence
+    ((5, 1, 1e9), 5),  # p grown, H = 5e17: past DIVERGENCE = 1e8 times max(1, |H(y_0)|)
+])
+def test_divergence_follows_its_rule(bad, expected):
+    """The rule of docs/exit-status.md "Divergence" on hand-made states (q, p) of the pendulum,
+    H = p^2/2 - cos q: the first non-finite state, or the first grown state whose energy left
+    every sane range."""
+    from rkhp.integrators.trajectory import divergence
+
+    system = rkhp.get_system("pendulum")
+    states = np.full((10, 2), 0.5)
+    states[0] = (1.5, 0.0)
+    k, column, value = bad
+    states[k, column] = value
+    assert divergence(system, states) == expected
+
+
 # --------------------------------------------------------------------------- verdicts and tables
 
 

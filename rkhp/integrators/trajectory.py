@@ -169,6 +169,15 @@ def write_columns(path, columns: dict[str, np.ndarray], record: dict | None = No
 
 
 
+def _finite_and_bounded(states: np.ndarray) -> bool:
+    """Whether every state is finite and none grew (|y_k| <= GROWTH max(1, |y_0|), max-norms):
+    the run `divergence` passes, found from the largest component alone."""
+    if states.size == 0:
+        return True
+    peak = float(np.abs(states).max())
+    return np.isfinite(peak) and peak <= GROWTH * max(1.0, float(np.abs(states[0]).max()))
+
+
 def divergence(system, states) -> int | None:
     """The index k of the first state y_k that has left every sane range, or None.
 
@@ -181,6 +190,8 @@ def divergence(system, states) -> int | None:
     requiring it first keeps H's evaluation to the few grown states.
     """
     states = np.asarray(states, dtype=float)
+    if _finite_and_bounded(states):
+        return None
     finite = np.isfinite(states).all(axis=1)
     bad = np.flatnonzero(~finite)
     first_bad = int(bad[0]) if bad.size else None
