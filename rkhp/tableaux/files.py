@@ -74,7 +74,9 @@ def builtin_names() -> list[str]:
     return list(_registry())
 
 
+@lru_cache(maxsize=1)
 def _alias_map() -> dict[str, str]:
+    """lower-case name or alias -> name, for every built-in table (read-only, built once)."""
     out = {}
     for name, (_, aliases) in _registry().items():
         out[name.lower()] = name

@@ -411,16 +411,16 @@ _CLASS_ORDERS: dict[tuple, dict[str, int]] = {}
 
 def class_orders(tableau, precision=None) -> dict[str, int]:
     """Order per condition class ("general", "degenerate", "symmetric") of a tableau, by
-    :func:`verify` at ``precision`` (cached by name, entries and precision): what `rkhp converge`
-    expects of an RKHP method (default precision) and what the implicit stage solve is accurate to
-    ("float": docs/implicit.md).
+    :func:`verify` at ``precision`` (cached by the tableau, which compares by value, and
+    precision): what `rkhp converge` expects of an RKHP method (default precision) and what the
+    implicit stage solve is accurate to ("float": docs/implicit.md).
 
     Each class's conditions follow from the previous class's (T_0 is part of T; the symmetric
     conditions combine T_0 residuals), so its order is at least theirs: this matters where a
     class is checked to a lower order (the symmetric relations ship up to order 8).
     """
     tableau = load_tableau(tableau)
-    key = (tableau.name, str(tableau.A), str(tableau.b), precision)
+    key = (tableau, precision)
     if key not in _CLASS_ORDERS:
         orders = verify(tableau, precision=precision, classes=("general", "degenerate", "symmetric")).orders
         general = int(orders["general"])
