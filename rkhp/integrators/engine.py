@@ -78,7 +78,10 @@ MEMO_JACOBIAN_KEPT = 9
 """1 while StepBuffers.stage_newton holds a factorised Jacobian (`_stage_newton`)."""
 MEMO_STAGE_NEWTON_FAILS = 10
 """The `_stage_newton` solves of this step that found no solution (`implicit_tower`)."""
-MEMO_SIZE = 11
+MEMO_FACTORED = 11
+"""1 while StepBuffers.LU and perm hold the factors of StepBuffers.Jalpha, -1 while Jalpha is
+singular, 0 when it changed since (`newton_solve`)."""
+MEMO_SIZE = 12
 """The number of memo slots."""
 
 
@@ -119,7 +122,7 @@ class StepBuffers(NamedTuple):
 
     work: the interpreter's; G (s, n, jet size): gradients of the stage functions; psi, Jpsi,
     alpha, Jalpha: the tower's results; x, delta, res (n): Newton's iterate, correction and
-    residual; LU (n, n), perm (n,) int64, v (n): the linear solve's (`solve_small`); hist (3, n):
+    residual; LU (n, n), perm (n,) int64, v (n): the linear solve's (`newton_solve`); hist (3, n):
     psi of the three previous steps; memo (MEMO_SIZE,): the scalars kept from one tower or step to
     the next, each in its named slot (MEMO_HISTORY ... MEMO_STAGE_NEWTON_FAILS); y, y_next (n): the
     state before and after the step; Gx (n): the point where G is expanded
@@ -268,21 +271,25 @@ def step_buffers(tapes: SystemTapes, n: int, s: int, space, stage_degree: int = 
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def solve_small(J, r, out, LU, perm, v):
-    """out = J^{-1} r by LU factorisation with partial pivoting (`rkhp.taylor.linalg.lu_factor`,
-    `lu_solve`) in the work arrays LU (n x n), perm (n) and v (n): no allocation in the step
-    loop. A singular J gives out = NaN (a non-finite correction: NEWTON_NON_FINITE). Inlined: a
-    compiled function of its own costs a unit of compile time (docs/engine.md "Compile time")."""
+def newton_solve(r, out, buf):
+    """out = Jalpha^{-1} r, Jalpha = buf.Jalpha, by LU factorisation with partial pivoting
+    (`rkhp.taylor.linalg.lu_factor`, `lu_solve`) in the work arrays buf.LU, buf.perm and buf.v:
+    no allocation in the step loop. The factors are kept while Jalpha is (memo slot
+    MEMO_FACTORED), so that the chord steps and the closing polish of `rkhp_step`, which reuse
+    the last tower's Jalpha, factorise it once. A singular Jalpha gives out = NaN (a non-finite
+    correction: NEWTON_NON_FINITE). Inlined: a compiled function of its own costs a unit of
+    compile time (docs/engine.md "Compile time")."""
+    J, LU, memo = buf.Jalpha, buf.LU, buf.memo
     n = r.shape[0]
-    for i in range(n):
-        out[i] = r[i]
-        for j in range(n):
-            LU[i, j] = J[i, j]
-    if lu_factor(LU, perm):
-        lu_solve(LU, perm, out, v)
-    else:
+    if memo[MEMO_FACTORED] == 0.0:
         for i in range(n):
-            out[i] = np.nan
+            for j in range(n):
+                LU[i, j] = J[i, j]
+        memo[MEMO_FACTORED] = 1.0 if lu_factor(LU, buf.perm) else -1.0
+    for i in range(n):
+        out[i] = r[i] if memo[MEMO_FACTORED] > 0.0 else np.nan
+    if memo[MEMO_FACTORED] > 0.0:
+        lu_solve(LU, buf.perm, out, buf.v)
 
 
 @nb.njit(**NJIT_NORC)
@@ -297,16 +304,12 @@ def _set_x(W, x0, n, D, M):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _stage(i, x0, A, h, D, j_end, tapes, space, buf, rate):
-    """Stage i at x0: g_i = f(x0 + dx, Z_i), Z_i = h sum_{j < j_end} a_ij G[j], in jets of degree
-    D (G[j] read up to degree D); G[i] := grad g_i up to degree D - 1 (its higher coefficients
-    are left as they are). buf.changes[k] (k < D) is increased by rate^k times the largest
-    w |change| among the degree-k coefficients of G[i], w = buf.weights[i] of the coefficient (the
-    implicit tower's convergence measure, `_stage_weights`; unused by the explicit tower)."""
+def _stage_jet(i, x0, A, h, D, j_end, tapes, space, buf):
+    """g_i = f(x0 + dx, Z_i), Z_i = h sum_{j < j_end} a_ij G[j], in jets of degree D (G[j] read up
+    to degree D), into the work arrays; returns the slot of g_i."""
     W, G = buf.work.W, buf.G
-    counts, up, expo = space.counts, space.up, space.expo
     n = x0.shape[0]
-    M = counts[D]
+    M = space.counts[D]
     _set_x(W, x0, n, D, M)
     zero_row = True
     for j in range(j_end):
@@ -322,7 +325,31 @@ def _stage(i, x0, A, h, D, j_end, tapes, space, buf, rate):
                     W[n + k, m] += c * G[j, k, m]
     tape = tapes.h if zero_row else tapes.f
     run_at(tapes.run, tape, D, space, buf.work)
-    g = tape.outputs[0]
+    return tape.outputs[0]
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _explicit_stage(i, x0, A, h, D, tapes, space, buf):
+    """Stage i of an explicit tableau at x0 (`_stage_jet`, the stages j < i): G[i] := grad g_i up
+    to degree D - 1."""
+    W, G = buf.work.W, buf.G
+    g = _stage_jet(i, x0, A, h, D, i, tapes, space, buf)
+    up, expo = space.up, space.expo
+    for k in range(x0.shape[0]):
+        for m in range(space.counts[D - 1]):
+            G[i, k, m] = (expo[m, k] + 1) * W[g, up[m, k]]
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _stage(i, x0, A, h, D, j_end, tapes, space, buf, rate):
+    """Stage i at x0 (`_stage_jet`): G[i] := grad g_i up to degree D - 1 (its higher coefficients
+    are left as they are). buf.changes[k] (k < D) is increased by rate^k times the largest
+    w |change| among the degree-k coefficients of G[i], w = buf.weights[i] of the coefficient (the
+    implicit tower's convergence measure, `_stage_weights`)."""
+    W, G = buf.work.W, buf.G
+    g = _stage_jet(i, x0, A, h, D, j_end, tapes, space, buf)
+    counts, up, expo = space.counts, space.up, space.expo
+    n = x0.shape[0]
     changes, weights = buf.changes, buf.weights
     lo = 0
     power = 1.0
@@ -379,6 +406,8 @@ def _alpha(x0, tapes, space, buf, jacobian):
         if jacobian:
             for l in range(n):
                 buf.Jalpha[k, l] = W[a, 1 + l]
+    if jacobian:
+        buf.memo[MEMO_FACTORED] = 0.0
 
 
 @nb.njit(inline="always", **NJIT_NORC)
@@ -389,7 +418,7 @@ def tower(x0, A, b, h, tapes, space, buf, jacobian):
     s = b.shape[0]
     extra = np.int64(1) if jacobian else np.int64(0)
     for i in range(s):
-        _stage(i, x0, A, h, s + extra - i, i, tapes, space, buf, 1.0)
+        _explicit_stage(i, x0, A, h, s + extra - i, tapes, space, buf)
     _psi_alpha(x0, b, h, tapes, space, buf, jacobian)
 
 
@@ -999,7 +1028,7 @@ def rkhp_step(method, tapes, space, buf, solver, stage):
                 return cause, it, sweeps
         for k in range(n):
             res[k] = y[k] - buf.alpha[k]
-        solve_small(buf.Jalpha, res, delta, buf.LU, buf.perm, buf.v)
+        newton_solve(res, delta, buf)
         size = max_abs(delta)
         if not np.isfinite(size):
             return Failure.NEWTON_NON_FINITE, it, sweeps
@@ -1078,7 +1107,9 @@ def _polish(p, tapes, space, buf, scale, iterations, exact):
             if exact:
                 for l in range(n):
                     J[k, l] = W[a, 1 + l]
-        solve_small(J, alpha, delta, buf.LU, buf.perm, buf.v)
+        if exact:
+            buf.memo[MEMO_FACTORED] = 0.0
+        newton_solve(alpha, delta, buf)
         for k in range(n):
             x[k] += delta[k]
         if not max_abs(delta) > 4e-16 * scale:
@@ -1121,6 +1152,7 @@ def rkhp_run(y0, method, n_steps, run, tapes, space, buf, solver, stage, record)
         y[k] = y0[k]
     buf.memo[MEMO_HISTORY] = 0.0
     buf.memo[MEMO_NEWTON_L] = 0.0
+    buf.memo[MEMO_FACTORED] = 0.0
     for k in range(n):
         record.states[0, k] = y[k]
     for step in range(n_steps):

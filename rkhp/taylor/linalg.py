@@ -1,6 +1,6 @@
 """Small dense linear algebra in compiled code, without allocation: the LU factorisation with
 partial pivoting of the spray kernel's Newton matrices (`rkhp.taylor.composites`) and of the
-engine's Newton solve (`rkhp.integrators.engine.solve_small`)."""
+engine's Newton solve (`rkhp.integrators.engine.newton_solve`)."""
 
 from __future__ import annotations
 
