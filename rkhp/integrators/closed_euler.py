@@ -35,7 +35,8 @@ the engine's Newton iteration does on the NaN that phi gives there (NEWTON_NON_F
 
 Compiled data: `ClosedForm` (the family's structure and H's tape), `ClosedWork` (work arrays),
 `ChordMemory` (what each substep keeps across steps, B included); `run` is the compiled composed loop,
-`integrate_closed_euler` the Python entry.
+one compiled unit with the substep and its history helpers inlined (a unit of their own would be
+optimised again in `run`: docs/engine.md "Compile time"), `integrate_closed_euler` the Python entry.
 """
 
 from __future__ import annotations
@@ -300,7 +301,7 @@ def _refresh(i, y0, hs, form, work, memory, n):
     return Failure.OK
 
 
-@nb.njit(**NJIT_NORC)
+@nb.njit(inline="always", **NJIT_NORC)
 def _predict(i, y0, hs, form, work, memory, n):
     """work.z from substep i's previous solutions (their polynomial extrapolation in the step
     index, `rkhp.integrators.spray_euler._weight`), or G(y0) without any."""
@@ -319,7 +320,7 @@ def _predict(i, y0, hs, form, work, memory, n):
         work.z[k] = acc
 
 
-@nb.njit(**NJIT_NORC)
+@nb.njit(inline="always", **NJIT_NORC)
 def _remember(i, memory, work, n):
     """Push the converged z of substep i into its history."""
     for r in range(HISTORY - 1, 0, -1):
@@ -355,7 +356,7 @@ def _broyden(B, work, n):
             B[a, b] += work.by[a] * sb
 
 
-@nb.njit(**NJIT_NORC)
+@nb.njit(inline="always", **NJIT_NORC)
 def closed_substep(i, y0, hs, form, work, memory, solver):
     """One Euler substep of step hs in direct form from y0 (substep i of the composition, its
     memory): its increment y1 - y0 into work.dy; returns (Failure, iterations).

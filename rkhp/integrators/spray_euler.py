@@ -330,7 +330,7 @@ def _weight(count, r):
     return -c if r % 2 else c
 
 
-@nb.njit(**NJIT_NORC)
+@nb.njit(inline="always", **NJIT_NORC)
 def _predict(i, y0, hs, tapes, work, memory, n):
     """work.p from substep i's previous solutions (their polynomial extrapolation in the step
     index, `_weight`), or hs grad H(y0) without any."""
@@ -380,7 +380,7 @@ def _start_stages(i, q, memory, work, n):
         memory.z_nodes[i] = q
 
 
-@nb.njit(**NJIT_NORC)
+@nb.njit(inline="always", **NJIT_NORC)
 def _remember(i, q, memory, work, n):
     """Push the converged (p, Z) of substep i into its history."""
     for r in range(HISTORY - 1, 0, -1):
@@ -453,7 +453,7 @@ def _sweep(i, q, y0, hs, tapes, work, memory, n):
     return size
 
 
-@nb.njit(**NJIT_NORC)
+@nb.njit(inline="always", **NJIT_NORC)
 def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     """One Euler substep of step hs in direct form (see the module) from y0: its increment
     y1 - y0 into work.dy,
@@ -543,7 +543,9 @@ def add_increment(y, low, dy, n):
 def run(y0, gammas, h, n_steps, tapes, work, memory, solver, record):
     """The composed loop: n_steps steps from y0, each the Euler substeps gammas[0] h,
     gammas[1] h, ... in direct form (`euler_substep`), substep i warm-started from substep i of
-    the previous step (`memory`, emptied here first), all in compiled code.
+    the previous step (`memory`, emptied here first), all in compiled code: one compiled unit with
+    the substep and its history helpers inlined (a unit of their own would be optimised again
+    here: docs/engine.md "Compile time").
 
     Arguments: y0 (n,); gammas (s,) the composition's coefficients; h the step (negative: a
     backward run); tapes, work, memory from `spray_tapes`, `euler_work`, `substep_memory`;
