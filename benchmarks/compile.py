@@ -12,6 +12,9 @@ same interpreter and numba are measured:
 
 - cold: `python -m rkhp converge rigid-body --format json` with an empty numba cache
   (NUMBA_CACHE_DIR set to a new folder), the whole process: wall and CPU (user + system) seconds;
+  and where its compile CPU goes: numba's compile events of each compiled unit (module and
+  name), the unit's own CPU seconds (those of the units it compiled on the way left out), the
+  units that took at least `UNIT_FLOOR` s printed;
 - warm: the same command again, on the cache the cold run filled;
 - families: `python -m rkhp integrate SYSTEM --method paper-three-stage --steps 10` for one
   system of each class of tapes (`FAMILIES`: the rigid body's plain tapes, the spray tapes of
@@ -70,6 +73,32 @@ for method in sys.argv[1:]:
         best = min(best, time.process_time() - start)
     out[method] = best / 1000 * 1e6
 print(json.dumps(out))
+"""
+
+
+UNIT_FLOOR = 0.3
+"""Compiled units of the cold run with less compile CPU than this (s) are left out of its table."""
+
+#: the cold run: the command, with each compiled unit's own compile CPU written to argv[1]
+COLD_CODE = """
+import atexit, json, runpy, sys, time
+from numba.core import event
+path, stack, own = sys.argv[1], [], {}
+class Units(event.Listener):
+    def on_start(self, ev):
+        stack.append([time.process_time(), 0.0])
+    def on_end(self, ev):
+        start, inner = stack.pop()
+        spent = time.process_time() - start
+        func = ev.data["dispatcher"].py_func
+        name = func.__module__ + "." + func.__qualname__
+        own[name] = own.get(name, 0.0) + spent - inner
+        if stack:
+            stack[-1][1] += spent
+event.register("numba:compile", Units())
+atexit.register(lambda: open(path, "w").write(json.dumps(own)))
+sys.argv = ["rkhp", *sys.argv[2:]]
+runpy.run_module("rkhp", run_name="__main__", alter_sys=True)
 """
 
 
@@ -140,7 +169,8 @@ def measure(tree: Path, work: Path) -> dict:
     """Cold and warm converge, and the cold start of each class of tapes, of one version (one
     round); the numba cache that the warm run used is kept for the step timings."""
     cache = Path(tempfile.mkdtemp(prefix="numba-", dir=work))
-    cold = run(tree, ["-m", "rkhp", *COMMAND], cache)
+    units = cache.parent / f"{cache.name}-units.json"
+    cold = run(tree, ["-c", COLD_CODE, str(units), *COMMAND], cache)
     warm = run(tree, ["-m", "rkhp", *COMMAND], cache)
     families = {}
     for system in FAMILIES:
@@ -148,7 +178,8 @@ def measure(tree: Path, work: Path) -> dict:
         command = [part.format(system=system) for part in FAMILY_COMMAND]
         families[system] = run(tree, ["-m", "rkhp", *command], family_cache)[1]
         shutil.rmtree(family_cache)
-    return {"cold": cold[:2], "warm": warm[:2], "families": families, "cache": cache}
+    return {"cold": cold[:2], "units": json.loads(units.read_text()), "warm": warm[:2],
+            "families": families, "cache": cache}
 
 
 def step_costs(tree: Path, cache: Path, repeats: int) -> dict:
@@ -209,6 +240,13 @@ def main() -> None:
             cold = [min(r["cold"][k] for r in rounds) for k in (0, 1)]
             warm = [min(r["warm"][k] for r in rounds) for k in (0, 1)]
             print(f"{name:24s} {cold[0]:9.1f}s {cold[1]:8.1f}s {warm[0]:9.2f}s {warm[1]:8.2f}s")
+        print(f"compile CPU of the cold run by compiled unit (s, its own, the round of the least "
+              f"cold CPU; units under {UNIT_FLOOR} s left out)")
+        for name, rounds in results.items():
+            units = min(rounds, key=lambda r: r["cold"][1])["units"]
+            print(f"{name:24s} total {sum(units.values()):5.1f}s: " + ", ".join(
+                f"{unit} {seconds:.1f}" for unit, seconds in sorted(units.items(), key=lambda u: -u[1])
+                if seconds >= UNIT_FLOOR))
         processes = options.rounds * options.step_runs
         print(f"us/step, minimum and median over {processes} processes per version (the versions' "
               f"processes alternating), each the minimum of {options.repeats} runs of 1000 steps")
