@@ -79,13 +79,14 @@ def alpha_cost_by_degree(closed, spray):
     """us per evaluation of the alpha tape on jets of degree D (3 variables, the step's space)."""
     import numba
 
-    from rkhp.taylor.interpreter import run_tape, tape_work
+    from rkhp.taylor.interpreter import address_of, as_plain, interpreter, run_from, tape_work
     from rkhp.taylor.jets import jet_space
 
     @numba.njit
-    def loop(tape, D, space, work, count):
+    def loop(run, tape, D, space, work, count):
+        tape_at, space_at, work_at = address_of(tape), address_of(space), address_of(work)
         for _ in range(count):
-            run_tape(tape, D, space, work)
+            run_from(run, tape_at, D, space_at, work_at)
 
     n, space = 3, jet_space(3, 4)
     rng = np.random.default_rng(1)
@@ -103,11 +104,12 @@ def alpha_cost_by_degree(closed, spray):
             for k in range(n if D >= 1 else 0):
                 work.W[k, 1 + k] = 1.0
             work.W[n:2 * n, 1:M] = dp
-            loop(tape, np.int64(D), space, work, 1)
+            run = interpreter(tape).address
+            loop(run, as_plain(tape), np.int64(D), space, work, 1)
             best = np.inf
             for _ in range(REPEATS):
                 c = time.process_time()
-                loop(tape, np.int64(D), space, work, 300)
+                loop(run, as_plain(tape), np.int64(D), space, work, 300)
                 best = min(best, (time.process_time() - c) / 300 * 1e6)
             costs.append(best)
         rows.append((D, *costs))

@@ -153,7 +153,7 @@ def test_an_interpreter_is_made_only_for_the_plain_tape_layout():
         ops: np.ndarray
 
     tape = get_system("charged-particle").h_tape
-    assert _interpreter(nb.typeof(tape))._compiled.args[0] == nb.typeof(tape)
+    assert _interpreter(nb.typeof(tape))._compiled.args[0] == nb.types.CPointer(nb.typeof(tape))
     with pytest.raises(TypeError, match="not laid out as"):
         _interpreter(nb.typeof(Other(np.zeros((1, 1), np.int64))))
     readonly = np.zeros((1, 5), np.int64)
@@ -191,3 +191,40 @@ def test_a_call_at_an_address_takes_only_the_plain_signature():
     ops.flags.writeable = False
     with pytest.raises(TypingError, match="plain tape"):
         h_at(1, as_plain(tape)._replace(ops=ops), space, work)
+
+
+def test_a_call_from_kept_addresses_is_the_call_at_the_address():
+    """`run_from` on the addresses of copies taken once (`address_of`, what the step loops do)
+    gives what `run_at` gives, H = cos x1 + sin x2 of the charged particle at several points;
+    `address_of` takes only a plain tape, a jet space or work arrays."""
+    import numpy as np
+    from numba.core.errors import TypingError
+
+    from rkhp.systems import get_system
+    from rkhp.taylor.compiler import numba as nb
+    from rkhp.taylor.interpreter import address_of, as_plain, interpreter, run_from, tape_work
+    from rkhp.taylor.jets import jet_space
+
+    @nb.njit
+    def h_values(address, tape, space, work, points, out):
+        tape_at, space_at, work_at = address_of(tape), address_of(space), address_of(work)
+        for r in range(points.shape[0]):
+            work.W[0, 0], work.W[1, 0] = points[r, 0], points[r, 1]
+            run_from(address, tape_at, 0, space_at, work_at)
+            out[r] = work.W[tape.outputs[0], 0]
+
+    system = get_system("charged-particle")
+    tape, space = system.h_tape, jet_space(0, 0)
+    work = tape_work((tape,), space.size)
+    points = np.array([[0.3, -1.1], [1.0, 2.0], [-0.5, 0.25]])
+    out = np.empty(3)
+    h_values(interpreter(tape).address, as_plain(tape), space, work, points, out)
+    want = np.cos(points[:, 0]) + np.sin(points[:, 1])
+    assert np.all(np.abs(out - want) <= 1e-14 * np.abs(want))
+
+    @nb.njit
+    def address_of_array(a):
+        return address_of(a)
+
+    with pytest.raises(TypingError, match="plain tape"):
+        address_of_array(np.zeros(3))

@@ -32,7 +32,7 @@ from ..base.bounds import check_step
 from ..base.errors import InputError, NumericalFailure
 from ..taylor.compiler import NJIT
 from ..taylor.compiler import numba as nb
-from ..taylor.interpreter import TapeWork, as_plain, interpreter, run_at, tape_work
+from ..taylor.interpreter import TapeWork, address_of, as_plain, interpreter, run_from, tape_work
 from ..taylor.jets import JetSpace, jet_space
 from ..taylor.linalg import lu_factor, lu_solve
 from ..taylor.tape import Tape
@@ -56,6 +56,17 @@ class FieldWork(NamedTuple):
     wa: TapeWork
 
 
+class FieldAt(NamedTuple):
+    """The addresses of copies of a `FieldWork`'s members for `run_from`, taken once by the
+    kernel that evaluates the field (`_field_addresses`)."""
+
+    htape: object
+    atape: object
+    space: object
+    wh: object
+    wa: object
+
+
 class Field(NamedTuple):
     """The compiled field's arguments: the address of the interpreter of the system's class of
     tapes (`rkhp.taylor.interpreter.Interpreter.address`) and the work."""
@@ -69,10 +80,18 @@ class Field(NamedTuple):
 
 
 @nb.njit(inline="always", **NJIT)
-def _field(x, run, ws, out):
-    """out = pi(x) grad H(x) by the interpreter of the tapes' class at the address `run`: grad H
-    from the H tape, pi = D^T - D from the alpha tape."""
-    htape, atape, space, wh, wa = ws.htape, ws.atape, ws.space, ws.wh, ws.wa
+def _field_addresses(ws):
+    """`FieldAt` of `ws`, on the stack of the kernel this is inlined into (`address_of`)."""
+    return FieldAt(address_of(ws.htape), address_of(ws.atape), address_of(ws.space),
+                   address_of(ws.wh), address_of(ws.wa))
+
+
+@nb.njit(inline="always", **NJIT)
+def _field(x, run, ws, at, out):
+    """out = pi(x) grad H(x) by the interpreter of the tapes' class at the address `run`, on the
+    copies of `ws` at `at` (`_field_addresses`): grad H from the H tape, pi = D^T - D from the
+    alpha tape."""
+    htape, atape, wh, wa = ws.htape, ws.atape, ws.wh, ws.wa
     n = x.shape[0]
     Wh, Wa = wh.W, wa.W
     Wh[:, :] = 0.0
@@ -82,8 +101,8 @@ def _field(x, run, ws, out):
         Wh[i, 1 + i] = 1.0
         Wa[i, 0] = x[i]
         Wa[n + i, 1 + i] = 1.0
-    run_at(run, htape, np.int64(1), space, wh)
-    run_at(run, atape, np.int64(1), space, wa)
+    run_from(run, at.htape, np.int64(1), at.space, at.wh)
+    run_from(run, at.atape, np.int64(1), at.space, at.wa)
     ho = htape.outputs[0]
     ao = atape.outputs
     for i in range(n):
@@ -96,7 +115,7 @@ def _field(x, run, ws, out):
 @nb.njit(**NJIT)
 def _field_call(x, run, ws, out):
     """`_field` as a kernel: the field that scipy calls once per point."""
-    _field(x, run, ws, out)
+    _field(x, run, ws, _field_addresses(ws), out)
 
 
 @nb.njit(inline="always", **NJIT)
@@ -110,6 +129,7 @@ def _record(states, row, x):
 @nb.njit(**NJIT)
 def _rk_loop(run, ws, A, b, h, n_steps, x0, domain, states):
     """Explicit RK steps; returns (steps done, Failure)."""
+    at = _field_addresses(ws)
     n = x0.shape[0]
     s = b.shape[0]
     K = np.empty((s, n))
@@ -125,7 +145,7 @@ def _rk_loop(run, ws, A, b, h, n_steps, x0, domain, states):
                 if a != 0.0:
                     for q in range(n):
                         xi[q] += a * K[j, q]
-            _field(xi, run, ws, K[i])
+            _field(xi, run, ws, at, K[i])
         for i in range(s):
             w = h * b[i]
             if w != 0.0:
@@ -143,6 +163,7 @@ def _midpoint_loop(run, ws, h, n_steps, x0, domain, tol, max_it, states, newton)
     """Implicit midpoint steps, Newton on the midpoint; returns (steps done, Failure). The Newton
     matrix is factorised by the engine's LU pair (`rkhp.taylor.linalg`; numpy's det and inv
     would compile their LAPACK wrappers and shape-error messages: seconds of a cold start)."""
+    at = _field_addresses(ws)
     n = x0.shape[0]
     x = x0.copy()
     m = np.empty(n)
@@ -155,7 +176,7 @@ def _midpoint_loop(run, ws, h, n_steps, x0, domain, tol, max_it, states, newton)
     y = np.empty(n)
     _record(states, 0, x)
     for k in range(n_steps):
-        _field(x, run, ws, g)
+        _field(x, run, ws, at, g)
         for q in range(n):
             m[q] = x[q] + 0.5 * h * g[q]
         fresh = True
@@ -172,15 +193,15 @@ def _midpoint_loop(run, ws, h, n_steps, x0, domain, tol, max_it, states, newton)
                     for q in range(n):
                         y[q] = m[q]
                     y[j] = m[j] + d
-                    _field(y, run, ws, fp)
+                    _field(y, run, ws, at, fp)
                     y[j] = m[j] - d
-                    _field(y, run, ws, fm)
+                    _field(y, run, ws, at, fm)
                     for q in range(n):
                         J[q, j] = (1.0 if q == j else 0.0) - 0.5 * h * (fp[q] - fm[q]) / (2.0 * d)
                 if not lu_factor(J, perm):
                     return k, Failure.SINGULAR
                 fresh = False
-            _field(m, run, ws, g)
+            _field(m, run, ws, at, g)
             size = 0.0
             scale = 1.0
             for q in range(n):

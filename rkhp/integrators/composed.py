@@ -81,7 +81,7 @@ def composed_run(y0, method, n_steps, run, tapes, space, buf, memory, solver, re
     """Integrate n_steps composed steps from y0 (the explicit base tableau of `method`), the
     tapes evaluated by the interpreter of their class at the address `run`; returns (number of completed steps,
     Failure of the step after them or Failure.OK)."""
-    program = interpreted(tapes, run)
+    program = interpreted(tapes, run, space, buf.work)
     n = y0.shape[0]
     y = buf.y
     for k in range(n):

@@ -14,7 +14,7 @@ import numpy as np
 from ..base.errors import NumericalFailure
 from ..taylor.compiler import NJIT
 from ..taylor.compiler import numba as nb
-from ..taylor.interpreter import as_plain, interpreter, run_at, tape_work
+from ..taylor.interpreter import address_of, as_plain, interpreter, run_from, tape_work
 from ..taylor.jets import jet_space
 
 #: whether the compiled loop has been compared with a system's own evaluation in this process
@@ -27,11 +27,12 @@ def _hamiltonian_loop(run, htape, space, states, work, out):
     n = states.shape[1]
     ho = htape.outputs[0]
     W = work.W
+    tape_at, space_at, work_at = address_of(htape), address_of(space), address_of(work)
     for r in range(states.shape[0]):
         W[:, :] = 0.0
         for i in range(n):
             W[i, 0] = states[r, i]
-        run_at(run, htape, np.int64(0), space, work)
+        run_from(run, tape_at, np.int64(0), space_at, work_at)
         out[r] = W[ho, 0]
 
 

@@ -32,7 +32,7 @@ import numpy as np
 from ..systems.core import DOMAINS
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
-from ..taylor.interpreter import Interpreter, TapeWork, run_at, tape_work
+from ..taylor.interpreter import Interpreter, TapeWork, address_of, run_from, tape_work
 from ..taylor.jets import JetSpace
 from ..taylor.linalg import lu_factor, lu_solve
 from ..taylor.ops import COMPOSE_ARG
@@ -97,14 +97,22 @@ class SystemTapes(NamedTuple):
 
 class Interpreted(NamedTuple):
     """The tapes of `SystemTapes` and the address of their class's interpreter
-    (`rkhp.taylor.interpreter.Interpreter.address`), as the step loop uses them: a tape is
-    evaluated as ``run_at(tapes.run, tape, D, space, work)`` (`rkhp.taylor.interpreter.run_at`)."""
+    (`rkhp.taylor.interpreter.Interpreter.address`), as the step loop uses them, with the
+    addresses of copies of the tapes, the jet space and the work arrays taken once for the run
+    (`interpreted`): the tape f is evaluated as ``run_from(tapes.run, tapes.f_at, D,
+    tapes.space_at, tapes.work_at)`` (`rkhp.taylor.interpreter.run_from`)."""
 
     f: Tape
     h: Tape
     alpha: Tape
     beta: Tape
     run: int
+    f_at: object
+    h_at: object
+    alpha_at: object
+    beta_at: object
+    space_at: object
+    work_at: object
 
 
 class EngineData(NamedTuple):
@@ -323,9 +331,8 @@ def _stage_jet(i, x0, A, h, D, j_end, tapes, space, buf):
             if c != 0.0:
                 for m in range(M):
                     W[n + k, m] += c * G[j, k, m]
-    tape = tapes.h if zero_row else tapes.f
-    run_at(tapes.run, tape, D, space, buf.work)
-    return tape.outputs[0]
+    run_from(tapes.run, tapes.h_at if zero_row else tapes.f_at, D, tapes.space_at, tapes.work_at)
+    return tapes.h.outputs[0] if zero_row else tapes.f.outputs[0]
 
 
 @nb.njit(inline="always", **NJIT_NORC)
@@ -399,7 +406,7 @@ def _alpha(x0, tapes, space, buf, jacobian):
         W[n + k, 0] = psi[k]
         for l in range(n):
             W[n + k, 1 + l] = Jpsi[k, l] if jacobian else 0.0
-    run_at(tapes.run, tapes.alpha, extra, space, buf.work)
+    run_from(tapes.run, tapes.alpha_at, extra, tapes.space_at, tapes.work_at)
     for k in range(n):
         a = tapes.alpha.outputs[k]
         buf.alpha[k] = W[a, 0]
@@ -470,13 +477,13 @@ def _stage_measure(x0, A, b, h, tapes, space, buf):
     W = buf.work.W
     n = x0.shape[0]
     _set_p(W, x0, n)
-    run_at(tapes.run, tapes.f, np.int64(1), space, buf.work)
+    run_from(tapes.run, tapes.f_at, np.int64(1), tapes.space_at, tapes.work_at)
     g = tapes.f.outputs[0]
     c = 0.0
     for k in range(n):
         c += abs(W[g, 1 + k])
     _set_p(W, x0, n)
-    run_at(tapes.run, tapes.alpha, np.int64(1), space, buf.work)
+    run_from(tapes.run, tapes.alpha_at, np.int64(1), tapes.space_at, tapes.work_at)
     pi = 0.0
     for k in range(n):
         row = 0.0
@@ -1072,7 +1079,7 @@ def rkhp_step(method, tapes, space, buf, solver, stage):
     for k in range(n):
         W[k, 0] = x[k]
         W[n + k, 0] = res[k]
-    run_at(tapes.run, tapes.beta, np.int64(0), space, buf.work)
+    run_from(tapes.run, tapes.beta_at, np.int64(0), tapes.space_at, tapes.work_at)
     for k in range(n):
         buf.y_next[k] = W[tapes.beta.outputs[k], 0]
     return Failure.OK, it, sweeps
@@ -1100,7 +1107,7 @@ def _polish(p, tapes, space, buf, scale, iterations, exact):
                 for l in range(n):
                     W[k, 1 + l] = 1.0 if k == l else 0.0
                     W[n + k, 1 + l] = 0.0
-        run_at(tapes.run, tapes.alpha, degree, space, buf.work)
+        run_from(tapes.run, tapes.alpha_at, degree, tapes.space_at, tapes.work_at)
         for k in range(n):
             a = tapes.alpha.outputs[k]
             alpha[k] = y[k] - W[a, 0]
@@ -1132,9 +1139,13 @@ def state_failure(y, domain):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def interpreted(tapes, run):
-    """`Interpreted`: the system's tapes and the address `run` of their interpreter."""
-    return Interpreted(tapes.f, tapes.h, tapes.alpha, tapes.beta, run)
+def interpreted(tapes, run, space, work):
+    """`Interpreted`: the system's tapes, the address `run` of their interpreter and the addresses
+    of copies of the tapes, `space` and `work` on the stack of the loop that calls this (inlined
+    there: `address_of`), which live as long as its run."""
+    return Interpreted(tapes.f, tapes.h, tapes.alpha, tapes.beta, run, address_of(tapes.f),
+                       address_of(tapes.h), address_of(tapes.alpha), address_of(tapes.beta),
+                       address_of(space), address_of(work))
 
 
 @nb.njit(**NJIT_NORC)
@@ -1145,7 +1156,7 @@ def rkhp_run(y0, method, n_steps, run, tapes, space, buf, solver, stage, record)
 
     Returns (number of completed steps, Failure of the step after them or Failure.OK).
     """
-    program = interpreted(tapes, run)
+    program = interpreted(tapes, run, space, buf.work)
     n = y0.shape[0]
     y = buf.y
     for k in range(n):
