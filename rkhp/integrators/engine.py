@@ -294,10 +294,13 @@ def newton_solve(r, out, buf):
             for j in range(n):
                 LU[i, j] = J[i, j]
         memo[MEMO_FACTORED] = 1.0 if lu_factor(LU, buf.perm) else -1.0
-    for i in range(n):
-        out[i] = r[i] if memo[MEMO_FACTORED] > 0.0 else np.nan
     if memo[MEMO_FACTORED] > 0.0:
+        for i in range(n):
+            out[i] = r[i]
         lu_solve(LU, buf.perm, out, buf.v)
+    else:
+        for i in range(n):
+            out[i] = np.nan
 
 
 @nb.njit(**NJIT_NORC)
