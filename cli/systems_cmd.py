@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from rkhp.base import bounds
+from rkhp.integrators.methods import DEFAULT_METHOD
 
 from .options import (
     METHOD_HELP,
@@ -141,7 +142,7 @@ def integration_report(system, trajectory, method: str, h: float, steps: int) ->
 
 @click.command("integrate")
 @click.argument("system")
-@click.option("--method", "method", required=True, metavar="METHOD", help=METHOD_HELP)
+@click.option("--method", "method", default=DEFAULT_METHOD, show_default=True, metavar="METHOD", help=METHOD_HELP)
 @click.option("--steps", type=STEPS, default=None, help="Number of steps over [0, T].")
 @click.option("--h", "h", type=SIGNED, default=None,
               help="Step size; it must divide T (steps = T / h; docs/input.md); negative runs backwards.")

@@ -85,6 +85,20 @@ def test_integrate_command_takes_every_form(method):
     assert doc["method"] == method and doc["status"] == "ok" and doc["exact_error"] < 2e-2
 
 
+def test_integrate_without_a_method_runs_the_papers_three_stage_method():
+    # the paper's explicit three-stage method has order 4 under the degeneracy condition
+    # (paper §5.2), which the rigid body's birealisation meets: halving h divides its error
+    # against the closed-form solution by about 2^4
+    errors = []
+    for steps in ("40", "80"):
+        rc, out = _cli("integrate", "rigid-body", "--steps", steps, "--format", "json")
+        assert rc == 0, out
+        doc = json.loads(out)
+        assert doc["method"] == "paper-three-stage" and doc["status"] == "ok"
+        errors.append(doc["exact_error"])
+    assert 3.7 < np.log2(errors[0] / errors[1]) < 4.3
+
+
 def test_thp_orders_per_class():
     # THP of order N over T has order N (paper Thm 5.1); over T_0 the tree b[b] is missing, so on
     # a general realisation order 1; in the symmetric class the even orders' conditions have
