@@ -16,6 +16,11 @@ same interpreter and numba are measured:
   name), the unit's own CPU seconds (those of the units it compiled on the way left out), the
   units that took at least `UNIT_FLOOR` s printed;
 - warm: the same command again, on the cache the cold run filled;
+- cold, engine only: `ENGINE_COMMAND`, the command's default methods less RKHP Euler, with an
+  empty cache: the whole process's CPU seconds. These three run on the engine's step loop in
+  every version; RKHP Euler on the rigid body runs in the closed direct form where it exists
+  (`rkhp.integrators.closed_euler`, a loop of its own), so this figure compares the same work
+  where the first does not;
 - families: `python -m rkhp integrate SYSTEM --method paper-three-stage --steps 10` for one
   system of each class of tapes (`FAMILIES`: the rigid body's plain tapes, the spray tapes of
   charged-particle, the phimv tapes of toda:12), each with an empty cache of its own: the
@@ -54,6 +59,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 BEFORE = "2575823"
 COMMAND = ["converge", "rigid-body", "--format", "json"]
+ENGINE_COMMAND = ["converge", "rigid-body", "--method", "paper-two-stage", "--method",
+                  "paper-three-stage", "--method", "rk4", "--format", "json"]
 STEP_METHODS = ("paper-three-stage", "euler", "gauss2")
 FAMILIES = ("rigid-body", "charged-particle", "toda:12")
 FAMILY_COMMAND = ["integrate", "{system}", "--method", "paper-three-stage", "--steps", "10",
@@ -172,6 +179,9 @@ def measure(tree: Path, work: Path) -> dict:
     units = cache.parent / f"{cache.name}-units.json"
     cold = run(tree, ["-c", COLD_CODE, str(units), *COMMAND], cache)
     warm = run(tree, ["-m", "rkhp", *COMMAND], cache)
+    engine_cache = Path(tempfile.mkdtemp(prefix="numba-", dir=work))
+    engine = run(tree, ["-m", "rkhp", *ENGINE_COMMAND], engine_cache)[1]
+    shutil.rmtree(engine_cache)
     families = {}
     for system in FAMILIES:
         family_cache = Path(tempfile.mkdtemp(prefix="numba-", dir=work))
@@ -179,7 +189,7 @@ def measure(tree: Path, work: Path) -> dict:
         families[system] = run(tree, ["-m", "rkhp", *command], family_cache)[1]
         shutil.rmtree(family_cache)
     return {"cold": cold[:2], "units": json.loads(units.read_text()), "warm": warm[:2],
-            "families": families, "cache": cache}
+            "engine": engine, "families": families, "cache": cache}
 
 
 def step_costs(tree: Path, cache: Path, repeats: int) -> dict:
@@ -235,11 +245,15 @@ def main() -> None:
             loads.append(os.getloadavg()[0])
         print(f"machine: {os.cpu_count()} CPUs, load average {min(loads):.1f} to {max(loads):.1f} "
               f"during the runs; `rkhp {' '.join(COMMAND)}`, minima over {options.rounds} rounds")
-        print(f"{'version':24s} {'cold wall':>10s} {'cold CPU':>9s} {'warm wall':>10s} {'warm CPU':>9s}")
+        print(f"{'version':24s} {'cold wall':>10s} {'cold CPU':>9s} {'warm wall':>10s} {'warm CPU':>9s} "
+              f"{'engine only, cold CPU':>22s}")
         for name, rounds in results.items():
             cold = [min(r["cold"][k] for r in rounds) for k in (0, 1)]
             warm = [min(r["warm"][k] for r in rounds) for k in (0, 1)]
-            print(f"{name:24s} {cold[0]:9.1f}s {cold[1]:8.1f}s {warm[0]:9.2f}s {warm[1]:8.2f}s")
+            engine = min(r["engine"] for r in rounds)
+            print(f"{name:24s} {cold[0]:9.1f}s {cold[1]:8.1f}s {warm[0]:9.2f}s {warm[1]:8.2f}s "
+                  f"{engine:21.1f}s")
+        print(f"engine only: `rkhp {' '.join(ENGINE_COMMAND)}`")
         print(f"compile CPU of the cold run by compiled unit (s, its own, the round of the least "
               f"cold CPU; units under {UNIT_FLOOR} s left out)")
         for name, rounds in results.items():
