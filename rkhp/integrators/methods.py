@@ -36,7 +36,7 @@ from ..base.errors import InputError
 from ..trees.conditions import conditions_of_order
 
 DEFAULT_METHODS = ("euler", "paper-two-stage", "paper-three-stage", "rk4")
-"""The methods a study compares when it is given none."""
+"""The methods `converge`, `bench` and `stress` compare when they are given none."""
 DEFAULT_METHOD = "paper-three-stage"
 """The method `rkhp integrate` runs when it is given none: the paper's explicit three-stage
 method, of order 4 on degenerate birealisations (paper §5.2; docs/methods.md)."""
