@@ -56,7 +56,7 @@ def provenance(command: str | None = None, seed: int | None = None) -> dict:
 
 def provenance_line(record: dict, comment: str) -> str:
     """The record as one comment line of a text file (``# provenance: {...}`` for CSV, ``%`` for
-    LaTeX): the JSON after ``provenance: `` reads back with json.loads."""
+    LaTeX): the JSON after ``provenance:`` reads back with json.loads."""
     return f"{comment} provenance: {json.dumps(record, ensure_ascii=False)}"
 
 

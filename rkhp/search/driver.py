@@ -264,8 +264,9 @@ def make_tableau(problem: Problem, entries, name: str):
 def verified(problem: Problem, x_float, polished, digits: int, closed: bool, name: str,
              restart: int | None) -> Found | None:
     """Verify a polished solution: exactly when its entries (or, with ``closed``, those of a
-    nearby member of its family, see :func:`closed_form`) have closed forms that satisfy the
-    conditions, else at D digits. None if the verification disagrees with the search."""
+    nearby member of its family, see :func:`~rkhp.search.recognise.closed_form`) have closed
+    forms that satisfy the conditions, else at D digits. None if the verification disagrees with
+    the search."""
     from ..tableaux.verification import verify
     exact = recognise_point(problem.system(), polished)
     if exact is None and closed:
