@@ -119,7 +119,7 @@ from rkhp.integrators.classical import integrate_classical, integrate_midpoint, 
 from rkhp.integrators.energy import hamiltonian_values
 from rkhp.systems import get_system
 from rkhp.tableaux.files import load_tableau
-KERNELS = ("run_tape", "_hamiltonian_loop", "rkhp_run", "_rk_loop", "_midpoint_loop", "_field", "_field_call")
+KERNELS = ("run_tape", "_hamiltonian_loop", "drive", "_rk_loop", "_midpoint_loop", "_field", "_field_call")
 start, out = {}, {}
 class Timer(event.Listener):
     def on_start(self, ev):

@@ -27,7 +27,7 @@ import scipy.linalg
 
 from rkhp.integrators import integrate
 from rkhp.integrators.methods import resolve_method
-from rkhp.integrators.rkhp_method import stage_solve, tableau_arrays
+from rkhp.integrators.tower_substep import stage_solve, tableau_arrays
 from rkhp.systems import get_system
 
 REPEATS = 5

@@ -164,13 +164,19 @@ def integration_report(system, trajectory, method: str, h: float, steps: int) ->
                    "--output, the file holds these states.")
 @click.option("--t-eval-count", type=integer(2, bounds.MAX_OUTPUT_TIMES, "N"), default=None,
               help="As --t-eval, at N equally spaced times from 0 to T (numpy's linspace).")
+@click.option("--explain", is_flag=True,
+              help="Say which substep provider would run METHOD's steps on SYSTEM, and why (docs/engine.md), "
+                   "without running them.")
 @force_option()
 @format_option("table", "json")
 def integrate(system, method, steps, h, t_final, x0, modified_order, realisation, output, every, t_eval,
-              t_eval_count, force, fmt):
+              t_eval_count, explain, force, fmt):
     """Integrate SYSTEM (built-in or spec file) with METHOD (docs/methods.md)."""
     from rkhp.base.errors import InputError, NumericalFailure
     from rkhp.integrators.methods import resolve_method, resolve_system
+
+    if explain:
+        return _explain(resolve_system(system, realisation, parse_x0(x0)), resolve_method(method), fmt)
 
     if t_eval is not None and t_eval_count is not None:
         raise InputError("give at most one of --t-eval and --t-eval-count")
@@ -216,6 +222,28 @@ def integrate(system, method, steps, h, t_final, x0, modified_order, realisation
     if not trajectory.ok:
         raise NumericalFailure(f"{poisson.name}, {chosen.name}, h = {step:g}: "
                                f"{trajectory.status}")
+
+
+def _explain(poisson, chosen, fmt: str) -> None:
+    """`rkhp integrate --explain`: the substep provider of the method on the system."""
+    from rkhp.integrators.substeps import explain
+
+    e = explain(poisson, chosen)
+    doc = {"system": e.system, "method": e.method, "realisation": poisson.realisation,
+           "family": poisson.family, "base_kind": None if e.key is None else e.key[1],
+           "providers": list(e.row), "refused": list(e.refused), "substep": e.provider}
+    if fmt == "json":
+        emit_json(doc)
+        return
+    out = console()
+    if e.provider is None:
+        out.print(f"{plain(e.method)} is a {chosen.kind} method: its own loop runs it, not the driver's "
+                  "substeps", markup=False)
+        return
+    out.print(f"{plain(e.system)} ({poisson.family} family, {poisson.realisation} realisation), "
+              f"{plain(e.method)} (base method: {e.key[1]}): substeps by {e.provider}", markup=False)
+    out.print(f"row of the table: {', '.join(e.row)}"
+              + (f"; refused: {', '.join(e.refused)}" if e.refused else ""), markup=False)
 
 
 def _output_times(t_eval, count, end: float):

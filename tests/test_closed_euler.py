@@ -2,7 +2,7 @@
 (rkhp.integrators.closed_euler; docs/compositions.md "The cost of a substep").
 
 Values from outside the code: the engine's RKHP Euler step (alpha solved by Newton on Taylor jets
-of H o alpha, `rkhp.integrators.rkhp_method`) and its composed loop (`rkhp.integrators.composed`),
+of H o alpha, the tower's substeps `rkhp.integrators.tower_substep`, run by the same driver),
 the implicit midpoint rule's own equation (RKHP Euler on a constant pi, docs/theory.md §5), the
 symmetry of RKHP Euler with a symmetric birealisation (docs/theory.md §12: Phi_-h o Phi_h = id),
 the Casimirs of each family, and the orders 4 and 6 of tj4 and kahan-li6 against a DOP853
@@ -15,11 +15,12 @@ import numpy as np
 import pytest
 
 from rkhp.base.errors import InputError
-from rkhp.integrators.closed_euler import closed_form, integrate_closed_euler
-from rkhp.integrators.composed import integrate_composition
+from rkhp.integrators.closed_euler import closed_form
+from rkhp.integrators.driver import integrate_closed_euler, run
 from rkhp.integrators.failure import Failure
-from rkhp.integrators.methods import direct_euler, integrate, resolve_method
+from rkhp.integrators.methods import integrate, resolve_method
 from rkhp.integrators.rkhp_method import integrate as engine_integrate
+from rkhp.integrators.substeps import CLOSED, TOWER, choose
 from rkhp.studies.converge import converge
 from rkhp.systems import get_system
 from rkhp.systems.families import family_system
@@ -62,7 +63,7 @@ def test_a_composition_is_the_engine_composition(name):
     system, h = system_named(name), SYSTEMS[name]
     tj4 = load_composition("tj4")
     direct = integrate_closed_euler(system, tj4.gamma_float, h, 20)
-    engine = integrate_composition(system, tj4, h, 20)
+    engine = run(system, resolve_method("euler").tableau, h, 20, gammas=tj4.gamma_float, provider=TOWER)
     assert direct.ok and engine.ok
     assert np.abs(direct.states - engine.states).max() < 5e-14 * np.abs(engine.states).max()
 
@@ -106,18 +107,18 @@ def test_euler_and_its_compositions_are_routed_here(name):
     system = get_system(name)
     for method in ("euler", "suzuki4"):
         m = resolve_method(method)
-        assert direct_euler(system, m.tableau)
+        assert choose(system, m.tableau).provider is CLOSED
         run = m.integrate(system, 0.1, 5)
         gammas = (1.0,) if method == "euler" else m.composition.gamma_float
         assert run.method == method
         np.testing.assert_array_equal(run.states, integrate_closed_euler(system, gammas, 0.1, 5).states)
-    assert not direct_euler(system, resolve_method("rk4").tableau)
+    assert choose(system, resolve_method("rk4").tableau).provider is TOWER
 
 
 @pytest.mark.parametrize("realisation", ["shifted", "truncated:3"])
 def test_other_realisations_run_in_the_engine(realisation):
     system = get_system("rigid-body", realisation)
-    assert not direct_euler(system, resolve_method("euler").tableau)
+    assert choose(system, resolve_method("euler").tableau).provider is TOWER
     with pytest.raises(InputError):
         closed_form(system)
     assert integrate(system, "euler", 0.1, 3).ok

@@ -85,8 +85,8 @@ def test_the_cache_is_asked_for_the_class_of_the_system_tapes(tmp_path):
                           timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
     plain, both, seconds = json.loads(proc.stdout)
-    assert plain == ["rkhp.integrators.engine.rkhp_run"]
-    assert both == ["rkhp.taylor.interpreter.run_tape", "rkhp.integrators.engine.rkhp_run"]
+    assert plain == ["rkhp.integrators.driver.drive"]
+    assert both == ["rkhp.taylor.interpreter.run_tape", "rkhp.integrators.driver.drive"]
     expected = TAPE.seconds + KERNELS["rkhp"][0].seconds + COMPOSITE_SECONDS["spray"] + COMPOSITE_SECONDS["phimv"]
     assert seconds == pytest.approx(expected)
 
@@ -99,7 +99,7 @@ def test_an_empty_cache_lacks_the_kernels_of_each_kind(tmp_path):
     assert proc.returncode == 0, proc.stderr
     cold = json.loads(proc.stdout)
     tape = "rkhp.taylor.interpreter.run_tape"
-    assert cold["rkhp"][0] == [tape, "rkhp.integrators.engine.rkhp_run"]
+    assert cold["rkhp"][0] == [tape, "rkhp.integrators.driver.drive"]
     assert cold["classical"][0] == [tape, "rkhp.integrators.classical._rk_loop"]
     assert cold["taylor"][0] == [tape]
     assert cold["taylor"][1] < cold["rkhp"][1]
@@ -116,7 +116,7 @@ def test_the_notice_follows_the_progress_rules(tmp_path):
 
 
 @pytest.mark.parametrize("args, seconds", [
-    (["integrate", "rigid-body", "--method", "rk4", "--steps", "100"], 8),  # run_tape 2.9 + rkhp_run 5.5
+    (["integrate", "rigid-body", "--method", "rk4", "--steps", "100"], 8),  # run_tape 2.9 + drive 5.5
     (["converge", "rigid-body", "--method", "classical:rk4"], 4),  # run_tape 2.9 + _rk_loop 1.3 + H loop 0.3
     (["check", "rigid-body"], 3),  # run_tape 2.9
     (["check", "nambu"], 20),  # run_tape 2.9 + the spray kernel 17.4
@@ -137,7 +137,7 @@ def test_a_cold_json_run_is_quiet_and_then_warm(tmp_path):
     assert shown == b""
     doc = json.loads(out.read_text())
     assert doc["status"] == "ok" and doc["compile_seconds"] > 2  # it did compile
-    assert any((tmp_path / "numba-cache").rglob("engine.rkhp_run-*.nbi"))
+    assert any((tmp_path / "numba-cache").rglob("driver.drive-*.nbi"))
     # the same machine again: in the cache, so no notice even on a terminal
     assert NOTICE not in _stderr_on_a_terminal(args[:-2], env, timeout=600)
 
@@ -170,7 +170,7 @@ def test_rkhp_compile_on_an_empty_cache_compiles_every_class(tmp_path):
     assert report["cache_dir"] == str(tmp_path / "numba-cache")
     for item in report["classes"]:
         assert "rkhp.taylor.interpreter.run_tape" in item["compiled"], item
-        assert "rkhp.integrators.engine.rkhp_run" in item["compiled"], item
+        assert "rkhp.integrators.driver.drive" in item["compiled"], item
     args = [sys.executable, "-m", "rkhp", "integrate", "nambu", "--method", "gauss2", "--steps", "10"]
     assert NOTICE not in _stderr_on_a_terminal(args, env, timeout=600)
 

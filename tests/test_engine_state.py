@@ -57,7 +57,7 @@ def _modules():
 
 def test_the_scan_finds_the_compiled_functions():
     names = {f.name for _, tree in _modules() for f in compiled_functions(tree)}
-    assert {"rkhp_run", "rkhp_step", "implicit_tower", "run_tape", "spray", "composed_run",
+    assert {"drive", "rkhp_step", "implicit_tower", "run_tape", "spray", "explicit_substep",
             "_value_stages", "one_kernel", "first_or_others"} <= names
 
 

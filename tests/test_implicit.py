@@ -111,15 +111,16 @@ def test_every_implicit_builtin_integrates(method):
     assert np.abs(tr.final_state - system.exact_solution(10.0)).max() < 1e-2
 
 
-def test_one_compilation_serves_explicit_and_implicit_tableaux():
-    from rkhp.integrators.engine import rkhp_run
+def test_one_compilation_serves_every_explicit_and_every_implicit_tableau():
+    from rkhp.integrators.driver import drive
 
     system = get_system("pendulum")
-    integrate(system, "paper-three-stage", 0.1, 5).raise_if_failed()
-    compiled = len(rkhp_run.signatures)
-    for method in ("gauss2", "paper-implicit"):
+    for method in ("paper-three-stage", "gauss2"):
         integrate(system, method, 0.1, 5).raise_if_failed()
-    assert len(rkhp_run.signatures) == compiled
+    compiled = len(drive.signatures)
+    for method in ("rk4", "paper-implicit", "lobatto-iiia3"):
+        integrate(system, method, 0.1, 5).raise_if_failed()
+    assert len(drive.signatures) == compiled
 
 
 def test_a_step_too_large_for_the_stages_is_one_line_exit_1(run_cli):

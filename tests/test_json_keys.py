@@ -50,6 +50,7 @@ COMMANDS = [
     ["long-time", "rigid-body", "--steps", "200", "--method", "euler"],
     ["integrate", "pendulum", "--method", "euler", "--steps", "10", "--modified", "3"],
     ["integrate", "rigid-body", "--method", "rk4", "--steps", "10", "--t-eval", "0.5,1.25"],
+    ["integrate", "rigid-body", "--method", "tj4", "--explain"],
     ["compile"],
 ]
 

@@ -17,8 +17,9 @@ import pytest
 
 from rkhp.base.errors import InputError
 from rkhp.integrators import integrate, integrate_midpoint
+from rkhp.integrators.driver import integrate_spray_euler
 from rkhp.integrators.failure import Failure
-from rkhp.integrators.spray_euler import integrate_spray_euler, spray_tapes
+from rkhp.integrators.spray_euler import spray_tapes
 from rkhp.studies.reference import reference
 from rkhp.systems import get_system
 from rkhp.systems.problems import ProblemData, build

@@ -25,21 +25,22 @@ from typing import NamedTuple
 
 from ..base.executors import InProcess, LocalProcesses, available_cores, run_all
 from .kernels import KERNELS, cold_start
-from .methods import direct_form, resolve_method
+from .methods import resolve_method
 
 #: the parts of a class's compile: the Hamiltonian (it compiles the class's tape interpreter), one
-#: step of each kind of method (explicit and implicit RKHP being two specialisations of the step
-#: loop; tj4, a composition of Euler steps: the composed loop, or its direct form where the family
-#: has one), the composed loop of tj4 (on those families too) and the scipy peers' vector field.
+#: step of each kind of method (explicit and implicit RKHP being two specialisations of the
+#: driver's loop over the tower's substeps; tj4, a composition of Euler steps: the loop over the
+#: direct Euler form where the family has one, `rkhp.integrators.substeps`) and the scipy peers'
+#: vector field.
 #: After the Hamiltonian (every other part calls the interpreter), the costliest cold compile first
 #: (each part's CPU seconds: `benchmarks/compile_parts.py`, docs/engine.md "Compile time"): the
 #: processes take the parts in this order, so that the long ones start early and the processes
 #: finish together.
-HAMILTONIAN, COMPOSED, VECTOR_FIELD = "hamiltonian", "composed:tj4", "vector-field"
-AHEAD_PARTS = (HAMILTONIAN, "gauss2", "tj4", COMPOSED, "rk4", "implicit-midpoint", "classical:rk4",
-               VECTOR_FIELD, "thp2")
-#: the parts that compile kernels of a class's or family's own (tj4: the direct Euler forms of the
-#: spray realisation and of closed-form families); the others' kernels are shared by every class
+HAMILTONIAN, VECTOR_FIELD = "hamiltonian", "vector-field"
+AHEAD_PARTS = (HAMILTONIAN, "gauss2", "tj4", "rk4", "implicit-midpoint", "classical:rk4", VECTOR_FIELD, "thp2")
+#: the parts that compile kernels of a class's or family's own (tj4: the driver's loop over the
+#: direct Euler forms of the spray realisation and of closed-form families); the others' kernels
+#: are shared by every class
 FAMILY_PARTS = ("tj4",)
 
 
@@ -90,11 +91,6 @@ def prepare_part(system, part: str) -> None:
         from .energy import hamiltonian_values
 
         hamiltonian_values(system, np.array([system.x0]))
-    elif part == COMPOSED:
-        from ..tableaux.compositions import load_composition
-        from .composed import integrate_composition
-
-        integrate_composition(system, load_composition("tj4"), h, 1)
     elif part == VECTOR_FIELD:
         from .classical import vector_field
 
@@ -132,16 +128,20 @@ def ahead_phases(classes: dict[type, tuple[str, ...]]) -> tuple[list[AheadTask],
     """The tasks of every class in two phases. First what compiles: each class's Hamiltonian (its
     tape interpreter), then in the order of `AHEAD_PARTS` the first class's other parts (the
     kernels shared by all classes) and the `FAMILY_PARTS` of the first class of each direct Euler
-    form (`rkhp.integrators.methods.direct_form`: the classes of one form share its kernel); then
+    form (`rkhp.integrators.substeps.choose` for RKHP Euler: the classes of one form share its
+    kernel); then
     the other parts, which load those kernels (that every kind of run finds them for every
     class)."""
     from ..systems import get_system
+    from ..tableaux.files import load_tableau
+    from .substeps import TOWER, choose
 
+    euler = load_tableau("euler")
     firsts = [names[0] for names in classes.values()]
     forms: dict = {}
     for first in firsts:
-        forms.setdefault(direct_form(get_system(first)), first)
-    family_firsts = {first for form, first in forms.items() if form is not None}
+        forms.setdefault(choose(get_system(first), euler).provider, first)
+    family_firsts = {first for form, first in forms.items() if form is not TOWER}
     compiling = [AheadTask(first, HAMILTONIAN) for first in firsts]
     loading = []
     for part in AHEAD_PARTS[1:]:

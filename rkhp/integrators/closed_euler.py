@@ -34,9 +34,11 @@ family's phi (|K|_F < 0.9 * 2 pi, `rkhp.taylor.composites.phimv`): a substep bey
 the engine's Newton iteration does on the NaN that phi gives there (NEWTON_NON_FINITE).
 
 Compiled data: `ClosedForm` (the family's structure and H's tape), `ClosedWork` (work arrays),
-`ChordMemory` (what each substep keeps across steps, B included); `run` is the compiled composed loop,
-one compiled unit with the substep and its history helpers inlined (a unit of their own would be
-optimised again in `run`: docs/engine.md "Compile time"), `integrate_closed_euler` the Python entry.
+`ChordMemory` (what each substep keeps across steps, B included), `ClosedSubstep` (the three, and
+the state); `begin` and `substep` make the direct form a substep provider of the driver
+(`rkhp.integrators.substeps`), inlined into its loop with their helpers (a unit of their own would
+be optimised again there: docs/engine.md "Compile time"); `rkhp.integrators.driver.integrate_closed_euler`
+is the Python entry.
 """
 
 from __future__ import annotations
@@ -47,7 +49,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..base.bounds import check_step
 from ..base.errors import InputError
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
@@ -55,12 +56,9 @@ from ..taylor.elementary import TWO_PI
 from ..taylor.linalg import lu_factor, lu_solve
 from ..taylor.scalar import SCALAR_CODES, shared
 from ..taylor.tape import Tape
-from .composed import Record, Solver
-from .engine import max_abs, state_failure
+from .engine import max_abs
 from .failure import Failure
-from .newton import NEWTON_MAX_ITERATIONS
 from .spray_euler import (
-    DIRECT_TOLERANCE,
     HISTORY,
     RATE_MARGIN,
     SLOW_CONTRACTION,
@@ -69,10 +67,7 @@ from .spray_euler import (
     _hessian,
     _weight,
     add_increment,
-    check_gammas,
-    direct_trajectory,
 )
-from .trajectory import Trajectory
 
 CONSTANT, LIE_POISSON, LOG_CANONICAL = 0, 1, 2
 """The families of `ClosedForm.kind`."""
@@ -123,7 +118,7 @@ class ClosedWork(NamedTuple):
     (then the correction) and lu_solve's work vector; last, step, by (n): the previous residual,
     the previous correction and a product, for Broyden's update; perm (n) int64: the row order
     of the chord matrix's factors; y, y_low (n): the state as the double-double y + y_low
-    (`run`)."""
+    (`begin`)."""
 
     W: np.ndarray
     z: np.ndarray
@@ -437,47 +432,31 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
     return Failure.OK, it
 
 
-@nb.njit(**NJIT_NORC)
-def run(y0, gammas, h, n_steps, form, work, memory, solver, record):
-    """The composed loop: n_steps steps from y0, each the Euler substeps gammas[0] h,
-    gammas[1] h, ... in direct form (`closed_substep`), substep i warm-started from substep i of
-    the previous step (`memory`, emptied here first), all in compiled code; the state carried as
-    a double-double (`rkhp.integrators.spray_euler.add_increment`).
-
-    solver: (tol, max_iter, domain code) as `rkhp.integrators.composed.Solver`; record: states
-    (n_steps + 1, n) with keep_all (states[k] = y_k), else (1, n) (the last state), iterations
-    (n_steps,) int64 (iterations of each step, all its substeps), as
-    `rkhp.integrators.composed.Record`. Returns (completed steps, Failure of the step after them
-    or Failure.OK)."""
-    n = y0.shape[0]
-    s = gammas.shape[0]
-    y, low = work.y, work.y_low
-    for k in range(n):
-        y[k] = y0[k]
-        low[k] = 0.0
-        record.states[0, k] = y0[k]
-    for i in range(s):
+@nb.njit(inline="always", **NJIT_NORC)
+def begin(data, y0):
+    """Start a run at y0 (the state work.y, carried as the double-double y + y_low,
+    `rkhp.integrators.spray_euler.add_increment`), every substep's memory emptied."""
+    work, memory = data.work, data.memory
+    for k in range(y0.shape[0]):
+        work.y[k] = y0[k]
+        work.y_low[k] = 0.0
+    for i in range(memory.count.shape[0]):
         memory.count[i] = 0
         memory.ready[i] = 0
         memory.rate[i] = 1.0
         memory.refreshes[i] = 0
-    for step in range(n_steps):
-        total = 0
-        for i in range(s):
-            cause, it = closed_substep(i, y, gammas[i] * h, form, work, memory, solver)
-            total += it
-            if cause != Failure.OK:
-                record.iterations[step] = total
-                return step, cause
-            add_increment(y, low, work.dy, n)
-        record.iterations[step] = total
-        cause = state_failure(y, solver.domain)
-        if cause != Failure.OK:
-            return step, cause
-        row = step + 1 if record.keep_all else 0
-        for k in range(n):
-            record.states[row, k] = y[k]
-    return n_steps, Failure.OK
+    return 0
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def substep(data, context, i, hs, solver):
+    """Substep i of size hs in direct form (`closed_substep`), its increment added to the state
+    without rounding it (`add_increment`); returns (Failure, iterations, 0 stage sweeps)."""
+    work = data.work
+    cause, it = closed_substep(i, work.y, hs, data.form, work, data.memory, solver)
+    if cause == Failure.OK:
+        add_increment(work.y, work.y_low, work.dy, work.y.shape[0])
+    return cause, it, 0
 
 
 # ----------------------------------------------------------------------------------------------
@@ -509,7 +488,8 @@ def closed_form(system) -> ClosedForm:
     family with the symmetric realisation (the family's base birealisation itself); InputError
     otherwise. The structure is read back from the system's pi, which is constant, linear
     (pi(x)_ij = sum_k C_ijk x_k) or lambda_ij x_i x_j on these families. Kept per system (a run
-    of a few steps spends its time in Python, and `direct_euler` and the run each ask for it)."""
+    of a few steps spends its time in Python, and the choice of the substep provider and the run
+    each ask for it)."""
     form = _FORMS.get(system)
     if form is None:
         form = _FORMS[system] = _read_form(system)
@@ -549,33 +529,25 @@ def closed_form_available(system) -> bool:
     return True
 
 
-def integrate_closed_euler(system, gammas, h, n_steps, x0=None, keep_all: bool = True, *,
-                           tol: float = DIRECT_TOLERANCE,
-                           max_iter: int = NEWTON_MAX_ITERATIONS) -> Trajectory:
-    """Integrate `system` (family constant, lie-poisson or log-canonical, symmetric realisation)
-    by n_steps steps of the composition of RKHP Euler steps gammas[0] h, gammas[1] h, ... (in
-    that order), each in direct form (see the module); h may be negative. gammas = (1,) is RKHP
-    Euler.
+class ClosedSubstep(NamedTuple):
+    """What the direct form's substeps of one run use: the system's `ClosedForm`, the work arrays
+    and the memory of the composition's substeps; the state the substeps advance, y (work.y, the
+    high part of the double-double y + y_low)."""
 
-    Returns a Trajectory whose times advance by h sum(gammas) a step; states y_0..y_k with
-    keep_all, else y_0 and the last state; newton_iterations: iterations per step (all
-    substeps); a failed run keeps the states before the failing step and names it.
-    InputError for another family or realisation, or bad arguments.
-    """
+    form: ClosedForm
+    work: ClosedWork
+    memory: ChordMemory
+    y: np.ndarray
+
+
+def closed_substep_data(system, substeps: int) -> ClosedSubstep:
+    """The data of `substeps` direct-form substeps on `system` (InputError for a system that
+    `closed_form` refuses)."""
     form = closed_form(system)
-    g = check_gammas(gammas)
-    h, n_steps = check_step(h, n_steps, system.dim)
-    n = system.dim
-    work = closed_work(form, n)
-    memory = chord_memory(g.size, n)
-    solver = Solver(float(tol), int(max_iter), system.domain_code)
+    work = closed_work(form, system.dim)
+    return ClosedSubstep(form, work, chord_memory(substeps, system.dim), work.y)
 
-    def call(y0, steps, states, iterations, keep):
-        return run(y0, g, h, steps, form, work, memory, solver, Record(states, iterations, keep))
 
-    return direct_trajectory(system, g, h, n_steps, x0, keep_all, call,
-                             "closed-euler" if g.size == 1 else "closed-euler-composition",
-                             lambda: {"gammas": g.tolist(), "newton_tolerance": tol,
-                                      "newton_max_iterations": max_iter,
-                                      "realisation": system.realisation,
-                                      "refreshes": memory.refreshes.tolist()})
+def closed_extra(data: ClosedSubstep) -> dict:
+    """What a run reports of its direct-form substeps: how often each rebuilt its chord matrix."""
+    return {"refreshes": data.memory.refreshes.tolist()}

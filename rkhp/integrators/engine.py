@@ -16,7 +16,7 @@ is polynomial in s (see `rkhp_step`).
 The tableau, h and the states are data: one compilation serves every system and tableau. The
 compiled data are small named groups (docs/engine.md "The state of the step loop"):
 `SystemTapes` (the four tapes), `rkhp.taylor.jets.JetSpace`, `Method` (A, b, h), `Solver`,
-`StageSolve`, `Record` (where a run writes), `StepBuffers` (every work array of the step loop,
+`StageSolve`, `StepBuffers` (every work array of the step loop,
 allocated once by `step_buffers`; the scalars kept between towers and steps in the named slots
 MEMO_HISTORY ... MEMO_STAGE_NEWTON_FAILS of its memo). A run ends
 with a `rkhp.integrators.failure.Failure`; `state_failure` is the one step validator (finite
@@ -118,7 +118,7 @@ class Interpreted(NamedTuple):
 class EngineData(NamedTuple):
     """What the compiled engine evaluates a system with: its tapes (plain), the interpreter of
     their class (compiled engine code takes its address) and the jet space
-    (`rkhp.integrators.rkhp_method.engine_data`)."""
+    (`rkhp.integrators.tower_substep.engine_data`)."""
 
     tapes: SystemTapes
     interpreter: Interpreter
@@ -168,7 +168,7 @@ class StepBuffers(NamedTuple):
 
 class StageSolve(NamedTuple):
     """How the towers compute the stages (passed to compiled code as it is for an implicit
-    tableau; the compiled loop takes None for an explicit one, `rkhp_method.compiled_stage`).
+    tableau; the compiled loop takes None for an explicit one, `tower_substep.compiled_stage`).
 
     degree 0: an explicit tableau, each stage once at its exact degree (`tower`); degree D >= 1:
     an implicit tableau, every stage function a jet of degree D solved by sweeps
@@ -194,17 +194,6 @@ class Solver(NamedTuple):
     tol: float
     max_iter: int
     domain: int
-
-
-class Record(NamedTuple):
-    """Where a run writes: states (all, or the last in row 0), Newton iterations per step (summed
-    over its substeps in a composed run), whether every state is kept, and the stage sweeps per
-    step of an RKHP run (None in the runs that do not count them)."""
-
-    states: np.ndarray
-    iterations: np.ndarray
-    keep_all: bool
-    sweeps: np.ndarray | None = None
 
 
 STAGE_NEWTON_ITERATIONS = 30
@@ -1020,7 +1009,7 @@ def rkhp_step(method, tapes, space, buf, solver, stage):
     full = np.bool_(True)
     it = 0
     # stage is None for an explicit tableau: numba prunes the implicit branches, so the loop of
-    # explicit tableaux is compiled without them (`rkhp_method.compiled_stage`)
+    # explicit tableaux is compiled without them (`tower_substep.compiled_stage`)
     limit = max_iter if stage is None else max_iter + stage.max_sweeps
     sweeps = 0
     stages_done = stage is None
@@ -1149,36 +1138,3 @@ def interpreted(tapes, run, space, work):
     return Interpreted(tapes.f, tapes.h, tapes.alpha, tapes.beta, run, address_of(tapes.f),
                        address_of(tapes.h), address_of(tapes.alpha), address_of(tapes.beta),
                        address_of(space), address_of(work))
-
-
-@nb.njit(**NJIT_NORC)
-def rkhp_run(y0, method, n_steps, run, tapes, space, buf, solver, stage, record):
-    """Integrate n_steps from y0 into `record`, the tapes evaluated by the interpreter of their
-    class at the address `run`: states[k] = y_k (keep_all) or states[0] = the last state; iterations[k],
-    sweeps[k]: Newton iterations and stage sweeps of step k.
-
-    Returns (number of completed steps, Failure of the step after them or Failure.OK).
-    """
-    program = interpreted(tapes, run, space, buf.work)
-    n = y0.shape[0]
-    y = buf.y
-    for k in range(n):
-        y[k] = y0[k]
-    buf.memo[MEMO_HISTORY] = 0.0
-    buf.memo[MEMO_NEWTON_L] = 0.0
-    buf.memo[MEMO_FACTORED] = 0.0
-    for k in range(n):
-        record.states[0, k] = y[k]
-    for step in range(n_steps):
-        cause, it, done = rkhp_step(method, program, space, buf, solver, stage)
-        record.iterations[step] = it
-        record.sweeps[step] = done
-        if cause == Failure.OK:
-            cause = state_failure(buf.y_next, solver.domain)
-        if cause != Failure.OK:
-            return step, cause
-        row = step + 1 if record.keep_all else 0
-        for k in range(n):
-            y[k] = buf.y_next[k]
-            record.states[row, k] = y[k]
-    return n_steps, Failure.OK

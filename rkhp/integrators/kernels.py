@@ -51,16 +51,16 @@ empty cache per system, 2026-11-28); the entry kernels call the interpreter at i
 KERNELS: dict[str, tuple[Kernel, ...]] = {
     "tape": (TAPE,),
     "invariants": (Kernel("rkhp.integrators.energy", "_hamiltonian_loop", 0.3),),
-    "rkhp": (Kernel("rkhp.integrators.engine", "rkhp_run", 5.5),),
+    "rkhp": (Kernel("rkhp.integrators.driver", "drive", 5.5),),
     "taylor": (),  # THP runs the tape interpreter from Python
     "classical": (Kernel("rkhp.integrators.classical", "_rk_loop", 1.3),),
     "implicit-midpoint": (Kernel("rkhp.integrators.classical", "_midpoint_loop", 3.0),),
     # the bench's peers: the compiled field that scipy calls
     "scipy": (Kernel("rkhp.integrators.classical", "_field_call", 1.0),),
-    # compositions: the composed loop over the engine's step (the figure: rkhp_run's, whose step it
-    # inlines); on the spray realisation the direct Euler form runs instead (compiled by `rkhp
-    # compile`; its tapes are not of the system's class, so the notice does not count it)
-    "composition": (Kernel("rkhp.integrators.composed", "composed_run", 5.5),),
+    # compositions: the same loop over the same substeps (one step is a composition of one
+    # substep); where a direct Euler form runs instead (compiled by `rkhp compile`; its tapes are
+    # not of the system's class), the notice does not count it
+    "composition": (Kernel("rkhp.integrators.driver", "drive", 5.5),),
 }
 """Entry kernels per kind (the tape interpreter is added to every run)."""
 

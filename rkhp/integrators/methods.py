@@ -30,7 +30,7 @@ RKHP method is (:func:`rkhp.tableaux.symmetry.rkhp_symmetry`).
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from ..base.errors import InputError
 from ..trees.conditions import conditions_of_order
@@ -73,13 +73,19 @@ class Method:
     composition: object = None
 
     def integrate(self, system, h: float, n_steps: int, x0=None):
-        """Run the method; returns a :class:`~rkhp.integrators.trajectory.Trajectory`."""
-        if self.kind == "rkhp":
-            if direct_euler(system, self.tableau):
-                return _direct(system, (1.0,), h, n_steps, x0, self.name)
-            from . import integrate
+        """Run the method; returns a :class:`~rkhp.integrators.trajectory.Trajectory`. RKHP methods
+        and compositions run on the driver (`rkhp.integrators.driver`), by the substep provider
+        that `rkhp.integrators.substeps.choose` picks for the system and the base method."""
+        if self.kind in ("rkhp", "composition"):
+            from .driver import run
 
-            return integrate(system, self.tableau, h, n_steps, x0)
+            if self.kind == "rkhp":
+                return run(system, self.tableau, h, n_steps, x0, name=self.name)
+            from .tower_substep import check_composable
+
+            check_composable(self.tableau, self.name)
+            return run(system, self.tableau, h, n_steps, x0, gammas=self.composition.gamma_float, span=1.0,
+                       name=self.name, extra={"base": self.tableau.name, "substeps": self.composition.substeps})
         if self.kind == "taylor":
             from .taylor import integrate_taylor
 
@@ -92,12 +98,6 @@ class Method:
             from .classical import integrate_midpoint
 
             return integrate_midpoint(system, h, n_steps, x0)
-        if self.kind == "composition":
-            if direct_euler(system, self.tableau):
-                return _direct(system, self.composition.gamma_float, h, n_steps, x0, self.name)
-            from .composed import integrate_composition
-
-            return integrate_composition(system, self.composition, h, n_steps, x0)
         raise InputError(f"{self.name} is scipy's adaptive {self.solver}: it runs by tolerance, not "
                          "by steps (a peer of `rkhp bench`, --peers)")
 
@@ -141,37 +141,6 @@ def composed_order(composition, base, condition_class: str) -> int:
     from ..tableaux.compositions import class_composition_orders
 
     return class_composition_orders(composition, base)[condition_class].order
-
-
-def direct_euler(system, tableau) -> bool:
-    """Whether Euler substeps on `system` run in a direct form: the tableau is RKHP Euler and the
-    system has the full Poisson-spray realisation (family general, symmetric;
-    `rkhp.integrators.spray_euler`) or the symmetric realisation of a family whose base is in
-    closed form (constant, lie-poisson, log-canonical; `rkhp.integrators.closed_euler`), and the
-    direct form can evaluate its tapes."""
-    if tableau is None or tableau.stages != 1 or tableau.A_float[0][0] != 0.0 or tableau.b_float[0] != 1.0:
-        return False
-    return direct_form(system) is not None
-
-
-def direct_form(system):
-    """The entry of the direct Euler form that takes `system` (None: none does)."""
-    if system.realisation != "symmetric":
-        return None
-    if system.family == "general":
-        from .spray_euler import direct_form_available, integrate_spray_euler
-
-        return integrate_spray_euler if direct_form_available(system) else None
-    from .closed_euler import KINDS, closed_form_available, integrate_closed_euler
-
-    return integrate_closed_euler if system.family in KINDS and closed_form_available(system) else None
-
-
-def _direct(system, gammas, h, n_steps, x0, name: str):
-    """The run of `direct_euler`'s substeps gammas h, named `name` (docs/compositions.md)."""
-    from .trajectory import checked
-
-    return checked(replace(direct_form(system)(system, gammas, h, n_steps, x0), method=name), system)
 
 
 def condition_class(system) -> str:

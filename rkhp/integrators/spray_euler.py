@@ -36,17 +36,17 @@ cost, and Q would otherwise toggle along an orbit).
 
 Compiled data: `SprayTapes` (X and H as plain tapes),
 `EulerWork` (work arrays of one substep), `SubstepMemory` (what each substep keeps across steps).
-`run` is the compiled composed loop; `integrate_spray_euler` the Python entry.
+`SpraySubstep` (the three, and the state); `begin` and `substep` make the direct form a substep
+provider of the driver (`rkhp.integrators.substeps`); `rkhp.integrators.driver.integrate_spray_euler`
+is the Python entry.
 """
 
 from __future__ import annotations
 
-import time
 from typing import NamedTuple
 
 import numpy as np
 
-from ..base.bounds import MAX_STAGES, check_step
 from ..base.errors import InputError
 from ..taylor.collocation import TABLE_A, TABLE_B, TABLE_E, TABLE_W
 from ..taylor.compiler import NJIT_NORC
@@ -57,10 +57,8 @@ from ..taylor.ops import SCRATCH_BASE, SPRAY
 from ..taylor.rows import subprogram_at
 from ..taylor.scalar import SCALAR_CODES, gradients, shared, values
 from ..taylor.tape import Tape
-from .engine import Record, Solver, max_abs, state_failure
-from .failure import Failure, failure_status
-from .newton import NEWTON_MAX_ITERATIONS
-from .trajectory import Trajectory, checked
+from .engine import max_abs
+from .failure import Failure
 
 MAX_NODES = 12
 """Collocation nodes of the direct form at most (E_12 theta^24 <= NODE_BOUND for theta up to
@@ -107,7 +105,7 @@ class EulerWork(NamedTuple):
 
     W (slots, 2 n + 1): the tapes' slots, values and first derivatives (`rkhp.taylor.scalar`);
     Z, X (MAX_NODES, n): stage increments and their field values; p, g, xbar, y, y_low, dy (n):
-    the momentum, grad H(xbar), the average, the state as the double-double y + y_low (`run`), a
+    the momentum, grad H(xbar), the average, the state as the double-double y + y_low (`begin`), a
     substep's increment; hess (n, n): Hess H at the refresh point; res, tmp (m): the residual (then
     the correction) and lu_solve's work vector."""
 
@@ -539,60 +537,36 @@ def add_increment(y, low, dy, n):
         y[k], low[k] = total, (a - (total - bb)) + (b - bb)
 
 
-@nb.njit(**NJIT_NORC)
-def run(y0, gammas, h, n_steps, tapes, work, memory, solver, record):
-    """The composed loop: n_steps steps from y0, each the Euler substeps gammas[0] h,
-    gammas[1] h, ... in direct form (`euler_substep`), substep i warm-started from substep i of
-    the previous step (`memory`, emptied here first), all in compiled code: one compiled unit with
-    the substep and its history helpers inlined (a unit of their own would be optimised again
-    here: docs/engine.md "Compile time").
-
-    Arguments: y0 (n,); gammas (s,) the composition's coefficients; h the step (negative: a
-    backward run); tapes, work, memory from `spray_tapes`, `euler_work`, `substep_memory`;
-    solver (`rkhp.integrators.engine.Solver`): the chord iterations' tolerance (relative to
-    max(1, |y|)) and limit per substep, the system's domain code (`state_failure`); record
-    (`rkhp.integrators.engine.Record`): states (n_steps + 1, n) when keep_all (states[k] = y_k),
-    else (1, n) (the last state), iterations (n_steps,) int64: chord iterations of each step (all
-    its substeps).
-
-    The state is carried as a double-double y + y_low (the substeps see y): each substep adds its
-    increment without rounding the state to doubles, so the rounding of the states does not
-    accumulate (measured: the Casimir of nambu over 10^5 triple-jump steps of h = 0.1 moves by
-    3.6e-14 relative, against 1.4e-13 when the state was rounded at every substep).
-
-    Returns (completed steps, Failure of the step after them or Failure.OK).
-    """
-    n = y0.shape[0]
-    s = gammas.shape[0]
-    y, low = work.y, work.y_low
-    for k in range(n):
-        y[k] = y0[k]
-        low[k] = 0.0
-        record.states[0, k] = y0[k]
-    for i in range(s):
+@nb.njit(inline="always", **NJIT_NORC)
+def begin(data, y0):
+    """Start a run at y0 (the state work.y, carried as the double-double y + y_low: each substep
+    adds its increment without rounding the state to doubles, so the rounding of the states does
+    not accumulate; measured: the Casimir of nambu over 10^5 triple-jump steps of h = 0.1 moves by
+    3.6e-14 relative, against 1.4e-13 when the state was rounded at every substep), every
+    substep's memory emptied."""
+    work, memory = data.work, data.memory
+    for k in range(y0.shape[0]):
+        work.y[k] = y0[k]
+        work.y_low[k] = 0.0
+    for i in range(memory.nodes.shape[0]):
         memory.counts[i, 0] = 0
         memory.counts[i, 1] = 0
         memory.nodes[i] = 0
         memory.rate[i] = 1.0
         memory.refreshes[i] = 0
-    for step in range(n_steps):
-        total = 0
-        for i in range(s):
-            cause, it = euler_substep(i, y, gammas[i] * h, tapes, work, memory, solver.tol,
-                                      solver.max_iter)
-            total += it
-            if cause != Failure.OK:
-                record.iterations[step] = total
-                return step, cause
-            add_increment(y, low, work.dy, n)
-        record.iterations[step] = total
-        cause = state_failure(y, solver.domain)
-        if cause != Failure.OK:
-            return step, cause
-        row = step + 1 if record.keep_all else 0
-        for k in range(n):
-            record.states[row, k] = y[k]
-    return n_steps, Failure.OK
+    return 0
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def substep(data, context, i, hs, solver):
+    """Substep i of size hs in direct form (`euler_substep`: solver.tol relative to max(1, |y|),
+    at most solver.max_iter chord iterations), its increment added to the state without rounding
+    it (`add_increment`); returns (Failure, iterations, 0 stage sweeps)."""
+    work = data.work
+    cause, it = euler_substep(i, work.y, hs, data.tapes, work, data.memory, solver.tol, solver.max_iter)
+    if cause == Failure.OK:
+        add_increment(work.y, work.y_low, work.dy, work.y.shape[0])
+    return cause, it, 0
 
 
 # ----------------------------------------------------------------------------------------------
@@ -655,79 +629,26 @@ def direct_form_available(system) -> bool:
     return True
 
 
-def check_gammas(gammas) -> np.ndarray:
-    """The composition's coefficients as a float array (InputError unless 1 to MAX_STAGES finite
-    numbers)."""
-    try:
-        g = np.array(gammas, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        raise InputError("gammas must be a list of numbers") from None
-    if not 1 <= g.size <= MAX_STAGES or not np.all(np.isfinite(g)):
-        raise InputError(f"gammas must be 1 to {MAX_STAGES} finite numbers")
-    return np.ascontiguousarray(g)
+class SpraySubstep(NamedTuple):
+    """What the direct form's substeps of one run use: the tapes (`spray_tapes`), the work arrays
+    and the memory of the composition's substeps; the state the substeps advance, y (work.y, the
+    high part of the double-double y + y_low)."""
+
+    tapes: SprayTapes
+    work: EulerWork
+    memory: SubstepMemory
+    y: np.ndarray
 
 
-def integrate_spray_euler(system, gammas, h, n_steps, x0=None, keep_all: bool = True, *,
-                          tol: float = DIRECT_TOLERANCE,
-                          max_iter: int = NEWTON_MAX_ITERATIONS) -> Trajectory:
-    """Integrate `system` (family general, realisation symmetric) by n_steps steps of the
-    composition of RKHP Euler steps gammas[0] h, gammas[1] h, ... (in that order), each in direct
-    form (see the module); h may be negative. gammas = (1,) is RKHP Euler.
-
-    Returns a Trajectory whose times advance by h sum(gammas) a step; states y_0..y_k with
-    keep_all, else y_0 and the last state; newton_iterations: chord iterations per step (all
-    substeps); a failed run keeps the states before the failing step and names it, and with
-    keep_all a run that diverged ends before the state that diverged (trajectory.checked).
-    InputError for another family or realisation, or bad arguments.
-    """
+def spray_substep_data(system, substeps: int) -> SpraySubstep:
+    """The data of `substeps` direct-form substeps on `system` (InputError for a system that
+    `spray_tapes` refuses)."""
     tapes = spray_tapes(system)
-    g = check_gammas(gammas)
-    h, n_steps = check_step(h, n_steps, system.dim)
-    n = system.dim
-    work = euler_work(tapes, n)
-    memory = substep_memory(g.size, n)
-    rest = (tapes, work, memory, Solver(float(tol), int(max_iter), system.domain_code))
-
-    def call(y0, steps, states, iterations, keep):
-        return run(y0, g, h, steps, *rest, Record(states, iterations, keep))
-
-    return direct_trajectory(system, g, h, n_steps, x0, keep_all, call,
-                             "spray-euler" if g.size == 1 else "spray-euler-composition",
-                             lambda: {"gammas": g.tolist(), "newton_tolerance": tol,
-                                      "newton_max_iterations": max_iter,
-                                      "realisation": system.realisation,
-                                      "nodes": memory.nodes.tolist(),
-                                      "refreshes": memory.refreshes.tolist()})
+    work = euler_work(tapes, system.dim)
+    return SpraySubstep(tapes, work, substep_memory(substeps, system.dim), work.y)
 
 
-def direct_trajectory(system, g, h, n_steps, x0, keep_all, call, method, extra) -> Trajectory:
-    """The Trajectory of a direct Euler form's compiled loop, shared by the direct forms
-    (`rkhp.integrators.closed_euler`): ``call(y0, steps, states, iterations, keep_all)`` runs
-    the loop and returns (completed steps, Failure); it is called once with no step (compile
-    time: numba's compile or cache load), then timed. Times advance by h sum(g) a step; states
-    y_0..y_k with keep_all, else y_0 and the last state; `extra()` is read after the run. With
-    keep_all, a run that diverged ends before the state that diverged (trajectory.checked):
-    without it only y_0 and the last state are kept."""
-    n = system.dim
-    y0 = system.start(x0)
-    t0 = time.perf_counter()
-    call(y0, 0, np.zeros((1, n)), np.zeros(1, np.int64), True)
-    compile_seconds = time.perf_counter() - t0
-    states = np.empty((n_steps + 1 if keep_all else 1, n))
-    iterations = np.zeros(max(n_steps, 1), dtype=np.int64)
-    t0 = time.perf_counter()
-    done, cause = call(y0, n_steps, states, iterations, bool(keep_all))
-    run_seconds = time.perf_counter() - t0
-    cause = Failure(cause)
-    failed = cause != Failure.OK
-    step = h * float(np.sum(g))
-    if keep_all:
-        kept, times = states[: done + 1], step * np.arange(done + 1)
-    else:
-        kept, times = np.vstack([y0, states[0]]), np.array([0.0, step * done])
-    trajectory = Trajectory(
-        times=times, states=kept, newton_iterations=iterations[: done + failed],
-        cause=cause, status=failure_status(cause, done, step, system.domain) if failed else "ok",
-        failed_step=done if failed else None, compile_seconds=compile_seconds,
-        run_seconds=run_seconds, method=method, system=system.name, extra=extra(), poisson=system)
-    return checked(trajectory, system) if keep_all else trajectory
+def spray_extra(data: SpraySubstep) -> dict:
+    """What a run reports of its direct-form substeps: the collocation nodes of each and how often
+    each rebuilt its chord matrix."""
+    return {"nodes": data.memory.nodes.tolist(), "refreshes": data.memory.refreshes.tolist()}

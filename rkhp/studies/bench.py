@@ -32,6 +32,7 @@ from ..base.errors import InputError
 from ..base.executors import run_until_interrupted
 from ..base.interrupts import Interrupted, is_interrupt
 from ..integrators import integrate_ensemble
+from ..integrators.classical import vector_field
 from ..integrators.methods import DEFAULT_METHODS, SCIPY_METHODS, Method, check_distinct, resolve_method, resolve_system
 from .converge import check_t_final
 from .reference import Reference, dop853_reference, reference
@@ -273,7 +274,6 @@ def solve_peer(system, solver: str, x0, t_final: float, rtol: float):
     compiled vector field."""
     from scipy.integrate import solve_ivp
 
-    from ..integrators.classical import vector_field
 
     f = vector_field(system)
     return solve_ivp(lambda t, x: f(x), (0.0, t_final), x0, method=solver, rtol=rtol, atol=1e-3 * rtol)

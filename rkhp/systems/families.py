@@ -86,6 +86,9 @@ class PoissonFamily:
 
 FAMILIES: dict[str, PoissonFamily] = {}
 
+CONSTANT, LIE_POISSON, LOG_CANONICAL, GENERAL = "constant", "lie-poisson", "log-canonical", "general"
+"""The names of the registered families (the last is registered by `rkhp.systems.general`)."""
+
 
 def register_family(family: PoissonFamily) -> None:
     """Add a family to the registry (its name must be new)."""
@@ -271,7 +274,7 @@ def _lie_symbolic(structure: LieAlgebra):
 
 
 register_family(PoissonFamily(
-    name="lie-poisson", spec_key="structure_constants", domain="R^n",
+    name=LIE_POISSON, spec_key="structure_constants", domain="R^n",
     read=_read_structure_constants, check=_check_lie, poisson=_lie_poisson, program=_lie_program,
     degree=lambda structure: 1, base=_lie_base, casimirs=lambda structure: ((), ()),
     symbolic=_lie_symbolic))
@@ -332,7 +335,7 @@ def _log_canonical_poisson(lam):
 
 
 register_family(PoissonFamily(
-    name="log-canonical", spec_key="lambda", domain="positive orthant", read=read_matrix,
+    name=LOG_CANONICAL, spec_key="lambda", domain="positive orthant", read=read_matrix,
     check=_check_matrix("lambda"), poisson=_log_canonical_poisson, program=_log_canonical_program,
     degree=lambda lam: 2, base=_log_canonical_base, casimirs=_log_canonical_casimirs,
     symbolic=_log_canonical_symbolic))
@@ -376,7 +379,7 @@ def _constant_symbolic(pi):
 
 
 register_family(PoissonFamily(
-    name="constant", spec_key="poisson", domain="R^n", read=read_matrix,
+    name=CONSTANT, spec_key="poisson", domain="R^n", read=read_matrix,
     check=_check_matrix("poisson"), poisson=_constant_poisson, program=_constant_program,
     degree=lambda pi: 0, base=_constant_base, casimirs=_constant_casimirs,
     symbolic=_constant_symbolic))

@@ -22,7 +22,7 @@ import numpy as np
 from ..base.errors import InputError
 from ..base.expressions import parse_expression, variable_names
 from .core import PoissonSystem
-from .families import PoissonFamily, family_system, register_family, short
+from .families import GENERAL, PoissonFamily, family_system, register_family, short
 from .program import matrix_program, numeric_function
 from .structure import StructureCheck, check_finite_at, check_structure, symbols_of
 
@@ -116,7 +116,7 @@ def spray_base(structure: PoissonMatrix, sign: float):
 
 
 register_family(PoissonFamily(
-    name="general", spec_key="poisson", domain="R^n", read=read_poisson_matrix, check=check_shape,
+    name=GENERAL, spec_key="poisson", domain="R^n", read=read_poisson_matrix, check=check_shape,
     poisson=numeric_poisson, program=poisson_program, degree=poisson_degree, base=spray_base,
     casimirs=lambda structure: ((), ()), symbolic=lambda structure: structure.entries))
 
@@ -139,7 +139,7 @@ def general(structure: PoissonMatrix, hamiltonian: Callable, *, name: str, x0, t
         checked = check_structure(rows, casimirs=casimirs, x0=x0, seed=seed, where=where)
     symbols = symbols_of(structure.dim)
     system = family_system(
-        "general", structure, hamiltonian, name=name, x0=x0, t_final=t_final,
+        GENERAL, structure, hamiltonian, name=name, x0=x0, t_final=t_final,
         realisation=realisation, casimirs=tuple(numeric_function(c, symbols) for c in casimirs),
         casimir_names=tuple(casimir_names) or tuple(str(c) for c in casimirs),
         exact_solution=exact_solution, description=description)

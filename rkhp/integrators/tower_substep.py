@@ -1,0 +1,230 @@
+"""The RKHP step of the Taylor tower (`rkhp.integrators.engine.rkhp_step`, paper §5.2, docs/theory.md
+§5, §7, §10) as a substep provider of the driver (`rkhp.integrators.driver`): any tableau,
+explicit or implicit, on any system.
+
+A composition's substep i keeps its own history of psi (the start predictor of `rkhp_step`
+extrapolates psi over the previous steps of the same size): substep i of step k starts from the
+psi of substep i of steps k-1, k-2, k-3, so a negative substep is never predicted from a positive
+one. A method of one step is the composition of one substep of size h.
+
+Compiled data: `TowerSubstep` (the tableau, the tapes and their interpreter's address, the jet
+space, the step buffers, the substeps' memory, the stage solve, the state); `begin` (inlined into
+the driver's loop: the addresses of the tapes are taken on its stack) and the substeps are the
+provider's compiled functions (`rkhp.integrators.substeps`).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from ..base.errors import InputError
+from ..taylor.compiler import NJIT_NORC
+from ..taylor.compiler import numba as nb
+from ..taylor.interpreter import as_plain, interpreter
+from ..taylor.jets import jet_space
+from .engine import (
+    MEMO_FACTORED,
+    MEMO_HISTORY,
+    MEMO_NEWTON_L,
+    EngineData,
+    Method,
+    StageSolve,
+    SystemTapes,
+    interpreted,
+    rkhp_step,
+    step_buffers,
+)
+from .failure import Failure
+from .newton import NEWTON_TOLERANCE, STAGE_MAX_SWEEPS
+
+MAX_PRODUCT_PAIRS = 2_000_000
+"""Largest product table the Taylor tower accepts (n variables, degree s + 1 for an explicit
+tableau, `implicit_degree` for an implicit one)."""
+
+
+def resolve_tableau(tableau):
+    """A Tableau from a Tableau, a built-in name or a file path."""
+    if isinstance(tableau, str):
+        from ..tableaux.files import load_tableau
+
+        return load_tableau(tableau)
+    return tableau
+
+
+def tableau_arrays(tableau) -> tuple[np.ndarray, np.ndarray]:
+    """The float64 (A, b) of a tableau."""
+    A = np.ascontiguousarray(tableau.A_float, dtype=np.float64)
+    b = np.ascontiguousarray(tableau.b_float, dtype=np.float64)
+    return A, b
+
+
+def is_implicit(A: np.ndarray) -> bool:
+    """Whether a stage depends on itself or a later one (an entry on or above the diagonal)."""
+    return bool(np.any(np.triu(A) != 0.0))
+
+
+def stage_solve(tableau, A, degree=None, max_sweeps=STAGE_MAX_SWEEPS):
+    """The StageSolve of a tableau: explicit (degree 0) or implicit with stage functions that are
+    jets of degree `degree` (default: `implicit_degree`)."""
+    if not is_implicit(A):
+        return StageSolve(0, int(max_sweeps))
+    if degree is None:
+        from ..tableaux.verification import class_orders
+
+        degree = implicit_degree(max(class_orders(tableau, "float").values()))
+    if int(degree) != degree or degree < 1:
+        raise InputError(f"the stage degree must be a positive integer, got {degree!r}")
+    return StageSolve(int(degree), int(max_sweeps))
+
+
+def compiled_stage(stage):
+    """What the compiled loop takes for `stage`: None for an explicit tableau, so that numba
+    compiles the loop of explicit tableaux without the implicit tower (docs/engine.md "Compile
+    time"), the StageSolve itself for an implicit one."""
+    return stage if stage.degree > 0 else None
+
+
+def implicit_degree(order: int) -> int:
+    """Jet degree D of the stage functions of an implicit method of order N (its highest over the
+    condition classes): D = N + 1, at least 2 (the Newton Jacobian needs degree-1 coefficients of
+    the gradients).
+
+    Truncating the stage functions g_j at degree D leaves the degree-k coefficients of their
+    gradients wrong by O(h^(D - k)) (one degree and one power of h per gradient, from the missing
+    degree-D coefficients of Z), so psi = h sum_i b_i grad g_i(x) is wrong by O(h^(D + 1)) and the
+    global error by O(h^D): D = N + 1 keeps it one order below the method's (measured in
+    docs/implicit.md; docs/theory.md §10).
+    """
+    return max(order + 1, 2)
+
+
+def engine_data(system, stages: int, stage):
+    """`rkhp.integrators.engine.EngineData`: the tapes, interpreter and jet space for the
+    compiled engine, jets in n variables of degree s + 1 (explicit) or the stage degree
+    (implicit)."""
+    degree = stage.degree if stage.degree > 0 else stages + 1
+    space = jet_space(system.dim, degree)
+    if len(space.pa) > MAX_PRODUCT_PAIRS:
+        raise InputError(f"the method needs Taylor polynomials of degree {degree} in "
+                         f"{system.dim} variables ({len(space.pa)} product terms): too large")
+    plain = [as_plain(t) for t in (system.f_tape, system.h_tape, system.alpha_tape, system.beta_tape)]
+    return EngineData(SystemTapes(*plain), interpreter(system.f_tape), space)
+
+
+class PsiHistory(NamedTuple):
+    """Per substep i: psi of its three previous steps (hist[i], shape (3, n)) and how many there
+    are (count[i])."""
+
+    hist: np.ndarray
+    count: np.ndarray
+
+
+class TowerSubstep(NamedTuple):
+    """What the tower's substeps of one run use: the tableau's A (s, s) and b (s,); the system's
+    plain tapes, the address of their class's interpreter and the jet space
+    (`engine_data`); the step buffers (`engine.step_buffers`: the
+    state is buf.y); the memory of the composition's substeps; the stage solve (None for an
+    explicit tableau, so that numba compiles its substep without the implicit tower: docs/engine.md
+    "Compile time"; a `rkhp.integrators.engine.StageSolve` for an implicit one); the state the
+    substeps advance, y (buf.y)."""
+
+    A: np.ndarray
+    b: np.ndarray
+    tapes: SystemTapes
+    run: int
+    space: object
+    buf: object
+    memory: PsiHistory
+    stage: StageSolve | None
+    y: np.ndarray
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _swap_history(buf, memory, i, n, into_buffers):
+    """Load substep i's psi history into the step buffers (or store it back)."""
+    for r in range(3):
+        for k in range(n):
+            if into_buffers:
+                buf.hist[r, k] = memory.hist[i, r, k]
+            else:
+                memory.hist[i, r, k] = buf.hist[r, k]
+    if into_buffers:
+        buf.memo[MEMO_HISTORY] = memory.count[i]
+    else:
+        memory.count[i] = buf.memo[MEMO_HISTORY]
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def begin(data, y0):
+    """Start a run at y0 (the state buf.y), every substep without history; returns the tapes
+    evaluated at their interpreter's address (`engine.interpreted`: copies on the stack of the
+    loop this is inlined into)."""
+    buf = data.buf
+    for k in range(y0.shape[0]):
+        buf.y[k] = y0[k]
+    buf.memo[MEMO_HISTORY] = 0.0
+    buf.memo[MEMO_NEWTON_L] = 0.0
+    buf.memo[MEMO_FACTORED] = 0.0
+    for i in range(data.memory.count.shape[0]):
+        data.memory.count[i] = 0.0
+    return interpreted(data.tapes, data.run, data.space, buf.work)
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def explicit_substep(data, program, i, hs, solver):
+    """Substep i of size hs of an explicit tableau from buf.y (into buf.y when it succeeds);
+    returns (Failure, Newton iterations, stage sweeps)."""
+    buf = data.buf
+    n = buf.y.shape[0]
+    _swap_history(buf, data.memory, i, n, True)
+    cause, it, sweeps = rkhp_step(Method(data.A, data.b, hs), program, data.space, buf, solver, None)
+    _swap_history(buf, data.memory, i, n, False)
+    if cause == Failure.OK:
+        for k in range(n):
+            buf.y[k] = buf.y_next[k]
+    return cause, it, sweeps
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def implicit_substep(data, program, i, hs, solver):
+    """`explicit_substep` for an implicit tableau (its stages solved as data.stage says)."""
+    buf = data.buf
+    n = buf.y.shape[0]
+    _swap_history(buf, data.memory, i, n, True)
+    cause, it, sweeps = rkhp_step(Method(data.A, data.b, hs), program, data.space, buf, solver, data.stage)
+    _swap_history(buf, data.memory, i, n, False)
+    if cause == Failure.OK:
+        for k in range(n):
+            buf.y[k] = buf.y_next[k]
+    return cause, it, sweeps
+
+
+def tower_substep(system, tableau, substeps: int, stage_degree: int | None = None) -> TowerSubstep:
+    """The data of `substeps` tower substeps of `tableau` on `system` (an implicit tableau's stage
+    functions are jets of degree `stage_degree`, default `implicit_degree`)."""
+    tableau = resolve_tableau(tableau)
+    A, b = tableau_arrays(tableau)
+    stage = stage_solve(tableau, A, stage_degree)
+    tapes, interpreter, space = engine_data(system, len(b), stage)
+    buf = step_buffers(tapes, system.dim, len(b), space, stage.degree)
+    memory = PsiHistory(np.zeros((substeps, 3, system.dim)), np.zeros(substeps))
+    return TowerSubstep(A, b, tapes, interpreter.address, space, buf, memory, compiled_stage(stage), buf.y)
+
+
+def check_composable(tableau, name: str) -> None:
+    """InputError unless `tableau` is explicit: compositions run explicit RKHP bases."""
+    A, _ = tableau_arrays(tableau)
+    if is_implicit(A):
+        raise InputError(f"{name}: the base method {tableau.name} is implicit; compositions run "
+                         "explicit RKHP bases")
+
+
+def tower_extra(data: TowerSubstep) -> dict:
+    """What a run reports of its tower substeps: the stage degree (0: explicit)."""
+    return {"stage_degree": 0 if data.stage is None else data.stage.degree}
+
+
+TOLERANCE = NEWTON_TOLERANCE
+"""The default tolerance of the tower's Newton iteration (`rkhp.integrators.newton`)."""

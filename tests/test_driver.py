@@ -1,0 +1,106 @@
+"""The one driver of the RKHP integrators and its table of substep providers
+(rkhp.integrators.driver, rkhp.integrators.substeps; docs/engine.md "One driver, many substeps").
+
+Values from outside the code: the final states and statuses of 216 runs (12 built-in systems, two
+realisations, nine methods: tableaux explicit and implicit, RKHP Euler, compositions) computed by
+the integrators as they were before they ran on one driver (tests/data/driver_reference.json),
+and the midpoint rule's own equation for a step on a constant pi.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rkhp.integrators.driver import run, run_ensemble
+from rkhp.integrators.methods import resolve_method, resolve_system
+from rkhp.integrators.substeps import CLOSED, SPRAY, TOWER, choose, explain
+from rkhp.systems import get_system
+from rkhp.tableaux.compositions import load_composition
+from rkhp.tableaux.files import load_tableau
+
+REFERENCE = json.loads((Path(__file__).parent / "data" / "driver_reference.json").read_text())["runs"]
+#: one system of each family and each kind of run in the normal suite; all 216 in the slow one
+QUICK = [key for key in REFERENCE
+         if key.split("/")[0] in ("rigid-body", "lotka-volterra", "pendulum", "charged-particle")
+         and (key.split("/")[1] == "symmetric" or key.split("/")[2] in ("euler", "tj4"))]
+
+
+def _check(key: str) -> None:
+    name, realisation, method = key.split("/")
+    trajectory = resolve_method(method).integrate(resolve_system(name, realisation), 0.1, 20)
+    expected = REFERENCE[key]
+    assert trajectory.status == expected["status"]
+    final = np.array(expected["final"])
+    assert np.abs(trajectory.states[-1] - final).max() <= 1e-14 * max(1.0, np.abs(final).max())
+
+
+@pytest.mark.parametrize("key", QUICK)
+def test_the_driver_runs_as_the_integrators_did(key):
+    _check(key)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("key", [k for k in REFERENCE if k not in QUICK])
+def test_the_driver_runs_as_the_integrators_did_everywhere(key):
+    _check(key)
+
+
+@pytest.mark.parametrize("name, realisation, method, provider", [
+    ("rigid-body", "symmetric", "euler", CLOSED), ("lotka-volterra", "symmetric", "kahan-li8", CLOSED),
+    ("pendulum", "symmetric", "tj4", CLOSED), ("nambu", "symmetric", "suzuki4", SPRAY),
+    ("charged-particle", "symmetric", "euler", SPRAY), ("rigid-body", "shifted", "euler", TOWER),
+    ("nambu", "quartic", "tj4", TOWER), ("rigid-body", "symmetric", "rk4", TOWER),
+    ("charged-particle", "symmetric", "gauss2", TOWER),
+])
+def test_the_table_sends_euler_to_a_direct_form_on_the_symmetric_realisation(name, realisation, method, provider):
+    system, m = get_system(name, realisation), resolve_method(method)
+    assert choose(system, m.tableau).provider is provider
+    told = explain(system, m)
+    assert told.provider == provider.name and told.row[-1] == "tower"
+    assert m.integrate(system, 0.1, 2).extra["substep"] == provider.name
+
+
+def test_a_peer_is_not_run_by_the_driver():
+    assert explain(get_system("pendulum"), resolve_method("classical:rk4")).provider is None
+
+
+def test_every_provider_gives_the_same_step_to_round_off():
+    """The direct forms and the tower compute the same RKHP Euler substeps (each solved to
+    round-off), so a composition run by either agrees to round-off."""
+    euler, gammas = load_tableau("euler"), load_composition("tj4").gamma_float
+    for name in ("rigid-body", "lotka-volterra", "charged-particle"):
+        system = get_system(name)
+        direct = run(system, euler, 0.1, 10, gammas=gammas)
+        tower = run(system, euler, 0.1, 10, gammas=gammas, provider=TOWER)
+        assert direct.extra["substep"] != "tower"
+        assert np.abs(direct.states - tower.states).max() < 1e-13
+
+
+def test_a_consistent_composition_advances_by_n_h_exactly():
+    trajectory = resolve_method("kahan-li8").integrate(get_system("rigid-body"), 0.1, 100)
+    assert trajectory.times[-1] == 100 * 0.1
+    np.testing.assert_array_equal(trajectory.times, 0.1 * np.arange(101))
+
+
+def test_on_a_constant_pi_euler_is_the_implicit_midpoint_rule_on_every_provider():
+    system = get_system("pendulum")
+    J = np.array([[0.0, 1.0], [-1.0, 0.0]])
+    for provider in (CLOSED, TOWER):
+        trajectory = run(system, load_tableau("euler"), 0.2, 10, provider=provider)
+        for y0, y1 in zip(trajectory.states[:-1], trajectory.states[1:], strict=True):
+            residual = y1 - y0 - 0.2 * J @ system.grad_hamiltonian(0.5 * (y0 + y1))
+            assert np.abs(residual).max() < 1e-14
+
+
+def test_an_ensemble_is_one_run_at_a_time():
+    system = get_system("rigid-body")
+    starts = system.x0 * np.array([[1.0], [0.9], [1.1]])
+    for method in ("paper-three-stage", "euler"):
+        tableau = load_tableau(method)
+        finals = run_ensemble(system, tableau, 0.1, 30, starts, threads=2)
+        for x0, final in zip(starts, finals, strict=True):
+            np.testing.assert_array_equal(final, run(system, tableau, 0.1, 30, x0).final_state)
