@@ -258,7 +258,7 @@ def page(command: str, started: str, where: str, rows: list[Row], absent: dict, 
     if long_rows:
         text += ["## Long run: nambu, T = 10^4", "",
                  "Largest energy and Casimir errors over the run (DOP853 sampled at 2001 equally spaced times, "
-                 "kahan-li8 at every 5th step); CPU time of one run, cold for neither (compiled before).", "",
+                 "kahan-li8 at every 5th step); CPU time of one run, compiled beforehand.", "",
                  "| method | CPU s | energy error | Casimir error |", "|---|---|---|---|", *long_rows, ""]
     return "\n".join(text)
 
