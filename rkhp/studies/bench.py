@@ -39,7 +39,18 @@ from ..base.interrupts import Interrupted, is_interrupt
 from ..integrators import integrate_ensemble
 from ..integrators.methods import DEFAULT_METHODS, SCIPY_METHODS, Method, check_distinct, resolve_method, resolve_system
 from .converge import check_t_final
-from .peers import ADAPTIVE_KINDS, COMPILED_PEERS, Peer, absent, best_reference, compiled_peer, prepare, scipy_peer
+from .peers import (
+    ADAPTIVE_KINDS,
+    ATOL_RATIO,
+    COMPILED_PEERS,
+    Peer,
+    absent,
+    best_reference,
+    compiled_peer,
+    plain_field,
+    prepare,
+    scipy_peer,
+)
 from .reference import Reference, dop853_reference
 
 TARGETS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
@@ -307,8 +318,6 @@ def solve_peer(system, solver: str, x0, t_final: float, rtol: float):
     """scipy's solve_ivp(solver) from x0 to t_final at rtol (atol = 1e-3 rtol) on the system's field
     written with plain arithmetic (:func:`rkhp.studies.peers.plain_field`), with its whole history."""
     from scipy.integrate import solve_ivp
-
-    from .peers import ATOL_RATIO, plain_field
 
     return solve_ivp(plain_field(system), (0.0, t_final), x0, method=solver, rtol=rtol, atol=ATOL_RATIO * rtol)
 

@@ -30,6 +30,9 @@ import numpy as np
 
 from ..base.errors import InputError, NumericalFailure
 from ..integrators.methods import SCIPY_METHODS
+from ..systems.field_code import compiled
+from ..systems.field_code import field_code as generate
+from .reference import Reference, reference
 
 ATOL_RATIO = 1e-3
 """atol = ATOL_RATIO rtol, for every peer."""
@@ -109,8 +112,6 @@ _CODES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 def field_code(system, form: str):
     """The system's field in ``form`` (`rkhp.systems.field_code`), generated once per system."""
-    from ..systems.field_code import field_code as generate
-
     codes = _CODES.setdefault(system, {})
     if form not in codes:
         codes[form] = generate(system, form)
@@ -119,8 +120,6 @@ def field_code(system, form: str):
 
 def plain_field(system):
     """``f(t, x)``: the system's field written with plain arithmetic (form ``numpy``)."""
-    from ..systems.field_code import compiled
-
     return compiled(field_code(system, "numpy"))
 
 
@@ -142,8 +141,6 @@ def _scipy(peer: Peer, system, t_final: float, samples: int):
 def _numbalsoda(peer: Peer, system, t_final: float, samples: int):
     import numba
     from numbalsoda import dop853, lsoda_sig
-
-    from ..systems.field_code import compiled
 
     rhs = numba.cfunc(lsoda_sig)(compiled(field_code(system, "cfunc")))
     address = rhs.address
@@ -172,8 +169,6 @@ def _diffrax(peer: Peer, system, t_final: float, samples: int):
     import diffrax
     import jax
     import jax.numpy as jnp
-
-    from ..systems.field_code import compiled
 
     term = diffrax.ODETerm(compiled(field_code(system, "jax")))
     solver = getattr(diffrax, peer.solver)()
@@ -224,8 +219,6 @@ def compiled_reference(system, t_final: float, x0=None):
     distance to a solve at CHECK_RTOL (at least 10 eps |x(T)|): a
     :class:`rkhp.studies.reference.Reference` of kind ``dop853-compiled``. NumericalFailure if a
     solve fails; InputError when numbalsoda is absent."""
-    from .reference import Reference
-
     x0 = np.asarray(system.x0 if x0 is None else x0, dtype=np.float64)
     prepared = prepare(COMPILED_PEERS["numbalsoda:dop853"], system, t_final, x0)
     tight, loose = prepared.solve(x0, REFERENCE_RTOL), prepared.solve(x0, CHECK_RTOL)
@@ -241,8 +234,6 @@ def best_reference(system, t_final: float, x0=None):
     """The most accurate reference rkhp has here: the closed form where the system has one from
     this start (`rkhp.studies.reference`), else the compiled DOP853 (:func:`compiled_reference`)
     when numbalsoda is installed and its estimate is the smaller, else scipy's DOP853."""
-    from .reference import reference
-
     ref = reference(system, t_final, x0)
     if ref.kind == "exact" or absent(COMPILED_PEERS["numbalsoda:dop853"]):
         return ref

@@ -33,6 +33,7 @@ import numpy as np
 
 from ..base.errors import InputError
 from ..taylor import ops
+from .families import FAMILIES
 from .structure import symbols_of
 
 FORMS = ("numpy", "cfunc", "jax")
@@ -97,8 +98,6 @@ def hamiltonian_expression(system):
 
 def poisson_expressions(system):
     """pi(x) as rows of sympy expressions in x1..xn, from the system's family and structure."""
-    from .families import FAMILIES
-
     family = FAMILIES.get(system.family)
     if family is None or family.symbolic is None or system.structure is None:
         raise InputError(f"{system.name}: its Poisson matrix has no symbolic form (family {system.family})")
