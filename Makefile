@@ -60,9 +60,11 @@ $(DOCS_STAMP): $(STAMP)
 docs: $(DOCS_STAMP)
 	$(VENV)/bin/sphinx-build -E -W --keep-going -n -q -b html docs docs/_build/html
 
+# The peers must import: no silent skip. numbalsoda builds from source with a Fortran compiler
+# (Debian: apt-get install gfortran; docs/studies.md "Peers").
 bench: install
-	$(PY) -m pip install --quiet -c constraints.txt -e '.[bench]'
-	$(PY) -c "import nodepy.runge_kutta_method, nodepy.rooted_trees"  # the peers must import: no silent skip
+	$(PY) -m pip install --quiet -c constraints.txt -e '.[bench,peers]'
+	$(PY) -c "import nodepy.runge_kutta_method, nodepy.rooted_trees, numbalsoda, jax, diffrax"
 	for b in benchmarks/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
 lint: install

@@ -115,11 +115,11 @@ import json, time
 import numpy as np
 from numba.core import event
 from rkhp.integrators import rkhp_method
-from rkhp.integrators.classical import integrate_classical, integrate_midpoint, vector_field
+from rkhp.integrators.classical import integrate_classical, integrate_midpoint
 from rkhp.integrators.energy import hamiltonian_values
 from rkhp.systems import get_system
 from rkhp.tableaux.files import load_tableau
-KERNELS = ("run_tape", "_hamiltonian_loop", "drive", "_rk_loop", "_midpoint_loop", "_field", "_field_call")
+KERNELS = ("run_tape", "_hamiltonian_loop", "drive", "_rk_loop", "_midpoint_loop", "_field")
 start, out = {}, {}
 class Timer(event.Listener):
     def on_start(self, ev):
@@ -137,7 +137,6 @@ hamiltonian_values(system, np.array([system.x0, system.x0]))
 rkhp_method.integrate(system, rk4, 0.05, 2)
 integrate_classical(system, rk4, 0.05, 2)
 integrate_midpoint(system, 0.05, 2)
-vector_field(system)(system.x0)
 print(json.dumps(out))
 """
 

@@ -1,58 +1,66 @@
-"""Work-precision race: rkhp's compositions and paper-three-stage against scipy's DOP853 and Radau
-(docs/compositions.md "Work-precision"). Run: python benchmarks/work_precision.py [--quick]
+"""Work-precision race: rkhp's compositions against compiled and plain peers (docs/compositions.md
+"Work-precision"; the generated page docs/results/work-precision.md).
 
-For each system and each target end-point error (1e-6, 1e-8, 1e-10, 1e-12 at T = 10, 2-norm against
-the reference of rkhp.studies.reference), every method gets its cheapest setting reaching the target:
-the fewest steps among 2^k (rkhp) or the loosest rtol among 10^(-k/2) (scipy, atol = 1e-3 rtol). The
-settings are then timed together, interleaved (one call of each per round) and warm (compiled, numba
-cache loaded), and the minimum wall time over the rounds is reported.
+Run: python benchmarks/work_precision.py [SYSTEM ...] [--quick] [--targets 1e-8,1e-10,1e-12]
+     [--rounds N] [--write PAGE]
 
-The peers run scipy.integrate.solve_ivp on the system's vector field x -> pi(x) grad H(x) compiled with
-numba (rkhp.integrators.classical.vector_field): a right-hand side faster than the plain numpy one
-a user writes, so the ratio is not flattered.
+SYSTEM: built-in names or spec files (default: rigid-body, lotka-volterra, charged-particle, nambu,
+toda:12 and benchmarks/data/vortices-8.toml, 8 variables with a general pi). For each system and
+each target end-point error at T = 10 (2-norm against the best reference rkhp has,
+rkhp.studies.peers.best_reference: the closed form, or the tighter of scipy's DOP853 and the
+compiled DOP853 at rtol 1e-15 cross-checked at 1e-14), every contender gets its cheapest setting
+reaching the target: the fewest steps on a grid of ratio 2^(1/4) (rkhp), the loosest rtol on a grid
+of ratio 10^(1/4) (peers, atol = 1e-3 rtol). The settings are then timed together: warm (compiled,
+traced, numba cache loaded; compile times are left out), interleaved (each round calls every
+contender, in an order rotated by one each round; a call shorter than BATCH_SECONDS is repeated
+within its timing and the mean taken), ROUNDS rounds; the minimum over the rounds of the CPU time
+of the calling thread (time.thread_time) is reported, and of the wall time beside it.
 
-Part 2 (T = 10^4): energy and Casimir errors of kahan-li8 against DOP853 when both take the same
-time (DOP853 at the rtol whose time is nearest to kahan-li8's).
+Contenders (rkhp.studies.peers; every field is generated from the system, so spec files race too):
+- rkhp: the compositions of METHODS, the best of them per target;
+- numbalsoda:dop853: Hairer's DOP853 (Fortran) on a numba cfunc field, the whole loop compiled;
+- diffrax:dopri8, diffrax:tsit5: under jax.jit on the CPU, float64;
+- scipy:dop853: solve_ivp on the field a user writes with plain arithmetic.
+A compiled peer whose package is not installed is printed as absent (pip install 'rkhp[peers]').
+
+Part 2 (not with --quick): over T = 10^4 on nambu, energy and Casimir errors of kahan-li8 (h = 0.1)
+and of the compiled DOP853 (scipy's where it is absent) at rtol 1e-8 ... 1e-15, with CPU times.
 """
 
 from __future__ import annotations
 
+import math
+import os
+import platform
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-from rkhp.integrators.classical import vector_field
 from rkhp.integrators.methods import resolve_method, resolve_system
-from rkhp.studies.reference import reference
+from rkhp.studies import peers as P
 
-SYSTEMS = ("rigid-body", "lotka-volterra", "charged-particle", "nambu", "toda:12")
-METHODS = ("paper-three-stage", "suzuki4", "kahan-li6", "kahan-li8", "sofroniou-spaletta10")
-PEERS = ("DOP853", "Radau")
-TARGETS = (1e-6, 1e-8, 1e-10, 1e-12)
+ROOT = Path(__file__).resolve().parent.parent
+SYSTEMS = ("rigid-body", "lotka-volterra", "charged-particle", "nambu", "toda:12",
+           str(Path("benchmarks") / "data" / "vortices-8.toml"))
+METHODS = ("suzuki4", "kahan-li6", "kahan-li8", "sofroniou-spaletta10")
+PEERS = ("numbalsoda:dop853", "diffrax:dopri8", "diffrax:tsit5", "scipy:dop853")
+TARGETS = (1e-8, 1e-10, 1e-12)
 T_FINAL = 10.0
-ROUNDS = 5
-STEPS = tuple(2**k for k in range(2, 16))
-TOLERANCES = tuple(10.0 ** (-k / 2) for k in range(6, 29))
+ROUNDS = 7
+BATCH_SECONDS = 2e-3
+STEPS = tuple(sorted({int(round(2 ** (k / 4))) for k in range(8, 4 * 16 + 1)}))
+TOLERANCES = tuple(10.0 ** (-k / 4) for k in range(12, 61))
 
 
-def solve(f, solver, x0, t_final, rtol):
-    from scipy.integrate import solve_ivp
-
-    return solve_ivp(lambda t, x: f(x), (0.0, t_final), x0, method=solver, rtol=rtol, atol=1e-3 * rtol)
+def peer_of(name: str) -> P.Peer:
+    return P.scipy_peer("DOP853") if name == "scipy:dop853" else P.COMPILED_PEERS[name]
 
 
-def rkhp_runner(method, system, n):
-    return lambda: method.integrate(system, T_FINAL / n, n).final_state
-
-
-def scipy_runner(f, solver, x0, rtol):
-    return lambda: solve(f, solver, x0, T_FINAL, rtol).y[:, -1]
-
-
-def cheapest_rkhp(method, system, ref, targets):
-    """target -> (steps, error) of the fewest steps 2^k reaching it (None if none up to 2^15)."""
-    out, pending = {}, list(targets)
+def cheapest_steps(method, system, ref, targets) -> dict:
+    """target -> (steps, error) of the fewest steps of STEPS reaching it (none: left out)."""
+    out, pending = {}, sorted(targets, reverse=True)
     for n in STEPS:
         if not pending:
             break
@@ -60,89 +68,210 @@ def cheapest_rkhp(method, system, ref, targets):
         if not traj.ok:
             continue
         err = float(np.linalg.norm(traj.final_state - ref.state))
-        for t in [t for t in pending if err <= t]:
-            out[t] = (n, err)
-            pending.remove(t)
+        while pending and err <= pending[0]:
+            out[pending.pop(0)] = (n, err)
     return out
 
 
-def cheapest_scipy(f, solver, x0, ref, targets):
-    out, pending = {}, list(targets)
+def cheapest_tolerance(prepared, x0, ref, targets) -> dict:
+    """target -> (rtol, error) of the loosest rtol of TOLERANCES reaching it."""
+    out, pending = {}, sorted(targets, reverse=True)
     for rtol in TOLERANCES:
         if not pending:
             break
-        sol = solve(f, solver, x0, T_FINAL, rtol)
-        if not sol.success:
+        sol = prepared.solve(x0, rtol)
+        if not sol.ok:
             continue
-        err = float(np.linalg.norm(sol.y[:, -1] - ref.state))
-        for t in [t for t in pending if err <= t]:
-            out[t] = (rtol, err)
-            pending.remove(t)
+        err = float(np.linalg.norm(sol.state - ref.state))
+        while pending and err <= pending[0]:
+            out[pending.pop(0)] = (rtol, err)
     return out
 
 
-def interleaved(runners: dict) -> dict:
-    """name -> minimum wall seconds over ROUNDS rounds, each round calling every runner once."""
-    best = {k: np.inf for k in runners}
-    for run in runners.values():
-        run()  # warm
-    for _ in range(ROUNDS):
-        for name, run in runners.items():
-            t0 = time.perf_counter()
-            run()
-            best[name] = min(best[name], time.perf_counter() - t0)
-    return best
+def batch_of(call) -> int:
+    """Calls per timing: enough to last BATCH_SECONDS of CPU time."""
+    start = time.thread_time()
+    call()
+    return max(1, math.ceil(BATCH_SECONDS / max(time.thread_time() - start, 1e-7)))
 
 
-def _ms(seconds) -> str:
-    return "-" if seconds is None else f"{seconds * 1e3:.3f} ms"
+def interleaved(runners: dict, rounds: int) -> dict:
+    """name -> (minimum CPU seconds of the calling thread, minimum wall seconds) per call."""
+    batches = {k: batch_of(run) for k, run in runners.items()}
+    best = {k: [math.inf, math.inf] for k in runners}
+    names = list(runners)
+    for r in range(rounds):
+        for name in names[r % len(names):] + names[:r % len(names)]:
+            run, k = runners[name], batches[name]
+            wall, cpu = time.perf_counter(), time.thread_time()
+            for _ in range(k):
+                run()
+            cpu, wall = (time.thread_time() - cpu) / k, (time.perf_counter() - wall) / k
+            best[name] = [min(best[name][0], cpu), min(best[name][1], wall)]
+    return {k: tuple(v) for k, v in best.items()}
 
 
-def race_line(system_name: str, target: float, ours: dict, times: dict, settings: dict) -> str:
-    """One row: the best rkhp method and its time, DOP853's and Radau's, the ratio, every method."""
-    best = min(ours, key=ours.get) if ours else None
-    dop = times.get("DOP853")
-    ratio = f"{dop / ours[best]:.2f}x" if best and dop else "-"
-    setting = settings["DOP853"].get(target)
-    rtol = "-" if setting is None else f"{setting[0]:.3g}"
-    detail = ", ".join(f"{m} {settings[m][target][0]} steps {_ms(t)}" for m, t in ours.items())
-    return (f"{system_name:17s} {target:7.0e}  best {best or '-':21s} {_ms(ours.get(best)):>11s}  "
-            f"DOP853 {_ms(dop):>11s} (rtol {rtol})  Radau {_ms(times.get('Radau')):>11s}  "
-            f"DOP853/rkhp {ratio}   [{detail}]")
+class Row:
+    """One system at one target: the settings and times of every contender."""
+
+    def __init__(self, system: str, target: float):
+        self.system, self.target = system, target
+        self.cells: dict[str, tuple] = {}  # name -> (setting text, cpu s, wall s, error)
 
 
-def race(system_name: str, methods, targets) -> list[str]:
-    system = resolve_system(system_name)
-    ref = reference(system, T_FINAL)
-    f = vector_field(system)
+def race(name: str, targets, rounds: int, absent: dict) -> list[Row]:
+    system = resolve_system(name)
+    ref = P.best_reference(system, T_FINAL)
     x0 = np.asarray(system.x0, dtype=float)
-    settings = {m: cheapest_rkhp(resolve_method(m), system, ref, targets) for m in methods}
-    settings.update({p: cheapest_scipy(f, p, x0, ref, targets) for p in PEERS})
-    lines = []
+    print(f"# {system.name} (n = {system.dim}, {system.family}): reference {ref.kind}, estimated error "
+          f"{ref.error_estimate:.1e}", flush=True)
+    methods = {m: resolve_method(m) for m in METHODS}
+    settings = {m: cheapest_steps(method, system, ref, targets) for m, method in methods.items()}
+    prepared = {p: P.prepare(peer_of(p), system, T_FINAL) for p in PEERS if p not in absent}
+    settings.update({p: cheapest_tolerance(prep, x0, ref, targets) for p, prep in prepared.items()})
+    rows = []
     for target in targets:
         runners = {}
-        for m in methods:
+        for m, method in methods.items():
             if target in settings[m]:
-                runners[m] = rkhp_runner(resolve_method(m), system, settings[m][target][0])
-        for p in PEERS:
+                n = settings[m][target][0]
+                runners[m] = lambda method=method, n=n: method.integrate(system, T_FINAL / n, n)
+        for p, prep in prepared.items():
             if target in settings[p]:
-                runners[p] = scipy_runner(f, p, x0, settings[p][target][0])
-        times = interleaved(runners)
-        lines.append(race_line(system_name, target, {m: times[m] for m in methods if m in times},
-                               times, settings))
-        print(lines[-1], flush=True)
-    return lines
+                runners[p] = lambda prep=prep, rtol=settings[p][target][0]: prep.solve(x0, rtol)
+        times = interleaved(runners, rounds)
+        row = Row(system.name, target)
+        for key, (cpu, wall) in times.items():
+            setting, err = settings[key][target]
+            text = f"{setting} steps" if key in methods else f"rtol {setting:.2g}"
+            row.cells[key] = (text, cpu, wall, err)
+        rows.append(row)
+        print(line(row, absent), flush=True)
+    return rows
 
 
-def long_run(system_name: str = "nambu", method: str = "kahan-li8", t_final: float = 1e4, h: float = 0.1):
-    """Energy and Casimir errors over T = 10^4 of `method` and of DOP853 at about the same time."""
+def best_rkhp(row: Row):
+    ours = [m for m in METHODS if m in row.cells]
+    return min(ours, key=lambda m: row.cells[m][1]) if ours else None
+
+
+def _ms(cell, index: int = 1) -> str:
+    return "-" if cell is None else f"{cell[index] * 1e3:.3f}"
+
+
+def _ratio(a, b) -> str:
+    return "-" if a is None or b is None else f"{a[1] / b[1]:.2f}"
+
+
+def line(row: Row, absent: dict) -> str:
+    best = best_rkhp(row)
+    ours = row.cells.get(best)
+    parts = [f"{row.system:16s} {row.target:6.0e}  rkhp {best or '-'} {ours[0] if ours else ''} {_ms(ours)} ms"]
+    for p in PEERS:
+        parts.append(f"{p} absent" if p in absent else f"{p} {_ms(row.cells.get(p))} ms")
+    parts.append(f"rkhp/dop853-compiled {_ratio(ours, row.cells.get('numbalsoda:dop853'))}")
+    parts.append(f"scipy/rkhp {_ratio(row.cells.get('scipy:dop853'), ours)}")
+    return "  ".join(parts)
+
+
+def table(rows: list[Row], absent: dict, index: int) -> list[str]:
+    """The markdown table of the rows: times in ms (CPU: index 1, wall: index 2) and the ratios."""
+    head = ["system", "error", "rkhp best (setting)", "rkhp", *PEERS, "rkhp / compiled DOP853",
+            "scipy DOP853 / rkhp"]
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for row in rows:
+        best = best_rkhp(row)
+        ours = row.cells.get(best)
+        cells = [f"`{row.system}`", f"{row.target:.0e}", f"{best} ({ours[0]})" if ours else "-", _ms(ours, index)]
+        cells += ["absent" if p in absent else _ms(row.cells.get(p), index) for p in PEERS]
+        dop, plain = row.cells.get("numbalsoda:dop853"), row.cells.get("scipy:dop853")
+        cells += ["-" if ours is None or dop is None else f"{ours[index] / dop[index]:.1f}",
+                  "-" if ours is None or plain is None else f"{plain[index] / ours[index]:.2f}"]
+        out.append("| " + " | ".join(cells) + " |")
+    return out
+
+
+def settings_table(rows: list[Row], absent: dict) -> list[str]:
+    """The markdown table of every contender's setting and error per row."""
+    names = [*METHODS, *PEERS]
+    out = ["| system | error | " + " | ".join(names) + " |", "|" + "---|" * (len(names) + 2)]
+    for row in rows:
+        cells = [f"`{row.system}`", f"{row.target:.0e}"]
+        for name in names:
+            cell = row.cells.get(name)
+            cells.append("absent" if name in absent else "-" if cell is None else f"{cell[0]}, {cell[3]:.1e}")
+        out.append("| " + " | ".join(cells) + " |")
+    return out
+
+
+def machine() -> str:
+    model = platform.processor() or platform.machine()
+    try:
+        for text in Path("/proc/cpuinfo").read_text().splitlines():
+            if text.startswith("model name"):
+                model = text.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    load = ", ".join(f"{v:.1f}" for v in os.getloadavg()) if hasattr(os, "getloadavg") else "-"
+    return f"{model}, {os.cpu_count()} cores, load average {load} at the start; Python {platform.python_version()}"
+
+
+def versions() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = []
+    for package in ("numpy", "scipy", "numba", "numbalsoda", "jax", "diffrax"):
+        try:
+            out.append(f"{package} {version(package)}")
+        except PackageNotFoundError:
+            out.append(f"{package} absent")
+    return ", ".join(out)
+
+
+def page(command: str, started: str, where: str, rows: list[Row], absent: dict, targets, rounds: int,
+         long_rows: list[str]) -> str:
+    """The generated results page (docs/results/work-precision.md)."""
+    text = [
+        "# Work-precision against compiled peers (generated)",
+        "",
+        "Generated by `benchmarks/work_precision.py`; do not edit by hand: run it again.",
+        "",
+        f"- command: `{command}`",
+        f"- date: {started}",
+        f"- machine: {where}",
+        f"- packages: {versions()}",
+        f"- T = {T_FINAL:g}; end-point error (2-norm) at most {', '.join(f'{t:.0e}' for t in targets)} against the "
+        "best reference (closed form for the rigid body, else the tighter of scipy's DOP853 and the compiled "
+        "DOP853 at rtol 1e-15 cross-checked at 1e-14); each contender at its cheapest setting (steps on a grid "
+        "of ratio 2^(1/4), rtol on a grid of ratio 10^(1/4), atol = 1e-3 rtol).",
+        f"- times in ms per call, warm (compile and trace left out), {rounds} interleaved rounds, minimum; short "
+        f"calls repeated within a timing to last {BATCH_SECONDS * 1e3:g} ms.",
+        "- rkhp: the best of " + ", ".join(METHODS) + "; numbalsoda:dop853: Hairer's DOP853 (Fortran) on a numba "
+        "cfunc field; diffrax: under jax.jit on the CPU, float64; scipy:dop853: solve_ivp on the field written "
+        "with plain arithmetic. Every field is generated from the system (rkhp.systems.field_code).",
+    ]
+    text += [f"- {reason}" for reason in absent.values()]
+    text += ["", "## CPU time of the calling thread (ms)", "", *table(rows, absent, 1), "",
+             "## Wall time (ms)", "", *table(rows, absent, 2), "",
+             "## Settings (rkhp: steps; peers: rtol) and end-point errors", "", *settings_table(rows, absent), ""]
+    if long_rows:
+        text += ["## Long run: nambu, T = 10^4", "",
+                 "Largest energy and Casimir errors over the run (DOP853 sampled at 2001 equally spaced times, "
+                 "kahan-li8 at every 5th step); CPU time of one run, compiled beforehand.", "",
+                 "| method | CPU s | energy error | Casimir error |", "|---|---|---|---|", *long_rows, ""]
+    return "\n".join(text)
+
+
+def long_run(system_name: str = "nambu", method: str = "kahan-li8", t_final: float = 1e4, h: float = 0.1,
+             absent: dict | None = None) -> list[str]:
+    """Energy and Casimir errors over T = t_final of ``method`` and of a DOP853 over rtol (the
+    compiled one where installed): markdown table rows, printed as they come."""
     system = resolve_system(system_name)
     n = int(round(t_final / h))
-    t0 = time.perf_counter()
+    cpu = time.thread_time()
     traj = resolve_method(method).integrate(system, h, n).raise_if_failed()
-    ours = time.perf_counter() - t0
-    f = vector_field(system)
-    x0 = np.asarray(system.x0, dtype=float)
+    ours = time.thread_time() - cpu
 
     def drift(states):
         e0, c0 = system.hamiltonian(states[0]), system.casimir_values(states[0])
@@ -151,27 +280,55 @@ def long_run(system_name: str = "nambu", method: str = "kahan-li8", t_final: flo
         return energy, casimir
 
     e, c = drift(traj.states[:: max(1, n // 2000)])
-    print(f"{system_name} T = {t_final:g}: {method} h = {h} {ours:.2f} s: energy error {e:.2e}, Casimir error {c:.2e}")
-    from scipy.integrate import solve_ivp
+    rows = [f"| {method}, h = {h} | {ours:.2e} | {e:.1e} | {c:.1e} |"]
+    print(f"# {system_name}, T = {t_final:g}: method | CPU s | energy error | Casimir error\n{rows[-1]}", flush=True)
+    name = "scipy:dop853" if "numbalsoda:dop853" in (absent or {}) else "numbalsoda:dop853"
+    prepared = P.prepare(peer_of(name), system, t_final, samples=2000)
+    x0 = np.asarray(system.x0, dtype=float)
+    for rtol in (1e-8, 1e-10, 1e-12, 1e-14, 1e-15):
+        cpu = time.thread_time()
+        sol = prepared.solve(x0, rtol)
+        spent = time.thread_time() - cpu
+        e, c = drift(sol.states)
+        rows.append(f"| {name}, rtol {rtol:g} | {spent:.2e} | {e:.1e} | {c:.1e} |")
+        print(rows[-1], flush=True)
+    return rows
 
-    for rtol in (1e-6, 1e-8, 1e-10, 1e-12):
-        t0 = time.perf_counter()
-        sol = solve_ivp(lambda t, x: f(x), (0.0, t_final), x0, method="DOP853", rtol=rtol, atol=1e-3 * rtol)
-        spent = time.perf_counter() - t0
-        e, c = drift(sol.y.T[:: max(1, sol.y.shape[1] // 2000)])
-        print(f"{'':{len(system_name)}s}              DOP853 rtol {rtol:g} {spent:.2f} s: energy error {e:.2e}, "
-              f"Casimir error {c:.2e}")
+
+def _option(argv, flag, default):
+    if flag in argv:
+        i = argv.index(flag)
+        value = argv[i + 1]
+        del argv[i:i + 2]
+        return value
+    return default
 
 
 def main(argv) -> None:
+    argv = list(argv)
+    command = " ".join(["python benchmarks/work_precision.py", *argv])
     quick = "--quick" in argv
-    systems = SYSTEMS[:1] if quick else SYSTEMS
-    print(f"# python {' '.join(['benchmarks/work_precision.py', *argv])}  ({time.strftime('%Y-%m-%d %H:%M')})")
-    print(f"# T = {T_FINAL:g}; cheapest setting per target; min of {ROUNDS} interleaved warm rounds")
+    if quick:
+        argv.remove("--quick")
+    targets = tuple(float(t) for t in _option(argv, "--targets", ",".join(map(str, TARGETS))).split(","))
+    rounds = int(_option(argv, "--rounds", str(3 if quick else ROUNDS)))
+    write = _option(argv, "--write", None)
+    systems = tuple(argv) or (SYSTEMS[:1] if quick else SYSTEMS)
+    started = time.strftime("%Y-%m-%d %H:%M")
+    where = machine()
+    print(f"# {command}  ({started}; {where})")
+    print(f"# T = {T_FINAL:g}; cheapest setting per target; min of {rounds} interleaved warm rounds, "
+          "ms per call, CPU time of the calling thread")
+    absent = {p: reason for p in PEERS if (reason := P.absent(peer_of(p)))}
+    for reason in absent.values():
+        print(reason)
+    rows = []
     for name in systems:
-        race(name, METHODS, TARGETS)
-    if not quick:
-        long_run()
+        rows += race(name, targets, rounds, absent)
+    long_rows = [] if quick else long_run(absent=absent)
+    if write:
+        Path(write).write_text(page(command, started, where, rows, absent, targets, rounds, long_rows))
+        print(f"# written: {write}")
 
 
 if __name__ == "__main__":

@@ -251,18 +251,19 @@ def _render_converge(study, plot) -> None:
 
 @click.command()
 @_common
-@click.option("--peers", type=names(), default="scipy:dop853,scipy:rk45,classical:rk4,implicit-midpoint",
-              show_default=True,
-              help="Peers, in the grammar of --method but not RKHP tableaux: scipy:NAME (solve_ivp's "
-                   "dop853, rk45, rk23, radau, bdf, lsoda, run by tolerance), classical:NAME, "
-                   "implicit-midpoint, thpN; empty for none (docs/methods.md).")
+@click.option("--peers", type=names(),
+              default="numbalsoda:dop853,scipy:dop853,scipy:rk45,classical:rk4,implicit-midpoint", show_default=True,
+              help="Peers, run by tolerance: numbalsoda:dop853, diffrax:dopri8, diffrax:tsit5 (compiled; the "
+                   "optional extra peers, an absent one is named), scipy:NAME (solve_ivp's dop853, rk45, rk23, "
+                   "radau, bdf, lsoda on a plain-arithmetic field); by steps, in the grammar of --method but not "
+                   "RKHP tableaux: classical:NAME, implicit-midpoint, thpN; empty for none (docs/studies.md).")
 @click.option("--t-final", type=T_FINAL, help="Final time T (default: the system's).")
 @click.option("--steps", type=STEP_LIST, help="Numbers of steps of the integrators (default 10,20,...,2560).")
 @click.option("--tolerances", type=reals(bounds.tolerance, "RTOL,..."),
-              help=f"rtol values of the scipy peers ({bounds.MIN_TOLERANCE:g} <= rtol < 1; default 1e-3,...,1e-13; "
-                   "atol = 1e-3 rtol).")
+              help=f"rtol values of the adaptive peers ({bounds.MIN_TOLERANCE:g} <= rtol < 1; default "
+                   "1e-3,...,1e-13; atol = 1e-3 rtol).")
 @click.option("--repeats", type=integer(1, bounds.MAX_REPEATS, "N"), default=3, show_default=True,
-              help="Timed repeats per point (median).")
+              help="Timed repeats per point (minimum).")
 @click.option("--ensemble", type=integer(1, bounds.MAX_ENSEMBLE, "K"),
               help="Time K initial conditions near x0 at once (per-trajectory times).")
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Seed of the ensemble's starts.")
@@ -272,7 +273,7 @@ def _render_converge(study, plot) -> None:
 @format_option("table", "json", "csv", "latex")
 def bench(system, methods, x0, realisation, peers, t_final, steps, tolerances, repeats, ensemble, seed, plot,
           force, workers, scheduler, fmt):
-    """Work-precision: wall time (median of repeats) against error, methods and peers."""
+    """Work-precision: CPU and wall time (minimum of repeats) against error, methods and peers."""
     from rkhp.base.executors import open_executor
     from rkhp.studies import bench as B
 
@@ -301,22 +302,23 @@ def bench(system, methods, x0, realisation, peers, t_final, steps, tolerances, r
 
 
 def _bench_cells(study, p) -> list[str]:
-    """A point of a curve as the terminal shows it (and --format latex): setting, error, seconds,
-    f evals, status."""
+    """A point of a curve as the terminal shows it (and --format latex): setting, error, CPU
+    seconds, wall seconds, f evals, status."""
     setting = str(p.steps) if p.steps is not None else f"{p.tolerance:g}"
     error = (_e(p.error) if p.error is not None else
              (f"< {study.reference.floor:.1e}" if p.status == "ok" else "—"))
-    return [setting, error, f"{p.seconds:.2e}", "—" if p.evaluations is None else str(p.evaluations), p.status]
+    cpu = "—" if p.cpu_seconds is None else f"{p.cpu_seconds:.2e}"
+    return [setting, error, cpu, f"{p.seconds:.2e}", "—" if p.evaluations is None else str(p.evaluations), p.status]
 
 
 #: the columns of `bench --format csv` (docs/results.md)
-BENCH_CSV = ("method", "kind", "steps", "tolerance", "error", "seconds", "evaluations", "status",
+BENCH_CSV = ("method", "kind", "steps", "tolerance", "error", "cpu_seconds", "seconds", "evaluations", "status",
              "compile_seconds", "trajectories")
 
 
 def _emit_bench(study, fmt) -> None:
     """bench as CSV (one row per point) or LaTeX (the points, then the cheapest per target)."""
-    rows = [(c.method, c.kind, p.steps, p.tolerance, p.error, p.seconds, p.evaluations, p.status,
+    rows = [(c.method, c.kind, p.steps, p.tolerance, p.error, p.cpu_seconds, p.seconds, p.evaluations, p.status,
              c.compile_seconds, c.trajectories) for c in study.curves for p in c.points]
     cells, groups = [], []
     for c in study.curves:
@@ -326,14 +328,15 @@ def _emit_bench(study, fmt) -> None:
     mode = (f"ensemble of {study.ensemble} starts, seconds per trajectory" if study.ensemble
             else "one trajectory")
     caption = (f"Work-precision on {study.system} ({study.realisation} realisation), T = {study.t_final:g}, "
-               f"{mode}, median of {study.repeats} repeats; reference: {study.reference.kind}. Setting: "
-               "steps, or rtol for scipy.")
-    points = booktabs(("method", "kind", "setting", "error", "seconds", "f evals", "status"), cells, caption,
-                      "llrrrrl", groups)
-    cheapest = booktabs(("error at most", "cheapest", "setting", "seconds"),
+               f"{mode}, minimum of {study.repeats} repeats (CPU: of the calling thread); reference: "
+               f"{study.reference.kind}. Setting: steps, or rtol for the adaptive peers.")
+    points = booktabs(("method", "kind", "setting", "error", "CPU s", "wall s", "f evals", "status"), cells,
+                      caption, "llrrrrrl", groups)
+    cheapest = booktabs(("error at most", "cheapest", "setting", "CPU s", "wall s"),
                         [(f"{c.target:.0e}", c.method or "no method reached it", c.setting or "—",
+                          "—" if c.cpu_seconds is None else f"{c.cpu_seconds:.2e}",
                           "—" if c.seconds is None else f"{c.seconds:.2e}") for c in study.cheapest],
-                        f"Cheapest method per error target on {study.system}.", "rllr")
+                        f"Cheapest method per error target on {study.system}.", "rllrr")
     emit_table(fmt, BENCH_CSV, rows, [points, cheapest])
 
 
@@ -344,14 +347,17 @@ def _render_bench(study, plot) -> None:
             else "one trajectory")
     out.print(f"[bold]{plain(study.system)}[/] ({plain(study.realisation)} realisation), x0 = {_vector(study.x0)}, "
               f"T = {study.t_final:g}, {mode}; "
-              f"median of {study.repeats} repeats")
+              f"minimum of {study.repeats} repeats, warm (compile apart); CPU: of the calling thread")
     out.print(f"reference: {ref.kind}, estimated error {ref.error_estimate:.1e}")
+    for _, reason in study.absent_peers:
+        out.print(plain(reason))
     for c in study.curves:
-        extra = f", compile {c.compile_seconds:.2f} s apart" if c.kind == "rkhp" else ""
+        extra = f", compile {c.compile_seconds:.2f} s apart" if c.compile_seconds else ""
         timed = f", {c.trajectories} trajectories timed" if study.ensemble else ""
         out.print(f"[bold]{plain(c.method)}[/] ({c.kind}{extra}{timed})")
         table = compact_table(None)
-        for col in ("steps" if c.kind != "scipy" else "rtol", "error", "seconds", "f evals", "status"):
+        by_steps = c.points and c.points[0].steps is not None
+        for col in ("steps" if by_steps else "rtol", "error", "CPU s", "wall s", "f evals", "status"):
             table.add_column(col, justify="right")
         for p in c.points:
             table.add_row(*map(plain, _bench_cells(study, p)))
@@ -361,7 +367,8 @@ def _render_bench(study, plot) -> None:
         if c.method is None:
             out.print(f"error <= {c.target:.0e}: no method reached it")
         else:
-            out.print(f"error <= {c.target:.0e}: {plain(c.method)} ({plain(c.setting)}), {c.seconds:.2e} s")
+            cpu = "" if c.cpu_seconds is None else f"{c.cpu_seconds:.2e} s CPU, "
+            out.print(f"error <= {c.target:.0e}: {plain(c.method)} ({plain(c.setting)}), {cpu}{c.seconds:.2e} s wall")
     if plot:
         out.print(f"plot written to {plain(plot)} (its data: {plain(data_path(plot))})")
 

@@ -11,7 +11,6 @@ from rkhp.base.errors import InputError
 from rkhp.integrators.classical import (
     integrate_classical,
     integrate_midpoint,
-    vector_field,
 )
 from rkhp.integrators.energy import hamiltonian_values
 from rkhp.integrators.failure import Failure
@@ -33,7 +32,7 @@ def _error(traj, system, t):
 def test_vector_field_from_tapes_is_pi_grad_h(name, realisation):
     """pi = D^T - D with D = d_p alpha(x, 0) (docs/theory.md §4) in both realisations."""
     system = get_system(name, realisation=realisation)
-    f = vector_field(system)
+    f = system.vector_field
     rng = np.random.default_rng(1)
     for _ in range(5):
         x = np.asarray(system.x0) * (1 + 0.3 * rng.random(system.dim)) + 0.1
@@ -59,7 +58,7 @@ def test_classical_orders_on_rigid_body(rigid, name, order):
 
 def test_rk4_step_by_hand(rigid):
     """One RK4 step equals the textbook formula on f = pi grad H."""
-    f = vector_field(rigid)
+    f = rigid.vector_field
     x, h = np.asarray(rigid.x0), 0.3
     k1 = f(x)
     k2 = f(x + h / 2 * k1)
@@ -80,7 +79,7 @@ def test_midpoint_order_and_quadratic_casimir(rigid):
     assert np.max(np.abs(r2 - r2[0])) < 1e-14
     assert b.newton_iterations.min() >= 1 and b.newton_iterations.max() <= 5
     # the midpoint equation holds at every step
-    f = vector_field(rigid)
+    f = rigid.vector_field
     x0, x1 = b.states[10], b.states[11]
     assert np.allclose(x1, x0 + T / 200 * f((x0 + x1) / 2), rtol=0, atol=1e-15)
 

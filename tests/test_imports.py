@@ -33,7 +33,7 @@ import rkhp
 ROOT = Path(rkhp.__file__).parent
 #: third-party packages heavy to import (each 0.1 s to 1.7 s measured with `python -c "import X"`)
 HEAVY = frozenset({"numpy", "scipy", "sympy", "mpmath", "numba", "llvmlite", "matplotlib", "dask",
-                   "distributed", "cloudpickle"})
+                   "distributed", "cloudpickle", "numbalsoda", "jax", "diffrax"})
 
 
 def _module_files() -> dict[str, Path]:

@@ -6,9 +6,8 @@ numba compiles the tape interpreter once per class of tapes (`rkhp.taylor.tape.t
 composite operations it must know), and the entry kernels of `rkhp.integrators.kernels` once for
 every class (they take plain tapes and call the class's interpreter through its address:
 `rkhp.taylor.interpreter.Interpreter`), except the direct forms of some families' methods. So
-one system per class stands for its whole family: one step of each kind of method, the compiled
-Hamiltonian of the studies and the vector field of the scipy peers compile every kernel a run of
-that family needs.
+one system per class stands for its whole family: one step of each kind of method and the
+compiled Hamiltonian of the studies compile every kernel a run of that family needs.
 
 Each of those runs on one system is a part (`AHEAD_PARTS`); the parts run in ``jobs`` processes
 side by side when numba's cache saves are locked (`rkhp.taylor.compiler.parallel_compiles_safe`),
@@ -30,14 +29,13 @@ from .methods import resolve_method
 #: the parts of a class's compile: the Hamiltonian (it compiles the class's tape interpreter), one
 #: step of each kind of method (explicit and implicit RKHP being two specialisations of the
 #: driver's loop over the tower's substeps; tj4, a composition of Euler steps: the loop over the
-#: direct Euler form where the family has one, `rkhp.integrators.substeps`) and the scipy peers'
-#: vector field.
+#: direct Euler form where the family has one, `rkhp.integrators.substeps`).
 #: After the Hamiltonian (every other part calls the interpreter), the costliest cold compile first
 #: (each part's CPU seconds: `benchmarks/compile_parts.py`, docs/engine.md "Compile time"): the
 #: processes take the parts in this order, so that the long ones start early and the processes
 #: finish together.
-HAMILTONIAN, VECTOR_FIELD = "hamiltonian", "vector-field"
-AHEAD_PARTS = (HAMILTONIAN, "gauss2", "tj4", "rk4", "implicit-midpoint", "classical:rk4", VECTOR_FIELD, "thp2")
+HAMILTONIAN = "hamiltonian"
+AHEAD_PARTS = (HAMILTONIAN, "gauss2", "tj4", "rk4", "implicit-midpoint", "classical:rk4", "thp2")
 #: the parts that compile kernels of a class's or family's own (tj4: the driver's loop over the
 #: direct Euler forms of the spray realisation and of closed-form families); the others' kernels
 #: are shared by every class
@@ -91,10 +89,6 @@ def prepare_part(system, part: str) -> None:
         from .energy import hamiltonian_values
 
         hamiltonian_values(system, np.array([system.x0]))
-    elif part == VECTOR_FIELD:
-        from .classical import vector_field
-
-        vector_field(system)(system.x0)
     else:
         resolve_method(part).integrate(system, h, 1)
 

@@ -112,12 +112,6 @@ def _field(x, run, ws, at, out):
         out[i] = acc
 
 
-@nb.njit(**NJIT)
-def _field_call(x, run, ws, out):
-    """`_field` as a kernel: the field that scipy calls once per point."""
-    _field(x, run, ws, _field_addresses(ws), out)
-
-
 @nb.njit(inline="always", **NJIT)
 def _record(states, row, x):
     """states[row] := x, entry by entry (numpy's row assignment would compile its shape-error
@@ -265,10 +259,7 @@ def _verify(name: str, system, field: Field) -> None:
     f = np.asarray(system.vector_field(x), dtype=np.float64)
     h = 1e-3
     states = np.empty((2, x.size))
-    if name == "field":
-        got, want = np.empty(x.size), f
-        _field_call(x, *field, got)
-    elif name == "rk":
+    if name == "rk":
         _rk_loop(*field, np.zeros((1, 1)), np.ones(1), h, 1, x, 0, states)
         got, want = states[1], x + h * f
     else:
@@ -374,15 +365,3 @@ def integrate_midpoint(system, h, n_steps, x0=None) -> Trajectory:
     return _trajectory(system, "implicit midpoint", h, k_done, cause, states, newton, started, compile_s, extra)
 
 
-def vector_field(system):
-    """The compiled Poisson vector field ``x -> pi(x) grad H(x)`` of a system (docs/theory.md §4)."""
-    field = _workspace(system)
-    _verify("field", system, field)
-    run, work = field
-
-    def f(x):
-        out = np.empty(system.dim)
-        _field_call(np.ascontiguousarray(x, dtype=np.float64), run, work, out)
-        return out
-
-    return f

@@ -55,8 +55,9 @@ KERNELS: dict[str, tuple[Kernel, ...]] = {
     "taylor": (),  # THP runs the tape interpreter from Python
     "classical": (Kernel("rkhp.integrators.classical", "_rk_loop", 1.3),),
     "implicit-midpoint": (Kernel("rkhp.integrators.classical", "_midpoint_loop", 3.0),),
-    # the bench's peers: the compiled field that scipy calls
-    "scipy": (Kernel("rkhp.integrators.classical", "_field_call", 1.0),),
+    # the bench's peers compile nothing of rkhp's (scipy calls a field in plain arithmetic,
+    # `rkhp.studies.peers`)
+    "scipy": (),
     # compositions: the same loop over the same substeps (one step is a composition of one
     # substep); where a direct Euler form runs instead (compiled by `rkhp compile`; its tapes are
     # not of the system's class), the notice does not count it

@@ -1,25 +1,30 @@
-"""Work-precision: wall time against global error, for the methods and their peers.
+"""Work-precision: time against global error, for the methods and their peers.
 
-Every method runs over numbers of steps; scipy's ``solve_ivp`` peers run over tolerances. A point's
-time is the median wall time of ``repeats`` calls, after one warm-up call per curve whose compile
-time (reported by the engine) is kept apart. Without an ensemble, in this process, the calls are
-interleaved: every curve is warmed up first, then each of the ``repeats`` rounds times every point
-of every curve once (each round starting one point further on), so that a change of the machine's
-load or clock during the study falls on all curves alike (:func:`_interleaved_curves`); with an
-executor of several workers each curve is one task, timed on the worker that runs it. The error is
-the 2-norm at T against the reference (:mod:`rkhp.studies.reference`); an error not above the
+Every method runs over numbers of steps; the adaptive peers (:mod:`rkhp.studies.peers`: scipy's
+``solve_ivp`` on a plain-arithmetic field, numbalsoda's compiled DOP853, diffrax under ``jax.jit``)
+run over tolerances. A point's times are the minima over ``repeats`` calls of the CPU time of the
+calling thread (``cpu_seconds``, what the cheapest point is chosen by) and of the wall time
+(``seconds``), after one warm-up call per curve whose compile (or trace) time is kept apart. A
+peer whose package is not installed is named in ``absent_peers``. Without an ensemble, in this
+process, the calls are interleaved: every curve is warmed up first, then each of the ``repeats``
+rounds times every point of every curve once (each round starting one point further on), so that
+a change of the machine's load or clock during the study falls on all curves alike
+(:func:`_interleaved_curves`); with an executor of several workers each curve is one task, timed
+on the worker that runs it. The error is
+the 2-norm at T against the best reference rkhp has (:func:`rkhp.studies.peers.best_reference`:
+the closed form, or the tighter of scipy's and the compiled DOP853); an error not above the
 reference's accuracy is not a measurement (``error`` None) but still counts as reaching a target
 error above that accuracy.
 
 Ensemble mode (``ensemble`` = K): every point times K initial conditions near x0 (seeded); RKHP
 methods run all K at once through ``rkhp.integrators.integrate_ensemble``, the peers one after
-another on the first min(K, ENSEMBLE_TIMED) starts; times are per trajectory and the error is the
-largest over the first min(K, ENSEMBLE_CHECKED) starts, each against its own DOP853 reference.
+another on the first min(K, ENSEMBLE_TIMED) starts; times are minimum wall times per trajectory (the
+RKHP ensemble may run on several threads: no ``cpu_seconds``) and the error is the largest over
+the first min(K, ENSEMBLE_CHECKED) starts, each against its own DOP853 reference.
 """
 
 from __future__ import annotations
 
-import statistics
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -32,16 +37,27 @@ from ..base.errors import InputError
 from ..base.executors import run_until_interrupted
 from ..base.interrupts import Interrupted, is_interrupt
 from ..integrators import integrate_ensemble
-from ..integrators.classical import vector_field
 from ..integrators.methods import DEFAULT_METHODS, SCIPY_METHODS, Method, check_distinct, resolve_method, resolve_system
 from .converge import check_t_final
-from .reference import Reference, dop853_reference, reference
+from .peers import (
+    ADAPTIVE_KINDS,
+    ATOL_RATIO,
+    COMPILED_PEERS,
+    Peer,
+    absent,
+    best_reference,
+    compiled_peer,
+    plain_field,
+    prepare,
+    scipy_peer,
+)
+from .reference import Reference, dop853_reference
 
 TARGETS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
 DEFAULT_STEPS = tuple(10 * 2**k for k in range(9))
 DEFAULT_TOLERANCES = tuple(10.0**-k for k in range(3, 14))
-DEFAULT_PEERS = ("scipy:dop853", "scipy:rk45", "classical:rk4", "implicit-midpoint")
-PEER_KINDS = ("scipy", "classical", "implicit-midpoint", "taylor")
+DEFAULT_PEERS = ("numbalsoda:dop853", "scipy:dop853", "scipy:rk45", "classical:rk4", "implicit-midpoint")
+PEER_KINDS = ("scipy", "numbalsoda", "diffrax", "classical", "implicit-midpoint", "taylor")
 #: Bare peer names of earlier versions (each is also a tableau name): refused with their spelling.
 FORMER_PEER_NAMES = {**{k: f"scipy:{k}" for k in SCIPY_METHODS}, "rk4": "classical:rk4",
                      "midpoint": "implicit-midpoint (the implicit midpoint rule) or classical:midpoint"}
@@ -52,7 +68,9 @@ ENSEMBLE_SPREAD = 0.05
 
 @dataclass(frozen=True)
 class BenchPoint:
-    """One setting: ``steps`` (integrators) or ``tolerance`` (scipy, rtol; atol = 1e-3 rtol)."""
+    """One setting: ``steps`` (integrators) or ``tolerance`` (adaptive peers, rtol; atol = 1e-3 rtol);
+    ``seconds`` wall and ``cpu_seconds`` CPU time of the calling thread (None in ensemble mode),
+    minima over the repeats."""
 
     steps: int | None
     tolerance: float | None
@@ -61,15 +79,23 @@ class BenchPoint:
     seconds: float
     evaluations: int | None
     status: str
+    cpu_seconds: float | None = None
+
+    @property
+    def cost(self) -> float:
+        """What the cheapest point is chosen by: CPU seconds where measured, else wall seconds."""
+        return self.seconds if self.cpu_seconds is None else self.cpu_seconds
 
     def to_json(self) -> dict:
         return {"steps": self.steps, "tolerance": self.tolerance, "error": self.error,
-                "seconds": self.seconds, "evaluations": self.evaluations, "status": self.status}
+                "seconds": self.seconds, "cpu_seconds": self.cpu_seconds, "evaluations": self.evaluations,
+                "status": self.status}
 
 
 @dataclass(frozen=True)
 class BenchCurve:
-    """A method's (or peer's) work-precision points; kind: rkhp, classical, implicit-midpoint, scipy."""
+    """A method's (or peer's) work-precision points; kind: rkhp, composition, taylor, classical,
+    implicit-midpoint, or a peer's: scipy, numbalsoda, diffrax."""
 
     method: str
     kind: str
@@ -84,17 +110,19 @@ class BenchCurve:
 
 @dataclass(frozen=True)
 class Cheapest:
-    """The cheapest measured point whose error is at most ``target`` (method None if none)."""
+    """The cheapest measured point (by :attr:`BenchPoint.cost`) whose error is at most ``target``
+    (method None if none)."""
 
     target: float
     method: str | None
     setting: str | None
     seconds: float | None
     error: float | None
+    cpu_seconds: float | None = None
 
     def to_json(self) -> dict:
         return {"target": self.target, "method": self.method, "setting": self.setting,
-                "seconds": self.seconds, "error": self.error}
+                "seconds": self.seconds, "cpu_seconds": self.cpu_seconds, "error": self.error}
 
 
 @dataclass(frozen=True)
@@ -112,6 +140,7 @@ class BenchStudy:
     targets: tuple[float, ...] = TARGETS
     x0: tuple[float, ...] = ()
     interrupted: bool = False
+    absent_peers: tuple[tuple[str, str], ...] = ()
 
     def to_json(self) -> dict:
         return {"system": self.system, "realisation": self.realisation, "x0": list(self.x0),
@@ -119,13 +148,19 @@ class BenchStudy:
                 "reference": {"kind": self.reference.kind, "error_estimate": self.reference.error_estimate},
                 "repeats": self.repeats, "ensemble": self.ensemble,
                 "curves": [c.to_json() for c in self.curves],
-                "cheapest": [c.to_json() for c in self.cheapest]}
+                "cheapest": [c.to_json() for c in self.cheapest],
+                "absent_peers": [{"peer": name, "reason": reason} for name, reason in self.absent_peers]}
 
 
 def resolve_peer(name) -> Method:
-    """A peer: a method of the grammar of :mod:`rkhp.integrators.methods` that is not an RKHP tableau
-    (``scipy:NAME``, ``classical:NAME``, ``implicit-midpoint``, ``thpN``). A bare tableau name is
-    refused, so that a name means the same in --peers as in --method (docs/methods.md)."""
+    """A peer: a compiled peer of :data:`rkhp.studies.peers.COMPILED_PEERS` (``numbalsoda:dop853``,
+    ``diffrax:dopri8``, ``diffrax:tsit5``), or a method of the grammar of
+    :mod:`rkhp.integrators.methods` that is not an RKHP tableau (``scipy:NAME``, ``classical:NAME``,
+    ``implicit-midpoint``, ``thpN``). A bare tableau name is refused, so that a name means the same
+    in --peers as in --method (docs/methods.md)."""
+    compiled = compiled_peer(name)
+    if compiled is not None:
+        return Method(compiled.name, compiled.kind, solver=compiled.solver)
     key = name.strip().lower() if isinstance(name, str) else None
     if key in FORMER_PEER_NAMES:
         raise InputError(f"peer {name!r} is a tableau name, an RKHP method (give it with --method); "
@@ -133,22 +168,28 @@ def resolve_peer(name) -> Method:
     method = resolve_method(name)
     if method.kind not in PEER_KINDS:
         raise InputError(f"peer {method.name!r} is an RKHP method: give it with --method; peers are "
-                         "scipy:NAME, classical:NAME, implicit-midpoint or thpN")
+                         f"{', '.join(COMPILED_PEERS)}, scipy:NAME, classical:NAME, implicit-midpoint or thpN")
     return method
 
 
-def _median_seconds(call, repeats: int):
-    times, result = [], None
+def peer_of(method: Method) -> Peer:
+    """The :class:`rkhp.studies.peers.Peer` that runs an adaptive peer's Method."""
+    return scipy_peer(method.solver) if method.kind == "scipy" else COMPILED_PEERS[method.name]
+
+
+def _least_seconds(call, repeats: int):
+    """(minimum wall seconds of ``repeats`` calls, the last call's result)."""
+    best, result = float("inf"), None
     for _ in range(repeats):
         start = time.perf_counter()
         result = call()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times), result
+        best = min(best, time.perf_counter() - start)
+    return best, result
 
 
 class Outcome(NamedTuple):
     """What one call of a point gives: its measured error (None: failed), f evaluations (scipy), status
-    and the compile time the engine reported."""
+    and the compile time the engine (or the peer's preparation) reported."""
 
     measured: float | None
     evaluations: int | None
@@ -174,33 +215,35 @@ def _method_call(method: Method, system, ref: Reference, n: int, t_final: float)
     return call
 
 
-def _scipy_call(method: Method, system, ref: Reference, rtol: float, t_final: float) -> Callable[[], Outcome]:
+def _peer_call(prepared, system, ref: Reference, rtol: float) -> Callable[[], Outcome]:
     x0 = np.asarray(system.x0, dtype=float)
 
     def call() -> Outcome:
-        sol = solve_peer(system, method.solver, x0, t_final, rtol)
-        ok = sol.success and np.all(np.isfinite(sol.y[:, -1]))
-        measured = float(np.linalg.norm(sol.y[:, -1] - ref.state)) if ok else None
-        return Outcome(measured, int(sol.nfev), "ok" if ok else f"failed: {sol.message}", 0.0)
+        sol = prepared.solve(x0, rtol)
+        measured = float(np.linalg.norm(sol.state - ref.state)) if sol.ok else None
+        return Outcome(measured, sol.evaluations, sol.message, prepared.compile_seconds)
 
     return call
 
 
 def _settings(curves, system, ref: Reference, steps, tolerances, t_final: float) -> list[Setting]:
-    """Every point of every curve (RKHP and classical methods over ``steps``, scipy over ``tolerances``)."""
+    """Every point of every curve (integrators over ``steps``, adaptive peers over ``tolerances``,
+    each peer prepared once: :func:`rkhp.studies.peers.prepare`)."""
     out = []
     for k, m in enumerate(curves):
-        if m.kind == "scipy":
-            out += [Setting(k, None, rtol, _scipy_call(m, system, ref, rtol, t_final)) for rtol in tolerances]
+        if m.kind in ADAPTIVE_KINDS:
+            prepared = prepare(peer_of(m), system, t_final)
+            out += [Setting(k, None, rtol, _peer_call(prepared, system, ref, rtol)) for rtol in tolerances]
         else:
             out += [Setting(k, n, None, _method_call(m, system, ref, n, t_final)) for n in steps]
     return out
 
 
-def _timed(call) -> tuple[float, Outcome]:
-    start = time.perf_counter()
+def _timed(call) -> tuple[float, float, Outcome]:
+    """(wall seconds, CPU seconds of the calling thread, outcome) of one call."""
+    start, cpu = time.perf_counter(), time.thread_time()
     outcome = call()
-    return time.perf_counter() - start, outcome
+    return time.perf_counter() - start, time.thread_time() - cpu, outcome
 
 
 def _interleaved_curves(curves, system, ref: Reference, steps, tolerances, t_final: float, repeats: int,
@@ -211,6 +254,7 @@ def _interleaved_curves(curves, system, ref: Reference, steps, tolerances, t_fin
     never timed are left out)."""
     settings = _settings(curves, system, ref, steps, tolerances, t_final)
     times: list[list[float]] = [[] for _ in settings]
+    cpu: list[list[float]] = [[] for _ in settings]
     outcomes: list[Outcome | None] = [None] * len(settings)
     compile_seconds = [0.0] * len(curves)
     calls = len(curves) + repeats * len(settings)
@@ -231,8 +275,9 @@ def _interleaved_curves(curves, system, ref: Reference, steps, tolerances, t_fin
         for r in range(repeats):
             for j in range(len(settings)):
                 i = (j + r) % len(settings)
-                seconds, outcome = _timed(settings[i].call)
+                seconds, cpu_seconds, outcome = _timed(settings[i].call)
                 times[i].append(seconds)
+                cpu[i].append(cpu_seconds)
                 outcomes[i] = outcome
                 compile_seconds[settings[i].curve] = max(compile_seconds[settings[i].curve], outcome.compile_seconds)
                 advance()
@@ -243,11 +288,11 @@ def _interleaved_curves(curves, system, ref: Reference, steps, tolerances, t_fin
     built = []
     for k, m in enumerate(curves):
         points = tuple(
-            _point(o.measured, ref.floor, steps=s.steps, tolerance=s.tolerance, seconds=statistics.median(t),
+            _point(o.measured, ref.floor, steps=s.steps, tolerance=s.tolerance, seconds=min(t), cpu_seconds=min(c),
                    evaluations=o.evaluations, status=o.status)
-            for s, t, o in zip(settings, times, outcomes, strict=True) if s.curve == k and t)
+            for s, t, c, o in zip(settings, times, cpu, outcomes, strict=True) if s.curve == k and t)
         if points or not interrupted:
-            built.append(BenchCurve(m.name, "scipy" if m.kind == "scipy" else m.kind, compile_seconds[k], 1, points))
+            built.append(BenchCurve(m.name, m.kind, compile_seconds[k], 1, points))
     return built, interrupted
 
 
@@ -270,31 +315,30 @@ def _curve_task(method: Method, system, ref: Reference, steps, tolerances, t_fin
 
 
 def solve_peer(system, solver: str, x0, t_final: float, rtol: float):
-    """scipy's solve_ivp(solver) from x0 to t_final at rtol (atol = 1e-3 rtol) on the system's
-    compiled vector field."""
+    """scipy's solve_ivp(solver) from x0 to t_final at rtol (atol = 1e-3 rtol) on the system's field
+    written with plain arithmetic (:func:`rkhp.studies.peers.plain_field`), with its whole history."""
     from scipy.integrate import solve_ivp
 
-
-    f = vector_field(system)
-    return solve_ivp(lambda t, x: f(x), (0.0, t_final), x0, method=solver, rtol=rtol, atol=1e-3 * rtol)
+    return solve_ivp(plain_field(system), (0.0, t_final), x0, method=solver, rtol=rtol, atol=ATOL_RATIO * rtol)
 
 
 def cheapest(curves, targets=TARGETS) -> tuple[Cheapest, ...]:
-    """For each target error, the cheapest measured point reaching it (over all curves)."""
+    """For each target error, the cheapest measured point reaching it (over all curves), by
+    :attr:`BenchPoint.cost`."""
     out = []
     for target in targets:
         best = None
         for c in curves:
             for p in c.points:
                 if p.status == "ok" and p.measured_error is not None and p.measured_error <= target:
-                    if best is None or p.seconds < best[1].seconds:
+                    if best is None or p.cost < best[1].cost:
                         best = (c, p)
         if best is None:
             out.append(Cheapest(target, None, None, None, None))
         else:
             c, p = best
             setting = f"{p.steps} steps" if p.steps is not None else f"rtol {p.tolerance:g}"
-            out.append(Cheapest(target, c.method, setting, p.seconds, p.error))
+            out.append(Cheapest(target, c.method, setting, p.seconds, p.error, p.cpu_seconds))
     return tuple(out)
 
 
@@ -341,7 +385,7 @@ def _ensemble_method_curve(method: Method, system, refs, floor, starts, steps, t
     warm = time.perf_counter() - warm_start
     points, fastest_first = [], None
     for n in steps:
-        seconds, finals = _median_seconds(lambda n=n: run(n), repeats)
+        seconds, finals = _least_seconds(lambda n=n: run(n), repeats)
         if n == steps[0]:
             fastest_first = seconds
         measured = _ensemble_errors(finals, refs)
@@ -360,28 +404,33 @@ def _final_states(result):
     return states[:, -1, :] if states.ndim == 3 else states
 
 
-def _ensemble_scipy_curve(method, system, refs, floor, starts, tolerances, t_final, repeats) -> BenchCurve:
-    solver = method.solver
+def _ensemble_peer_curve(method, system, refs, floor, starts, tolerances, t_final, repeats) -> BenchCurve:
+    """An adaptive peer on the first min(K, ENSEMBLE_TIMED) starts, one after another (prepared and
+    warmed up once, :func:`rkhp.studies.peers.prepare`)."""
     count = min(len(starts), ENSEMBLE_TIMED)
-    solve_peer(system, solver, starts[0], t_final, max(tolerances))  # warm-up, untimed
+    prepared = prepare(peer_of(method), system, t_final, starts[0])
     points = []
     for rtol in tolerances:
         def run(rtol=rtol):
-            sols = [solve_peer(system, solver, x, t_final, rtol) for x in starts[:count]]
-            return np.array([s.y[:, -1] for s in sols]), sum(int(s.nfev) for s in sols)
+            sols = [prepared.solve(x, rtol) for x in starts[:count]]
+            counted = all(s.evaluations is not None for s in sols)
+            return (np.array([s.state if s.ok else np.full(len(x), np.nan) for s, x in zip(sols, starts)]),
+                    sum(s.evaluations for s in sols) // count if counted else None)
 
-        seconds, (finals, nfev) = _median_seconds(run, repeats)
+        seconds, (finals, evaluations) = _least_seconds(run, repeats)
         measured = _ensemble_errors(finals, refs)
         points.append(_point(measured, floor, steps=None, tolerance=rtol, seconds=seconds / count,
-                             evaluations=nfev // count, status="ok" if measured is not None else "failed"))
-    return BenchCurve(method.name, "scipy", 0.0, count, tuple(points))
+                             evaluations=evaluations, status="ok" if measured is not None else "failed"))
+    return BenchCurve(method.name, method.kind, prepared.compile_seconds, count, tuple(points))
 
 
 def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=DEFAULT_TOLERANCES,
           t_final=None, repeats: int = 3, ensemble: int | None = None, seed: int = 0,
           on_curve=None, executor=None) -> BenchStudy:
     """Work-precision study of ``methods`` and ``peers`` (names of :mod:`rkhp.integrators.methods`, or Methods;
-    a method may be ``scipy:NAME`` too) on ``system`` (a name, a spec file or a PoissonSystem).
+    a method may be ``scipy:NAME`` too; peers: :func:`resolve_peer`) on ``system`` (a name, a spec file
+    or a PoissonSystem). A compiled peer whose package is not installed is left out and named, with
+    the reason, in ``absent_peers``.
 
     With an ``executor`` (rkhp.base.executors): one trajectory per point, each curve is one task, timed
     on the worker that runs it; in ensemble mode the curves run here one after another and each
@@ -404,13 +453,15 @@ def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=
     bounds.seed(seed)
     curves_of = check_distinct([*(resolve_method(m) for m in methods or DEFAULT_METHODS),
                                 *(resolve_peer(p) for p in peers)])
-    integrators = [m for m in curves_of if m.kind != "scipy"]
-    solvers = [m for m in curves_of if m.kind == "scipy"]
+    missing = {m.name: absent(peer_of(m)) for m in curves_of if m.kind in ADAPTIVE_KINDS}
+    absent_peers = tuple((name, reason) for name, reason in missing.items() if reason)
+    integrators = [m for m in curves_of if m.kind not in ADAPTIVE_KINDS]
+    solvers = [m for m in curves_of if m.kind in ADAPTIVE_KINDS and not missing[m.name]]
     bounds.check_work(repeats * (ensemble or 1) * sum(steps) * len(integrators),
                       f"the bench ({repeats} repeats x {ensemble or 1} starts x {sum(steps)} steps x "
                       f"{len(integrators)} methods)")
     if ensemble is None:
-        ref = reference(system, t_final)
+        ref = best_reference(system, t_final)
         if executor is None or executor.kind == "in-process":
             curves, interrupted = _interleaved_curves([*integrators, *solvers], system, ref, steps, tolerances,
                                                       t_final, repeats, on_curve)
@@ -431,7 +482,7 @@ def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=
                 if on_curve:
                     on_curve(len(curves), len(integrators) + len(solvers))
             for p in solvers:
-                curves.append(_ensemble_scipy_curve(p, system, refs, ref.floor, starts, tolerances, t_final,
+                curves.append(_ensemble_peer_curve(p, system, refs, ref.floor, starts, tolerances, t_final,
                                                     repeats))
                 if on_curve:
                     on_curve(len(curves), len(integrators) + len(solvers))
@@ -440,4 +491,5 @@ def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=
                 raise
             interrupted = True
     return BenchStudy(system.name, system.realisation, t_final, ref, repeats, ensemble, tuple(curves),
-                      cheapest(curves), x0=tuple(float(v) for v in system.x0), interrupted=interrupted)
+                      cheapest(curves), x0=tuple(float(v) for v in system.x0), interrupted=interrupted,
+                      absent_peers=absent_peers)

@@ -115,6 +115,9 @@ class PoissonSystem:
     `poisson_degree`: the degree of pi as a polynomial in x (0 constant, 1 linear, ...; None when
     pi is not a polynomial): it decides which terms of the spray series vanish, hence the order
     a ``truncated:K`` realisation allows (`realisation_order`).
+    `structure`: the data of pi in its family (`rkhp.systems.families`: structure constants,
+    lambda, a matrix of expressions...), from which the family's ``symbolic`` gives pi as sympy
+    expressions (`rkhp.systems.field_code`).
     """
 
     name: str
@@ -136,6 +139,7 @@ class PoissonSystem:
     description: str = ""
     extra: dict = field(default_factory=dict)
     poisson_degree: int | None = None
+    structure: object = None
 
     @property
     def realisation_order(self) -> int | None:
@@ -218,14 +222,16 @@ def build_system(*, name: str, family: str, dim: int, poisson: Callable, hamilto
                  poisson_program: Callable, poisson_degree: int | None,
                  realisation_name: str = "symmetric", domain: str = "R^n",
                  casimirs: tuple = (), casimir_names: tuple = (),
-                 exact_solution: Callable | None = None, description: str = "") -> PoissonSystem:
+                 exact_solution: Callable | None = None, description: str = "",
+                 structure=None) -> PoissonSystem:
     """Record the tapes of a system from programs over tape Vars.
 
     hamiltonian(x) -> Var; base_alpha(x, p), base_beta(x, p) -> lists of n Vars: the symmetric
     base birealisation; the realisation named `realisation_name` is composed on top.
     poisson_program(y) -> n x n entries (numbers or functions of y with + - * / ** and the tape
     functions): pi at the tape level, for the ``truncated:K`` realisations; poisson_degree: its
-    degree as a polynomial (None if it is not one).
+    degree as a polynomial (None if it is not one); structure: the family's data of pi, kept on
+    the system.
     """
     kind = realisation(realisation_name)
     if kind.truncation is not None:
@@ -252,4 +258,5 @@ def build_system(*, name: str, family: str, dim: int, poisson: Callable, hamilto
         h_tape=h_tape, f_tape=f_tape, alpha_tape=alpha_tape, beta_tape=beta_tape,
         domain=domain, casimirs=tuple(casimirs), casimir_names=tuple(casimir_names),
         exact_solution=exact_solution, description=description, poisson_degree=poisson_degree,
+        structure=structure,
     )

@@ -122,7 +122,7 @@ def family_system(family_name: str, structure, hamiltonian: Callable, *, name: s
                         x0=x0, t_final=t_final, poisson_program=fam.program(structure),
                         poisson_degree=fam.degree(structure), realisation_name=realisation,
                         domain=fam.domain, casimirs=casimirs, casimir_names=casimir_names,
-                        exact_solution=exact_solution, description=description)
+                        exact_solution=exact_solution, description=description, structure=structure)
 
 
 # ----------------------------------------------------------------------------------------------

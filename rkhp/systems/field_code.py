@@ -1,0 +1,193 @@
+"""The Poisson vector field f(x) = pi(x) grad H(x) written out as plain arithmetic (docs/theory.md §4).
+
+What a user hands an ODE solver is a right-hand side written with plain arithmetic; the peers of
+``rkhp bench`` get that field, generated from the system itself, for every system (built-in or
+from a spec file):
+
+- pi(x) as sympy expressions from the system's family (:attr:`PoissonFamily.symbolic
+  <rkhp.systems.families.PoissonFamily>` of ``system.structure``);
+- H(x) as a sympy expression read off the system's Hamiltonian tape (`rkhp.taylor.tape`: its
+  arithmetic rows and elementary functions, one sympy node per row);
+- f_i = sum_j pi_ij dH/dx_j by sympy's differentiation, its common subexpressions named once
+  (``sympy.cse``), printed by sympy's Python printer (arithmetic, number literals and ``math.f``
+  calls).
+
+The source is built from a tree of rkhp's own making (symbols x1..xn, numbers, + - * / **, the
+functions of the opcode table), checked node by node (:func:`check_tree`) before it is printed:
+no text of a spec file reaches ``exec``. Three forms (:data:`FORMS`):
+
+- ``numpy``: ``f(t, x) -> ndarray`` for scipy's ``solve_ivp``: the state unpacked to Python floats,
+  scalar arithmetic, ``math`` functions, one ``np.array`` built at the end;
+- ``cfunc``: ``f(t, u, du, p)`` writing du in place, the signature of a numba ``cfunc`` right-hand
+  side (numbalsoda's ``lsoda_sig``);
+- ``jax``: ``f(t, y, args) -> array`` for diffrax, the functions of ``jax.numpy``.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+from typing import NamedTuple
+
+import numpy as np
+
+from ..base.errors import InputError
+from ..taylor import ops
+from .families import FAMILIES
+from .structure import symbols_of
+
+FORMS = ("numpy", "cfunc", "jax")
+#: the functions a field may call: those of the opcode table and its derived ones (`rkhp.taylor.ops`)
+FUNCTION_NAMES = ("exp", "log", "sin", "cos", "sqrt", "atan", "tan", "sinh", "cosh", "tanh")
+
+
+class FieldCode(NamedTuple):
+    """A system's field as source: ``source`` defines ``field`` in the form ``form``; ``dim``
+    components; ``operations``: the arithmetic operations and function calls of one evaluation
+    (sympy's ``count_ops`` of the printed expressions)."""
+
+    form: str
+    source: str
+    dim: int
+    operations: int
+
+
+def hamiltonian_expression(system):
+    """H(x) as a sympy expression in x1..xn, read off ``system.h_tape`` row by row; InputError
+    for a tape holding an operation that has no elementary form (a composite operation)."""
+    import sympy
+
+    tape = system.h_tape
+    n = system.dim
+    x = symbols_of(n)
+    slots: dict[int, object] = {i: x[i] for i in range(n)}
+    slots.update({n + i: sympy.Integer(0) for i in range(tape.n_inputs - n)})  # p = 0: H reads no p
+    functions = {op.code: getattr(sympy, op.sympy) for op in ops.OPS if op.kind == ops.FUNCTION and op.sympy}
+    for row in range(int(tape.main), tape.ops.shape[0]):
+        code, out, a, b, k = (int(v) for v in tape.ops[row])
+        f = sympy.Float(float(tape.fpar[row]))
+        A, B = slots.get(a), slots.get(b)
+        if code == ops.CONST:
+            value = f
+        elif code == ops.ADD:
+            value = A + B
+        elif code == ops.SUB:
+            value = A - B
+        elif code == ops.MUL:
+            value = A * B
+        elif code == ops.NEG:
+            value = -A
+        elif code == ops.MULC:
+            value = A * f
+        elif code == ops.ADDC:
+            value = A + f
+        elif code == ops.DIV:
+            value = A / B
+        elif code == ops.POWI:
+            value = A ** sympy.Integer(k)
+        elif code == ops.POWR:
+            value = A ** f
+        elif code in functions:
+            value = functions[code](A)
+        else:
+            raise InputError(f"{system.name}: its Hamiltonian holds the operation {ops.BY_CODE[code].name}, "
+                             "which has no plain-arithmetic form")
+        slots[out] = value
+    return slots[int(tape.outputs[0])]
+
+
+def poisson_expressions(system):
+    """pi(x) as rows of sympy expressions in x1..xn, from the system's family and structure."""
+    family = FAMILIES.get(system.family)
+    if family is None or family.symbolic is None or system.structure is None:
+        raise InputError(f"{system.name}: its Poisson matrix has no symbolic form (family {system.family})")
+    return family.symbolic(system.structure)
+
+
+def field_expressions(system):
+    """(symbols x1..xn, [f_1..f_n]) with f = pi(x) grad H(x), as sympy expressions."""
+    import sympy
+
+    x = symbols_of(system.dim)
+    H = hamiltonian_expression(system)
+    grad = [sympy.diff(H, s) for s in x]
+    pi = poisson_expressions(system)
+    return x, [sympy.Add(*[pi[i][j] * grad[j] for j in range(system.dim) if pi[i][j] != 0 and grad[j] != 0])
+               for i in range(system.dim)]
+
+
+def check_tree(expr) -> None:
+    """InputError unless ``expr`` holds only numbers, symbols, pi and E, + * ** and the functions
+    of :data:`FUNCTION_NAMES` (what the printer turns into arithmetic and ``math.f`` calls)."""
+    import sympy
+
+    for node in sympy.preorder_traversal(expr):
+        if isinstance(node, sympy.Number | sympy.Symbol | sympy.Add | sympy.Mul | sympy.Pow):
+            continue
+        if node in (sympy.pi, sympy.E):
+            continue
+        if isinstance(node, sympy.Function) and type(node).__name__ in FUNCTION_NAMES:
+            continue
+        raise InputError(f"the vector field holds {type(node).__name__}, which has no plain-arithmetic form")
+
+
+def _printed(symbols, exprs) -> tuple[list[tuple[str, str]], list[str], int]:
+    """(named subexpressions, the components, operation count) as Python text; x_i is named xi."""
+    import sympy
+    from sympy.printing.pycode import PythonCodePrinter
+
+    for e in exprs:
+        check_tree(e)
+    names = sympy.numbered_symbols("c")
+    common, reduced = sympy.cse(exprs, symbols=names, order="none")
+    printer = PythonCodePrinter({"fully_qualified_modules": True, "standard": "python3"})
+    lines = [(str(s), printer.doprint(e)) for s, e in common]
+    components = [printer.doprint(sympy.Float(0.0) if e == 0 else e) for e in reduced]
+    count = int(sum(sympy.count_ops(e) for _, e in common) + sum(sympy.count_ops(e) for e in reduced))
+    return lines, components, count
+
+
+def field_code(system, form: str) -> FieldCode:
+    """The source of the system's field in ``form`` (:data:`FORMS`), defining ``field``."""
+    if form not in FORMS:
+        raise InputError(f"unknown form {form!r} of the field; choose one of {', '.join(FORMS)}")
+    symbols, exprs = field_expressions(system)
+    return code_of(symbols, exprs, form)
+
+
+def code_of(symbols, exprs, form: str) -> FieldCode:
+    """:func:`field_code` of given expressions (``symbols`` named x1..xn)."""
+    lines, components, count = _printed(symbols, exprs)
+    n = len(symbols)
+    names = [str(s) for s in symbols]
+    body = [f"    {name} = {text}" for name, text in lines]
+    if form == "numpy":
+        head = ["def field(t, x):", f"    {', '.join(names)}{',' if n == 1 else ''} = x.tolist()"]
+        tail = [f"    return np.array([{', '.join(components)}])"]
+    elif form == "cfunc":
+        head = ["def field(t, u, du, p):", *[f"    {name} = u[{i}]" for i, name in enumerate(names)]]
+        tail = [f"    du[{i}] = {text}" for i, text in enumerate(components)]
+    else:
+        head = ["def field(t, y, args):", *[f"    {name} = y[{i}]" for i, name in enumerate(names)]]
+        stacked = ", ".join(f"jnp.asarray({text}, dtype=y.dtype)" for text in components)
+        tail = [f"    return jnp.stack([{stacked}])"]
+    return FieldCode(form, "\n".join(head + body + tail) + "\n", n, count)
+
+
+def _namespace(form: str) -> dict:
+    if form == "jax":
+        import jax.numpy as jnp
+
+        functions = SimpleNamespace(**{name: getattr(jnp, name) for name in ("exp", "log", "sin", "cos", "sqrt",
+                                                                              "tan", "sinh", "cosh", "tanh")},
+                                    atan=jnp.arctan, pi=math.pi, e=math.e)
+        return {"math": functions, "jnp": jnp}
+    return {"math": math, "np": np}
+
+
+def compiled(code: FieldCode):
+    """The function ``field`` that ``code.source`` defines (a Python function; the ``cfunc``
+    form is then compiled by numba's ``cfunc``, the ``jax`` one traced by ``jax.jit``)."""
+    namespace = _namespace(code.form)
+    exec(compile(code.source, f"<field of {code.form}>", "exec"), namespace)  # noqa: S102 (checked tree)
+    return namespace["field"]
