@@ -18,13 +18,13 @@ The equation is z = G(x(z)) with G(x) = h grad H(x) (constant, lie-poisson) or x
 (log-canonical): values and first derivatives of H only (`rkhp.taylor.scalar`), no jets. It is
 solved by quasi-Newton iterations z += B (G(x(z)) - z) from B = M^-1, M = I - G'(y0) x'(0)
 (x'(0) = pi(y0) / 2 for the first two families, diag(y0) lambda / 2 for log-canonical; Hess H by
-differences of the gradient, `rkhp.integrators.spray_euler._hessian`), a chord matrix that
+differences of the gradient, `rkhp.integrators.direct_form.hessian`), a chord matrix that
 contracts by O(h^2) an iteration, improved by Broyden's update of B from each correction and the
 change of the residual it brought (measured on RKHP Euler: 4.3 iterations a step against 6.6 for
 the plain chord iterations on the rigid body at h = 0.1, 5.8 against 8.1 on Lotka–Volterra,
 4.1 against 4.6 on toda:12 at h = 0.05).
 B is built once per substep of a composition and kept, with its updates, across steps (rebuilt
-when its contraction grows, `REFRESH_CONTRACTION`, `rkhp.integrators.spray_euler.SLOW_CONTRACTION`).
+when its contraction grows, `REFRESH_CONTRACTION`, `rkhp.integrators.direct_form.SLOW_CONTRACTION`).
 Each substep starts from z extrapolated over the same substep of the previous steps (`HISTORY`,
 as the spray's direct form, docs/general-poisson.md "The Euler step in direct form").
 
@@ -56,18 +56,18 @@ from ..taylor.elementary import TWO_PI
 from ..taylor.linalg import lu_factor, lu_solve
 from ..taylor.scalar import SCALAR_CODES, shared
 from ..taylor.tape import Tape
-from .engine import max_abs
-from .failure import Failure
-from .spray_euler import (
+from .direct_form import (
     HISTORY,
     RATE_MARGIN,
     SLOW_CONTRACTION,
     STAGNATION,
-    _gradient,
-    _hessian,
-    _weight,
     add_increment,
+    gradient,
+    hessian,
+    weight,
 )
+from .engine import max_abs
+from .failure import Failure
 
 CONSTANT, LIE_POISSON, LOG_CANONICAL = 0, 1, 2
 """The families of `ClosedForm.kind`."""
@@ -240,7 +240,7 @@ def _point(y0, form, work, n):
 @nb.njit(inline="always", **NJIT_NORC)
 def _target(hs, form, work, n):
     """work.res := G(work.xbar) (see the module) with step hs."""
-    _gradient(form, work, work.xbar, n)
+    gradient(form, work, work.xbar, n)
     for k in range(n):
         gk = hs * work.g[k]
         work.res[k] = work.xbar[k] * gk if form.kind == LOG_CANONICAL else gk
@@ -266,10 +266,10 @@ def _refresh(i, y0, hs, form, work, memory, n):
         for a in range(n):
             for b in range(n):
                 D[a, b] = 0.5 * form.matrix[a, b] * (y0[a] if form.kind == LOG_CANONICAL else 1.0)
-    _hessian(form, work, y0, n)
+    hessian(form, work, y0, n)
     if form.kind == LOG_CANONICAL:
         # G'(y0) = h (diag(grad H) + diag(y0) Hess H)
-        _gradient(form, work, y0, n)
+        gradient(form, work, y0, n)
         for a in range(n):
             for b in range(n):
                 H[a, b] *= y0[a]
@@ -299,7 +299,7 @@ def _refresh(i, y0, hs, form, work, memory, n):
 @nb.njit(inline="always", **NJIT_NORC)
 def _predict(i, y0, hs, form, work, memory, n):
     """work.z from substep i's previous solutions (their polynomial extrapolation in the step
-    index, `rkhp.integrators.spray_euler._weight`), or G(y0) without any."""
+    index, `rkhp.integrators.direct_form.weight`), or G(y0) without any."""
     count = memory.count[i]
     if count == 0:
         for k in range(n):
@@ -311,7 +311,7 @@ def _predict(i, y0, hs, form, work, memory, n):
     for k in range(n):
         acc = 0.0
         for r in range(count):
-            acc += _weight(count, r) * memory.z_hist[i, r, k]
+            acc += weight(count, r) * memory.z_hist[i, r, k]
         work.z[k] = acc
 
 
@@ -363,7 +363,7 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
     iteration on its predicted successor t / (1 - t) |d| (t = RATE_MARGIN theta, theta the
     measured contraction: Broyden's iterations contract unevenly; without the margin, a constant
     pi's step stopped 4e-15 off the midpoint equation), is at most solver.tol max(1, |y0|), or
-    when corrections at round-off stop halving (`rkhp.integrators.spray_euler.STAGNATION`); then
+    when corrections at round-off stop halving (`rkhp.integrators.direct_form.STAGNATION`); then
     x and y1 are taken at the final z. The first iteration predicts nothing: the previous step's
     first contraction, which the spray's direct form uses there, is no bound once Broyden's
     update has improved B (measured below 1e-4 on the rigid body)."""
@@ -435,7 +435,7 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
 @nb.njit(inline="always", **NJIT_NORC)
 def begin(data, y0):
     """Start a run at y0 (the state work.y, carried as the double-double y + y_low,
-    `rkhp.integrators.spray_euler.add_increment`), every substep's memory emptied."""
+    `rkhp.integrators.direct_form.add_increment`), every substep's memory emptied."""
     work, memory = data.work, data.memory
     for k in range(y0.shape[0]):
         work.y[k] = y0[k]

@@ -57,6 +57,16 @@ from ..taylor.ops import SCRATCH_BASE, SPRAY
 from ..taylor.rows import subprogram_at
 from ..taylor.scalar import SCALAR_CODES, gradients, shared, values
 from ..taylor.tape import Tape
+from .direct_form import (
+    HISTORY,
+    RATE_MARGIN,
+    SLOW_CONTRACTION,
+    STAGNATION,
+    add_increment,
+    gradient,
+    hessian,
+    weight,
+)
 from .engine import max_abs
 from .failure import Failure
 
@@ -68,30 +78,6 @@ NODE_BOUND = 2.0**-53
 """The bound on E_Q theta^(2 Q), the relative error of the average for y' = lambda y,
 |lambda| <= theta (`rkhp.taylor.collocation.average_error_constant`), that sets the number of
 nodes: half a unit of round-off."""
-RATE_MARGIN = 2.0
-"""Safety factor on a substep's last measured contraction when it predicts the second correction
-from the first (so that one iteration can suffice)."""
-SLOW_CONTRACTION = 0.25
-"""A chord iteration contracting by more than this refreshes the substep's matrix (once per
-substep; as the engine's Newton iteration, `rkhp.integrators.engine.rkhp_step`). The matrix is
-kept across steps: it goes stale by O(h) a step, which the first iteration of a step feels (its
-p-columns: measured 0.05 on nambu at h = 0.1 even just after a refresh), the later ones less."""
-HESSIAN_STEP = 2.0**-17
-"""Relative step of the central differences that give Hess H for the chord matrix."""
-STAGNATION = 64 * 2.0**-52
-"""Corrections at most this (relative to max(1, |y0|)) that no longer halve are round-off: the
-iterations have converged as far as float64 allows."""
-DIRECT_TOLERANCE = 2.0**-60
-"""The chord iterations' default tolerance (relative): below round-off, so that they run until
-the corrections stagnate (`STAGNATION`). Stopping at 1e-15 left the stages off the collocation
-solution by that much, which moves a non-quadratic Casimir systematically (docs/general-poisson.md
-"The Euler step in direct form")."""
-HISTORY = 4
-"""Previous solutions of a substep kept for the extrapolated start (cubic: measured on the
-charged particle at h = 0.1, step 11, the start's error is 8.3e-7 against 7.4e-6 with three,
-quadratic: one chord iteration fewer)."""
-
-
 class SprayTapes(NamedTuple):
     """The plain tapes of the direct form, each over the 2n inputs (y, p): `field` X(y, p) =
     pi(y) p (the spray operation's sub-program, outputs X), `hamiltonian` H(y) (p unused)."""
@@ -196,46 +182,6 @@ def _field_at(tapes, work, y0, j, n):
         work.X[j, k] = W[tapes.field.outputs[k], 0]
 
 
-@nb.njit(inline="always", **NJIT_NORC)
-def _gradient(tapes, work, x, n):
-    """grad H(x) into work.g, by forward mode (`rkhp.taylor.scalar.gradients`)."""
-    W = work.W
-    for k in range(n):
-        for m in range(1, n + 1):
-            W[k, m] = 1.0 if m == 1 + k else 0.0
-            W[n + k, m] = 0.0
-        W[k, 0] = x[k]
-        W[n + k, 0] = 0.0
-    gradients(tapes.hamiltonian, W, n)
-    out = tapes.hamiltonian.outputs[0]
-    for k in range(n):
-        work.g[k] = W[out, 1 + k]
-
-
-@nb.njit(**NJIT_NORC)
-def _hessian(tapes, work, x, n):
-    """Hess H(x) into work.hess by central differences of the gradient, steps
-    HESSIAN_STEP max(1, |x_k|) (error about 1e-10 relative: the chord matrix needs no more), made
-    symmetric; work.xbar is overwritten."""
-    H, xs = work.hess, work.xbar
-    for k in range(n):
-        xs[k] = x[k]
-    for k in range(n):
-        step = HESSIAN_STEP * max(1.0, abs(x[k]))
-        xs[k] = x[k] + step
-        _gradient(tapes, work, xs, n)
-        for r in range(n):
-            H[r, k] = work.g[r]
-        xs[k] = x[k] - step
-        _gradient(tapes, work, xs, n)
-        for r in range(n):
-            H[r, k] = (H[r, k] - work.g[r]) / (2.0 * step)
-        xs[k] = x[k]
-    for k in range(n):
-        for r in range(k):
-            H[r, k] = H[k, r] = 0.5 * (H[r, k] + H[k, r])
-
-
 @nb.njit(**NJIT_NORC)
 def _refresh(i, y0, hs, tapes, work, memory, n, current):
     """Substep i's chord matrix with step hs at (y0, work.p) (see the module): J, P, Q and the
@@ -258,7 +204,7 @@ def _refresh(i, y0, hs, tapes, work, memory, n, current):
     memory.nodes[i] = q
     if q != current:
         _start_stages(i, q, memory, work, n)
-    _hessian(tapes, work, y0, n)
+    hessian(tapes, work, y0, n)
     LU, H = memory.LU[i], work.hess
     m = (q + 1) * n
     for r in range(m):
@@ -318,31 +264,21 @@ def _theta(y0, tapes, work, n):
     return _norm_bound(J)
 
 
-@nb.njit(**NJIT_NORC)
-def _weight(count, r):
-    """The weight of the r-th newest of `count` equally spaced values in their polynomial
-    extrapolation one step ahead: (-1)^r binom(count, r + 1)."""
-    c = 1.0
-    for j in range(r + 1):
-        c = c * (count - j) / (j + 1)
-    return -c if r % 2 else c
-
-
 @nb.njit(inline="always", **NJIT_NORC)
 def _predict(i, y0, hs, tapes, work, memory, n):
     """work.p from substep i's previous solutions (their polynomial extrapolation in the step
-    index, `_weight`), or hs grad H(y0) without any."""
+    index, `weight`), or hs grad H(y0) without any."""
     count = memory.counts[i, 0]
     hist = memory.p_hist[i]
     if count == 0:
-        _gradient(tapes, work, y0, n)
+        gradient(tapes, work, y0, n)
         for k in range(n):
             work.p[k] = hs * work.g[k]
         return
     for k in range(n):
         acc = 0.0
         for r in range(count):
-            acc += _weight(count, r) * hist[r, k]
+            acc += weight(count, r) * hist[r, k]
         work.p[k] = acc
 
 
@@ -361,7 +297,7 @@ def _start_stages(i, q, memory, work, n):
             if count > 0:
                 acc = 0.0
                 for r in range(count):
-                    acc += _weight(count, r) * hist[r, j, k]
+                    acc += weight(count, r) * hist[r, j, k]
                 work.Z[j, k] = acc
             else:
                 x0 = 0.0
@@ -425,7 +361,7 @@ def _sweep(i, q, y0, hs, tapes, work, memory, n):
         for j in range(q):
             acc += TABLE_W[q, j] * work.X[j, k]
         work.xbar[k] = acc
-    _gradient(tapes, work, work.xbar, n)
+    gradient(tapes, work, work.xbar, n)
     res = work.res
     for a in range(q):
         for k in range(n):
@@ -525,16 +461,6 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
         work.dy[k] = acc
     _remember(i, q, memory, work, n)
     return Failure.OK, it
-
-
-@nb.njit(inline="always", **NJIT_NORC)
-def add_increment(y, low, dy, n):
-    """y + low += dy, the state kept as a double-double (Knuth's two-sum per component)."""
-    for k in range(n):
-        a, b = y[k], low[k] + dy[k]
-        total = a + b
-        bb = total - a
-        y[k], low[k] = total, (a - (total - bb)) + (b - bb)
 
 
 @nb.njit(inline="always", **NJIT_NORC)

@@ -1,0 +1,99 @@
+"""What the direct forms of the RKHP Euler step share (`rkhp.integrators.closed_euler`,
+`rkhp.integrators.spray_euler`; docs/theory.md §9, §12): the constants of their iterations, H's
+gradient and Hessian at a point, the extrapolated start from a substep's previous solutions, and
+the state kept as a double-double.
+
+`gradient` and `hessian` take the provider's tapes (a NamedTuple whose field ``hamiltonian`` is
+H's plain tape over (x, p)) and work arrays (fields W, g, hess, xbar).
+"""
+
+from __future__ import annotations
+
+from ..taylor.compiler import NJIT_NORC
+from ..taylor.compiler import numba as nb
+from ..taylor.scalar import gradients
+
+RATE_MARGIN = 2.0
+"""Safety factor on a substep's last measured contraction when it predicts the second correction
+from the first (so that one iteration can suffice)."""
+SLOW_CONTRACTION = 0.25
+"""A chord iteration contracting by more than this refreshes the substep's matrix (once per
+substep; as the engine's Newton iteration, `rkhp.integrators.engine.rkhp_step`). The matrix is
+kept across steps: it goes stale by O(h) a step, which the first iteration of a step feels (its
+p-columns: measured 0.05 on nambu at h = 0.1 even just after a refresh), the later ones less."""
+HESSIAN_STEP = 2.0**-17
+"""Relative step of the central differences that give Hess H for the chord matrix."""
+STAGNATION = 64 * 2.0**-52
+"""Corrections at most this (relative to max(1, |y0|)) that no longer halve are round-off: the
+iterations have converged as far as float64 allows."""
+DIRECT_TOLERANCE = 2.0**-60
+"""The chord iterations' default tolerance (relative): below round-off, so that they run until
+the corrections stagnate (`STAGNATION`). Stopping at 1e-15 left the stages off the collocation
+solution by that much, which moves a non-quadratic Casimir systematically (docs/general-poisson.md
+"The Euler step in direct form")."""
+HISTORY = 4
+"""Previous solutions of a substep kept for the extrapolated start (cubic: measured on the
+charged particle at h = 0.1, step 11, the start's error is 8.3e-7 against 7.4e-6 with three,
+quadratic: one chord iteration fewer)."""
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def gradient(tapes, work, x, n):
+    """grad H(x) into work.g, by forward mode (`rkhp.taylor.scalar.gradients`)."""
+    W = work.W
+    for k in range(n):
+        for m in range(1, n + 1):
+            W[k, m] = 1.0 if m == 1 + k else 0.0
+            W[n + k, m] = 0.0
+        W[k, 0] = x[k]
+        W[n + k, 0] = 0.0
+    gradients(tapes.hamiltonian, W, n)
+    out = tapes.hamiltonian.outputs[0]
+    for k in range(n):
+        work.g[k] = W[out, 1 + k]
+
+
+@nb.njit(**NJIT_NORC)
+def hessian(tapes, work, x, n):
+    """Hess H(x) into work.hess by central differences of the gradient, steps
+    HESSIAN_STEP max(1, |x_k|) (error about 1e-10 relative: the chord matrix needs no more), made
+    symmetric; work.xbar is overwritten."""
+    H, xs = work.hess, work.xbar
+    for k in range(n):
+        xs[k] = x[k]
+    for k in range(n):
+        step = HESSIAN_STEP * max(1.0, abs(x[k]))
+        xs[k] = x[k] + step
+        gradient(tapes, work, xs, n)
+        for r in range(n):
+            H[r, k] = work.g[r]
+        xs[k] = x[k] - step
+        gradient(tapes, work, xs, n)
+        for r in range(n):
+            H[r, k] = (H[r, k] - work.g[r]) / (2.0 * step)
+        xs[k] = x[k]
+    for k in range(n):
+        for r in range(k):
+            H[r, k] = H[k, r] = 0.5 * (H[r, k] + H[k, r])
+
+
+
+@nb.njit(**NJIT_NORC)
+def weight(count, r):
+    """The weight of the r-th newest of `count` equally spaced values in their polynomial
+    extrapolation one step ahead: (-1)^r binom(count, r + 1)."""
+    c = 1.0
+    for j in range(r + 1):
+        c = c * (count - j) / (j + 1)
+    return -c if r % 2 else c
+
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def add_increment(y, low, dy, n):
+    """y + low += dy, the state kept as a double-double (Knuth's two-sum per component)."""
+    for k in range(n):
+        a, b = y[k], low[k] + dy[k]
+        total = a + b
+        bb = total - a
+        y[k], low[k] = total, (a - (total - bb)) + (b - bb)
