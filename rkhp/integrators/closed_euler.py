@@ -54,7 +54,7 @@ from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
 from ..taylor.elementary import TWO_PI
 from ..taylor.linalg import lu_factor, lu_solve
-from ..taylor.scalar import SCALAR_CODES, shared
+from ..taylor.scalar import SCALAR_CODES, polynomial_degree, shared
 from ..taylor.tape import Tape
 from .direct_form import (
     HISTORY,
@@ -87,6 +87,37 @@ BROYDEN_FLOOR = 2.0**-30
 change of the residual is dominated by its rounding."""
 SERIES_TERMS = 64
 """Terms of the series of e^-K at most (|K|_F < PHI_GUARD needs about 40 for round-off)."""
+EXACT_DIMENSION = 12
+"""Systems with a quadratic H (a constant Hessian) solve each substep by Newton's method
+(`newton_substep`) on so(3)*, and on the constant and log-canonical families up to this
+dimension; the others keep a chord matrix across steps with Broyden's updates (`closed_substep`:
+an exact Jacobian would cost 2 n gradients of H, or an n x n inverse of more than this size, at
+each Newton step)."""
+ROTATION_SERIES = 1.0
+"""Below this angle theta the coefficients of the rotation (`_rotation_coefficients`) are summed
+as their power series (ROTATION_TERMS terms: the next is below 2^-56 of the first), above it
+taken from sin and cos (whose differences lose at most a few units of round-off there)."""
+ROTATION_TERMS = 9
+NEWTON_REFRESH = 1e-7
+"""`newton_substep` takes the exact Jacobian again after a correction above this (relative to
+max(1, |y0|)); below it the last one serves (its chord step contracts by about L 1e-7)."""
+
+
+def _rotation_series_table() -> np.ndarray:
+    """The coefficients in t = theta^2 of `_rotation_coefficients`' five series: (-1)^m / (2 m +
+    k)! for k = 1, 2, 3 (sin theta / theta, (1 - cos theta) / theta^2, (theta - sin theta) /
+    theta^3), then (-1)^(m + 1) 2 (m + 1) / (2 m + k + 2)! for k = 2, 3 (their derivatives in
+    theta, divided by theta)."""
+    table = np.zeros((5, ROTATION_TERMS))
+    for m in range(ROTATION_TERMS):
+        for row, k in enumerate((1, 2, 3)):
+            table[row, m] = (-1) ** m / math.factorial(2 * m + k)
+        for row, k in ((3, 2), (4, 3)):
+            table[row, m] = (-1) ** (m + 1) * 2 * (m + 1) / math.factorial(2 * m + k + 2)
+    return table
+
+
+ROTATION_SERIES_TABLE = _rotation_series_table()
 
 
 class ClosedForm(NamedTuple):
@@ -96,7 +127,12 @@ class ClosedForm(NamedTuple):
     kind: CONSTANT, LIE_POISSON or LOG_CANONICAL; matrix (n, n): pi (constant), lambda
     (log-canonical), zeros (lie-poisson); lie-poisson's K(p) by its entries that are not
     identically zero: pairs (e, 2) the (i, k) of entry e, K_ik = sum over r in
-    starts[e]..starts[e+1]-1 of coefs[r] p[cols[r]] (coefs = -C_ijk, cols = j)."""
+    starts[e]..starts[e+1]-1 of coefs[r] p[cols[r]] (coefs = -C_ijk, cols = j); rotation: the
+    scalar s with K(z) = hat(s z) when the algebra is so(3) (C = -s epsilon; e^-K and psi(K) are
+    then Rodrigues' closed forms, `_rotation_point`), else 0; exact: whether each substep's
+    matrix is the exact Jacobian at its iterates (`EXACT_DIMENSION`, `newton_substep`);
+    hessian_constant: whether H is a polynomial of degree at most 2 (`rkhp.taylor.scalar.
+    polynomial_degree`), and then hessian (n, n) its Hessian (else zeros)."""
 
     kind: int
     matrix: np.ndarray
@@ -105,6 +141,10 @@ class ClosedForm(NamedTuple):
     cols: np.ndarray
     coefs: np.ndarray
     hamiltonian: Tape
+    rotation: float
+    exact: bool
+    hessian_constant: bool
+    hessian: np.ndarray
 
 
 class ClosedWork(NamedTuple):
@@ -113,8 +153,9 @@ class ClosedWork(NamedTuple):
     W (slots, n + 1): H's tape slots, values and first derivatives (`rkhp.taylor.scalar`);
     z (n): the unknown; xbar (n): the point x of the step (alpha(x, p) = y0); g (n): grad H(xbar);
     dy (n): the substep's increment y1 - y0; v, kv (n): a term of the series and its product by
-    K; kval (e): the entries of K; hess, jac (n, n): Hess H and x'(0) at the refresh point (then
-    the chord matrix's inverse, before it is copied into the memory); res, tmp (n): the residual
+    K; kval (e): the entries of K; hess, jac (n, n): Hess H and x'(z) at the refresh point (then
+    the chord matrix's inverse, before it is copied into the memory); xz (n): x at the refresh
+    point; res, tmp (n): the residual
     (then the correction) and lu_solve's work vector; last, step, by (n): the previous residual,
     the previous correction and a product, for Broyden's update; perm (n) int64: the row order
     of the chord matrix's factors; y, y_low (n): the state as the double-double y + y_low
@@ -130,6 +171,7 @@ class ClosedWork(NamedTuple):
     kval: np.ndarray
     hess: np.ndarray
     jac: np.ndarray
+    xz: np.ndarray
     res: np.ndarray
     tmp: np.ndarray
     last: np.ndarray
@@ -163,7 +205,7 @@ def closed_work(form: ClosedForm, n: int) -> ClosedWork:
 
     return ClosedWork(np.zeros((form.hamiltonian.n_slots, n + 1)), vec(), vec(), vec(), vec(), vec(),
                       vec(), np.zeros(form.pairs.shape[0]), np.zeros((n, n)), np.zeros((n, n)),
-                      vec(), vec(), vec(), vec(), vec(), np.zeros(n, np.int64), vec(), vec())
+                      vec(), vec(), vec(), vec(), vec(), vec(), np.zeros(n, np.int64), vec(), vec())
 
 
 def chord_memory(s: int, n: int) -> ChordMemory:
@@ -218,9 +260,89 @@ def _exp_series(y0, form, work, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
+def _series(t, row):
+    """sum_m ROTATION_SERIES_TABLE[row, m] t^m by Horner's rule."""
+    acc = 0.0
+    for m in range(ROTATION_TERMS - 1, -1, -1):
+        acc = acc * t + ROTATION_SERIES_TABLE[row, m]
+    return acc
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _rotation_coefficients(theta):
+    """(sin(theta) / theta, (1 - cos theta) / theta^2, (theta - sin theta) / theta^3, a'/theta,
+    b'/theta), a and b the second and third (their derivatives in theta divided by theta, for the
+    Jacobian `_rotation_jacobian`): power series below ROTATION_SERIES (the singularities at 0 are
+    removable), sin and cos above."""
+    if theta < ROTATION_SERIES:
+        t = theta * theta
+        return _series(t, 0), _series(t, 1), _series(t, 2), _series(t, 3), _series(t, 4)
+    s = math.sin(theta)
+    t2 = theta * theta
+    half = math.sin(0.5 * theta)
+    one_minus_cos = 2.0 * half * half
+    return (s / theta, one_minus_cos / t2, (theta - s) / (t2 * theta),
+            (theta * s - 2.0 * one_minus_cos) / (t2 * t2),
+            (theta * one_minus_cos - 3.0 * (theta - s)) / (t2 * t2 * theta))
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _cross(a, b, out):
+    """out := a x b (3-vectors)."""
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _rotation_point(y0, form, work):
+    """so(3)*: with q = s z (K = hat(q), K y = q x y, theta = |q|), Rodrigues' closed forms
+    e^-K y0 = y0 - (sin theta / theta) q x y0 + ((1 - cos theta) / theta^2) q x (q x y0) and
+    psi(K) y0 = y0 - ((1 - cos theta) / theta^2) q x y0 + ((theta - sin theta) / theta^3) q x (q x y0)
+    (the series of the module summed by K^3 = -theta^2 K: docs/theory.md §12). work.v := q,
+    work.kv := q x y0, work.tmp := q x (q x y0); Failure as `_exp_series` (|K|_F = sqrt(2) theta)."""
+    q, c1, c2 = work.v, work.kv, work.tmp
+    for k in range(3):
+        q[k] = form.rotation * work.z[k]
+    theta = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2])
+    if not math.sqrt(2.0) * theta < PHI_GUARD:
+        return Failure.NEWTON_NON_FINITE
+    sinc, a, b, _, _ = _rotation_coefficients(theta)
+    _cross(q, y0, c1)
+    _cross(q, c1, c2)
+    for k in range(3):
+        work.dy[k] = -sinc * c1[k] + a * c2[k]
+        work.xbar[k] = y0[k] - a * c1[k] + b * c2[k]
+    return Failure.OK
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _rotation_jacobian(y0, form, work, D):
+    """D := x'(z) on so(3)*, x = y0 - a c1 + b c2 (`_rotation_point`, c1 = q x y0, c2 = q x c1,
+    q = s z): d c1 / dq = -hat(y0), d c2 / dq = (q . y0) I + q y0^T - 2 y0 q^T, d a / dq =
+    (a'/theta) q^T, d b / dq = (b'/theta) q^T; then times s. Reads what `_rotation_point` left in
+    work.v, work.kv, work.tmp."""
+    q, c1, c2 = work.v, work.kv, work.tmp
+    theta = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2])
+    _, a, b, da, db = _rotation_coefficients(theta)
+    qy = q[0] * y0[0] + q[1] * y0[1] + q[2] * y0[2]
+    for i in range(3):
+        for j in range(3):
+            hat = 0.0  # hat(y0)_ij = -epsilon_ijk y0_k: hat(y0) w = y0 x w
+            if (i + 1) % 3 == j:
+                hat = -y0[3 - i - j]
+            elif (j + 1) % 3 == i:
+                hat = y0[3 - i - j]
+            d2 = (qy if i == j else 0.0) + q[i] * y0[j] - 2.0 * y0[i] * q[j]
+            D[i, j] = form.rotation * ((-c1[i] * da + c2[i] * db) * q[j] + a * hat + b * d2)
+
+
+@nb.njit(inline="always", **NJIT_NORC)
 def _point(y0, form, work, n):
     """work.xbar (x with alpha(x, p) = y0) and work.dy (y1 - y0) from work.z (see the module);
     returns Failure.OK or the series' failure."""
+    if form.kind == LIE_POISSON and form.rotation != 0.0:
+        return _rotation_point(y0, form, work)
     if form.kind == LIE_POISSON:
         return _exp_series(y0, form, work, n)
     M = form.matrix
@@ -248,11 +370,13 @@ def _target(hs, form, work, n):
 
 @nb.njit(**NJIT_NORC)
 def _refresh(i, y0, hs, form, work, memory, n):
-    """Substep i's chord matrix M = I - G'(y0) x'(0) with step hs, its inverse into the memory
-    (its contraction, until measured, taken as REFRESH_CONTRACTION); Failure.OK or SINGULAR."""
-    memory.refreshes[i] += 1
+    """Substep i's chord matrix M = I - G'(y0) x'(0) with step hs (x'(0) = pi(y0) / 2, or
+    diag(y0) lambda / 2 for log-canonical), its inverse into the memory (its contraction, until
+    measured, taken as REFRESH_CONTRACTION); Failure.OK or SINGULAR."""
     memory.rate[i] = REFRESH_CONTRACTION  # until measured: a bound that triggers no rebuild
-    D, H = work.jac, work.hess
+    D, x = work.jac, work.xz
+    for k in range(n):
+        x[k] = y0[k]
     for a in range(n):
         for b in range(n):
             D[a, b] = 0.0
@@ -265,14 +389,51 @@ def _refresh(i, y0, hs, form, work, memory, n):
     else:
         for a in range(n):
             for b in range(n):
-                D[a, b] = 0.5 * form.matrix[a, b] * (y0[a] if form.kind == LOG_CANONICAL else 1.0)
-    hessian(form, work, y0, n)
-    if form.kind == LOG_CANONICAL:
-        # G'(y0) = h (diag(grad H) + diag(y0) Hess H)
-        gradient(form, work, y0, n)
+                D[a, b] = 0.5 * form.matrix[a, b] * (x[a] if form.kind == LOG_CANONICAL else 1.0)
+    return _store_inverse(i, hs, form, work, memory, n)
+
+
+@nb.njit(**NJIT_NORC)
+def _exact_matrix(i, y0, hs, form, work, memory, n):
+    """Substep i's exact Jacobian of z - G(x(z)) at z = work.z, I - G'(x) x'(z), its inverse into
+    the memory: called right after `_point` at that z (x = work.xbar, kept), with x'(z) = pi / 2
+    (constant), diag(x) lambda / 2 (log-canonical) or `_rotation_jacobian` (so(3)*). Failure.OK
+    or SINGULAR."""
+    D, x = work.jac, work.xz
+    for k in range(n):
+        x[k] = work.xbar[k]
+    if form.kind == LIE_POISSON:
+        _rotation_jacobian(y0, form, work, D)
+    else:
         for a in range(n):
             for b in range(n):
-                H[a, b] *= y0[a]
+                D[a, b] = 0.5 * form.matrix[a, b] * (x[a] if form.kind == LOG_CANONICAL else 1.0)
+    cause = _store_inverse(i, hs, form, work, memory, n)
+    for k in range(n):
+        work.xbar[k] = x[k]
+    return cause
+
+
+@nb.njit(**NJIT_NORC)
+def _store_inverse(i, hs, form, work, memory, n):
+    """M = I - hs G'(x) D with G'(x) = Hess H(x) (constant, lie-poisson) or diag(grad H(x)) +
+    diag(x) Hess H(x) (log-canonical), x = work.xz, D = work.jac (x'); its inverse into the
+    memory of substep i. Hess H is the constant one of the form for a quadratic H, else by
+    differences of the gradient (`rkhp.integrators.direct_form.hessian`). Failure.OK or SINGULAR."""
+    memory.refreshes[i] += 1
+    D, H, x = work.jac, work.hess, work.xz
+    if form.hessian_constant:
+        for a in range(n):
+            for b in range(n):
+                H[a, b] = form.hessian[a, b]
+    else:
+        hessian(form, work, x, n)
+    if form.kind == LOG_CANONICAL:
+        # G'(x) = h (diag(grad H) + diag(x) Hess H)
+        gradient(form, work, x, n)
+        for a in range(n):
+            for b in range(n):
+                H[a, b] *= x[a]
             H[a, a] += work.g[a]
     M = memory.inverse[i]
     for a in range(n):
@@ -433,6 +594,78 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
+def newton_substep(i, y0, hs, form, work, memory, solver):
+    """One Euler substep of step hs in direct form from y0 by Newton's method (form.exact): its
+    increment y1 - y0 into work.dy; returns (Failure, iterations).
+
+    Starts from the extrapolated z (`_predict`); each iteration evaluates x(z), takes the exact
+    Jacobian there (`_exact_matrix`) when the last correction exceeded NEWTON_REFRESH max(1, |y0|)
+    (always at the first: a Newton step; below it a chord step with the last Jacobian, which
+    already contracts by about L |d|), and corrects z by the Jacobian's inverse times G(x(z)) - z.
+    Stops when the correction is at most solver.tol max(1, |y0|), or when the next one is
+    predicted to be: 2 L |d|^2 after two Newton steps (L = |d_k| / |d_(k-1)|^2, the quadratic
+    constant just measured), theta / (1 - theta) |d| (theta = RATE_MARGIN |d_k| / |d_(k-1)|)
+    after a chord step; or when corrections at round-off stop halving (STAGNATION). Then x and
+    y1 are taken at the final z."""
+    n = y0.shape[0]
+    scale = max(1.0, max_abs(y0))
+    _predict(i, y0, hs, form, work, memory, n)
+    previous = np.inf
+    newton = False  # whether the last correction was a Newton step
+    refresh = True
+    it = 0
+    converged = False
+    while it < solver.max_iter:
+        it += 1
+        cause = _point(y0, form, work, n)
+        if cause != Failure.OK:
+            return cause, it
+        was_newton = newton
+        newton = refresh
+        if refresh:
+            cause = _exact_matrix(i, y0, hs, form, work, memory, n)
+            if cause != Failure.OK:
+                return cause, it
+        _target(hs, form, work, n)
+        size = 0.0
+        for k in range(n):
+            acc = 0.0
+            for b in range(n):
+                acc += memory.inverse[i, k, b] * (work.res[b] - work.z[b])
+            work.tmp[k] = acc
+            if not abs(acc) <= size:
+                size = abs(acc)
+        for k in range(n):
+            work.z[k] += work.tmp[k]
+        if not size < np.inf:
+            return Failure.NEWTON_NON_FINITE, it
+        if size > 1e8 * scale:
+            return Failure.NEWTON_DIVERGED, it
+        if newton and was_newton:
+            predicted = 2.0 * size / (previous * previous) * size * size
+        elif it >= 2:
+            bound = RATE_MARGIN * size / previous
+            predicted = bound / (1.0 - bound) * size if bound < 0.5 else np.inf
+        else:
+            predicted = np.inf
+        if size <= solver.tol * scale or predicted <= solver.tol * scale:
+            converged = True
+            break
+        if it >= 2 and size >= 0.5 * previous and size <= STAGNATION * scale:
+            converged = True
+            break
+        refresh = size > NEWTON_REFRESH * scale
+        previous = size
+    if not converged:
+        return Failure.NEWTON_NO_CONVERGENCE, it
+    cause = _point(y0, form, work, n)
+    if cause != Failure.OK:
+        return cause, it
+    _remember(i, memory, work, n)
+    return Failure.OK, it
+
+
+@nb.njit(inline="always", **NJIT_NORC)
 def begin(data, y0):
     """Start a run at y0 (the state work.y, carried as the double-double y + y_low,
     `rkhp.integrators.direct_form.add_increment`), every substep's memory emptied."""
@@ -450,10 +683,14 @@ def begin(data, y0):
 
 @nb.njit(inline="always", **NJIT_NORC)
 def substep(data, context, i, hs, solver):
-    """Substep i of size hs in direct form (`closed_substep`), its increment added to the state
+    """Substep i of size hs in direct form (`newton_substep` where the form is exact, else
+    `closed_substep`), its increment added to the state
     without rounding it (`add_increment`); returns (Failure, iterations, 0 stage sweeps)."""
-    work = data.work
-    cause, it = closed_substep(i, work.y, hs, data.form, work, data.memory, solver)
+    work, form = data.work, data.form
+    if form.exact:
+        cause, it = newton_substep(i, work.y, hs, form, work, data.memory, solver)
+    else:
+        cause, it = closed_substep(i, work.y, hs, form, work, data.memory, solver)
     if cause == Failure.OK:
         add_increment(work.y, work.y_low, work.dy, work.y.shape[0])
     return cause, it, 0
@@ -517,7 +754,37 @@ def _read_form(system) -> ClosedForm:
     else:
         for k in range(n):
             C[:, :, k] = system.poisson(np.eye(n)[k])
-    return ClosedForm(kind, np.ascontiguousarray(matrix), *_lie_entries(C), shared(Tape(*h)))
+    rotation = _rotation_scale(C) if kind == LIE_POISSON else 0.0
+    tape = shared(Tape(*h))
+    quadratic = polynomial_degree(tape) <= 2
+    exact = quadratic and (rotation != 0.0 or (kind != LIE_POISSON and n <= EXACT_DIMENSION))
+    form = ClosedForm(kind, np.ascontiguousarray(matrix), *_lie_entries(C), tape, rotation, exact, quadratic,
+                      np.zeros((n, n)))
+    if quadratic:
+        _quadratic_hessian(form, closed_work(form, n), n)
+    return form
+
+
+def _quadratic_hessian(form: ClosedForm, work: ClosedWork, n: int) -> None:
+    """form.hessian := the constant Hessian of a quadratic H, column k = grad H(e_k) - grad H(0)
+    (exact for a quadratic, up to the rounding of the gradients)."""
+    gradient(form, work, np.zeros(n), n)
+    at_zero = work.g.copy()
+    for k in range(n):
+        gradient(form, work, np.eye(n)[k], n)
+        form.hessian[:, k] = work.g - at_zero
+
+
+def _rotation_scale(C: np.ndarray) -> float:
+    """s when the structure constants are those of so(3) scaled, C = -s epsilon (then K(z) =
+    hat(s z), `ClosedForm.rotation`), else 0."""
+    if C.shape != (3, 3, 3):
+        return 0.0
+    epsilon = np.zeros((3, 3, 3))
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        epsilon[i, j, k], epsilon[i, k, j] = 1.0, -1.0
+    s = -float(C[0, 1, 2])
+    return s if s != 0.0 and np.array_equal(C, -s * epsilon) else 0.0
 
 
 def closed_form_available(system) -> bool:

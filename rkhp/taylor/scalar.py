@@ -170,6 +170,32 @@ def gradients(tape, W, nd):
 _COMMUTATIVE = frozenset({ADD, MUL})
 
 
+def polynomial_degree(tape: Tape, output: int = 0) -> float:
+    """The degree of the polynomial that output `output` of a plain tape (main = 0) is in the
+    tape's inputs, or inf when it is not a polynomial (a function of a non-constant, a division by
+    a non-constant, a non-integer power): a quadratic H has a constant Hessian
+    (`rkhp.integrators.closed_euler`)."""
+    degree = {k: 1.0 for k in range(tape.n_inputs)}
+    for code, out, a, b, k in tape.ops[tape.main:].tolist():
+        da, db = degree.get(a, 0.0), degree.get(b, 0.0)
+        if code in (ADD, SUB):
+            d = max(da, db)
+        elif code == MUL:
+            d = da + db
+        elif code in (MULC, ADDC, NEG):
+            d = da
+        elif code == CONST:
+            d = 0.0
+        elif code == DIV:
+            d = da if db == 0.0 else math.inf
+        elif code == POWI:
+            d = da * k if k >= 0 else (0.0 if da == 0.0 else math.inf)
+        else:
+            d = 0.0 if da == 0.0 else math.inf
+        degree[out] = d
+    return degree.get(int(tape.outputs[output]), 0.0)
+
+
 def shared(tape: Tape) -> Tape:
     """The same plain tape with each repeated row (same opcode, operands, parameters) computed
     once, its later copies' readers reading the first (the rows' order is kept; outputs
