@@ -4,6 +4,7 @@ float64 and the wrap limit (docs/theory.md §13, docs/stability.md)."""
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import sympy
 
@@ -65,33 +66,87 @@ def wrap_limit_explicit(m) -> Number | None:
     return first_positive_root(odd.as_expr(), K)
 
 
-#: the numerical wrap limit (tableaux without an exact m(z)) is looked for on (0, WRAP_SCAN_Z]
+#: the numerical wrap limit (tableaux without an exact m(z)) is looked for on (0, WRAP_SCAN_Z] on a
+#: grid of step WRAP_SCAN_STEP
 WRAP_SCAN_Z = 20.0
+WRAP_SCAN_STEP = 1e-3
+
+
+class Scaled(NamedTuple):
+    """Numbers mantissa 2^exponent as arrays (float64 mantissas in [1/2, 1) or 0, int64 exponents):
+    float64's precision without its range. m(z) of an s-stage tableau has degree 2^s - 1 and passes
+    10^308 at z of a few units from about 15 stages on; its slope's sign stays readable."""
+
+    mantissa: object
+    exponent: object
+
+
+def _scaled(x, exponent=0) -> Scaled:
+    import numpy as np
+
+    mantissa, shift = np.frexp(x)
+    return Scaled(mantissa, shift.astype(np.int64) + exponent)
+
+
+def _scaled_add(u: Scaled, v: Scaled) -> Scaled:
+    import numpy as np
+
+    top = np.maximum(u.exponent, v.exponent)
+    return _scaled(np.ldexp(u.mantissa, u.exponent - top) + np.ldexp(v.mantissa, v.exponent - top), top)
+
+
+def _scaled_mul(u: Scaled, v: Scaled) -> Scaled:
+    return _scaled(u.mantissa * v.mantissa, u.exponent + v.exponent)
+
+
+def _scaled_times(c: float, u: Scaled) -> Scaled:
+    return _scaled(c * u.mantissa, u.exponent)
+
+
+def m_and_slope(A, b, zs) -> tuple[Scaled, Scaled]:
+    """m(z) and m'(z) of an explicit tableau at every z of ``zs`` (Scaled arrays): the stage maps
+    m_i = z S_i, S_i = sum_j<i a_ij (1 + m_j^2/4) (docs/theory.md §13) and their derivatives
+    m_i' = S_i + z sum_j<i a_ij m_j m_j'/2, as arrays over z."""
+    import numpy as np
+
+    z = _scaled(np.asarray(zs, dtype=np.float64))
+    zero, one = _scaled(np.zeros_like(z.mantissa)), _scaled(np.ones_like(z.mantissa))
+
+    def sums(row, ws, dws):
+        total, slope = zero, zero
+        for a, w, dw in zip(row, ws, dws):
+            if a:
+                total, slope = _scaled_add(total, _scaled_times(a, w)), _scaled_add(slope, _scaled_times(a, dw))
+        return _scaled_mul(z, total), _scaled_add(total, _scaled_mul(z, slope))
+
+    ws, dws = [], []  # 1 + m_j^2/4 and its derivative m_j m_j'/2
+    for row in A:
+        m, dm = sums(row, ws, dws)
+        ws.append(_scaled_add(one, _scaled_times(0.25, _scaled_mul(m, m))))
+        dws.append(_scaled_times(0.5, _scaled_mul(m, dm)))
+    return sums(b, ws, dws)
 
 
 def wrap_limit_numeric(tableau: Tableau) -> Number | None:
     """The wrap limit of an explicit tableau without an exact m(z) (more than MAX_POLYNOMIAL_STAGES
-    stages, or decimals): the first z on a grid of step 10^-3 over (0, WRAP_SCAN_Z] where
-    theta(z) = 2 arctan(m(z)/2) (float64) stops increasing, refined by bisection; None when theta
-    increases over the whole scan."""
+    stages, or decimals): the first z of a grid of step WRAP_SCAN_STEP over (0, WRAP_SCAN_Z] where
+    m'(z) < 0 (`m_and_slope`: float64 digits, unbounded exponent), the sign change of m' before it
+    bisected to float64; None when m' stays positive over the scan. theta = 2 arctan(m/2) itself is
+    no guide: near its maximum it is within 4/m of pi, below float64's resolution of pi once m
+    passes about 10^16."""
     import numpy as np
 
-    zs = np.arange(1, int(WRAP_SCAN_Z * 1000) + 1) / 1000.0
-    with np.errstate(all="ignore"):
-        theta = np.array(explicit_angles(tableau.A_float, tableau.b_float, [float(z) for z in zs]))
-    falls = np.nonzero(np.diff(theta) < -1e-10)[0]  # a fall beyond round-off near theta = pi
+    A, b = tableau.A_float, tableau.b_float
+    zs = np.arange(1, round(WRAP_SCAN_Z / WRAP_SCAN_STEP) + 1) * WRAP_SCAN_STEP
+    falls = np.nonzero(m_and_slope(A, b, zs)[1].mantissa < 0)[0]
     if not len(falls):
         return None
-    lo, hi = float(zs[max(falls[0] - 1, 0)]), float(zs[falls[0] + 1])
-
-    def slope(z):
-        up, down = explicit_angles(tableau.A_float, tableau.b_float, [z + 1e-7, z - 1e-7])
-        return up - down
-
-    for _ in range(60):
+    lo, hi = (float(zs[falls[0] - 1]) if falls[0] else 0.0), float(zs[falls[0]])
+    while True:
         mid = (lo + hi) / 2
-        lo, hi = (mid, hi) if slope(mid) > 0 else (lo, mid)
-    return Number(None, (lo + hi) / 2)
+        if not lo < mid < hi:
+            return Number(None, mid)
+        lo, hi = (mid, hi) if m_and_slope(A, b, [mid])[1].mantissa[0] > 0 else (lo, mid)
 
 
 def explicit_angles(A, b, zs) -> list[float]:
