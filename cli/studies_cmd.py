@@ -112,8 +112,8 @@ def _f(x, digits=2) -> str:
               help="Halvings of h after the coarsest step (default 6, from N = 20).")
 @click.option("--reference", "reference_kind", type=click.Choice(REFERENCE_KINDS), default="auto", show_default=True,
               help="Reference solution: the closed form where there is one, else DOP853 (auto); mpmath: "
-                   "a Taylor-series solve at 26 digits for the problems given by expressions "
-                   "(docs/theory.md §6).")
+                   "a Taylor-series solve at 26 digits of the system's expressions (spec files, built-in "
+                   "systems; docs/theory.md §6).")
 @click.option("--plot", type=PLOT_FILE, help="Log-log plot of error against h (.png, .svg, .pdf).")
 @force_option()
 @executor_options("runs")

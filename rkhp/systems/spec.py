@@ -189,7 +189,7 @@ def system_from_keys(data: dict, where: str, default_name: str, source: str,
     casimirs = tuple(numeric_function(e, symbols) for e in exprs)
     names = tuple(str(e) for e in exprs)
     common = dict(name=name, t_final=t_final, realisation=realisation, x0=x0,
-                  description=f"from {source}: H = {H.expression}")
+                  description=f"from {source}: H = {H.expression}", hamiltonian_expression=lambda: h_expr)
     if family == "general":
         # the structure and the declared Casimirs are checked (docs/theory.md §9)
         system = general(structure, H, casimirs=exprs, where=f"{where}: poisson", **common)
