@@ -192,8 +192,8 @@ def _run(args):
 CONVERGE_KEYS = {"system", "realisation", "degenerate", "symmetric", "x0", "t_final", "reference", "methods",
                  "interrupted", "provenance"}
 METHOD_KEYS = {"method", "expected_order", "observed_order", "verdict", "fit_rows", "rows",
-               "realisation_bound"}
-ROW_KEYS = {"h", "steps", "error", "local_order", "casimir_error", "energy_error", "newton_mean", "newton_max",
+               "realisation_bound", "steps_chosen"}
+ROW_KEYS = {"h", "steps", "error", "local_order", "casimir_error_max", "energy_error_max", "newton_mean", "newton_max",
             "seconds"}
 
 
@@ -539,3 +539,72 @@ def test_the_reference_option_refuses_what_it_cannot_give(run_cli):
     for args in cases:
         code, _, err = run_cli(*args, "--method", "euler")
         assert code == 2 and len(err.strip().splitlines()) == 1, (args, err)
+
+
+# ----------------------------------------------------------------------------------------------
+# the steps chosen by pilot runs (docs/studies.md "How the steps are chosen")
+
+
+def test_chosen_steps_keep_every_row_above_the_floor_and_confirm_a_sixth_order():
+    """search-symmetric-o6-s5 (symmetric order 6, docs/symmetric.md) on the rigid body: the doublings
+    20..1280 leave its three finest rows out of the fit (round-off); the chosen steps keep all seven
+    measurable and confirm order 6. The rk4 of the same study keeps the doublings."""
+    from rkhp.studies.converge import converge
+
+    given = converge("rigid-body", ["search-symmetric-o6-s5"], steps=[20])
+    assert len(given.methods[0].fit.fit_rows) == 4
+    study = converge("rigid-body", ["search-symmetric-o6-s5", "rk4"])
+    six, four = study.methods
+    assert len(six.rows) == 7 and all(r.error is not None for r in six.rows)
+    assert six.expected_order == 6 and six.verdict == "confirmed" and abs(six.observed_order - 6) < 0.2
+    assert len(six.fit.fit_rows) >= 5
+    assert "chosen by pilot runs" in six.steps_chosen
+    assert [r.steps for r in four.rows] == [20, 40, 80, 160, 320, 640, 1280] and four.verdict == "confirmed"
+    assert study.reference.kind == "exact" and study.reference_choice is None
+
+
+def test_a_tenth_order_composition_on_a_spec_file_gets_mpmath_and_measurable_rows(tmp_path):
+    """sofroniou-spaletta10 (order 10, Sofroniou & Spaletta 2005) on the Nambu spec file, T = 10: with
+    the doublings 20..1280 every row but the first is below DOP853's accuracy; chosen, the study takes the mpmath
+    reference, every successful row is measurable, and the local order of the finest rows nears 10."""
+    from rkhp.studies.converge import converge
+
+    path = tmp_path / "my-nambu.toml"
+    path.write_text(MY_NAMBU)
+    given = converge(str(path), ["sofroniou-spaletta10"], steps=[20])
+    assert given.reference.kind == "dop853" and all(r.error is None for r in given.methods[0].rows[1:])
+    study = converge(str(path), ["sofroniou-spaletta10"])
+    assert study.reference.kind == "mpmath" and "DOP853's floor" in study.reference_choice
+    rows = [r for r in study.methods[0].rows if r.status == "ok"]
+    assert len(rows) >= 5 and all(r.error is not None for r in rows)
+    assert abs(rows[-1].local_order - 10) < 1
+    doc = study.to_json()
+    assert doc["reference"]["choice"] == study.reference_choice
+    assert doc["methods"][0]["steps_chosen"] == study.methods[0].steps_chosen
+
+
+def test_the_convergence_plot_draws_slopes_over_the_data_and_readable_h_labels(tmp_path, monkeypatch):
+    """A narrow range of h (0.22 to 0.33, where matplotlib labels 2.2, 2.4, ..., 3.4 x 10^-1 and two
+    overlap): no two drawn tick labels of the saved figure overlap, and the dashed slope line is
+    drawn above the data line."""
+    from rkhp.studies import plots
+    from rkhp.studies.converge import converge
+
+    figures = []
+    monkeypatch.setattr(plots, "_save", lambda fig, *args: figures.append(fig))
+    study = converge("rigid-body", ["rk4"], steps=[30, 34, 38, 42, 46])
+    plots.plot_convergence(study, tmp_path / "c.png")
+    (fig,) = figures
+    (ax,) = fig.axes
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    for axis in (ax.xaxis, ax.yaxis):
+        lo, hi = axis.get_view_interval()
+        boxes = [t.get_window_extent(renderer) for tick, t in
+                 ((tick, tick.label1) for tick in axis.get_major_ticks() + axis.get_minor_ticks())
+                 if t.get_visible() and t.get_text() and min(lo, hi) <= tick.get_loc() <= max(lo, hi)]
+        assert boxes
+        assert not any(a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1:])
+    data, slope = (line for line in ax.get_lines()[:2])
+    assert data.get_linestyle() == "-" and slope.get_linestyle() == "--"
+    assert slope.get_zorder() > data.get_zorder()

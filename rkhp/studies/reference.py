@@ -12,8 +12,9 @@
   built-in system or problem: `PoissonSystem.symbolic`), differentiated by sympy and evaluated in mpmath, integrated by
   mpmath's Taylor-series solver (``mpmath.odefun``) at MP_DIGITS and at MP_DIGITS + MP_CHECK_DIGITS
   digits: the second is the reference, rounded once to float64; its estimate is eps |x(T)| (the
-  rounding) plus the distance between the two solves. Chosen, never automatic
-  (``rkhp converge --reference mpmath``): where an order above 8 must be seen below DOP853's
+  rounding) plus the distance between the two solves. Chosen (``rkhp converge --reference
+  mpmath``), or by a study whose automatic DOP853 reference leaves a method a narrow range of steps
+  (`rkhp.studies.converge.choose_study_steps`): where an order above 8 must be seen below DOP853's
   accuracy. The horizon is bounded before the solves: at most MAX_MPMATH_STEPS steps of a DOP853
   probe (rtol 1e-10) to T.
 
