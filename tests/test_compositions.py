@@ -278,7 +278,7 @@ def test_verify_csv_and_tables_json_list_the_compositions(run_cli):
     import csv
 
     rows = {r["case"]: r for r in csv.DictReader(out.splitlines()[1:])}
-    assert rows["symmetric, order 2 (published)"]["order"] == "4"
+    assert rows["symmetric, order 2 (for claims)"]["order"] == "4"
     assert rows["euler on a general realisation"]["order"] == "1"
     code, out, _ = run_cli("tables", "--format", "json")
     assert code == 0

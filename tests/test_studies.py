@@ -209,7 +209,7 @@ def test_converge_json_keys_and_plots(tmp_path):
             assert b"<svg" in path.read_bytes()[:2000]
     data = json.loads(result.output)
     assert set(data) == CONVERGE_KEYS
-    assert set(data["reference"]) == {"kind", "error_estimate"}
+    assert set(data["reference"]) == {"kind", "error_estimate", "choice"}
     assert [m["method"] for m in data["methods"]] == ["euler", "rk4"]
     for m in data["methods"]:
         assert set(m) == METHOD_KEYS

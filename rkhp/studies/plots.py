@@ -84,8 +84,6 @@ def _readable_log_ticks(axis, lo: float, hi: float) -> None:
     m 10^k (NICE_MANTISSAS) inside the range, each MIN_TICK_RATIO above the one before, written
     as plain numbers (%g), and no minor labels (matplotlib labels every minor tick of a narrow
     range, 3x10^-1 beside 3.2x10^-1); wider ranges keep matplotlib's decades."""
-    import math
-
     from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
 
     if not (0 < lo < hi) or hi / lo >= 100:

@@ -10,6 +10,9 @@ import numpy as np
 PROBE_RTOL, PROBE_ATOL = 1e-10, 1e-12
 #: a factor of growth of |pi| or |grad H| over the step that names it as the cause
 GROWTH = 10.0
+#: the probe takes at most this many steps: a flow that needs more over the failed step is
+#: regular enough there (a step far too large), and no cause is added
+PROBE_STEPS = 2000
 
 
 def _norm(value) -> float:
@@ -23,29 +26,35 @@ def _vector(x) -> str:
 
 def flow_stop(system, x, h: float) -> str | None:
     """Why the exact flow of `system` does not continue from `x` over a step of `h`, in words, or
-    None when it does. DOP853 (PROBE_RTOL) from x over h; where it stops short, fails or leaves the
-    domain, the last state it reached is compared with x: |pi| or |grad H| grown by GROWTH or more
-    (or not finite) is named as the cause."""
-    from scipy.integrate import solve_ivp
+    None when it does (or when PROBE_STEPS steps do not tell). DOP853 (PROBE_RTOL) from x over h;
+    where it fails or leaves the domain, the last state it reached is compared with x: |pi| or
+    |grad H| grown by GROWTH or more (or not finite) is named as the cause."""
+    from scipy.integrate import DOP853
 
     x = np.asarray(x, dtype=np.float64)
+    t, y, stopped, left = 0.0, x, False, False
     with np.errstate(all="ignore"):
         try:
-            sol = solve_ivp(lambda t, y: system.vector_field(y), (0.0, float(h)), x, method="DOP853",
-                            rtol=PROBE_RTOL, atol=PROBE_ATOL)
+            solver = DOP853(lambda _, v: system.vector_field(v), 0.0, x, float(h), rtol=PROBE_RTOL,
+                            atol=PROBE_ATOL)
+            for _ in range(PROBE_STEPS):
+                solver.step()
+                if not (np.all(np.isfinite(solver.y)) and system.in_domain(solver.y)):
+                    stopped, left = True, bool(np.all(np.isfinite(solver.y)))
+                    break
+                t, y = solver.t, np.array(solver.y)
+                if solver.status != "running":
+                    stopped = solver.status == "failed"
+                    break
         except (ValueError, ArithmeticError):
-            sol = None
-        states = [] if sol is None else [(t, y) for t, y in zip(sol.t, sol.y.T, strict=True)
-                                         if np.all(np.isfinite(y)) and system.in_domain(y)]
-        done = sol is not None and sol.status == 0 and len(states) == len(sol.t)
-        if done:
+            stopped = True
+        if not stopped:
             return None
-        t, y = states[-1] if states else (0.0, x)
         growth = {"the structure pi": (_norm(system.poisson(y)), _norm(system.poisson(x))),
                   "grad H": (_norm(system.grad_hamiltonian(y)), _norm(system.grad_hamiltonian(x)))}
     where = f"the exact flow stops {t:.3g} into the step, at x = {_vector(y)}"
     causes = [f"{name} blows up there (|{name.split()[-1]}| = {end:.3g}, {start:.3g} at the step's start)"
               for name, (end, start) in growth.items() if end >= GROWTH * max(start, 1e-300)]
-    if not system.in_domain(y) or (sol is not None and len(states) < len(sol.t) and not causes):
-        causes.append(f"it leaves the domain ({system.domain})")
+    if left:
+        causes.append(f"it leaves the domain ({system.domain}) next")
     return f"{where}: {'; '.join(causes)}" if causes else where
