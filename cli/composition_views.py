@@ -25,13 +25,14 @@ def verify_composition(spec: str, fmt: str) -> None:
         _render_verification(result)
     if result.claim == "overstated":
         raise CheckFailed(f"claimed order overstated: {result.composition.name} claims "
-                          f"{result.composition.claimed_order}, its conditions hold to order {result.own.order}")
+                          f"{result.composition.claimed_order}, its conditions hold to order {result.own.order} "
+                          f"with {result.composition.base} of symmetric order {result.own.base_order}")
 
 
 def _order_rows(result) -> list[tuple[str, object]]:
     """(label, CompositionOrder): the published symmetric case, then each realisation class."""
     c = result.composition
-    return [("symmetric, order 2 (published)", result.own),
+    return [(f"symmetric, order {result.own.base_order} (for claims)", result.own),
             *((f"{c.base} on a {cls} realisation", result.by_class[cls]) for cls in _CLASSES)]
 
 
@@ -84,12 +85,14 @@ def _render_verification(result) -> None:
 
 def composition_json(spec: str) -> dict:
     """The JSON document of `rkhp show` for a composition (docs/json.md)."""
-    from rkhp.tableaux.compositions import composition_order, load_composition
+    from rkhp.tableaux.compositions import class_composition_orders, load_composition
+    from rkhp.tableaux.files import load_tableau
 
     c = load_composition(spec)
+    order = class_composition_orders(c, load_tableau(c.base))["symmetric"].order
     return {"name": c.name, "kind": "composition", "aliases": list(c.aliases), "base": c.base,
             "substeps": c.substeps, "gamma": c.gamma_text(), "gamma_float": list(c.gamma_float),
-            "symmetric": c.symmetric, "order": composition_order(c).order,
+            "symmetric": c.symmetric, "order": order,
             "claimed_order": c.claimed_order, "reference": c.reference}
 
 
@@ -110,7 +113,7 @@ def show_composition(spec: str, fmt: str) -> None:
 
     out = console()
     out.print(f"[bold]{escape(doc['name'])}[/bold]: composition of {doc['substeps']} substeps of "
-              f"{escape(doc['base'])}, order {doc['order']} with a symmetric base of order 2"
+              f"{escape(doc['base'])}, order {doc['order']} with its base on a symmetric realisation"
               + (", symmetric" if doc["symmetric"] else ""))
     if doc["reference"]:
         out.print(f"source: {escape(doc['reference'])}")
@@ -130,7 +133,7 @@ def composition_rows():
 
 
 def render_composition_table(results) -> None:
-    table = compact_table("Built-in compositions (orders with a symmetric base of order 2)")
+    table = compact_table("Built-in compositions (orders with the base on a symmetric realisation)")
     for col in ("name", "substeps", "base", "order", "symmetric", "claimed"):
         table.add_column(col, justify="left" if col in ("name", "base") else "right")
     for r in results:

@@ -107,13 +107,14 @@ def _f(x, digits=2) -> str:
 @_common
 @click.option("--t-final", type=T_FINAL, help="Final time T (default: the system's).")
 @click.option("--steps", type=STEP_LIST,
-              help="Numbers of steps N1,N2,... (one value: the coarsest, doubled --refinements times).")
+              help="Numbers of steps N1,N2,... (one value: the coarsest, doubled --refinements times). "
+                   "Default: chosen for each method by pilot runs (docs/studies.md).")
 @click.option("--refinements", type=integer(0, bounds.MAX_REFINEMENTS, "K"),
               help="Halvings of h after the coarsest step (default 6, from N = 20).")
 @click.option("--reference", "reference_kind", type=click.Choice(REFERENCE_KINDS), default="auto", show_default=True,
               help="Reference solution: the closed form where there is one, else DOP853 (auto); mpmath: "
-                   "a Taylor-series solve at 26 digits for the problems given by expressions "
-                   "(docs/theory.md §6).")
+                   "a Taylor-series solve at 26 digits of the system's expressions (spec files, built-in "
+                   "systems; docs/theory.md §6).")
 @click.option("--plot", type=PLOT_FILE, help="Log-log plot of error against h (.png, .svg, .pdf).")
 @force_option()
 @executor_options("runs")
@@ -124,14 +125,15 @@ def converge(system, methods, x0, realisation, t_final, steps, refinements, refe
     from rkhp.base.executors import open_executor
     from rkhp.studies.converge import converge as run
     from rkhp.studies.converge import step_counts
+    from rkhp.studies.steps import ROWS
 
-    counts = step_counts(steps, refinements)
+    rows = len(step_counts(steps, refinements)) if steps or refinements is not None else ROWS
     sys_, resolved = _setup(system, realisation, x0, methods, t_final, plot)
     compile_notice(_kinds(resolved), fmt != "json", sys_)
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
-        task = bar.add_task("converge", total=len(resolved) * len(counts))
-        study = run(sys_, resolved, counts, t_final, executor=executor, reference_kind=reference_kind,
-                    on_run=lambda done, _: bar.update(task, completed=done))
+        task = bar.add_task("converge", total=len(resolved) * rows)
+        study = run(sys_, resolved, steps, t_final, refinements, executor=executor, reference_kind=reference_kind,
+                    on_run=lambda done, total: bar.update(task, completed=done, total=total))
     if plot and not study.interrupted:
         from rkhp.studies.plots import plot_convergence
 
@@ -179,7 +181,7 @@ def _verdict_basis(study, m) -> str:
 
 
 #: the columns of `converge --format csv` (docs/results.md)
-CONVERGE_CSV = ("method", "kind", "h", "steps", "error", "local_order", "casimir_error", "energy_error",
+CONVERGE_CSV = ("method", "kind", "h", "steps", "error", "local_order", "casimir_error_max", "energy_error_max",
                 "newton_mean", "newton_max", "seconds", "role", "status", "observed_order", "expected_order",
                 "verdict")
 
@@ -217,6 +219,8 @@ def _render_converge(study, plot) -> None:
               f"T = {study.t_final:g}")
     out.print(f"reference: {ref.kind}, estimated error {ref.error_estimate:.1e} ({ref.detail}); "
               f"errors <= {ref.floor:.1e} are not reported as measurements")
+    if study.reference_choice:
+        out.print(f"reference chosen: {plain(study.reference_choice)}")
     for m in study.methods:
         table = compact_table(f"{plain(m.method)} ({m.kind})")
         for col in ("h", "steps", "error", "order", "Casimir", "energy", "Newton", "s", "fit"):
@@ -224,6 +228,8 @@ def _render_converge(study, plot) -> None:
         for i, r in enumerate(m.rows):
             table.add_row(*map(plain, _converge_cells(study, m, i, r)))
         out.print(table)
+        if m.steps_chosen:
+            out.print(f"  steps: {plain(m.steps_chosen)}")
         failed = [r.status for r in m.rows if r.status != "ok"]
         if failed:
             out.print(f"  failed runs: {plain('; '.join(failed))}")
@@ -465,8 +471,9 @@ def _stress_rows(study, verdicts):
     """The long-form rows of `stress --format csv` (a part an interrupt left out: its verdict only)."""
     for s in study.sweep:
         for r in s.rows:
-            for key in ("ok", "newton_max", "relative_error", "relative_energy_error", "status"):
-                yield ("a", s.method, r.h, r.steps, None, key, getattr(r, key))
+            for key, attr in (("ok", "ok"), ("newton_max", "newton_max"), ("relative_error", "relative_error"),
+                              ("relative_energy_error_max", "relative_energy_error"), ("status", "status")):
+                yield ("a", s.method, r.h, r.steps, None, key, getattr(r, attr))
     lr = study.long_run
     for r in () if lr is None else (*lr.runs, lr.peer):
         values = {"casimir_max": r.casimir_max, "energy_first_window": r.energy_windows[0],
@@ -476,12 +483,13 @@ def _stress_rows(study, verdicts):
         for key, value in values.items():
             yield ("b", r.method, lr.h, lr.steps, None, key, value)
     for r in () if study.near_singular is None else study.near_singular.runs:
-        for key in ("status", "min_component", "casimir_error", "kept"):
-            yield ("c", r.method, None, None, r.first_species, key, getattr(r, key))
+        for key, attr in (("status", "status"), ("min_component", "min_component"),
+                          ("casimir_error_max", "casimir_error"), ("kept", "kept")):
+            yield ("c", r.method, None, None, r.first_species, key, getattr(r, attr))
     for m in () if study.round_off is None else study.round_off.studies:
         for r in m.rows:
-            for key in ("error", "energy_error", "status"):
-                yield ("d", m.method, r.h, r.steps, None, key, getattr(r, key))
+            for key, attr in (("error", "error"), ("energy_error_max", "energy_error"), ("status", "status")):
+                yield ("d", m.method, r.h, r.steps, None, key, getattr(r, attr))
     for part, text in verdicts.items():
         yield (part, None, None, None, None, "verdict", text)
 

@@ -278,7 +278,7 @@ def test_verify_csv_and_tables_json_list_the_compositions(run_cli):
     import csv
 
     rows = {r["case"]: r for r in csv.DictReader(out.splitlines()[1:])}
-    assert rows["symmetric, order 2 (published)"]["order"] == "4"
+    assert rows["symmetric, order 2 (for claims)"]["order"] == "4"
     assert rows["euler on a general realisation"]["order"] == "1"
     code, out, _ = run_cli("tables", "--format", "json")
     assert code == 0
@@ -287,3 +287,24 @@ def test_verify_csv_and_tables_json_list_the_compositions(run_cli):
     orders = {c["name"]: c["order"] for c in doc["compositions"]}
     assert orders["tj4"] == 4 and orders["tj6"] == 6 and orders["kahan-li8"] == 8
     assert all(c["kind"] == "composition" and "provenance" not in c for c in doc["compositions"])
+
+
+def test_verify_checks_a_claim_against_the_base_s_own_symmetric_order(run_cli, tmp_path):
+    """Yoshida's triple jump g = 1/(2 - 2^(1/5)) of a symmetric base of order 4 has order 6 (Yoshida,
+    Phys. Lett. A 150, 1990): `rkhp verify` confirms the file's `order = 6` with the base
+    symmetric-nodes-o4-s3 (symmetric order 4), and refuses a claim of 8 naming that base order."""
+    g = "1/(2 - 2^(1/5))"
+    for claimed, code in ((6, 0), (8, 1)):
+        path = tmp_path / f"jump{claimed}.toml"
+        path.write_text(f'name = "jump"\nkind = "composition"\nbase = "symmetric-nodes-o4-s3"\norder = {claimed}\n'
+                        f'gamma = ["{g}", "1 - 2*{g}", "{g}"]\n')
+        status, out, err = run_cli("verify", str(path))
+        assert status == code, (out, err)
+        if code == 0:
+            assert f"claimed order {claimed}: confirmed" in out
+            doc = json.loads(run_cli("verify", str(path), "--format", "json")[1])
+            assert (doc["own"]["order"], doc["own"]["base_order"], doc["claim"]) == (6, 4, "confirmed")
+        else:
+            assert "hold to order 6 with symmetric-nodes-o4-s3 of symmetric order 4" in err
+    status, out, _ = run_cli("show", str(tmp_path / "jump6.toml"), "--format", "json")
+    assert status == 0 and json.loads(out)["order"] == 6

@@ -242,7 +242,7 @@ BAD_SPECS = {
                  '["0", "0", "0"]]', r"singular at x0 = \(1, 1, 1\): entry \(1, 2\)"),
     "casimir": ('poisson = [["0", "-x3", "x2"], ["x3", "0", "-x1"], ["-x2", "x1", "0"]]\n'
                 'casimirs = ["x1 + x2"]', r"casimir 1 \(x1 \+ x2\) is not a Casimir"),
-    "shape": ('poisson = [["0", "1"], ["-1", "0"]]', "must be a 3 x 3 matrix"),
+    "shape": ('poisson = [["0", "1"], ["-1", "0"]]', "x0 has 3 entries but poisson is 2 x 2"),
 }
 
 

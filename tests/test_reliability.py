@@ -273,7 +273,7 @@ def test_no_casimir_is_a_dash_not_zero():
 
     study = converge("pendulum", ["rk4"], steps=[20, 40, 80], t_final=1.0)
     assert all(r.casimir_error is None for r in study.methods[0].rows)
-    assert all(r["casimir_error"] is None for r in study.to_json()["methods"][0]["rows"])
+    assert all(r["casimir_error_max"] is None for r in study.to_json()["methods"][0]["rows"])
 
 
 def test_stress_counts_the_peer_once_and_not_as_rkhp():

@@ -191,7 +191,7 @@ def test_converge_csv_round_trips_and_matches_the_json():
     assert len(rows) == len(expected) == 6
     for row, (method, r) in zip(rows, expected, strict=True):
         assert row["method"] == method and int(row["steps"]) == r["steps"]
-        for key in ("h", "error", "local_order", "casimir_error", "energy_error"):
+        for key in ("h", "error", "local_order", "casimir_error_max", "energy_error_max"):
             assert _number(row[key]) == r[key]  # bit for bit: floats by repr
     rk4 = next(m for m in doc["methods"] if m["method"] == "rk4")
     assert {float(r["observed_order"]) for r in rows if r["method"] == "rk4"} == {rk4["observed_order"]}

@@ -218,6 +218,40 @@ def test_wrap_limit_where_theta_turns():
     assert angle[0] < angle[1] and angle[2] < angle[1]
 
 
+def _slope_60_digits(tableau, z):
+    """m'(z) of an explicit tableau at 60 digits: the stage recursion m_i = z sum_j a_ij (1 + m_j^2/4)
+    on the tableau's decimals, differentiated by mpmath.diff (an evaluation independent of rkhp's)."""
+    with mpmath.workdps(60):
+        A = [[mpmath.mpf(str(x)) for x in row] for row in tableau.A]
+        b = [mpmath.mpf(str(x)) for x in tableau.b]
+
+        def m(x):
+            ms = []
+            for row in A:
+                ms.append(x * mpmath.fsum(a * (1 + mj**2 / 4) for a, mj in zip(row, ms)))
+            return x * mpmath.fsum(bi * (1 + mi**2 / 4) for bi, mi in zip(b, ms))
+
+        return mpmath.diff(m, mpmath.mpf(z))
+
+
+def test_wrap_limit_of_dop853_is_the_first_sign_change_of_m_prime():
+    """dop853: m'(z) first vanishes at z = 6.00395425216271026... (60-digit recursion), where
+    pi - theta = 1.1e-13, invisible to a float64 scan of theta."""
+    r = analyse(load_tableau("dop853"))
+    assert r.wrap_limit.exact is None
+    assert r.wrap_limit.value == pytest.approx(6.00395425216271026, rel=1e-15)
+
+
+@pytest.mark.parametrize("name", ["curtis10", "ono12", "search-general-o6-s7", "search-symmetric-o8-s7"])
+def test_wrap_limit_numeric_against_a_60_digit_slope(name):
+    """Without an exact m(z): m' > 0 (60 digits) on a grid below the reported wrap limit and changes
+    sign within 1e-13 of it (ono12: there m = 4e61077, beyond float64's range)."""
+    tableau = load_tableau(name)
+    z0 = analyse(tableau).wrap_limit.value
+    assert all(_slope_60_digits(tableau, z0 * k / 16) > 0 for k in range(1, 16))
+    assert _slope_60_digits(tableau, z0 * (1 - 1e-13)) > 0 > _slope_60_digits(tableau, z0 * (1 + 1e-13))
+
+
 # ----------------------------------------------------------------------------- shifted realisation
 
 

@@ -192,8 +192,8 @@ def _run(args):
 CONVERGE_KEYS = {"system", "realisation", "degenerate", "symmetric", "x0", "t_final", "reference", "methods",
                  "interrupted", "provenance"}
 METHOD_KEYS = {"method", "expected_order", "observed_order", "verdict", "fit_rows", "rows",
-               "realisation_bound"}
-ROW_KEYS = {"h", "steps", "error", "local_order", "casimir_error", "energy_error", "newton_mean", "newton_max",
+               "realisation_bound", "steps_chosen"}
+ROW_KEYS = {"h", "steps", "error", "local_order", "casimir_error_max", "energy_error_max", "newton_mean", "newton_max",
             "seconds"}
 
 
@@ -209,7 +209,7 @@ def test_converge_json_keys_and_plots(tmp_path):
             assert b"<svg" in path.read_bytes()[:2000]
     data = json.loads(result.output)
     assert set(data) == CONVERGE_KEYS
-    assert set(data["reference"]) == {"kind", "error_estimate"}
+    assert set(data["reference"]) == {"kind", "error_estimate", "choice"}
     assert [m["method"] for m in data["methods"]] == ["euler", "rk4"]
     for m in data["methods"]:
         assert set(m) == METHOD_KEYS
@@ -474,11 +474,137 @@ def test_the_mpmath_reference_keeps_the_invariants_and_agrees_with_dop853():
     assert abs(np.cos(y[0]) + np.sin(y[1]) - (np.cos(y0[0]) + np.sin(y0[1]))) < 1e-15
 
 
+#: the Nambu system of docs/general-poisson.md as a spec file: pi v = grad C x v,
+#: C = |x|^2/2 + x1^4/4, H = x1^2/4 + x2^2/2 + 3 x3^2/4
+MY_NAMBU = """name = "my-nambu"
+family = "general"
+poisson = [["0",  "-x3", "x2"], ["x3", "0", "-(x1 + x1^3)"], ["-x2", "x1 + x1^3", "0"]]
+hamiltonian = "x1^2/4 + x2^2/2 + 3*x3^2/4"
+casimirs = ["(x1^2 + x2^2 + x3^2)/2 + x1^4/4"]
+x0 = [0.45359612142557731, 0.0, 0.89120736006143542]
+"""
+
+
+def _mpmath_solve(field, x0, t_final, digits=25):
+    """x(t_final) of xdot = field(x) by mpmath's Taylor solver, a vector field written by hand."""
+    import mpmath
+
+    with mpmath.workdps(digits):
+        solution = mpmath.odefun(lambda t, x: field(x), 0, [mpmath.mpf(float(v)) for v in x0])
+        return np.array([float(v) for v in solution(t_final)])
+
+
+def test_the_mpmath_reference_of_a_spec_file_and_of_lotka_volterra(tmp_path):
+    """--reference mpmath on a spec file (its expressions) and on lotka-volterra (a built-in system):
+    within its error estimate of an independent mpmath solve of the vector field written by hand
+    (Nambu: xdot = grad C x grad H; Lotka-Volterra: xdot_i = x_i sum_j lambda_ij (x_j - 1))."""
+    from rkhp.studies.reference import reference
+
+    path = tmp_path / "my-nambu.toml"
+    path.write_text(MY_NAMBU)
+    nambu = get_system(str(path))
+
+    def nambu_field(x):
+        c = (x[0] + x[0] ** 3, x[1], x[2])
+        g = (x[0] / 2, x[1], 3 * x[2] / 2)
+        return [c[1] * g[2] - c[2] * g[1], c[2] * g[0] - c[0] * g[2], c[0] * g[1] - c[1] * g[0]]
+
+    lam = [[0, 1, 2], [-1, 0, 1], [-2, -1, 0]]
+
+    def lv_field(x):
+        return [x[i] * sum(lam[i][j] * (x[j] - 1) for j in range(3)) for i in range(3)]
+
+    for system, field in ((nambu, nambu_field), (get_system("lotka-volterra"), lv_field)):
+        ref = reference(system, 2.0, kind="mpmath")
+        assert ref.kind == "mpmath" and ref.error_estimate < 1e-15
+        assert np.linalg.norm(ref.state - _mpmath_solve(field, system.x0, 2)) <= ref.error_estimate
+
+
+def test_an_mpmath_reference_needs_expressions():
+    """A system built from Python programs alone has no expressions to give mpmath: one clear InputError."""
+    from rkhp.studies.reference import reference
+    from rkhp.systems.families import family_system
+
+    system = family_system("constant", np.array(((0.0, 1.0), (-1.0, 0.0))),
+                           lambda x: 0.5 * (x[0] * x[0] + x[1] * x[1]), name="oscillator", x0=(1.0, 0.0),
+                           t_final=1.0)
+    with pytest.raises(InputError, match="built from programs alone"):
+        reference(system, 1.0, kind="mpmath")
+
+
 def test_the_reference_option_refuses_what_it_cannot_give(run_cli):
-    cases = [("converge", "rigid-body", "--reference", "mpmath"),  # no expressions: a closed form instead
-             ("converge", "nambu", "--reference", "exact"),
+    cases = [("converge", "nambu", "--reference", "exact"),
              ("converge", "charged-particle", "--reference", "mpmath", "--t-final", "1e6"),
              ("converge", "nambu", "--reference", "quad")]
     for args in cases:
         code, _, err = run_cli(*args, "--method", "euler")
         assert code == 2 and len(err.strip().splitlines()) == 1, (args, err)
+
+
+# ----------------------------------------------------------------------------------------------
+# the steps chosen by pilot runs (docs/studies.md "How the steps are chosen")
+
+
+def test_chosen_steps_keep_every_row_above_the_floor_and_confirm_a_sixth_order():
+    """search-symmetric-o6-s5 (symmetric order 6, docs/symmetric.md) on the rigid body: the doublings
+    20..1280 leave its three finest rows out of the fit (round-off); the chosen steps keep all seven
+    measurable and confirm order 6. The rk4 of the same study keeps the doublings."""
+    from rkhp.studies.converge import converge
+
+    given = converge("rigid-body", ["search-symmetric-o6-s5"], steps=[20])
+    assert len(given.methods[0].fit.fit_rows) == 4
+    study = converge("rigid-body", ["search-symmetric-o6-s5", "rk4"])
+    six, four = study.methods
+    assert len(six.rows) == 7 and all(r.error is not None for r in six.rows)
+    assert six.expected_order == 6 and six.verdict == "confirmed" and abs(six.observed_order - 6) < 0.2
+    assert len(six.fit.fit_rows) >= 5
+    assert "chosen by pilot runs" in six.steps_chosen
+    assert [r.steps for r in four.rows] == [20, 40, 80, 160, 320, 640, 1280] and four.verdict == "confirmed"
+    assert study.reference.kind == "exact" and study.reference_choice is None
+
+
+def test_a_tenth_order_composition_on_a_spec_file_gets_mpmath_and_measurable_rows(tmp_path):
+    """sofroniou-spaletta10 (order 10, Sofroniou & Spaletta 2005) on the Nambu spec file, T = 10: with
+    the doublings 20..1280 every row but the first is below DOP853's accuracy; chosen, the study takes the mpmath
+    reference, every successful row is measurable, and the local order of the finest rows nears 10."""
+    from rkhp.studies.converge import converge
+
+    path = tmp_path / "my-nambu.toml"
+    path.write_text(MY_NAMBU)
+    given = converge(str(path), ["sofroniou-spaletta10"], steps=[20])
+    assert given.reference.kind == "dop853" and all(r.error is None for r in given.methods[0].rows[1:])
+    study = converge(str(path), ["sofroniou-spaletta10"])
+    assert study.reference.kind == "mpmath" and "DOP853's floor" in study.reference_choice
+    rows = [r for r in study.methods[0].rows if r.status == "ok"]
+    assert len(rows) >= 5 and all(r.error is not None for r in rows)
+    assert abs(rows[-1].local_order - 10) < 1
+    doc = study.to_json()
+    assert doc["reference"]["choice"] == study.reference_choice
+    assert doc["methods"][0]["steps_chosen"] == study.methods[0].steps_chosen
+
+
+def test_the_convergence_plot_draws_slopes_over_the_data_and_readable_h_labels(tmp_path, monkeypatch):
+    """A narrow range of h (0.22 to 0.33, where matplotlib labels 2.2, 2.4, ..., 3.4 x 10^-1 and two
+    overlap): no two drawn tick labels of the saved figure overlap, and the dashed slope line is
+    drawn above the data line."""
+    from rkhp.studies import plots
+    from rkhp.studies.converge import converge
+
+    figures = []
+    monkeypatch.setattr(plots, "_save", lambda fig, *args: figures.append(fig))
+    study = converge("rigid-body", ["rk4"], steps=[30, 34, 38, 42, 46])
+    plots.plot_convergence(study, tmp_path / "c.png")
+    (fig,) = figures
+    (ax,) = fig.axes
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    for axis in (ax.xaxis, ax.yaxis):
+        lo, hi = axis.get_view_interval()
+        boxes = [t.get_window_extent(renderer) for tick, t in
+                 ((tick, tick.label1) for tick in axis.get_major_ticks() + axis.get_minor_ticks())
+                 if t.get_visible() and t.get_text() and min(lo, hi) <= tick.get_loc() <= max(lo, hi)]
+        assert boxes
+        assert not any(a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1:])
+    data, slope = (line for line in ax.get_lines()[:2])
+    assert data.get_linestyle() == "-" and slope.get_linestyle() == "--"
+    assert slope.get_zorder() > data.get_zorder()

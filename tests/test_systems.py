@@ -187,7 +187,7 @@ def test_spec_file_reproduces_builtin(tmp_path, text, suffix, builtin):
     ('family = "constant"\npoisson = [[0, 1], [1, 0]]\nhamiltonian = "x1^2"\nx0 = [1, 0]',
      "not antisymmetric"),
     ('family = "constant"\npoisson = [[0, 1], [-1, 0]]\nhamiltonian = "x1^2"\nx0 = [1, 0, 2]',
-     "must be 3 x 3"),
+     "x0 has 3 entries but poisson is 2 x 2"),
     ('family = "lie-poisson"\nstructure_constants = [[1, 4, 2, 1]]\nhamiltonian = "x1"\n'
      'x0 = [1, 0, 2]', "indices"),
     ('family = "banana"\nhamiltonian = "x1"\nx0 = [1]', "family must be"),

@@ -107,9 +107,13 @@ class Proof:
             return (f"proved impossible: 1 = sum g_i f_i with exact rational cofactors "
                     f"({self.check.terms} terms), checked; no tableau for {what}, real or complex "
                     f"({self.seconds:.2f} s)")
+        if self.proved and self.engine == "singular":
+            return (f"computed impossible, not proved: Singular's Groebner basis of the {len(self.polynomials)} "
+                    f"order-condition polynomials is [1], so no tableau for {what}, real or complex, by "
+                    f"Singular's output alone (cofactors not computed within the time limit: no certificate "
+                    f"an independent tool can check; {self.seconds:.2f} s)")
         if self.proved:
-            why = ("cofactors not computed within the time limit" if self.engine == "singular"
-                   else "no cofactors")
+            why = "no cofactors"
             return (f"proved impossible: the Groebner basis of the {len(self.polynomials)} "
                     f"order-condition polynomials is [1]; no tableau for {what}, real or complex "
                     f"({why}; {self.seconds:.2f} s)")

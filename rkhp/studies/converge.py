@@ -1,6 +1,7 @@
 """Empirical convergence studies: global error at T against h, observed and expected orders.
 
-For each method and step size: the global error at T (2-norm against the reference, docs/theory.md §6),
+The numbers of steps are given, or chosen for each method by pilot runs (`rkhp.studies.steps`). For
+each method and step size: the global error at T (2-norm against the reference, docs/theory.md §6),
 the local observed order, Casimir and energy errors (max over the run), Newton iterations and run
 time; per method the fitted slope over the asymptotic range (see :mod:`rkhp.studies.fit`), the
 expected order from the verify engine (symmetric order on a symmetric realisation, docs/theory.md §8;
@@ -18,9 +19,11 @@ from ..base import bounds
 from ..base.errors import InputError
 from ..base.executors import InProcess, run_all, run_until_interrupted
 from ..integrators.methods import condition_class, require_steps, resolve_methods, resolve_system
+from ..systems.singular import flow_stop
 from .fit import MIN_FIT_POINTS, OrderFit, fit_order, verdict
 from .invariants import max_deviations
 from .reference import Reference, reference
+from .steps import StepChoice, choose_steps
 
 DEFAULT_COARSEST = 20
 DEFAULT_REFINEMENTS = 6
@@ -29,7 +32,8 @@ DEFAULT_REFINEMENTS = 6
 @dataclass(frozen=True)
 class ConvergenceRow:
     """One run: ``steps`` steps of size ``h``; ``error`` is None when it failed or is not above
-    the reference's accuracy (see ``note``)."""
+    the reference's accuracy (see ``note``); ``casimir_error`` and ``energy_error`` are the largest
+    over the run (JSON ``casimir_error_max``, ``energy_error_max``)."""
 
     h: float
     steps: int
@@ -54,7 +58,7 @@ class ConvergenceRow:
 
     def to_json(self) -> dict:
         return {"h": self.h, "steps": self.steps, "error": self.error, "local_order": self.local_order,
-                "casimir_error": self.casimir_error, "energy_error": self.energy_error,
+                "casimir_error_max": self.casimir_error, "energy_error_max": self.energy_error,
                 "newton_mean": self.newton_mean, "newton_max": self.newton_max, "seconds": self.seconds}
 
 
@@ -69,6 +73,7 @@ class MethodConvergence:
     verdict: str
     rows: tuple[ConvergenceRow, ...]
     realisation_bound: int | None = None
+    steps_chosen: str | None = None
 
     @property
     def observed_order(self) -> float | None:
@@ -78,7 +83,8 @@ class MethodConvergence:
         return {"method": self.method, "expected_order": self.expected_order,
                 "realisation_bound": self.realisation_bound,
                 "observed_order": self.observed_order, "verdict": self.verdict,
-                "fit_rows": list(self.fit.fit_rows), "rows": [r.to_json() for r in self.rows]}
+                "fit_rows": list(self.fit.fit_rows), "steps_chosen": self.steps_chosen,
+                "rows": [r.to_json() for r in self.rows]}
 
 
 @dataclass(frozen=True)
@@ -94,6 +100,7 @@ class ConvergenceStudy:
     condition_class: str = "general"
     x0: tuple[float, ...] = ()
     interrupted: bool = False
+    reference_choice: str | None = None
 
     @property
     def symmetric(self) -> bool:
@@ -103,7 +110,8 @@ class ConvergenceStudy:
         return {"system": self.system, "realisation": self.realisation, "degenerate": self.degenerate,
                 "symmetric": self.symmetric, "x0": list(self.x0),
                 "t_final": self.t_final, "interrupted": self.interrupted,
-                "reference": {"kind": self.reference.kind, "error_estimate": self.reference.error_estimate},
+                "reference": {"kind": self.reference.kind, "error_estimate": self.reference.error_estimate,
+                              "choice": self.reference_choice},
                 "methods": [m.to_json() for m in self.methods]}
 
 
@@ -142,8 +150,10 @@ def run_row(method, system, ref: Reference, steps: int, t_final: float) -> Conve
     n_mean = float(newton.mean()) if newton.size else 0.0
     n_max = int(newton.max()) if newton.size else 0
     if not traj.ok:
+        stop = flow_stop(system, traj.final_state, h)
+        status = traj.status if stop is None else f"{traj.status}; {stop}"
         return ConvergenceRow(h, steps, None, None, None, None, n_mean, n_max, traj.run_seconds,
-                              traj.compile_seconds, traj.status, None)
+                              traj.compile_seconds, status, None)
     measured = float(np.linalg.norm(traj.final_state - ref.state))
     casimir, energy = max_deviations(system, traj.states)
     error = measured if measured > ref.floor else None
@@ -156,37 +166,75 @@ def study_methods(methods, system, ref: Reference, steps, t_final: float, on_run
     """Each method's convergence table, fit and verdict. Every (method, steps) run is one task on
     ``executor`` (rkhp.base.executors; default: in this process), reduced in method and step order;
     ``on_run(done, total)`` after each finished run."""
-    results, _ = study_rows(methods, system, ref, steps, t_final, on_run, executor, keep=False)
+    results, _ = _study(methods, system, ref, [StepChoice(tuple(steps), (), False, "")] * len(methods), t_final,
+                        on_run, executor, keep=False, chosen=False)
     return results
 
 
-def study_rows(methods, system, ref: Reference, steps, t_final: float, on_run=None, executor=None,
-               keep: bool = True) -> tuple[tuple[MethodConvergence, ...], bool]:
-    """As :func:`study_methods`, and whether an interrupt stopped the runs (with ``keep``: the
-    tables then hold the rows finished before it, methods without any left out)."""
-    runs = [(m, system, ref, n, t_final) for m in methods for n in steps]
+def _study(methods, system, ref: Reference, choices, t_final: float, on_run, executor, keep: bool,
+           chosen: bool) -> tuple[tuple[MethodConvergence, ...], bool]:
+    """The runs of each method at its StepChoice's numbers of steps, and whether an interrupt
+    stopped them (with ``keep``: the tables then hold the rows finished before it, methods without
+    any left out); with ``chosen``, each table says how its steps were chosen."""
+    runs = [(m, system, ref, n, t_final) for m, c in zip(methods, choices, strict=True) for n in c.counts]
     if keep:
         rows, interrupted = run_until_interrupted(executor or InProcess(), run_row, runs, on_run)
     else:
         rows, interrupted = run_all(executor or InProcess(), run_row, runs, on_run), False
-    tables = []
-    for k, m in enumerate(methods):
-        done = [r for r in rows[k * len(steps):(k + 1) * len(steps)] if r is not None]
+    tables, start = [], 0
+    for m, c in zip(methods, choices, strict=True):
+        done = [r for r in rows[start:start + len(c.counts)] if r is not None]
+        start += len(c.counts)
         if done:
-            tables.append(_method_convergence(m, system, ref, done))
+            tables.append(_method_convergence(m, system, ref, done, c.how if chosen else None))
     return tuple(tables), interrupted
 
 
-def _method_convergence(method, system, ref: Reference, rows) -> MethodConvergence:
+def pilot(method, system, t_final: float):
+    """n -> x(T) of the method's run of n steps to t_final (None where it fails), each run once."""
+    runs: dict[int, np.ndarray | None] = {}
+
+    def final_state(n: int):
+        if n not in runs:
+            traj = method.integrate(system, t_final / n, n)
+            ok = traj.ok and bool(np.all(np.isfinite(traj.final_state)))
+            runs[n] = np.array(traj.final_state) if ok else None
+        return runs[n]
+
+    return final_state
+
+
+def choose_study_steps(methods, system, ref: Reference, t_final: float, reference_kind: str):
+    """Each method's StepChoice (`rkhp.studies.steps`) and the reference, with why where it was
+    changed: an automatic reference that is DOP853 gives way to mpmath (a system given by
+    expressions) when its floor leaves some method a narrow range of steps."""
+    finals = [pilot(m, system, t_final) for m in methods]
+    orders = [m.expected_order_on(system) for m in methods]
+    choices = [choose_steps(f, ref, p) for f, p in zip(finals, orders, strict=True)]
+    narrow = [f"{m.name} (order {p})" for m, p, c in zip(methods, orders, choices, strict=True) if c.narrow]
+    if not narrow or reference_kind != "auto" or ref.kind != "dop853" or system.symbolic() is None:
+        return ref, choices, None
+    try:
+        better = reference(system, t_final, kind="mpmath")
+    except InputError as exc:
+        return ref, choices, (f"DOP853, whose floor leaves a narrow range of steps to {', '.join(narrow)}; "
+                              f"no mpmath reference: {exc}")
+    why = (f"mpmath, as DOP853's floor ({ref.floor:.1e}) left a narrow range of steps to {', '.join(narrow)}")
+    return better, [choose_steps(f, better, p) for f, p in zip(finals, orders, strict=True)], why
+
+
+def _method_convergence(method, system, ref: Reference, rows, steps_chosen: str | None = None
+                        ) -> MethodConvergence:
     expected = method.expected_order_on(system)
     bound = method.realisation_bound(system)
     if len(rows) < MIN_FIT_POINTS:  # an interrupted study: too few rows to fit
         fit = OrderFit(None, (), tuple((i, "too few rows") for i in range(len(rows))), (None,) * len(rows))
-        return MethodConvergence(method.name, method.kind, expected, fit, "inconclusive", tuple(rows), bound)
+        return MethodConvergence(method.name, method.kind, expected, fit, "inconclusive", tuple(rows), bound,
+                                 steps_chosen)
     fit = fit_order([r.h for r in rows], [r.measured_error for r in rows], floor=ref.floor)
     rows = [_with_local_order(r, p) for r, p in zip(rows, fit.local_orders, strict=True)]
     return MethodConvergence(method.name, method.kind, expected, fit, verdict(fit.slope, expected, fit),
-                             tuple(rows), bound)
+                             tuple(rows), bound, steps_chosen)
 
 
 def _with_local_order(row: ConvergenceRow, p) -> ConvergenceRow:
@@ -197,16 +245,27 @@ def converge(system, methods, steps=None, t_final=None, refinements=None, on_run
              executor=None, reference_kind: str = "auto") -> ConvergenceStudy:
     """Run a convergence study of ``methods`` (names of :mod:`rkhp.integrators.methods` or Methods; the
     defaults when empty) on ``system`` (a name, a spec file or a PoissonSystem) up to ``t_final``
-    (default: the system's). The runs are independent tasks on ``executor`` (rkhp.base.executors;
-    default: in this process), ``on_run(done, total)`` after each; the reference is computed here,
-    once, of ``reference_kind`` (`rkhp.studies.reference.KINDS`). Ctrl-C during the runs ends the
-    study early: ``interrupted`` is then True and the tables hold the rows finished before it."""
+    (default: the system's). The numbers of steps are ``steps`` and ``refinements``
+    (:func:`step_counts`) where either is given, else chosen for each method by pilot runs
+    (:func:`choose_study_steps`). The runs are independent tasks on ``executor``
+    (rkhp.base.executors; default: in this process), ``on_run(done, total)`` after each; the
+    reference is computed here, once, of ``reference_kind`` (`rkhp.studies.reference.KINDS`).
+    Ctrl-C during the runs ends the study early: ``interrupted`` is then True and the tables hold
+    the rows finished before it."""
     system = resolve_system(system)
     methods = require_steps(resolve_methods(methods))
     t_final = check_t_final(system.t_final if t_final is None else t_final)
-    counts = step_counts(steps, refinements)
-    bounds.check_trajectory(max(counts), system.dim, "the finest run")
+    chosen = not steps and refinements is None
+    if not chosen:
+        counts = step_counts(steps, refinements)
+        bounds.check_trajectory(max(counts), system.dim, "the finest run")
     ref = reference(system, t_final, kind=reference_kind)
-    results, interrupted = study_rows(methods, system, ref, counts, t_final, on_run, executor)
+    why = None
+    if chosen:
+        ref, choices, why = choose_study_steps(methods, system, ref, t_final, reference_kind)
+        bounds.check_trajectory(max(max(c.counts) for c in choices), system.dim, "the finest run")
+    else:
+        choices = [StepChoice(counts, (), False, "")] * len(methods)
+    results, interrupted = _study(methods, system, ref, choices, t_final, on_run, executor, True, chosen)
     return ConvergenceStudy(system.name, system.realisation, bool(system.degenerate), t_final, ref, results,
-                            condition_class(system), tuple(float(v) for v in system.x0), interrupted)
+                            condition_class(system), tuple(float(v) for v in system.x0), interrupted, why)

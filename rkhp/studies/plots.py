@@ -71,6 +71,36 @@ def _save(fig, path: Path, rows, record: dict | None, force: bool) -> None:
     write_output(data_path(path), csv_text(DATA_COLUMNS, rows, record), "plot data file", force)
 
 
+#: the slope lines are drawn over the data (matplotlib draws lines at zorder 2)
+SLOPE_ZORDER = 3
+#: tick values of a log axis spanning under two decades: m 10^k for these m, labels a factor
+#: MIN_TICK_RATIO apart at least
+NICE_MANTISSAS = (1.0, 1.2, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0)
+MIN_TICK_RATIO = 1.2
+
+
+def _readable_log_ticks(axis, lo: float, hi: float) -> None:
+    """Labels of a log axis over [lo, hi] that never overlap: within two decades, the values
+    m 10^k (NICE_MANTISSAS) inside the range, each MIN_TICK_RATIO above the one before, written
+    as plain numbers (%g), and no minor labels (matplotlib labels every minor tick of a narrow
+    range, 3x10^-1 beside 3.2x10^-1); wider ranges keep matplotlib's decades."""
+    from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
+
+    if not (0 < lo < hi) or hi / lo >= 100:
+        return
+    ticks = []
+    for k in range(math.floor(math.log10(lo)) - 1, math.ceil(math.log10(hi)) + 1):
+        for m in NICE_MANTISSAS:
+            v = float(f"{m * 10.0 ** k:.12g}")
+            if lo <= v <= hi and (not ticks or v >= MIN_TICK_RATIO * ticks[-1]):
+                ticks.append(v)
+    if not ticks:
+        return
+    axis.set_major_locator(FixedLocator(ticks))
+    axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    axis.set_minor_formatter(NullFormatter())
+
+
 def plot_convergence(study, path, record: dict | None = None, force: bool = False) -> Path:
     """Log-log global error against h, one line per method, with dashed reference slopes h^p
     for each expected order p, and the reference's accuracy floor."""
@@ -92,12 +122,14 @@ def plot_convergence(study, path, record: dict | None = None, force: bool = Fals
             h0, e0 = fit[-1]
             hmax = max(hs)
             slope = ([h0, hmax], [e0, e0 * (hmax / h0) ** m.expected_order])
-            ax.loglog(*slope, "--", color=line.get_color(), alpha=0.5, linewidth=1)
+            ax.loglog(*slope, "--", color=line.get_color(), alpha=0.8, linewidth=1, zorder=SLOPE_ZORDER)
             rows += _points(panel, f"{m.method} slope {m.expected_order}", *slope)
     floor = study.reference.floor
     ax.axhline(floor, color="grey", linestyle=":", linewidth=1, label=f"reference accuracy x10 ({floor:.1e})")
     rows += _points(panel, "reference accuracy x10", [min(r.h for m in study.methods for r in m.rows)] * 2,
                     [floor, floor])
+    all_h = [r.h for m in study.methods for r in m.rows]
+    _readable_log_ticks(ax.xaxis, min(all_h), max(all_h))
     ax.set_xlabel("step size h")
     ax.set_ylabel(f"global error at T = {study.t_final:g}")
     ax.set_title(f"{study.system} ({study.realisation} realisation); dashed: slope = expected order", fontsize=9)

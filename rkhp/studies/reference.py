@@ -8,12 +8,13 @@
 - ``dop853``: scipy's DOP853 at rtol 1e-13, atol 1e-15, with its error estimated by a second,
   tighter solve (rtol 2.5e-14, atol 1e-16): the estimate is the distance between the two (at least
   10 eps |x(T)|), and the tighter solve is the reference.
-- ``mpmath``: the vector field pi(x) grad H(x) of a problem given by expressions
-  (`rkhp.systems.problems`), differentiated by sympy and evaluated in mpmath, integrated by
+- ``mpmath``: the vector field pi(x) grad H(x) of a system given by expressions (a spec file, a
+  built-in system or problem: `PoissonSystem.symbolic`), differentiated by sympy and evaluated in mpmath, integrated by
   mpmath's Taylor-series solver (``mpmath.odefun``) at MP_DIGITS and at MP_DIGITS + MP_CHECK_DIGITS
   digits: the second is the reference, rounded once to float64; its estimate is eps |x(T)| (the
-  rounding) plus the distance between the two solves. Chosen, never automatic
-  (``rkhp converge --reference mpmath``): where an order above 8 must be seen below DOP853's
+  rounding) plus the distance between the two solves. Chosen (``rkhp converge --reference
+  mpmath``), or by a study whose automatic DOP853 reference leaves a method a narrow range of steps
+  (`rkhp.studies.converge.choose_study_steps`): where an order above 8 must be seen below DOP853's
   accuracy. The horizon is bounded before the solves: at most MAX_MPMATH_STEPS steps of a DOP853
   probe (rtol 1e-10) to T.
 
@@ -29,8 +30,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..base.errors import InputError, NumericalFailure
-from ..systems.problems import PROBLEMS, expressions, problem_data
-from ..systems.structure import symbols_of
 
 EPS = float(np.finfo(float).eps)
 #: steps of one DOP853 reference solve (about a minute), and the steps after which the number
@@ -152,18 +151,14 @@ def _probe_steps(system, t_final: float, x0) -> int:
 
 
 def symbolic_field(system):
-    """(symbols, pi(x) grad H(x) as sympy expressions) of a problem of `rkhp.systems.problems`;
-    InputError for a system that is not given by expressions there."""
-    import sympy
-
-    data = problem_data(system.name) if system.name.partition(":")[0] in PROBLEMS else None
-    if data is None:
-        raise InputError(f"an mpmath reference needs the expressions of the system: {system.name} has none "
-                         f"(it is available for {', '.join(PROBLEMS)})")
-    entries, H, _ = expressions(data)
-    symbols = symbols_of(data.dim)
-    grad = [sympy.diff(H, x) for x in symbols]
-    field = [sum((row[j] * grad[j] for j in range(data.dim)), sympy.Integer(0)) for row in entries]
+    """(symbols, pi(x) grad H(x) as sympy expressions) of a system given by expressions
+    (`PoissonSystem.symbolic`: spec files, the built-in systems and problems), checked against the
+    system's own vector field at its x0; InputError for a system built from programs alone."""
+    symbolic = system.symbolic()
+    if symbolic is None:
+        raise InputError(f"an mpmath reference needs the expressions of the system: {system.name} was "
+                         "built from programs alone (give it by a spec file or rkhp.system)")
+    symbols, field = symbolic.symbols, symbolic.vector_field()
     at_start = np.array([float(e.subs(dict(zip(symbols, system.x0, strict=True)))) for e in field])
     if not np.allclose(at_start, system.vector_field(np.asarray(system.x0, dtype=float)), rtol=1e-12, atol=1e-14):
         raise InputError(f"{system.name} is not the problem of that name: no mpmath reference for it")

@@ -86,7 +86,7 @@ class SweepRow:
         return {"h": self.h, "steps": self.steps, "ok": self.ok, "status": self.status,
                 "cause": self.cause,
                 "newton_max": self.newton_max, "relative_error": self.relative_error,
-                "relative_energy_error": self.relative_energy_error}
+                "relative_energy_error_max": self.relative_energy_error}
 
 
 @dataclass(frozen=True)
@@ -288,7 +288,7 @@ class SingularRun:
 
     def to_json(self) -> dict:
         return {"method": self.method, "first_species": self.first_species, "status": self.status,
-                "min_component": self.min_component, "casimir_error": self.casimir_error, "kept": self.kept}
+                "min_component": self.min_component, "casimir_error_max": self.casimir_error, "kept": self.kept}
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,7 @@ from .core import PoissonSystem
 from .families import SO3, LieAlgebra, family_system
 from .problems import PROBLEMS, build, problem_data
 from .spec import load_spec
+from .structure import symbols_of
 
 RIGID_BODY_I = (2.0, 1.0, 2.0 / 3.0)
 RIGID_BODY_X0 = (math.cos(1.1), 0.0, math.sin(1.1))
@@ -69,6 +70,14 @@ def rigid_body_exact(inertia, x0) -> Callable | None:
     return solution
 
 
+def _expression(formula, n: int):
+    """A Hamiltonian as a sympy expression, ``formula(x, sympy)`` in the real symbols x1..xn (the
+    coefficients the tapes use, exactly: a float64 coefficient as its binary rational)."""
+    import sympy
+
+    return formula(symbols_of(n), sympy)
+
+
 def rigid_body(realisation: str = "symmetric") -> PoissonSystem:
     """Free rigid body on so(3)* (pi(x) v = x cross v, closed-form realisation),
     H = sum x_i^2 / (2 I_i), I = (2, 1, 2/3) (HLW, docs/theory.md §6)."""
@@ -79,7 +88,9 @@ def rigid_body(realisation: str = "symmetric") -> PoissonSystem:
         name="rigid-body", x0=RIGID_BODY_X0, t_final=10.0, realisation=realisation,
         casimirs=(lambda x: 0.5 * float(np.dot(x, x)),), casimir_names=("|x|^2/2",),
         exact_solution=rigid_body_exact(inertia, RIGID_BODY_X0),
-        description="free rigid body, so(3)*, I = (2, 1, 2/3)")
+        description="free rigid body, so(3)*, I = (2, 1, 2/3)",
+        hamiltonian_expression=lambda: _expression(
+            lambda x, sympy: sum(sympy.Rational(0.5 / inertia[i]) * x[i] ** 2 for i in range(3)), 3))
 
 
 def lotka_volterra(realisation: str = "symmetric") -> PoissonSystem:
@@ -90,7 +101,8 @@ def lotka_volterra(realisation: str = "symmetric") -> PoissonSystem:
         casimirs=(lambda x: float(np.log(x[0]) - 2.0 * np.log(x[1]) + np.log(x[2])),),
         casimir_names=("log x1 - 2 log x2 + log x3",),
         description="3-species Lotka-Volterra, log-canonical, "
-                    "lambda = [[0,1,2],[-1,0,1],[-2,-1,0]]")
+                    "lambda = [[0,1,2],[-1,0,1],[-2,-1,0]]",
+        hamiltonian_expression=lambda: _expression(lambda x, sympy: sum(x[i] - sympy.log(x[i]) for i in range(3)), 3))
 
 
 def pendulum(realisation: str = "symmetric") -> PoissonSystem:
@@ -98,7 +110,9 @@ def pendulum(realisation: str = "symmetric") -> PoissonSystem:
     return family_system("constant", np.array(((0.0, 1.0), (-1.0, 0.0))),
                          lambda x: 0.5 * (x[1] * x[1]) - tp.cos(x[0]),
                          name="pendulum", x0=PENDULUM_X0, t_final=10.0, realisation=realisation,
-                         description="pendulum, canonical (constant pi), H = p^2/2 - cos q")
+                         description="pendulum, canonical (constant pi), H = p^2/2 - cos q",
+                         hamiltonian_expression=lambda: _expression(
+                             lambda x, sympy: x[1] ** 2 / 2 - sympy.cos(x[0]), 2))
 
 
 BUILTINS: dict[str, Callable[[str], PoissonSystem]] = {

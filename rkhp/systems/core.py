@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -100,6 +101,23 @@ def realisation(name: str) -> Realisation:
         raise InputError(f"unknown realisation {name!r}; choose one of {', '.join(REALISATIONS)}, "
                          f"{TRUNCATED}K")
     return REALISATIONS[name]
+
+
+class SymbolicSystem(NamedTuple):
+    """A system as sympy expressions in the real symbols x1..xn: pi(x) by rows and H(x)
+    (docs/theory.md §4); what a reference computed from the expressions integrates
+    (`rkhp.studies.reference`)."""
+
+    symbols: tuple
+    poisson: tuple
+    hamiltonian: object
+
+    def vector_field(self) -> list:
+        """xdot = pi(x) grad H(x), entry by entry."""
+        import sympy
+
+        grad = [sympy.diff(self.hamiltonian, x) for x in self.symbols]
+        return [sum((row[j] * grad[j] for j in range(len(grad))), sympy.Integer(0)) for row in self.poisson]
 
 
 @dataclass(frozen=True, eq=False)
@@ -196,6 +214,13 @@ class PoissonSystem:
         if x.shape != (self.dim,) or not np.all(np.isfinite(x)):
             return False
         return bool(np.all(x > 0)) if self.domain == "positive orthant" else True
+
+    def symbolic(self) -> SymbolicSystem | None:
+        """The system as expressions where it was given by them (spec files, the built-in systems,
+        the reference problems: `rkhp.systems.families.family_system`'s ``hamiltonian_expression``);
+        None for one built from programs alone."""
+        make = self.extra.get("symbolic")
+        return None if make is None else make()
 
     def casimir_values(self, x) -> np.ndarray:
         return np.array([c(np.asarray(x, dtype=np.float64)) for c in self.casimirs])

@@ -43,8 +43,8 @@ from ..base import documents
 from ..base.errors import InputError
 from ..base.exact_text import combination_text
 from ..taylor import tape as tp
-from .core import PoissonSystem, build_system
-from .structure import lie_poisson_matrix, log_canonical_matrix
+from .core import PoissonSystem, SymbolicSystem, build_system
+from .structure import lie_poisson_matrix, log_canonical_matrix, symbols_of
 
 #: so(3)*: {x_i, x_j} = -eps_ijk x_k, i.e. pi(x) v = x cross v
 SO3 = np.zeros((3, 3, 3))
@@ -106,23 +106,29 @@ def family(name: str) -> PoissonFamily:
 
 def family_system(family_name: str, structure, hamiltonian: Callable, *, name: str, x0,
                   t_final: float, realisation: str = "symmetric", casimirs=None,
-                  casimir_names=(), exact_solution=None, description: str = "") -> PoissonSystem:
+                  casimir_names=(), exact_solution=None, description: str = "",
+                  hamiltonian_expression: Callable | None = None) -> PoissonSystem:
     """The system of a family's structure with Hamiltonian `hamiltonian(x)` (a program over tape
     Vars), its realisation `realisation` composed on the family's base; without `casimirs`, the
-    family's default ones."""
+    family's default ones. `hamiltonian_expression()`: H as a sympy expression in the real
+    symbols x1..xn, where the system is given by expressions (`PoissonSystem.symbolic`)."""
     fam = family(family_name)
     n = fam.check(structure)
     if casimirs is None:
         casimirs, casimir_names = fam.casimirs(structure)
     alpha, beta = fam.base(structure, 1.0), fam.base(structure, -1.0)
-    return build_system(name=name, family=fam.name, dim=n, poisson=fam.poisson(structure),
-                        hamiltonian=hamiltonian,
-                        base_alpha=lambda x, p: alpha(x, p, tp.functions),
-                        base_beta=lambda x, p: beta(x, p, tp.functions),
-                        x0=x0, t_final=t_final, poisson_program=fam.program(structure),
-                        poisson_degree=fam.degree(structure), realisation_name=realisation,
-                        domain=fam.domain, casimirs=casimirs, casimir_names=casimir_names,
-                        exact_solution=exact_solution, description=description, structure=structure)
+    system = build_system(name=name, family=fam.name, dim=n, poisson=fam.poisson(structure),
+                          hamiltonian=hamiltonian,
+                          base_alpha=lambda x, p: alpha(x, p, tp.functions),
+                          base_beta=lambda x, p: beta(x, p, tp.functions),
+                          x0=x0, t_final=t_final, poisson_program=fam.program(structure),
+                          poisson_degree=fam.degree(structure), realisation_name=realisation,
+                          domain=fam.domain, casimirs=casimirs, casimir_names=casimir_names,
+                          exact_solution=exact_solution, description=description, structure=structure)
+    if hamiltonian_expression is not None and fam.symbolic is not None:
+        system.extra["symbolic"] = lambda: SymbolicSystem(symbols_of(n), fam.symbolic(structure),
+                                                          hamiltonian_expression())
+    return system
 
 
 # ----------------------------------------------------------------------------------------------

@@ -124,13 +124,15 @@ register_family(PoissonFamily(
 def general(structure: PoissonMatrix, hamiltonian: Callable, *, name: str, x0, t_final: float,
             realisation: str = "symmetric", casimirs=(), casimir_names=(),
             exact_solution=None, description: str = "", where: str = "poisson",
-            checked: StructureCheck | None = None, seed: int = 0) -> PoissonSystem:
+            checked: StructureCheck | None = None, seed: int = 0,
+            hamiltonian_expression: Callable | None = None) -> PoissonSystem:
     """A system xdot = pi(x) grad H(x) of the general family, `hamiltonian(x)` a program over
     tape values.
 
     `casimirs` are sympy expressions (checked to Poisson-commute with every x_i). The structure
     is checked unless `checked` (the result of an earlier :func:`check_structure`) is given;
     InputError (one line, naming `where`) if it is not a Poisson matrix or is singular at x0.
+    `hamiltonian_expression`: as for `rkhp.systems.families.family_system`.
     """
     x0 = np.asarray(x0, dtype=np.float64)
     rows = structure.entries
@@ -142,6 +144,7 @@ def general(structure: PoissonMatrix, hamiltonian: Callable, *, name: str, x0, t
         GENERAL, structure, hamiltonian, name=name, x0=x0, t_final=t_final,
         realisation=realisation, casimirs=tuple(numeric_function(c, symbols) for c in casimirs),
         casimir_names=tuple(casimir_names) or tuple(str(c) for c in casimirs),
-        exact_solution=exact_solution, description=description)
+        exact_solution=exact_solution, description=description,
+        hamiltonian_expression=hamiltonian_expression)
     system.extra["structure_check"] = checked
     return system

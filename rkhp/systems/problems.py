@@ -333,7 +333,7 @@ def build(data: ProblemData, realisation: str = "symmetric", general: bool = Fal
     entries, H, casimirs = expressions(data)
     symbols = symbols_of(data.dim)
     common = dict(name=data.name, x0=data.x0, t_final=data.t_final, realisation=realisation,
-                  description=data.description)
+                  description=data.description, hamiltonian_expression=lambda: H)
     hamiltonian = to_program(H, symbols)
     if general or data.family == "general":
         return general_family(PoissonMatrix(entries), hamiltonian, casimirs=casimirs,

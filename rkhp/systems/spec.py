@@ -156,6 +156,14 @@ def _plain_value(value):
     return value
 
 
+def _square_size(value) -> int | None:
+    """n for a value that is an n x n list of lists (a matrix key), else None (the family's reader
+    then says what is wrong with it)."""
+    if isinstance(value, list) and value and all(isinstance(row, list) and len(row) == len(value) for row in value):
+        return len(value)
+    return None
+
+
 def system_from_keys(data: dict, where: str, default_name: str, source: str,
                      realisation: str = "symmetric") -> PoissonSystem:
     """A PoissonSystem from the keys of a spec document (:func:`load_spec`'s checks; messages
@@ -177,6 +185,10 @@ def system_from_keys(data: dict, where: str, default_name: str, source: str,
         raise InputError(f"{where}: family {family} needs key {needed}")
     if "hamiltonian" not in data:
         raise InputError(f"{where}: missing key hamiltonian")
+    size = _square_size(data[needed])
+    if size is not None and size != n:
+        raise InputError(f"{where}: x0 has {n} entries but {needed} is {size} x {size}: the state has one "
+                         f"entry per row of {needed}")
     structure = FAMILIES[family].read(data[needed], n, f"{where}: {needed}")
     h_expr, symbols = parse_expression(data["hamiltonian"], n, f"{where}: hamiltonian")
     exprs = []
@@ -189,7 +201,7 @@ def system_from_keys(data: dict, where: str, default_name: str, source: str,
     casimirs = tuple(numeric_function(e, symbols) for e in exprs)
     names = tuple(str(e) for e in exprs)
     common = dict(name=name, t_final=t_final, realisation=realisation, x0=x0,
-                  description=f"from {source}: H = {H.expression}")
+                  description=f"from {source}: H = {H.expression}", hamiltonian_expression=lambda: h_expr)
     if family == "general":
         # the structure and the declared Casimirs are checked (docs/theory.md §9)
         system = general(structure, H, casimirs=exprs, where=f"{where}: poisson", **common)

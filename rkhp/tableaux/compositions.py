@@ -18,11 +18,13 @@ substep by substep over the words of weight <= p.
 Built-in compositions ship as ``tables/compositions/*.toml``; user files have the same keys:
 
     name = "yoshida6"                    # optional (default: the file name)
-    kind = "composition"                 # marks a composition file
+    kind = "composition"                 # marks a composition file (a file without `kind`
+                                         # that has `gamma` and no `A` is one too)
     base = "euler"                       # optional: an RKHP method (tableau name or file)
     gamma = ["0.784513610477557263819", ...]   # numbers or exact expressions (safe reader)
     reference = "..."                    # optional
-    order = 6                            # optional: the claimed order with a symmetric base of order 2
+    order = 6                            # optional: the claimed order with the base on a symmetric
+                                         # realisation (Euler's: symmetric, order 2)
     aliases = [...]                      # optional
 """
 
@@ -67,7 +69,7 @@ class Composition:
         base: the name (or file) of the base RKHP method.
         gamma: the coefficients as read (Fraction, sympy number or GivenDecimal).
         reference: where the coefficients come from.
-        claimed_order: the order claimed by the file (with a symmetric base of order 2), or None.
+        claimed_order: the order claimed by the file (with the base on a symmetric realisation), or None.
         aliases: other names.
     """
 
@@ -270,15 +272,17 @@ def builtin_compositions() -> list[str]:
 
 
 def is_composition_name(spec: str) -> bool:
-    """Whether `spec` names a built-in composition or a composition file."""
+    """Whether `spec` names a built-in composition or a composition file: ``kind = "composition"``,
+    or no ``kind`` and the key ``gamma`` without a Butcher matrix ``A`` (a tableau has A)."""
     if spec.lower() in _registry():
         return True
     path = Path(spec)
     if path.suffix.lower() in (".toml", ".json") and path.is_file():
         try:
-            return parse_document(read_text(path), path.suffix.lower(), str(path)).get("kind") == KIND
+            data = parse_document(read_text(path), path.suffix.lower(), str(path))
         except InputError:
             return False
+        return data.get("kind") == KIND or ("kind" not in data and "gamma" in data and "A" not in data)
     return False
 
 
@@ -349,7 +353,9 @@ class CompositionVerification:
 
     Attributes:
         composition: the Composition.
-        own: its order with a symmetric base of order 2 (how compositions are published).
+        own: its order with its base on a symmetric realisation (the base's symmetric order q, odd in
+            h for a symmetric RKHP base; Euler's q = 2 is how compositions are published): what a
+            claimed order states.
         base_symmetric: whether the base RKHP method is symmetric under a symmetric birealisation
             (checked to `base_symmetry_checked` orders, :func:`rkhp.tableaux.symmetry.rkhp_symmetry`).
         by_class: its order with its base on each realisation class (general, degenerate,
@@ -381,19 +387,17 @@ class CompositionVerification:
                 "claimed_order": c.claimed_order, "claim": self.claim}
 
 
-def class_composition_orders(comp: Composition, base, known: tuple[CompositionOrder, ...] = ()
-                             ) -> dict[str, CompositionOrder]:
+def class_composition_orders(comp: Composition, base) -> dict[str, CompositionOrder]:
     """The order of `comp` with the RKHP method `base` (a Tableau) on each realisation class: q is
     the base's order in the class; the base's modified field is odd in h on the symmetric class
     when the base is a symmetric RKHP method (docs/compositions.md). The order depends only on q
-    and that symmetry: it is computed once for each such pair, and not at all for a pair of
-    `known` (orders of `comp` already computed to MAX_COMPOSITION_ORDER, e.g. its own)."""
+    and that symmetry: it is computed once for each such pair."""
     from .symmetry import rkhp_symmetry
     from .verification import class_orders
 
     orders = class_orders(base)
     symmetric = rkhp_symmetry(base).symmetric
-    done = {(o.base_order, o.base_symmetric): o for o in known}
+    done = {}
     by_class = {}
     for cls, q in orders.items():
         pair = (q, cls == "symmetric" and symmetric)
@@ -404,15 +408,16 @@ def class_composition_orders(comp: Composition, base, known: tuple[CompositionOr
 
 
 def verify_composition(comp: Composition) -> CompositionVerification:
-    """The orders of a composition (its own with a symmetric base of order 2, and with its base on
-    each realisation class), its symmetry, and its claimed order checked."""
+    """The orders of a composition with its base on each realisation class, its own (the symmetric
+    class's: the base's symmetric order, odd in h when the base is a symmetric RKHP method), its
+    symmetry, and its claimed order checked against its own."""
     from .symmetry import rkhp_symmetry
 
     base = load_tableau(comp.base)
-    own = composition_order(comp, 2, True)
     symmetry = rkhp_symmetry(base)
+    by_class = class_composition_orders(comp, base)
+    own = by_class["symmetric"]
     claim = None
     if comp.claimed_order is not None:
         claim = "confirmed" if own.order >= comp.claimed_order else "overstated"
-    return CompositionVerification(comp, own, symmetry.symmetric, symmetry.checked_up_to,
-                                   class_composition_orders(comp, base, (own,)), claim)
+    return CompositionVerification(comp, own, symmetry.symmetric, symmetry.checked_up_to, by_class, claim)
