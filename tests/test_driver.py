@@ -104,3 +104,16 @@ def test_an_ensemble_is_one_run_at_a_time():
         finals = run_ensemble(system, tableau, 0.1, 30, starts, threads=2)
         for x0, final in zip(starts, finals, strict=True):
             np.testing.assert_array_equal(final, run(system, tableau, 0.1, 30, x0).final_state)
+
+
+@pytest.mark.parametrize("name, x0", [("charged-particle", (0.5, 0.1)), ("rigid-body", None),
+                                      ("lotka-volterra", None), ("nambu", None)])
+def test_a_symmetric_composition_retraces_itself_to_round_off(name, x0):
+    """RKHP Euler on a symmetric birealisation is symmetric (docs/theory.md §12), and so is a
+    symmetric composition of it: 100 steps of kahan-li8 forward, then 100 back, return to the
+    start to round-off when every substep is solved to round-off."""
+    system, method = resolve_system(name, x0=x0), resolve_method("kahan-li8")
+    forward = method.integrate(system, 0.1, 100)
+    back = method.integrate(system, -0.1, 100, x0=forward.final_state)
+    assert np.abs(forward.final_state - system.x0).max() > 0.1
+    assert np.abs(back.final_state - system.x0).max() < 1e-13
