@@ -13,6 +13,14 @@ alternating, minima over REPEATS runs; iterations per substep (chord iterations 
 Newton iterations of the tower); and the largest difference of the two trajectories over the
 tower's steps, relative to the largest |y|.
 
+Second table, the race's settings (the step sizes at which the compositions reach 1e-10 at T = 10
+in docs/results/work-precision.md): per substep, microseconds, iterations, Jacobians (chord
+matrices or Newton's), and an estimate of the floating-point operations the substep ran
+(`flops`: per iteration the point x(z) and y1, H's gradient by forward mode and the linear solve;
+per Jacobian its assembly and factorisation) and of those the mathematics needs (`limit`: two
+Newton iterations with one Jacobian and the closing point), with the rate the run achieved
+(flops / time).
+
 Timed: `rkhp.integrators.driver.drive` called directly with its arguments built once (no Python
 in the timed call), in CPU seconds of the calling thread (`time.thread_time`: on a shared machine
 the time the other work takes from it is not counted; the minimum is then the fairer figure).
@@ -46,7 +54,7 @@ def system_of(label: str):
 
 def loop(system, provider, gammas, h: float, steps: int):
     """A call of the driver's compiled loop over `provider`'s substeps, its arguments built once."""
-    ready = setup(system, load_tableau("euler"), gammas, provider=provider)
+    ready = setup(system, load_tableau("euler"), gammas, provider=provider)  # None: the table's
     y0, out = np.array(system.x0), record(steps, system.dim, True)
     return lambda: drive(y0, ready.gammas, h, steps, ready.data, ready.solver, out)
 
@@ -85,6 +93,48 @@ def measure(label: str, method: str, h: float, direct_steps: int, tower_steps: i
     }
 
 
+RACE = (("rigid-body", "sofroniou-spaletta10", 11), ("lotka-volterra", "sofroniou-spaletta10", 54),
+        ("toda:12", "sofroniou-spaletta10", 23), ("heavy-top", "kahan-li8", 40), ("pendulum", "kahan-li8", 40))
+"""(system, composition, steps over T = 10) of the second table: closed direct forms."""
+
+
+def closed_flops(form, n: int) -> dict:
+    """Flop estimates of the closed direct form's parts on `form` (see the module)."""
+    from rkhp.integrators import closed_euler
+
+    ops = form.hamiltonian.ops.shape[0]
+    gradient = 2 * ops * (n + 1) + 2 * n
+    if form.kind == closed_euler.LIE_POISSON and form.rotation:
+        point = 70
+    elif form.kind == closed_euler.LIE_POISSON:
+        point = 12 * (4 * len(form.coefs) + 6 * n)  # about 12 terms of two series (|K| about 0.1)
+    else:
+        point = 2 * n * n + (40 * n if form.kind == closed_euler.LOG_CANONICAL else 2 * n)
+    solve = 2 * n * n + (6 * n * n if not form.exact else 0)  # the chord path's Broyden update
+    jacobian = 2 * n**3 + (2 * n**3 // 3) + 2 * n**3 + (0 if form.hessian_constant else 2 * n * gradient)
+    return {"iteration": point + gradient + solve, "jacobian": jacobian, "point": point}
+
+
+def race(name: str, composition: str, steps: int) -> dict:
+    """Time, iterations, Jacobians and flops per substep of a composition by its direct form."""
+    system = get_system(name)
+    gammas = load_composition(composition).gamma_float
+    h, s = system.t_final / steps, len(gammas)
+    call = loop(system, None, gammas, h, steps)
+    call()
+    best = min(seconds(call) for _ in range(REPEATS))
+    trajectory = run(system, load_tableau("euler"), h, steps, gammas=gammas)
+    substeps = steps * s
+    iterations = float(np.sum(trajectory.newton_iterations)) / substeps
+    jacobians = float(np.sum(trajectory.extra["refreshes"])) / substeps
+    parts = closed_flops(setup(system, load_tableau("euler"), gammas).data.form, system.dim)
+    flops = iterations * parts["iteration"] + jacobians * parts["jacobian"] + parts["point"]
+    limit = 2 * parts["iteration"] + parts["jacobian"] + parts["point"]
+    us = 1e6 * best / substeps
+    return {"us": us, "iterations": iterations, "jacobians": jacobians, "flops": flops, "limit": limit,
+            "rate": flops / us / 1e3, "h": h}
+
+
 def main() -> None:
     print("$ python benchmarks/substeps.py")
     print(f"microseconds per Euler substep (min of {REPEATS}, thread CPU time)")
@@ -96,6 +146,15 @@ def main() -> None:
         print(f"{label:<18} {method:<6} {h:>5g} {m['provider']:>7} {m['direct_us']:>7.2f} {m['tower_us']:>9.1f} "
               f"{m['tower_us'] / m['direct_us']:>6.1f}x {m['iterations']:>5.2f} "
               f"{m['tower_iterations']:>6.2f} {m['gap']:>9.1e}")
+        sys.stdout.flush()
+    print()
+    print(f"the race's settings: per substep (min of {REPEATS}, thread CPU time)")
+    print(f"{'system':<18} {'method':<22} {'h':>6} {'us':>6} {'iter':>5} {'jac':>5} {'flops':>7} "
+          f"{'limit':>6} {'GFLOP/s':>8}")
+    for name, composition, steps in RACE:
+        m = race(name, composition, steps)
+        print(f"{name:<18} {composition:<22} {m['h']:>6.3f} {m['us']:>6.2f} {m['iterations']:>5.2f} "
+              f"{m['jacobians']:>5.2f} {m['flops']:>7.0f} {m['limit']:>6.0f} {m['rate']:>8.2f}")
         sys.stdout.flush()
 
 

@@ -30,12 +30,19 @@ QUICK = [key for key in REFERENCE
 
 
 def _check(key: str) -> None:
+    """The run of `key` as the reference has it: its final state to 1e-13 (relative), or, for a
+    run that failed, a failure of the same cause. The driver ran the 216 bit for bit as before;
+    the direct forms have since changed at round-off (Rodrigues' formulas on so(3)*, Newton's
+    method, more collocation nodes), which moves a run at the edge of convergence by a step."""
     name, realisation, method = key.split("/")
     trajectory = resolve_method(method).integrate(resolve_system(name, realisation), 0.1, 20)
     expected = REFERENCE[key]
-    assert trajectory.status == expected["status"]
+    if expected["status"] != "ok":
+        assert trajectory.status.split(": ", 1)[1] == expected["status"].split(": ", 1)[1]
+        return
+    assert trajectory.status == "ok"
     final = np.array(expected["final"])
-    assert np.abs(trajectory.states[-1] - final).max() <= 1e-14 * max(1.0, np.abs(final).max())
+    assert np.abs(trajectory.states[-1] - final).max() <= 1e-13 * max(1.0, np.abs(final).max())
 
 
 @pytest.mark.parametrize("key", QUICK)
@@ -117,3 +124,15 @@ def test_a_symmetric_composition_retraces_itself_to_round_off(name, x0):
     back = method.integrate(system, -0.1, 100, x0=forward.final_state)
     assert np.abs(forward.final_state - system.x0).max() > 0.1
     assert np.abs(back.final_state - system.x0).max() < 1e-13
+
+
+def test_a_time_on_the_grid_is_the_grid_state():
+    """--t-eval at a grid time returns the grid state (docs/results.md), also where the grid time
+    n h differs from the time asked by round-off (3 x 0.1 = 0.30000000000000004)."""
+    from rkhp.integrators.output_times import states_at
+
+    system, method = get_system("rigid-body"), resolve_method("kahan-li8")
+    trajectory = method.integrate(system, 0.1, 100)
+    timed = states_at(trajectory, method, [0.3, 0.35, 1.0, 10.0])
+    np.testing.assert_array_equal(timed.substeps, [0.0, 0.35 - trajectory.times[3], 0.0, 0.0])
+    np.testing.assert_array_equal(timed.states[[0, 2, 3]], trajectory.states[[3, 10, 100]])

@@ -90,9 +90,9 @@ SERIES_TERMS = 64
 EXACT_DIMENSION = 12
 """Systems with a quadratic H (a constant Hessian) solve each substep by Newton's method
 (`newton_substep`) on so(3)*, and on the constant and log-canonical families up to this
-dimension; the others keep a chord matrix across steps with Broyden's updates (`closed_substep`:
-an exact Jacobian would cost 2 n gradients of H, or an n x n inverse of more than this size, at
-each Newton step)."""
+dimension; the others keep a chord matrix across steps with Broyden's updates (`closed_substep`):
+where Hess H must be evaluated at every Newton step, more but cheaper chord iterations take less
+time (`benchmarks/substeps.py`), and on other Lie–Poisson algebras x'(z) has no closed form."""
 ROTATION_SERIES = 1.0
 """Below this angle theta the coefficients of the rotation (`_rotation_coefficients`) are summed
 as their power series (ROTATION_TERMS terms: the next is below 2^-56 of the first), above it
@@ -186,7 +186,8 @@ class ChordMemory(NamedTuple):
     """What substep i of a composition keeps from one step to the next (index i first).
 
     z_hist (s, HISTORY, n): its last solutions, newest first; count (s,) int64: how many;
-    inverse (s, n, n): the inverse of its chord matrix, with Broyden's updates; ready (s,) int64:
+    inverse (s, n, n): the inverse of its chord matrix, with Broyden's updates (with Newton's
+    method, `newton_substep`: the LU factors of its last Jacobian); ready (s,) int64:
     1 once it exists; rate (s,): the contraction of its first two iterations, last measured (1: none yet);
     refreshes (s,) int64: how many times the matrix was built in this run."""
 
@@ -204,8 +205,8 @@ def closed_work(form: ClosedForm, n: int) -> ClosedWork:
         return np.zeros(n)
 
     return ClosedWork(np.zeros((form.hamiltonian.n_slots, n + 1)), vec(), vec(), vec(), vec(), vec(),
-                      vec(), np.zeros(form.pairs.shape[0]), np.zeros((n, n)), np.zeros((n, n)),
-                      vec(), vec(), vec(), vec(), vec(), vec(), np.zeros(n, np.int64), vec(), vec())
+                      vec(), np.zeros(form.pairs.shape[0]), np.zeros((n, n)), np.zeros((n, n)), vec(),
+                      vec(), vec(), vec(), vec(), vec(), np.zeros(n, np.int64), vec(), vec())
 
 
 def chord_memory(s: int, n: int) -> ChordMemory:
@@ -393,12 +394,13 @@ def _refresh(i, y0, hs, form, work, memory, n):
     return _store_inverse(i, hs, form, work, memory, n)
 
 
-@nb.njit(**NJIT_NORC)
-def _exact_matrix(i, y0, hs, form, work, memory, n):
-    """Substep i's exact Jacobian of z - G(x(z)) at z = work.z, I - G'(x) x'(z), its inverse into
-    the memory: called right after `_point` at that z (x = work.xbar, kept), with x'(z) = pi / 2
-    (constant), diag(x) lambda / 2 (log-canonical) or `_rotation_jacobian` (so(3)*). Failure.OK
-    or SINGULAR."""
+@nb.njit(inline="always", **NJIT_NORC)
+def _exact_factors(i, y0, hs, form, work, memory, n):
+    """The LU factors (in memory.inverse[i], row order work.perm) of substep i's exact Jacobian of
+    z - G(x(z)) at z = work.z, I - G'(x) x'(z): called right after `_point` at that z (x =
+    work.xbar, kept), with x'(z) = pi / 2 (constant), diag(x) lambda / 2 (log-canonical) or
+    `_rotation_jacobian` (so(3)*). Failure.OK or SINGULAR."""
+    memory.refreshes[i] += 1
     D, x = work.jac, work.xz
     for k in range(n):
         x[k] = work.xbar[k]
@@ -408,19 +410,20 @@ def _exact_matrix(i, y0, hs, form, work, memory, n):
         for a in range(n):
             for b in range(n):
                 D[a, b] = 0.5 * form.matrix[a, b] * (x[a] if form.kind == LOG_CANONICAL else 1.0)
-    cause = _store_inverse(i, hs, form, work, memory, n)
+    _jacobian(i, hs, form, work, memory, n)
     for k in range(n):
         work.xbar[k] = x[k]
-    return cause
+    if not lu_factor(memory.inverse[i], work.perm):
+        return Failure.SINGULAR
+    return Failure.OK
 
 
-@nb.njit(**NJIT_NORC)
-def _store_inverse(i, hs, form, work, memory, n):
-    """M = I - hs G'(x) D with G'(x) = Hess H(x) (constant, lie-poisson) or diag(grad H(x)) +
-    diag(x) Hess H(x) (log-canonical), x = work.xz, D = work.jac (x'); its inverse into the
-    memory of substep i. Hess H is the constant one of the form for a quadratic H, else by
-    differences of the gradient (`rkhp.integrators.direct_form.hessian`). Failure.OK or SINGULAR."""
-    memory.refreshes[i] += 1
+@nb.njit(inline="always", **NJIT_NORC)
+def _jacobian(i, hs, form, work, memory, n):
+    """memory.inverse[i] := I - hs G'(x) D with G'(x) = Hess H(x) (constant, lie-poisson) or
+    diag(grad H(x)) + diag(x) Hess H(x) (log-canonical), x = work.xz, D = work.jac (x'). Hess H is
+    the constant one of the form for a quadratic H, else by differences of the gradient
+    (`rkhp.integrators.direct_form.hessian`)."""
     D, H, x = work.jac, work.hess, work.xz
     if form.hessian_constant:
         for a in range(n):
@@ -429,8 +432,9 @@ def _store_inverse(i, hs, form, work, memory, n):
     else:
         hessian(form, work, x, n)
     if form.kind == LOG_CANONICAL:
-        # G'(x) = h (diag(grad H) + diag(x) Hess H)
         gradient(form, work, x, n)
+    if form.kind == LOG_CANONICAL:
+        # G'(x) = h (diag(grad H) + diag(x) Hess H)
         for a in range(n):
             for b in range(n):
                 H[a, b] *= x[a]
@@ -442,6 +446,15 @@ def _store_inverse(i, hs, form, work, memory, n):
             for r in range(n):
                 acc += H[a, r] * D[r, b]
             M[a, b] = (1.0 if a == b else 0.0) - hs * acc
+
+
+@nb.njit(**NJIT_NORC)
+def _store_inverse(i, hs, form, work, memory, n):
+    """Substep i's chord matrix (`_jacobian`) inverted in place (memory.inverse[i]), marked
+    ready. Failure.OK or SINGULAR."""
+    memory.refreshes[i] += 1
+    _jacobian(i, hs, form, work, memory, n)
+    M, D = memory.inverse[i], work.jac
     if not lu_factor(M, work.perm):
         return Failure.SINGULAR
     for b in range(n):  # the inverse, column by column, into work.jac
@@ -598,8 +611,8 @@ def newton_substep(i, y0, hs, form, work, memory, solver):
     """One Euler substep of step hs in direct form from y0 by Newton's method (form.exact): its
     increment y1 - y0 into work.dy; returns (Failure, iterations).
 
-    Starts from the extrapolated z (`_predict`); each iteration evaluates x(z), takes the exact
-    Jacobian there (`_exact_matrix`) when the last correction exceeded NEWTON_REFRESH max(1, |y0|)
+    Starts from the extrapolated z (`_predict`); each iteration evaluates x(z), factorises the
+    exact Jacobian there (`_exact_factors`) when the last correction exceeded NEWTON_REFRESH max(1, |y0|)
     (always at the first: a Newton step; below it a chord step with the last Jacobian, which
     already contracts by about L |d|), and corrects z by the Jacobian's inverse times G(x(z)) - z.
     Stops when the correction is at most solver.tol max(1, |y0|), or when the next one is
@@ -623,20 +636,18 @@ def newton_substep(i, y0, hs, form, work, memory, solver):
         was_newton = newton
         newton = refresh
         if refresh:
-            cause = _exact_matrix(i, y0, hs, form, work, memory, n)
+            cause = _exact_factors(i, y0, hs, form, work, memory, n)
             if cause != Failure.OK:
                 return cause, it
         _target(hs, form, work, n)
+        for k in range(n):
+            work.res[k] -= work.z[k]
+        lu_solve(memory.inverse[i], work.perm, work.res, work.tmp)
         size = 0.0
         for k in range(n):
-            acc = 0.0
-            for b in range(n):
-                acc += memory.inverse[i, k, b] * (work.res[b] - work.z[b])
-            work.tmp[k] = acc
-            if not abs(acc) <= size:
-                size = abs(acc)
-        for k in range(n):
-            work.z[k] += work.tmp[k]
+            work.z[k] += work.res[k]
+            if not abs(work.res[k]) <= size:
+                size = abs(work.res[k])
         if not size < np.inf:
             return Failure.NEWTON_NON_FINITE, it
         if size > 1e8 * scale:

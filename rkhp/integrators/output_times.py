@@ -6,7 +6,9 @@ method, of size t - t_n (with its sign), from y_n. An RKHP step of any size is a
 the symplectic leaf of y_0 and every Casimir keeps its value to round-off; an interpolation
 between y_n and y_{n+1} would leave the leaf. Its error is that of y_n, O(h^p), plus the local
 error of a step of size |t - t_n| <= |h|, O(h^(p+1)): the output has the method's order p.
-A time on the grid (t - t_n = 0) is the grid state itself.
+A time on the grid is the grid state itself: t_n = n h is the grid time as the run computed it, so
+a time within a few units of round-off of it (0.3 against 3 x 0.1 = 0.30000000000000004) counts
+as t_n.
 """
 
 from __future__ import annotations
@@ -96,13 +98,16 @@ def states_at(trajectory, method, times, system=None) -> TimedStates:
     slack = 4 * np.finfo(float).eps * max(abs(float(grid[0])), abs(float(grid[-1])))
     values = check_output_times(times, float(grid[0]), float(grid[-1]), slack=slack)
     direction = 1.0 if grid[-1] >= grid[0] else -1.0
-    # n: the last grid point not past t in the direction of the run
+    # n: the last grid point not past t in the direction of the run, or the grid point t rounds to
     index = np.searchsorted(direction * grid, direction * values, side="right") - 1
+    ahead = np.minimum(index + 1, grid.size - 1)
+    on_next = np.abs(grid[ahead] - values) <= slack
+    index = np.where(on_next, ahead, index)
     m = values.size
     states = np.empty((m, system.dim))
     newton = np.zeros(m, dtype=np.int64)
     sweeps = np.zeros(m, dtype=np.int64)
-    substeps = values - grid[index]
+    substeps = np.where(np.abs(values - grid[index]) <= slack, 0.0, values - grid[index])
     for k in range(m):
         start = trajectory.states[index[k]]
         if substeps[k] == 0.0:
