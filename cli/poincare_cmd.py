@@ -65,7 +65,7 @@ def poincare(system, expression, direction, t_final, method, tol, steps, x0, rea
     method (docs/solve.md)."""
     from rkhp.base.errors import NumericalFailure
     from rkhp.integrators.methods import resolve_system
-    from rkhp.ivp.poincare import axes_of, section
+    from rkhp.ivp.poincare import axes_of, poincare_section
     from rkhp.ivp.solve import FAILED
 
     poisson = resolve_system(system, realisation, parse_x0(x0))
@@ -79,7 +79,7 @@ def poincare(system, expression, direction, t_final, method, tol, steps, x0, rea
             if fmt == "table" and planned.choice is not None:
                 click.echo(plan_line(planned))
 
-        found = section(poisson, expression, t_final, method, tol, steps=steps, direction=direction,
+        found = poincare_section(poisson, expression, t_final, method, tol, steps=steps, direction=direction,
                         on_plan=told, on_candidate=lambda done, total: bar.update(pilot, completed=done, total=total),
                         on_progress=lambda done, total: bar.update(task, completed=done, total=total))
     if plot is not None and len(found.times):

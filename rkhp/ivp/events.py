@@ -33,18 +33,27 @@ class Event:
 
     Attributes:
         name: the expression's text, or the function's name.
-        values: states of shape (m, n) and times (m,) -> g at each (m,).
+        values: states of shape (m, n) and times (m,) -> g at each (m,); None for an expression
+            not read yet (:func:`event`: read when the solve knows the dimension).
         direction: > 0 upward crossings only, < 0 downward only, 0 both.
         terminal: 0: the run goes on; k >= 1: the run ends at the k-th occurrence.
     """
 
     name: str
-    values: Callable = field(repr=False, compare=False)
+    values: Callable | None = field(repr=False, compare=False)
     direction: float = 0.0
     terminal: int = 0
 
     def value(self, state, t: float) -> float:
         return float(self.values(np.asarray(state, dtype=np.float64)[None, :], np.array([t]))[0])
+
+
+def event(expression: str, direction: float = 0.0, terminal=False) -> Event:
+    """The event ``expression`` = 0 with its flags, for :func:`rkhp.solve` (``rkhp.event("x2",
+    direction=1, terminal=True)``): the expression is read when the solve knows the system."""
+    if not isinstance(expression, str):
+        raise InputError(f"event: the expression must be a string, got {type(expression).__name__}")
+    return Event(expression, None, _direction(direction, "event"), _terminal(terminal, "event"))
 
 
 def expression_event(text: str, dim: int, direction: float = 0.0, terminal=False, where: str = "event") -> Event:
@@ -101,7 +110,9 @@ def as_events(events, dim: int) -> tuple[Event, ...]:
         raise InputError(f"{len(items)} events; at most {MAX_EVENTS}")
     out = []
     for k, item in enumerate(items):
-        if isinstance(item, Event):
+        if isinstance(item, Event) and item.values is None:
+            out.append(expression_event(item.name, dim, item.direction, item.terminal, where=f"event {k + 1}"))
+        elif isinstance(item, Event):
             out.append(item)
         elif isinstance(item, str):
             out.append(expression_event(item, dim, where=f"event {k + 1}"))

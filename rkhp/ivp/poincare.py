@@ -44,7 +44,7 @@ class Section:
                 "invariant_errors": list(r.invariant_errors), "status": r.status, "message": r.message}
 
 
-def section(system, expression: str, t_final: float | None = None, method=DEFAULT_METHOD, tol=None, *,
+def poincare_section(system, expression: str, t_final: float | None = None, method=DEFAULT_METHOD, tol=None, *,
             steps=None, direction: str = "up", x0=None, realisation: str = "symmetric", on_plan=None,
             on_progress=None, on_candidate=None) -> Section:
     """The Poincaré section of ``system``'s orbit (from ``x0``, default its start) over [0,
