@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..base.errors import InputError
-from ..integrators.methods import DEFAULT_METHOD
+from ..integrators.methods import DEFAULT_METHOD, resolve_system
 from .events import expression_event
 from .solve import SolveResult, solve
 
@@ -51,8 +51,6 @@ def poincare_section(system, expression: str, t_final: float | None = None, meth
     ``t_final``] (default the system's T) with the hypersurface ``expression`` = 0 (an expression
     in x1..xn, the safe reader), crossed ``direction`` ("up": g increasing, "down", "both"), by
     :func:`rkhp.ivp.solve.solve` with ``method`` and ``tol`` or ``steps``."""
-    from ..integrators.methods import resolve_system
-
     if direction not in DIRECTIONS:
         raise InputError(f"direction {direction!r}: one of {', '.join(DIRECTIONS)}")
     poisson = resolve_system(system, realisation, x0)

@@ -18,6 +18,7 @@ import numpy as np
 from ..base import bounds
 from ..base.errors import InputError
 from ..integrators.failure import Failure
+from ..integrators.trajectory import Trajectory
 
 #: steps of one chunk at least (a call of the compiled loop costs about 0.1-0.5 ms on its own)
 MIN_CHUNK = 2_000
@@ -40,13 +41,14 @@ class Span:
         """h = (t1 - t0) / steps."""
         return self.length / steps
 
-    def times(self, steps: int, first: int = 0, count: int | None = None) -> np.ndarray:
+    def times(self, steps: int, first: int = 0, count: int | None = None, exact_end: bool = True) -> np.ndarray:
         """The grid times t0 + n h (h = span / steps) for n = first .. first + count - 1 (default:
-        to the end), t_N exactly t1."""
+        to the end), t_N exactly t1 when ``exact_end`` (else N h, which may miss t1 by round-off,
+        as the times of one call of the method)."""
         count = steps + 1 - first if count is None else count
         n = np.arange(first, first + count, dtype=np.float64)
         times = self.t0 + n * self.step(steps)
-        if first + count - 1 == steps:
+        if exact_end and first + count - 1 == steps:
             times[-1] = self.t1
         return times
 
@@ -91,9 +93,10 @@ class Chunk:
         return self.cause == Failure.OK
 
 
-def chunks(system, method, span: Span, steps: int, x0=None) -> Iterator[Chunk]:
+def chunks(system, method, span: Span, steps: int, x0=None, exact_end: bool = True) -> Iterator[Chunk]:
     """The chunks of ``steps`` steps of ``method`` (a Method) on ``system`` (a PoissonSystem) over
-    ``span`` from ``x0`` (default: the system's start); a failed chunk is the last."""
+    ``span`` from ``x0`` (default: the system's start); a failed chunk is the last. The times:
+    :meth:`Span.times`."""
     h = span.step(steps)
     state = system.start(x0)
     done = 0
@@ -102,7 +105,7 @@ def chunks(system, method, span: Span, steps: int, x0=None) -> Iterator[Chunk]:
         part = method.integrate(system, h, min(size, steps - done), state)
         m = len(part.states) - 1
         status = "ok" if part.ok else failure_line(part.cause, done + m, span, h, system.domain)
-        yield Chunk(done, span.times(steps, done, m + 1), part.states,
+        yield Chunk(done, span.times(steps, done, m + 1, exact_end), part.states,
                     np.asarray(part.newton_iterations, dtype=np.int64)[:m],
                     np.asarray(part.stage_sweeps, dtype=np.int64)[:m], part.cause, status, part.run_seconds,
                     part.compile_seconds)
@@ -120,14 +123,12 @@ def failure_line(cause: Failure, step: int, span: Span, h: float, domain: str) -
             f"{text}")
 
 
-def trajectory(system, method, span: Span, steps: int, x0=None, on_progress=None):
-    """The whole run as one :class:`~rkhp.integrators.trajectory.Trajectory` (times t0 + n h),
-    ``on_progress(done, steps)`` after each chunk; a failed run keeps the states before the
-    failure, as one call of the method would."""
-    from ..integrators.trajectory import Trajectory
-
+def trajectory(system, method, span: Span, steps: int, x0=None, on_progress=None) -> Trajectory:
+    """The whole run as one :class:`~rkhp.integrators.trajectory.Trajectory`, its states and times
+    t0 + n h those of one call of the method, ``on_progress(done, steps)`` after each chunk; a
+    failed run keeps the states before the failure, as one call of the method would."""
     bounds.check_trajectory(steps, system.dim)
-    parts = list(_progress(chunks(system, method, span, steps, x0), steps, on_progress))
+    parts = list(_progress(chunks(system, method, span, steps, x0, exact_end=False), steps, on_progress))
     states = np.concatenate([parts[0].states] + [c.states[1:] for c in parts[1:]])
     last = parts[-1]
     return Trajectory(np.concatenate([parts[0].times] + [c.times[1:] for c in parts[1:]]), states,

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..base import bounds
 from ..base.errors import InputError, NumericalFailure
+from ..base.provenance import provenance
 from ..integrators.methods import DEFAULT_METHOD, Method, require_steps, resolve_method, resolve_system
 from ..integrators.output_times import check_output_times, states_at
 from ..integrators.trajectory import Trajectory, energies
@@ -326,8 +327,6 @@ def solve(system, t_span=None, method=DEFAULT_METHOD, tol=None, *, steps=None, t
     Bad input raises InputError; a run that fails returns status -1 (as solve_ivp) with the grid
     up to the failure.
     """
-    from ..base.provenance import provenance
-
     poisson = resolve_system(system, realisation, x0)
     chosen, planned = plan(poisson, t_span, method, tol, steps, None, on_candidate)
     span = planned.span
