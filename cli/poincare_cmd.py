@@ -114,8 +114,8 @@ def _render(found, plot) -> None:
     print_table(out, table)
     if len(found.times) > SHOWN:
         out.print(f"... {len(found.times) - SHOWN} more (all of them: --format csv or json)", markup=False)
-    casimir = "-" if r.casimir_error is None else f"{r.casimir_error:.2e}"
-    out.print(f"along the orbit: Casimir error {casimir}, energy error {r.energy_error:.2e}"
-              + "".join(f", invariant {k + 1} {e:.2e}" for k, e in enumerate(r.invariant_errors)), markup=False)
+    casimir = "-" if r.casimir_error_max is None else f"{r.casimir_error_max:.2e}"
+    out.print(f"largest over the orbit: Casimir error {casimir}, energy error {r.energy_error_max:.2e}"
+              + "".join(f", invariant {k + 1} {e:.2e}" for k, e in enumerate(r.invariant_errors_max)), markup=False)
     if plot:
         out.print(f"plot written to {plain(plot)}", markup=False)

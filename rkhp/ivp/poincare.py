@@ -40,8 +40,9 @@ class Section:
         return {"system": r.system, "section": self.expression, "direction": self.direction,
                 "method": r.method, "steps": r.steps, "h": r.h, "tolerance": r.tolerance,
                 "estimated_error": r.estimated_error, "count": len(self.times), "times": self.times.tolist(),
-                "points": self.points.tolist(), "casimir_error": r.casimir_error, "energy_error": r.energy_error,
-                "invariant_errors": list(r.invariant_errors), "status": r.status, "message": r.message}
+                "points": self.points.tolist(), "casimir_error_max": r.casimir_error_max,
+                "energy_error_max": r.energy_error_max, "invariant_errors_max": list(r.invariant_errors_max),
+                "status": r.status, "message": r.message}
 
 
 def poincare_section(system, expression: str, t_final: float | None = None, method=DEFAULT_METHOD, tol=None, *,

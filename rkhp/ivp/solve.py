@@ -87,7 +87,7 @@ class SolveResult:
     run; ``steps_taken`` before a failure or a terminal event), ``tolerance`` (None when the steps
     were given), ``estimated_error`` (the error at t1 estimated after the run, relative to
     max(1, |y(t1)|); None when the steps were given), ``plan`` (the step choice and the candidates),
-    ``casimir_error``, ``energy_error`` and ``invariant_errors`` (the largest |C(y) - C(y_0)|,
+    ``casimir_error_max``, ``energy_error_max`` and ``invariant_errors_max`` (the largest |C(y) - C(y_0)|,
     |H(y) - H(y_0)| and |I(y) - I(y_0)| over the grid, each declared invariant; None without
     Casimirs), ``newton_mean``, ``newton_max``, ``run_seconds``, ``provenance``.
     """
@@ -109,18 +109,18 @@ class SolveResult:
     tolerance: float | None = None
     estimated_error: float | None = None
     plan: Plan | None = None
-    casimir_error: float | None = None
-    energy_error: float = 0.0
-    invariant_errors: list = field(default_factory=list)
+    casimir_error_max: float | None = None
+    energy_error_max: float = 0.0
+    invariant_errors_max: list = field(default_factory=list)
     newton_mean: float = 0.0
     newton_max: int = 0
     run_seconds: float = 0.0
     provenance: dict = field(default_factory=dict)
 
     @property
-    def invariant_error(self) -> float | None:
+    def invariant_error_max(self) -> float | None:
         """The largest drift of the declared invariants (None without any)."""
-        return max(self.invariant_errors) if self.invariant_errors else None
+        return max(self.invariant_errors_max) if self.invariant_errors_max else None
 
     def to_json(self) -> dict:
         """The JSON document of the result (docs/json.md "rkhp.solve")."""
@@ -131,8 +131,8 @@ class SolveResult:
             "success": self.success, "t": self.t.tolist(), "y": self.y.T.tolist(),
             "t_events": None if self.t_events is None else [t.tolist() for t in self.t_events],
             "y_events": None if self.y_events is None else [y.tolist() for y in self.y_events],
-            "casimir_error": self.casimir_error, "energy_error": self.energy_error,
-            "invariant_errors": list(self.invariant_errors), "invariant_error": self.invariant_error,
+            "casimir_error_max": self.casimir_error_max, "energy_error_max": self.energy_error_max,
+            "invariant_errors_max": list(self.invariant_errors_max), "invariant_error_max": self.invariant_error_max,
             "newton_mean": self.newton_mean, "newton_max": self.newton_max, "run_seconds": self.run_seconds,
             "plan": None if self.plan is None else self.plan.to_json(),
         }
@@ -391,8 +391,8 @@ def _result(system, method, planned: Plan, choice, n: int, run: _Run, times, den
         success=run.status >= 0, system=system.name, method=method.name,
         order=_order(method, system), steps=n, h=planned.span.step(n), steps_taken=taken,
         tolerance=None if choice is None else choice.tolerance, estimated_error=estimate, plan=plan_final,
-        casimir_error=run.casimir if system.casimirs else None, energy_error=run.energy,
-        invariant_errors=[float(v) for v in run.invariants], newton_mean=run.newton_sum / taken if taken else 0.0,
+        casimir_error_max=run.casimir if system.casimirs else None, energy_error_max=run.energy,
+        invariant_errors_max=[float(v) for v in run.invariants], newton_mean=run.newton_sum / taken if taken else 0.0,
         newton_max=run.newton_max, run_seconds=run.seconds, provenance=record)
 
 

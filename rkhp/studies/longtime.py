@@ -45,7 +45,7 @@ class Growth:
     def to_json(self) -> dict:
         return {"method": self.method, "h": self.h, "steps": self.steps, "tolerance": self.tolerance,
                 "times": list(self.times), "energy_errors": list(self.errors), "exponent": self.exponent,
-                "status": self.status, "invariant_errors": list(self.invariant_errors)}
+                "status": self.status, "invariant_errors_max": list(self.invariant_errors)}
 
 
 def sample_times(t_final: float, h: float) -> np.ndarray:

@@ -189,7 +189,7 @@ class LongRun:
         return {"method": self.method, "status": self.status, "casimir_windows": list(self.casimir_windows),
                 "energy_windows": list(self.energy_windows), "casimir_max": self.casimir_max,
                 "energy_growth": self.energy_growth, "seconds": self.seconds,
-                "invariant_errors": list(self.invariant_errors), "invariant_max": self.invariant_max,
+                "invariant_errors_max": list(self.invariant_errors), "invariant_max": self.invariant_max,
                 "modified_energy": None if self.modified is None else self.modified.to_json()}
 
 
