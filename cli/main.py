@@ -23,6 +23,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "systems": ("rkhp_cli.systems_cmd", "systems", "List the built-in Poisson systems."),
     "check": ("rkhp_cli.systems_cmd", "check", "Check a system's birealisation axioms (AD)."),
     "integrate": ("rkhp_cli.systems_cmd", "integrate", "Integrate a Poisson system with a method (docs/methods.md)."),
+    "poincare": ("rkhp_cli.poincare_cmd", "poincare", "Poincare section of an orbit: points, CSV, plot."),
     "compose": ("rkhp_cli.compose_cmd", "compose", "Composition of RKHP steps against the Butcher product."),
     "modified": ("rkhp_cli.modified_cmd", "modified", "Modified Hamiltonian of a method (backward error analysis)."),
     "stability": ("rkhp_cli.stability_cmd", "stability", "Linear phase and stability of RKHP methods."),

@@ -183,7 +183,7 @@ def _verdict_basis(study, m) -> str:
 #: the columns of `converge --format csv` (docs/results.md)
 CONVERGE_CSV = ("method", "kind", "h", "steps", "error", "local_order", "casimir_error_max", "energy_error_max",
                 "newton_mean", "newton_max", "seconds", "role", "status", "observed_order", "expected_order",
-                "verdict")
+                "verdict", "invariant_error_max")
 
 
 def _emit_converge(study, fmt) -> None:
@@ -191,7 +191,7 @@ def _emit_converge(study, fmt) -> None:
     verdicts)."""
     rows = [(m.method, m.kind, r.h, r.steps, r.error, r.local_order, r.casimir_error, r.energy_error,
              r.newton_mean, r.newton_max, r.seconds, _role(m, i) or None, r.status, m.observed_order,
-             m.expected_order, m.verdict)
+             m.expected_order, m.verdict, r.invariant_error)
             for m in study.methods for i, r in enumerate(m.rows)]
     cells, groups = [], []
     for m in study.methods:
@@ -233,6 +233,9 @@ def _render_converge(study, plot) -> None:
         failed = [r.status for r in m.rows if r.status != "ok"]
         if failed:
             out.print(f"  failed runs: {plain('; '.join(failed))}")
+        drifts = [r.invariant_error for r in m.rows if r.invariant_error is not None]
+        if drifts:
+            out.print(f"  declared invariants, largest drift per run: {', '.join(_e1(d) for d in drifts)}")
     out.print("columns: global error at T (2-norm), local order, max Casimir and energy errors over the run, "
               "Newton iterations mean/max, run seconds (compile apart), role in the fit (pre = pre-asymptotic, "
               "floor = round-off floor, drift = order drift, <ref = below the reference's accuracy)")
@@ -476,7 +479,8 @@ def _stress_rows(study, verdicts):
                 yield ("a", s.method, r.h, r.steps, None, key, getattr(r, attr))
     lr = study.long_run
     for r in () if lr is None else (*lr.runs, lr.peer):
-        values = {"casimir_max": r.casimir_max, "energy_first_window": r.energy_windows[0],
+        values = {"casimir_max": r.casimir_max, "invariant_max": r.invariant_max,
+                  "energy_first_window": r.energy_windows[0],
                   "energy_last_window": r.energy_windows[-1], "energy_growth": r.energy_growth,
                   "modified_energy_max": None if r.modified is None else r.modified.max,
                   "seconds": r.seconds, "status": r.status}
@@ -560,6 +564,8 @@ def _render_long_run(out, lr, verdicts) -> None:
     for r in (*lr.runs, lr.peer):
         if r.status != "ok":
             out.print(f"  {plain(r.method)}: {plain(r.status)}")
+        if r.invariant_max is not None:
+            out.print(f"  {plain(r.method)}: declared invariants' largest drift {_e(r.invariant_max)}")
     out.print(f"verdict (b): {plain(verdicts['b'])}")
 
 
@@ -638,6 +644,7 @@ def long_time(system, methods, x0, realisation, h, steps, tolerance, plot, force
             out.print(f"  {r.method} ({what}): {r.status}", markup=False)
             continue
         k = "—" if r.exponent is None else f"{r.exponent:.2f}"
-        out.print(f"  {r.method} ({what}): final error {r.errors[-1]:.2e}, growth exponent {k}", markup=False)
+        drift = "".join(f", invariant {i + 1} drift {e:.2e}" for i, e in enumerate(r.invariant_errors))
+        out.print(f"  {r.method} ({what}): final error {r.errors[-1]:.2e}, growth exponent {k}{drift}", markup=False)
     if plot:
         out.print(f"plot written to {plot}", markup=False)

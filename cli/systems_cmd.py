@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import sys
+
 import click
 
 from rkhp.base import bounds
 from rkhp.integrators.methods import DEFAULT_METHOD
+from rkhp.ivp.tolerance import MIN_TOLERANCE
 
 from .options import (
     METHOD_HELP,
@@ -20,6 +23,8 @@ from .options import (
     integer,
     output_path,
     parse_x0,
+    progress,
+    real,
     reals,
     run_provenance,
     x0_option,
@@ -132,13 +137,14 @@ def integration_report(system, trajectory, method: str, h: float, steps: int) ->
     last state (``casimir_error``, ``energy_error``) and the largest over the run (``..._max``)."""
     import numpy as np
 
-    from rkhp.studies.invariants import max_deviations
+    from rkhp.studies.invariants import declared_errors, max_deviations
 
     x0, xf = trajectory.states[0], trajectory.final_state
     casimir = (float(np.abs(system.casimir_values(xf) - system.casimir_values(x0)).max())
                if system.casimirs else None)
     casimir_max, energy_max = max_deviations(system, trajectory.states)
     iters = trajectory.newton_iterations
+    invariants = declared_errors(system, trajectory.states)
     exact = None
     if system.exact_solution is not None and trajectory.ok:
         exact = float(np.abs(system.exact_solution(trajectory.times[-1]) - xf).max())
@@ -152,13 +158,18 @@ def integration_report(system, trajectory, method: str, h: float, steps: int) ->
         "status": failure_status(system, trajectory, h), "compile_seconds": trajectory.compile_seconds,
         "run_seconds": trajectory.run_seconds, "realisation": system.realisation,
         "exact_error": exact, "casimir_error_max": casimir_max, "energy_error_max": energy_max,
+        "invariant_errors_max": invariants, "invariant_error_max": max(invariants) if invariants else None,
     }
 
 
 @click.command("integrate")
 @click.argument("system")
-@click.option("--method", "method", default=DEFAULT_METHOD, show_default=True, metavar="METHOD", help=METHOD_HELP)
+@click.option("--method", "method", default=DEFAULT_METHOD, show_default=True, metavar="METHOD",
+              help=METHOD_HELP + " With --tol also auto: the cheapest of the candidates of docs/solve.md.")
 @click.option("--steps", type=STEPS, default=None, help="Number of steps over [0, T].")
+@click.option("--tol", "tol", type=real(MIN_TOLERANCE, 1.0, high_open=True, name="TOL"), default=None,
+              help="Choose the steps for this error at T (2-norm, relative to max(1, |x(T)|)) from a pilot "
+                   "error estimate (docs/solve.md); instead of --steps and --h.")
 @click.option("--h", "h", type=SIGNED, default=None,
               help="Step size; it must divide T (steps = T / h; docs/input.md); negative runs backwards.")
 @click.option("--t-final", type=SIGNED, default=None,
@@ -184,11 +195,13 @@ def integration_report(system, trajectory, method: str, h: float, steps: int) ->
                    "without running them.")
 @force_option()
 @format_option("table", "json")
-def integrate(system, method, steps, h, t_final, x0, modified_order, realisation, output, every, t_eval,
+def integrate(system, method, steps, tol, h, t_final, x0, modified_order, realisation, output, every, t_eval,
               t_eval_count, explain, force, fmt):
-    """Integrate SYSTEM (built-in or spec file) with METHOD (docs/methods.md)."""
+    """Integrate SYSTEM (built-in or spec file) with METHOD (docs/methods.md), by --steps, --h or a
+    tolerance --tol (docs/solve.md)."""
     from rkhp.base.errors import InputError, NumericalFailure
     from rkhp.integrators.methods import resolve_method, resolve_system
+    from rkhp.ivp.solve import is_auto
 
     if explain:
         return _explain(resolve_system(system, realisation, parse_x0(x0)), resolve_method(method), fmt)
@@ -198,23 +211,37 @@ def integrate(system, method, steps, h, t_final, x0, modified_order, realisation
     chosen_times = t_eval is not None or t_eval_count is not None
     if every is not None and (output is None or chosen_times):
         raise InputError("--every thins the states written by --output (not those of --t-eval)")
+    if tol is not None and (steps is not None or h is not None):
+        raise InputError("give one of --tol, --steps and --h")
+    if is_auto(method) and tol is None:
+        raise InputError("--method auto chooses by a tolerance: give --tol")
     poisson = resolve_system(system, realisation, parse_x0(x0))
-    chosen = resolve_method(method)
-    _warn_c(chosen)
-    end = t_final
+    end = poisson.t_final if t_final is None and tol is not None else t_final
     if end is None:
         end = -poisson.t_final if h is not None and h < 0 else poisson.t_final
-    n, step = bounds.step_plan(end, steps, h)
-    bounds.check_trajectory(n, poisson.dim)
+    if tol is None:
+        n, step = bounds.step_plan(end, steps, h)
+        bounds.check_trajectory(n, poisson.dim)
     times = _output_times(t_eval, t_eval_count, end)
+    chosen = None if is_auto(method) else resolve_method(method)
+    if chosen is not None:
+        _warn_c(chosen)
     series = None
-    if modified_order is not None:
+    if modified_order is not None and chosen is not None:
         from .modified_cmd import modified_series
 
         series = modified_series(poisson, chosen, modified_order, fmt != "json")
-    compile_notice((chosen.kind,), fmt != "json", poisson)
-    trajectory = chosen.integrate(poisson, step, n)
-    report = integration_report(poisson, trajectory, chosen.name, step, n)
+    compile_notice((chosen.kind,) if chosen is not None else ("rkhp", "composition"), fmt != "json", poisson)
+    if tol is None:
+        trajectory = _run(poisson, chosen, end, n, fmt)
+        report = integration_report(poisson, trajectory, chosen.name, step, n)
+    else:
+        chosen, trajectory, report = _run_to_tolerance(poisson, method, end, tol, fmt)
+        step, n = report["h"], report["steps"]
+        if modified_order is not None and series is None:
+            from .modified_cmd import modified_series
+
+            series = modified_series(poisson, chosen, modified_order, fmt != "json")
     if series is not None and trajectory.ok:
         from .modified_cmd import modified_energy_report
 
@@ -226,16 +253,19 @@ def integrate(system, method, steps, h, t_final, x0, modified_order, realisation
     if output is not None and times is None:
         from rkhp.integrators.trajectory import kept_rows
 
-        written = trajectory.write(output, every or 1, run_provenance(), force=force)
+        written = _write(poisson, output, trajectory.columns(every or 1), force)
         report["output"] = {"file": str(written), "rows": len(kept_rows(len(trajectory.states), every or 1))}
     elif output is not None and timed is not None:  # a failed run may reach none of the chosen times
-        report["output"] = {"file": str(timed.write(output, run_provenance(), force)), "rows": len(timed.times)}
+        report["output"] = {"file": str(_write(poisson, output, timed.columns(), force)), "rows": len(timed.times)}
     if fmt == "json":
         emit_json(report)
     else:
         _print_integration(report)
     if not trajectory.ok:
         raise NumericalFailure(f"{poisson.name}, {chosen.name}, h = {step:g}: {report['status']}")
+    if tol is not None and not report["tolerance"]["met"]:
+        raise NumericalFailure(f"{poisson.name}, {chosen.name}: the estimated error "
+                               f"{report['tolerance']['estimated_error']:.3g} misses --tol {tol:g}")
 
 
 def _explain(poisson, chosen, fmt: str) -> None:
@@ -258,6 +288,74 @@ def _explain(poisson, chosen, fmt: str) -> None:
               f"{plain(e.method)} (base method: {e.key[1]}): substeps by {e.provider}", markup=False)
     out.print(f"row of the table: {', '.join(e.row)}"
               + (f"; refused: {', '.join(e.refused)}" if e.refused else ""), markup=False)
+
+
+def _write(system, path, columns, force):
+    """A trajectory file of the columns, with the declared invariants' columns (docs/results.md)."""
+    from rkhp.integrators.trajectory import write_columns
+    from rkhp.studies.invariants import declared_columns
+
+    return write_columns(path, declared_columns(system, columns), run_provenance(), force)
+
+
+def _run(system, method, end: float, steps: int, fmt):
+    """The run of `steps` steps to `end`, in chunks with a progress bar on a terminal (rkhp.ivp.run)."""
+    from rkhp.ivp.run import Span, trajectory
+
+    with progress(fmt != "json") as bar:
+        task = bar.add_task("integrate", total=steps)
+        return trajectory(system, method, Span(0.0, end), steps,
+                          on_progress=lambda done, _: bar.update(task, completed=done))
+
+
+def _run_to_tolerance(system, method, end: float, tol: float, fmt):
+    """The method (chosen, with --method auto), the run and the report of --tol: the pilot's plan,
+    told before the run, the run, and its error estimate (rkhp.ivp.tolerance)."""
+    from rkhp.ivp import tolerance
+    from rkhp.ivp.solve import plan
+
+    with progress(fmt != "json") as bar:
+        task = bar.add_task("pilot runs", total=None)
+        chosen, planned = plan(system, (0.0, end), method, tol,
+                               on_candidate=lambda done, total: bar.update(task, completed=done, total=total))
+    if fmt != "json":
+        console().print(plan_line(planned), markup=False)
+        sys.stdout.flush()
+    span = planned.span
+    choice, trajectory, estimate = tolerance.run_to_tolerance(
+        planned.choice, span, system,
+        lambda c: _ran(_run(system, chosen, end, c.steps, fmt)))
+    report = integration_report(system, trajectory, chosen.name, choice.h, choice.steps)
+    report["tolerance"] = tolerance_report(planned, choice, estimate)
+    return chosen, trajectory, report
+
+
+def _ran(trajectory):
+    return trajectory, trajectory.final_state if trajectory.ok else None
+
+
+def tolerance_report(planned, choice, estimate) -> dict:
+    """The `tolerance` object of `rkhp integrate --tol` (docs/json.md)."""
+    return {"tol": choice.tolerance, "order": choice.order, "pilot": choice.pilot.to_json(),
+            "planned_steps": planned.steps, "steps": choice.steps, "h": choice.h,
+            "predicted_error": choice.predicted_error, "estimated_error": estimate,
+            "met": estimate is not None and estimate <= choice.tolerance,
+            "candidates": [c.to_json() for c in planned.candidates]}
+
+
+def plan_line(planned) -> str:
+    """The line --tol prints before the run: the pilot's estimate and the steps chosen."""
+    c = planned.choice
+    pilot = c.pilot
+    auto = ""
+    if planned.candidates:
+        auto = "method auto: " + ", ".join(
+            f"{k.method} {k.choice.steps} steps ~{k.choice.predicted_seconds:.2g} s" if k.choice else
+            f"{k.method} left out" for k in planned.candidates) + "; "
+    return (f"{auto}tol {c.tolerance:g}: {c.method} (order {c.order}), pilot {pilot.steps[0]}..{pilot.finest_steps} "
+            f"steps, estimated error {pilot.estimate:.2g} at {pilot.finest_steps} steps"
+            f"{' (round-off)' if pilot.round_off else ''}; chose {c.steps} steps of h = {c.h:.6g} "
+            f"(predicted error {c.predicted_error:.2g}, about {c.predicted_seconds:.2g} s)")
 
 
 def _output_times(t_eval, count, end: float):
@@ -318,6 +416,17 @@ def _warn_c(method) -> None:
                              "differs from the row sum of A; the integrator uses the row sums"), err=True)
 
 
+def _invariant_rows(r: dict) -> list[tuple[str, str]]:
+    return [(f"max invariant {k + 1} error over the run", _fmt(e, 3)) for k, e in enumerate(r["invariant_errors_max"])]
+
+
+def _tolerance_rows(r: dict) -> list[tuple[str, str]]:
+    t = r.get("tolerance")
+    if t is None:
+        return []
+    return [("tolerance", f"{t['tol']:g}"), ("estimated error", _fmt(t["estimated_error"], 3))]
+
+
 def _modified_rows(r: dict) -> list[tuple[str, str]]:
     if "modified_energy_error" not in r:
         return []
@@ -339,7 +448,9 @@ def _print_integration(r: dict) -> None:
             ("max Casimir error over the run", _fmt(r["casimir_error_max"], 3)),
             ("energy error at t_final", _fmt(r["energy_error"], 3)),
             ("max energy error over the run", _fmt(r["energy_error_max"], 3)),
+            *_invariant_rows(r),
             *_modified_rows(r),
+            *_tolerance_rows(r),
             ("Newton iterations (mean, max)", f"{r['newton_mean']:.2f}, {r['newton_max']}"),
             ("status", plain(r["status"])),
             ("compile seconds", f"{r['compile_seconds']:.3f}"),

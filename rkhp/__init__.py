@@ -27,6 +27,9 @@ _LAZY = {
     "get_system": "rkhp.systems",
     "states_at": "rkhp.integrators.output_times",
     "system": "rkhp.systems.spec",
+    "solve": "rkhp.ivp.solve",
+    "event": "rkhp.ivp.events",
+    "poincare_section": "rkhp.ivp.poincare",
 }
 
 __all__ = sorted(_LAZY)

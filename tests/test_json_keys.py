@@ -52,6 +52,8 @@ COMMANDS = [
     ["integrate", "rigid-body", "--method", "rk4", "--steps", "10", "--t-eval", "0.5,1.25"],
     ["integrate", "rigid-body", "--method", "tj4", "--explain"],
     ["compile"],
+    ["integrate", "rigid-body", "--tol", "1e-6", "--method", "auto"],
+    ["poincare", "pendulum", "--section", "x2", "--steps", "200"],
 ]
 
 

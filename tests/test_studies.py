@@ -194,7 +194,7 @@ CONVERGE_KEYS = {"system", "realisation", "degenerate", "symmetric", "x0", "t_fi
 METHOD_KEYS = {"method", "expected_order", "observed_order", "verdict", "fit_rows", "rows",
                "realisation_bound", "steps_chosen"}
 ROW_KEYS = {"h", "steps", "error", "local_order", "casimir_error_max", "energy_error_max", "newton_mean", "newton_max",
-            "seconds"}
+            "seconds", "invariant_error_max"}
 
 
 def test_converge_json_keys_and_plots(tmp_path):

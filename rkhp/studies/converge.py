@@ -21,7 +21,7 @@ from ..base.executors import InProcess, run_all, run_until_interrupted
 from ..integrators.methods import condition_class, require_steps, resolve_methods, resolve_system
 from ..systems.singular import flow_stop
 from .fit import MIN_FIT_POINTS, OrderFit, fit_order, verdict
-from .invariants import max_deviations
+from .invariants import declared_error, max_deviations
 from .reference import Reference, reference
 from .steps import StepChoice, choose_steps
 
@@ -47,6 +47,7 @@ class ConvergenceRow:
     compile_seconds: float
     status: str
     measured_error: float | None
+    invariant_error: float | None = None
 
     @property
     def note(self) -> str:
@@ -59,7 +60,8 @@ class ConvergenceRow:
     def to_json(self) -> dict:
         return {"h": self.h, "steps": self.steps, "error": self.error, "local_order": self.local_order,
                 "casimir_error_max": self.casimir_error, "energy_error_max": self.energy_error,
-                "newton_mean": self.newton_mean, "newton_max": self.newton_max, "seconds": self.seconds}
+                "newton_mean": self.newton_mean, "newton_max": self.newton_max, "seconds": self.seconds,
+                "invariant_error_max": self.invariant_error}
 
 
 @dataclass(frozen=True)
@@ -158,7 +160,7 @@ def run_row(method, system, ref: Reference, steps: int, t_final: float) -> Conve
     casimir, energy = max_deviations(system, traj.states)
     error = measured if measured > ref.floor else None
     return ConvergenceRow(h, steps, error, None, casimir, energy, n_mean, n_max, traj.run_seconds,
-                          traj.compile_seconds, "ok", measured)
+                          traj.compile_seconds, "ok", measured, declared_error(system, traj.states))
 
 
 def study_methods(methods, system, ref: Reference, steps, t_final: float, on_run=None,

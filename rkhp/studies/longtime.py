@@ -18,7 +18,7 @@ import numpy as np
 from ..base.errors import InputError
 from ..integrators.methods import Method, resolve_method
 from .bench import solve_peer
-from .invariants import energy_deviations
+from .invariants import declared_errors, energy_deviations
 
 #: samples of the running maximum, log-spaced in t
 SAMPLES = 60
@@ -40,11 +40,12 @@ class Growth:
     errors: tuple[float, ...]
     exponent: float | None
     status: str
+    invariant_errors: tuple[float, ...] = ()
 
     def to_json(self) -> dict:
         return {"method": self.method, "h": self.h, "steps": self.steps, "tolerance": self.tolerance,
                 "times": list(self.times), "energy_errors": list(self.errors), "exponent": self.exponent,
-                "status": self.status}
+                "status": self.status, "invariant_errors_max": list(self.invariant_errors)}
 
 
 def sample_times(t_final: float, h: float) -> np.ndarray:
@@ -81,7 +82,7 @@ def energy_growth(system, method, h: float, steps: int, tolerance: float = 1e-10
         err = energy_deviations(system, sol.y.T)
         errors = running_max_at(sol.t, err, times)
         return Growth(m.name, None, None, tolerance, tuple(times), tuple(errors),
-                      fit_exponent(times, errors, t_final), "ok")
+                      fit_exponent(times, errors, t_final), "ok", tuple(declared_errors(system, sol.y.T)))
     run = m.integrate(system, h, steps)
     if not run.ok:
         return Growth(m.name, h, steps, None, (), (), None, run.status)
@@ -89,7 +90,8 @@ def energy_growth(system, method, h: float, steps: int, tolerance: float = 1e-10
     states = run.states[::stride]
     err = energy_deviations(system, states)
     errors = running_max_at(run.times[::stride], err, times)
-    return Growth(m.name, h, steps, None, tuple(times), tuple(errors), fit_exponent(times, errors, t_final), "ok")
+    return Growth(m.name, h, steps, None, tuple(times), tuple(errors), fit_exponent(times, errors, t_final), "ok",
+                  tuple(declared_errors(system, states)))
 
 
 def check_long_time(h: float, steps: int) -> None:

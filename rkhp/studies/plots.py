@@ -242,3 +242,22 @@ def plot_long_time(system: str, runs, path, record: dict | None = None, force: b
     ax.legend(fontsize=7)
     _save(fig, path, rows, record, force)
     return path
+
+
+def plot_section(section, axes: tuple[int, int], path, record: dict | None = None, force: bool = False) -> Path:
+    """The points of a Poincaré section (rkhp.ivp.poincare) in the plane of two coordinates;
+    the data beside it."""
+    path = check_plot_path(path, force=force)
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(5.6, 5.6))
+    i, j = axes
+    xs, ys = section.points[:, i], section.points[:, j]
+    ax.plot(xs, ys, ".", markersize=2)
+    ax.set_xlabel(f"x{i + 1}")
+    ax.set_ylabel(f"x{j + 1}")
+    r = section.result
+    ax.set_title(f"{r.system}: section {section.expression} = 0 ({section.direction}), {len(xs)} points, "
+                 f"{r.method}", fontsize=9)
+    ax.grid(True, alpha=0.3)
+    _save(fig, path, _points("section", f"x{j + 1} against x{i + 1}", xs, ys), record, force)
+    return path

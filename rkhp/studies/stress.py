@@ -33,7 +33,7 @@ from ..integrators.modified_energy import ModifiedEnergy, method_series
 from ..series.modified import MAX_ORDER, method_character
 from .converge import check_t_final, study_methods
 from .fit import fit_order
-from .invariants import invariant_deviations, max_deviations, window_maxima
+from .invariants import declared_errors, invariant_deviations, max_deviations, window_maxima
 from .reference import reference
 
 SWEEP_COARSEST = 200
@@ -166,6 +166,12 @@ class LongRun:
     modified: ModifiedWindows | None = None
     failure: Failure = Failure.OK
     kind: str = "rkhp"
+    invariant_errors: tuple[float, ...] = ()
+
+    @property
+    def invariant_max(self) -> float | None:
+        """The largest drift of the declared invariants; None for a system without any."""
+        return max(self.invariant_errors) if self.invariant_errors else None
 
     @property
     def casimir_max(self) -> float | None:
@@ -183,6 +189,7 @@ class LongRun:
         return {"method": self.method, "status": self.status, "casimir_windows": list(self.casimir_windows),
                 "energy_windows": list(self.energy_windows), "casimir_max": self.casimir_max,
                 "energy_growth": self.energy_growth, "seconds": self.seconds,
+                "invariant_errors_max": list(self.invariant_errors), "invariant_max": self.invariant_max,
                 "modified_energy": None if self.modified is None else self.modified.to_json()}
 
 
@@ -239,7 +246,8 @@ def _long_run(method, system, h: float, steps: int, windows: int) -> LongRun:
     modified = _modified_windows(method, system, h, traj.states, windows) if method.kind == "rkhp" and traj.ok else None
     casimirs = tuple(window_maxima(casimir, windows)) if system.casimirs else ()
     return LongRun(method.name, casimirs, tuple(window_maxima(energy, windows)),
-                   traj.status, traj.run_seconds, modified, traj.cause, method.kind)
+                   traj.status, traj.run_seconds, modified, traj.cause, method.kind,
+                   tuple(declared_errors(system, traj.states)))
 
 
 def _modified_windows(method, system, h: float, states, windows: int) -> ModifiedWindows | None:

@@ -128,6 +128,8 @@ class PoissonSystem:
     `hamiltonian(x) -> float`, `grad_hamiltonian(x) -> (n,)`, `casimirs` (x -> float each),
     `alpha(x, p)`, `beta(x, p)`, `in_domain(x) -> bool`, `vector_field(x) -> (n,)`.
     `exact_solution(t)` (or None) is the exact solution from the system's own `x0`.
+    `invariants` (x -> float each, named by `invariant_names`): first integrals the user declared
+    (a spec file's ``invariants``), reported like the energy (docs/spec-files.md).
     The engine uses the tapes: `h_tape` (H), `f_tape` (H o alpha), `alpha_tape`, `beta_tape`,
     all over the 2n inputs (x, p), and `domain_code` (0: R^n, 1: positive orthant).
     `poisson_degree`: the degree of pi as a polynomial in x (0 constant, 1 linear, ...; None when
@@ -158,6 +160,8 @@ class PoissonSystem:
     extra: dict = field(default_factory=dict)
     poisson_degree: int | None = None
     structure: object = None
+    invariants: tuple = ()
+    invariant_names: tuple = ()
 
     @property
     def realisation_order(self) -> int | None:
@@ -224,6 +228,10 @@ class PoissonSystem:
 
     def casimir_values(self, x) -> np.ndarray:
         return np.array([c(np.asarray(x, dtype=np.float64)) for c in self.casimirs])
+
+    def invariant_values(self, x) -> np.ndarray:
+        """The declared invariants at x (an empty array without any)."""
+        return np.array([f(np.asarray(x, dtype=np.float64)) for f in self.invariants])
 
     def start(self, x0=None) -> np.ndarray:
         """The state a run starts from, as a new float64 vector: ``x0`` checked as by

@@ -17,6 +17,7 @@ Keys (docs/spec-files.md): the common keys below, and the spec key of the family
     x0 = [0.4536, 0.0, 0.8912]
     t_final = 10.0                         # optional (default 10)
     casimirs = ["x1^2 + x2^2 + x3^2"]      # optional
+    invariants = ["x1^2/2 + x2^2 + 3*x3^2/2"]  # optional: first integrals to report, like H
 
 Expressions are read by the safe reader `rkhp.base.expressions` (no code is ever executed) and recorded
 on a tape (`rkhp.taylor.tape`) that the compiled engine differentiates; the functions allowed are
@@ -26,6 +27,7 @@ those of the opcode table (`rkhp.taylor.ops.FUNCTIONS`).
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +44,11 @@ from .general import general
 from .program import numeric_function, to_program
 from .structure import check_structure
 
-COMMON_KEYS = ("name", "family", "hamiltonian", "x0", "t_final", "casimirs")
+COMMON_KEYS = ("name", "family", "hamiltonian", "x0", "t_final", "casimirs", "invariants")
+#: the relative size of {I, H}(x0) above which a declared invariant I is refused
+INVARIANT_TOLERANCE = 1e-9
+#: the most Casimirs, and the most invariants, of one system
+MAX_EXPRESSIONS = 64
 
 
 def family_names() -> tuple[str, ...]:
@@ -164,6 +170,34 @@ def _square_size(value) -> int | None:
     return None
 
 
+def _expressions(data: dict, key: str, n: int, where: str) -> list:
+    """The list of expressions under ``key`` (casimirs, invariants), read by the safe reader."""
+    if key not in data:
+        return []
+    if not isinstance(data[key], list):
+        raise InputError(f"{where}: {key} must be a list of expressions")
+    if len(data[key]) > MAX_EXPRESSIONS:
+        raise InputError(f"{where}: {len(data[key])} {key}; at most {MAX_EXPRESSIONS}")
+    return [parse_expression(c, n, f"{where}: {key}[{i + 1}]")[0] for i, c in enumerate(data[key])]
+
+
+def check_invariants(system, exprs, symbols, where: str) -> None:
+    """Each declared invariant I Poisson-commutes with H at x0: {I, H}(x0) = grad I . pi grad H
+    is at most INVARIANT_TOLERANCE times |grad I| |pi grad H| (InputError naming the first that
+    does not: it changes along the flow from the start on, docs/spec-files.md)."""
+    import sympy
+
+    point = [float(v) for v in system.x0]
+    field = np.asarray(system.vector_field(np.asarray(point)), dtype=float)
+    for i, expr in enumerate(exprs):
+        gradient = np.array(sympy.lambdify(symbols, [sympy.diff(expr, s) for s in symbols], "math")(*point),
+                            dtype=float)
+        bracket = float(gradient @ field)
+        if abs(bracket) > INVARIANT_TOLERANCE * (float(np.linalg.norm(gradient)) * float(np.linalg.norm(field))):
+            raise InputError(f"{where}: invariants[{i + 1}] {short(str(expr))} is not conserved: its rate of "
+                             f"change {{I, H}} at x0 is {bracket:.3g}, not 0")
+
+
 def system_from_keys(data: dict, where: str, default_name: str, source: str,
                      realisation: str = "symmetric") -> PoissonSystem:
     """A PoissonSystem from the keys of a spec document (:func:`load_spec`'s checks; messages
@@ -191,12 +225,8 @@ def system_from_keys(data: dict, where: str, default_name: str, source: str,
                          f"entry per row of {needed}")
     structure = FAMILIES[family].read(data[needed], n, f"{where}: {needed}")
     h_expr, symbols = parse_expression(data["hamiltonian"], n, f"{where}: hamiltonian")
-    exprs = []
-    if "casimirs" in data:
-        if not isinstance(data["casimirs"], list):
-            raise InputError(f"{where}: casimirs must be a list of expressions")
-        exprs = [parse_expression(c, n, f"{where}: casimirs[{i + 1}]")[0]
-                 for i, c in enumerate(data["casimirs"])]
+    exprs = _expressions(data, "casimirs", n, where)
+    invariant_exprs = _expressions(data, "invariants", n, where)
     H = to_program(h_expr, symbols)
     casimirs = tuple(numeric_function(e, symbols) for e in exprs)
     names = tuple(str(e) for e in exprs)
@@ -211,7 +241,12 @@ def system_from_keys(data: dict, where: str, default_name: str, source: str,
     if not system.in_domain(x0):
         raise InputError(f"{where}: x0 = {x0.tolist()} is outside the domain ({system.domain})")
     expressions = [("hamiltonian", h_expr)] + [(f"casimir {i + 1}", e) for i, e in enumerate(exprs)]
+    expressions += [(f"invariant {i + 1}", e) for i, e in enumerate(invariant_exprs)]
     check_finite_at(expressions, symbols, x0, where)
+    if invariant_exprs:
+        check_invariants(system, invariant_exprs, symbols, where)
+        system = replace(system, invariants=tuple(numeric_function(e, symbols) for e in invariant_exprs),
+                         invariant_names=tuple(str(e) for e in invariant_exprs))
     system.extra["expressions"] = (symbols, expressions)
     if family != "general":  # the general family checks its structure and Casimirs itself
         check_structure(FAMILIES[family].symbolic(structure), casimirs=exprs, x0=x0,
