@@ -226,6 +226,7 @@ def integrate(system, method, steps, tol, h, t_final, x0, modified_order, realis
     chosen = None if is_auto(method) else resolve_method(method)
     if chosen is not None:
         _warn_c(chosen)
+        _implicit_notice(chosen, fmt != "json")
     series = None
     if modified_order is not None and chosen is not None:
         from .modified_cmd import modified_series
@@ -401,6 +402,25 @@ def timed_report(system, timed) -> dict | None:
                                                                                      strict=True)))
     return {"times": timed.times.tolist(), "states": timed.states.tolist(), "substeps": timed.substeps.tolist(),
             "casimir_error": casimir, "exact_error": exact}
+
+
+def _implicit_notice(method, enabled: bool) -> None:
+    """One line on stderr, on a terminal and not in JSON mode, before a run of an implicit tableau:
+    its stage functions are Taylor polynomials of one degree D, so the step it computes is the
+    method's Poisson map up to O(h^(D+1)) only (docs/implicit.md "Truncated stages and the Poisson
+    map")."""
+    import sys
+
+    if not (enabled and sys.stderr.isatty()) or method.kind != "rkhp":
+        return
+    from rkhp.integrators.tower_substep import stage_solve, tableau_arrays
+
+    degree = stage_solve(method.tableau, tableau_arrays(method.tableau)[0]).degree
+    if degree:
+        click.echo(f"rkhp: note: {method.name} is implicit: its stages are Taylor polynomials of degree {degree}, "
+                   f"so a step is a Poisson map up to O(h^{degree + 1}): the Casimirs are kept to round-off, "
+                   "other invariants move at that order, and a step costs far more than an explicit one "
+                   "(docs/implicit.md)", err=True)
 
 
 def _warn_c(method) -> None:

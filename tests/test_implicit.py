@@ -157,3 +157,21 @@ def test_commands_accept_implicit_and_taylor_methods(tmp_path):
     assert res.exit_code == 0, res.output
     runs = json.loads(res.output)["long_run"]["runs"]
     assert all(r["casimir_max"] < 1e-13 for r in runs)
+
+
+def test_an_implicit_run_is_announced_as_a_poisson_map_up_to_its_truncation(monkeypatch, capsys):
+    """On a terminal, `rkhp integrate` with an implicit tableau says that its step is a Poisson map
+    up to O(h^(D + 1)), D the stage degree N + 1 (gauss2: order 4, D = 5; docs/implicit.md), and
+    says nothing for an explicit one or in JSON mode."""
+    import sys
+
+    from rkhp_cli.systems_cmd import _implicit_notice
+
+    from rkhp.integrators.methods import resolve_method
+
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    _implicit_notice(resolve_method("gauss2"), True)
+    assert "degree 5, so a step is a Poisson map up to O(h^6)" in capsys.readouterr().err
+    _implicit_notice(resolve_method("rk4"), True)
+    _implicit_notice(resolve_method("gauss2"), False)
+    assert capsys.readouterr().err == ""
