@@ -77,10 +77,218 @@ def _kernel_files() -> list[Path]:
 # --------------------------------------------------------------------------- a damaged cache
 
 
+TINY = "import numba\n\n\n@numba.njit(cache=True)\ndef twice(x):\n    return x + x\n"
+
+HEALING = r'''
+import json, random, shutil, sys
+import importlib.util
+from pathlib import Path
+
+import rkhp.taylor.compiler  # noqa: F401 - rkhp's cache, made robust (rkhp.taylor.kernel_cache)
+
+module_file, cache, pristine = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3])
+
+
+def run():
+    """A fresh dispatcher of `twice` (a new module object), called at two signatures."""
+    spec = importlib.util.spec_from_file_location("tiny", module_file)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    values = [module.twice(1.5), module.twice(3)]
+    stats = module.twice.stats
+    return values, sum(stats.cache_hits.values()), sum(stats.cache_misses.values())
+
+
+def damage(mode):
+    index = next(cache.rglob("*.nbi"))
+    data = sorted(cache.rglob("*.nbc"))
+    noise = random.Random(mode)
+    if mode == "empty index":
+        index.write_bytes(b"")
+    elif mode == "garbage index":
+        index.write_bytes(noise.randbytes(3000))
+    elif mode == "truncated index":
+        index.write_bytes(index.read_bytes()[:40])
+    elif mode == "truncated data":
+        data[0].write_bytes(data[0].read_bytes()[: data[0].stat().st_size // 2])
+    elif mode == "garbage data":
+        data[0].write_bytes(noise.randbytes(data[0].stat().st_size))
+    elif mode == "swapped data":
+        first, second = data[0].read_bytes(), data[1].read_bytes()
+        data[0].write_bytes(second)
+        data[1].write_bytes(first)
+
+
+first = run()
+shutil.copytree(cache, pristine)
+report = {"first": first}
+for mode in sys.argv[4:]:
+    shutil.rmtree(cache)
+    shutil.copytree(pristine, cache)
+    damage(mode)
+    report[mode] = [run(), run()]
+report["left"] = [p.name for p in cache.rglob("*") if ".tmp." in p.name]
+print(json.dumps(report))
+'''
+
 #: damaged files, and how many of the two signatures each sends to a compile
+DAMAGES = {"empty index": 2, "garbage index": 2, "truncated index": 2, "truncated data": 1, "garbage data": 1,
+           "swapped data": 2}
+
+
+def test_damaged_cache_files_cost_one_compile(tmp_path):
+    """A kernel cached at two signatures (float64, int64), its cache files then damaged as a disk
+    full during a save, a crash or a bad copy leave them: each damaged entry is compiled once
+    (a miss, never an error: numba's own reader raises EOFError, UnpicklingError or SystemError,
+    or runs the other signature's machine code), the values are right, and the next fresh
+    dispatcher loads both from the repaired files."""
+    module = tmp_path / "tiny_kernel.py"
+    module.write_text(TINY)
+    cache = tmp_path / "numba-cache"
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    proc = subprocess.run([sys.executable, "-c", HEALING, str(module), str(cache), str(tmp_path / "pristine"),
+                           *DAMAGES], env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    report = json.loads(proc.stdout)
+    assert report["first"] == [[3.0, 6], 0, 2]  # compiled at both signatures, saved
+    for mode, compiled in DAMAGES.items():
+        damaged, repaired = report[mode]
+        assert damaged == [[3.0, 6], 2 - compiled, compiled], mode
+        assert repaired == [[3.0, 6], 2, 0], mode
+    assert report["left"] == []
+
+
+def _run_tape_index(folder: Path) -> Path:
+    return next((folder / "taylor").glob("interpreter.run_tape-*.nbi"))
+
+
+def test_an_empty_index_is_not_an_interrupt_and_heals(tmp_path):
+    """The tape interpreter's index emptied (numba reads it with EOFError, which click took for
+    Ctrl-C: `rkhp: interrupted`, status 130): the check runs, compiles the interpreter once and
+    gives the numbers of the shared cache; the next run loads the repaired index."""
+    env, folder = _private_cache(tmp_path)
+    index = _run_tape_index(folder)
+    index.write_bytes(b"")
+    first = _rkhp(*CHECK, env=env)
+    assert first.returncode == 0 and first.stderr == "", first.stderr[-3000:]
+    reference = _reference_check()
+    assert json.loads(first.stdout)["deviations"] == reference
+    assert index.stat().st_size > 0
+    script = ("import json, sys; from rkhp.taylor.compiler import is_cached; "
+              "from rkhp.taylor.interpreter import run_tape; print(json.dumps(is_cached(run_tape, 'Tape(')))")
+    loaded = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
+    assert json.loads(loaded.stdout) is True, loaded.stderr  # the interpreter for plain tapes is cached again
+    again = _rkhp(*CHECK, env=env)
+    assert again.returncode == 0 and json.loads(again.stdout)["deviations"] == reference
+
+
+@pytest.mark.slow
+def test_rkhp_compile_repairs_a_damaged_cache(tmp_path):
+    """`rkhp compile` on a cache whose interpreter index is garbage: status 0, the interpreter
+    compiled again for every class of tapes, then a second compile has nothing to do."""
+    env, folder = _private_cache(tmp_path, ("taylor", "integrators"))
+    _run_tape_index(folder).write_bytes(random.Random(0).randbytes(3000))
+    first = _rkhp("compile", "--format", "json", env=env, timeout=900)
+    assert first.returncode == 0 and first.stderr == "", first.stderr[-3000:]
+    assert all("rkhp.taylor.interpreter.run_tape" in c["compiled"] for c in json.loads(first.stdout)["classes"])
+    second = _rkhp("compile", "--format", "json", env=env, timeout=900)
+    assert second.returncode == 0 and all(c["compiled"] == [] for c in json.loads(second.stdout)["classes"])
+
+
+FULL_CACHE_DISK = r'''
+import errno, os, sys
+from numba.core import caching
+
+
+def full(self, name, data):
+    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+
+caching.IndexDataCacheFile._save_data = full  # every save into the cache meets a full disk
+from rkhp_cli.main import main
+
+sys.argv = ["rkhp", *sys.argv[1:]]
+main()
+'''
+
+
+def test_a_full_disk_under_the_cache_is_a_warning_not_the_output(tmp_path):
+    """The interpreter must compile (its index removed) and its save meets a full disk: one
+    warning line naming the cache folder, status 0, the right numbers; not "cannot write the
+    output", which is stdout's error."""
+    env, folder = _private_cache(tmp_path)
+    _run_tape_index(folder).unlink()
+    proc = subprocess.run([sys.executable, "-c", FULL_CACHE_DISK, *CHECK], env=env, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert proc.stderr == (f"rkhp: warning: cannot save compiled kernels in the cache folder {folder} "
+                           "(No space left on device): later runs compile them again (docs/engine.md)\n")
+    assert json.loads(proc.stdout)["deviations"] == _reference_check()
 
 
 # --------------------------------------------------------------------------- an unusable cache folder
+
+
+def test_an_unusable_cache_folder_is_said_once_and_falls_back(tmp_path):
+    """XDG_CACHE_HOME naming a file: one warning line, the kernels cached in the documented
+    fallback (here already holding the interpreter), the right numbers, and nothing written
+    into the sources' __pycache__."""
+    blocker = tmp_path / "not-a-folder"
+    blocker.write_text("a file")
+    temporary = tmp_path / "tmp"
+    temporary.mkdir()
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(XDG_CACHE_HOME=str(blocker), TMPDIR=str(temporary))
+    fallback = temporary / f"rkhp-cache-{os.getuid()}" / "numba" / cache_dir().name  # docs/engine.md
+    shutil.copytree(cache_dir() / "taylor", fallback / "taylor")
+    before = _kernel_files()
+    proc = _rkhp(*CHECK, env=env)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    preferred = blocker / "rkhp" / "numba" / cache_dir().name
+    assert proc.stderr == (f"rkhp: warning: the kernel cache folder {preferred} cannot be used (Not a directory): "
+                           f"using {fallback} (docs/engine.md)\n")
+    assert json.loads(proc.stdout)["deviations"] == _reference_check()
+    assert _kernel_files() == before
+
+
+def test_no_usable_folder_is_said_and_never_the_sources(tmp_path):
+    """Neither the cache folder nor the fallback can be used (another file where the fallback's
+    folder would be): the warning gives both reasons, and rkhp's kernels are still placed in the
+    cache folder (whose saves then fail), never in the sources' __pycache__ by numba's in-tree
+    locator."""
+    blocker = tmp_path / "not-a-folder"
+    blocker.write_text("a file")
+    temporary = tmp_path / "tmp"
+    temporary.mkdir()
+    (temporary / f"rkhp-cache-{os.getuid()}").write_text("someone's file")
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(XDG_CACHE_HOME=str(blocker), TMPDIR=str(temporary))
+    script = ("import json, warnings\nwith warnings.catch_warnings(record=True) as said:\n"
+              "    warnings.simplefilter('always')\n    import rkhp.taylor.compiler as c\n"
+              "from rkhp.taylor.interpreter import run_tape\n"
+              "print(json.dumps({'folder': c.RKHP_CACHE_DIR, 'said': [str(w.message) for w in said],"
+              " 'kernels': run_tape._cache.cache_path}))")
+    proc = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    report = json.loads(proc.stdout)
+    preferred = blocker / "rkhp" / "numba" / cache_dir().name
+    assert report["folder"] == str(preferred)
+    assert report["kernels"] == str(preferred / "taylor")
+    assert len(report["said"]) == 1 and "Not a directory" in report["said"][0]
+    assert "File exists" in report["said"][0] and "every run compiles them" in report["said"][0]
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() == 0, reason="root writes read-only folders")
+def test_a_read_only_cache_folder_falls_back(tmp_path):
+    from rkhp.taylor.kernel_cache import usable_folder
+
+    home = tmp_path / "home"
+    home.mkdir(mode=0o500)
+    try:
+        chosen = usable_folder(home / "rkhp" / "numba" / "0123456789abcdef")
+    finally:
+        home.chmod(0o700)
+    assert chosen.reason is not None and chosen.path != home / "rkhp" / "numba" / "0123456789abcdef"
 
 
 # --------------------------------------------------------------------------- SIGTERM and SIGHUP
