@@ -369,6 +369,41 @@ def test_sigterm_from_outside_is_never_a_traceback():
         assert err.count("\n") == 1 and err.startswith("rkhp: interrupted by SIGTERM"), err
 
 
+SLOW_DISK = r'''
+import sys, time
+from rkhp.base import files
+
+
+def slow(path):
+    """A slow disk: flushing the written content takes a minute."""
+    time.sleep(60)
+
+
+files._sync = slow
+from rkhp_cli.main import main
+
+sys.argv = ["rkhp", *sys.argv[1:]]
+main()
+'''
+
+
+def test_a_signal_while_the_output_is_written_leaves_nothing(tmp_path):
+    """SIGTERM while `--output` is being written (its temporary file there, its content being
+    flushed to a slow disk): status 143, one line, neither the file nor its temporary left. The
+    temporary's name matches the glob docs/input.md gives, `.NAME.*.tmp`."""
+    proc = subprocess.Popen([sys.executable, "-c", SLOW_DISK, "integrate", "rigid-body", "--method", "rk4",
+                             "--steps", "1000", "--output", "traj.csv"], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while proc.poll() is None and not list(tmp_path.glob(".traj.csv.*.tmp")) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert proc.poll() is None and _handles(proc.pid, signal.SIGTERM), proc.communicate()
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143 and err == "rkhp: interrupted by SIGTERM\n", err[-3000:]
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_signal_ignored_at_the_start_stays_ignored():
     """`nohup` starts a command with SIGHUP ignored: the command does not handle it."""
     proc = subprocess.Popen([sys.executable, "-m", "rkhp", *LONG_CONVERGE], stdout=subprocess.DEVNULL,
@@ -486,6 +521,63 @@ def test_what_says_that_memory_ran_out():
 
 
 # --------------------------------------------------------------------------- a full disk for --output and --plot
+
+
+def _full_disk(monkeypatch):
+    from rkhp.base import files
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(files.os, "fsync", full)
+
+
+def test_a_full_disk_for_output_is_a_failure_not_bad_input(tmp_path, monkeypatch):
+    """The run is done when --output meets a full disk: status 1 (2 says that nothing was
+    computed), one line naming the file, nothing left in the folder."""
+    from cli_run import in_process
+
+    _full_disk(monkeypatch)
+    target = tmp_path / "traj.csv"
+    ran = in_process(("integrate", "rigid-body", "--method", "rk4", "--steps", "10", "--output", str(target)), None)
+    assert ran.returncode == 1
+    assert ran.stderr == (f"rkhp: error: trajectory file {target}: cannot write the file (No space left on "
+                          "device); nothing was written\n")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_full_disk_for_a_plot_is_a_failure_not_bad_input(tmp_path, monkeypatch):
+    from cli_run import in_process
+
+    _full_disk(monkeypatch)
+    target = tmp_path / "c.png"
+    ran = in_process(("converge", "rigid-body", "--method", "rk4", "--steps", "20,40,80", "--plot", str(target)), None)
+    assert ran.returncode == 1 and ran.stderr.count("\n") == 1 and "No space left on device" in ran.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_temporary_file_matches_the_documented_glob(tmp_path):
+    """docs/input.md names the temporaries `.NAME.*.tmp`: a leftover (an interrupted copy, a
+    crash) is found by that glob."""
+    from rkhp.base.files import atomic_path
+
+    documented = re.search(r"named\s+`(\.NAME\.\*\.tmp)`", (ROOT / "docs" / "input.md").read_text()).group(1)
+    for name in ("traj.csv", "plot.png", "found.toml", "data"):
+        with atomic_path(tmp_path / name) as tmp:
+            assert fnmatch.fnmatch(tmp.name, documented.replace("NAME", name)), tmp.name
+            tmp.write_text("x")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["data", "found.toml", "plot.png", "traj.csv"]
+
+
+def test_a_failed_write_is_write_failed_not_input_error(tmp_path, monkeypatch):
+    from rkhp.base.errors import InputError
+    from rkhp.base.files import write_atomic
+
+    _full_disk(monkeypatch)
+    with pytest.raises(WriteFailed, match="No space left") as caught:
+        write_atomic(tmp_path / "t.toml", "A = [[0]]\n")
+    assert not isinstance(caught.value, InputError)
+    assert list(tmp_path.iterdir()) == []
 
 
 # --------------------------------------------------------------------------- rkhp check's tolerance

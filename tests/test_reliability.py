@@ -426,12 +426,13 @@ def test_a_symbolic_link_is_never_followed(tmp_path):
 
 def test_a_full_disk_leaves_nothing_behind(tmp_path, monkeypatch):
     from rkhp.base import files
+    from rkhp.base.errors import WriteFailed
 
     def full(fd):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
     monkeypatch.setattr(files.os, "fsync", full)
-    with pytest.raises(InputError, match="No space left"):
+    with pytest.raises(WriteFailed, match="No space left"):
         files.write_atomic(tmp_path / "t.toml", "A = [[0]]\n")
     assert list(tmp_path.iterdir()) == []
 

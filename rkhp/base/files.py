@@ -12,6 +12,9 @@ full disk or an interrupt leaves the old file or nothing, never a 0-byte or trun
   the rename, which does not replace a file created in between.
 - A symbolic link at the name is never followed: without ``force`` it is refused, with ``force``
   the link itself is replaced by the file (its target is left as it is).
+- A write that fails once the work is done (a full disk, a failing device, a folder removed
+  meanwhile) is a WriteFailed (the command line's status 1), not bad input: nothing was written.
+- The temporary file is named ``.NAME.XXXXXXXX.tmp`` (`TEMPORARY_GLOB`), in NAME's folder.
 """
 
 from __future__ import annotations
@@ -21,7 +24,10 @@ import os
 import tempfile
 from pathlib import Path
 
-from .errors import InputError
+from .errors import InputError, WriteFailed
+
+#: the names of the temporary files (NAME: the target's name), as docs/input.md gives them
+TEMPORARY_GLOB = ".{name}.*.tmp"
 
 
 def check_target(path, what: str = "output file", force: bool = False) -> Path:
@@ -45,14 +51,16 @@ def _umask() -> int:
 @contextlib.contextmanager
 def atomic_path(path, what: str = "output file", force: bool = False):
     """``with atomic_path(path) as tmp:`` write the content to ``tmp`` (a new file in the same
-    folder, same extension); on leaving without an error it becomes ``path`` (see the module), on
-    an error it is removed. OSError: InputError naming the file, nothing written."""
+    folder, named by `TEMPORARY_GLOB`); on leaving without an error it becomes ``path`` (see the
+    module), on an error or an interrupt it is removed. OSError: WriteFailed naming the file,
+    nothing written."""
     path = check_target(path, what, force)
     folder = path.parent
     try:
-        fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=folder)
+        fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
     except OSError as exc:
-        raise InputError(f"{what} {path}: cannot write in {folder} ({exc.strerror or exc})") from None
+        raise WriteFailed(f"{what} {path}: cannot write in {folder} ({exc.strerror or exc}); "
+                          "nothing was written") from None
     tmp = Path(name)
     try:
         os.fchmod(fd, 0o666 & ~_umask())
@@ -65,11 +73,14 @@ def atomic_path(path, what: str = "output file", force: bool = False):
             try:
                 os.link(tmp, path)  # fails if the name was taken meanwhile: nothing replaced
             except FileExistsError:
-                raise InputError(f"{what} {path}: the file exists; give --force to replace it") from None
+                raise WriteFailed(f"{what} {path}: the file was created meanwhile; nothing was written "
+                                  "(give --force to replace it)") from None
             tmp.unlink()
+    except WriteFailed:
+        raise
     except OSError as exc:
-        raise InputError(f"{what} {path}: cannot write the file ({exc.strerror or exc}); "
-                         "nothing was written") from None
+        raise WriteFailed(f"{what} {path}: cannot write the file ({exc.strerror or exc}); "
+                          "nothing was written") from None
     finally:
         with contextlib.suppress(OSError):
             tmp.unlink()
