@@ -426,6 +426,99 @@ def test_a_signal_ignored_at_the_start_stays_ignored():
 # --------------------------------------------------------------------------- workers die with their parent
 
 
+def _children(pid: int) -> list[int]:
+    """The child processes of ``pid`` (Linux: /proc/PID/task/*/children)."""
+    found = []
+    for task in Path(f"/proc/{pid}/task").glob("*/children"):
+        try:
+            found += [int(c) for c in task.read_text().split()]
+        except OSError:
+            pass
+    return found
+
+
+def _alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie, dead and not yet reaped, does not)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return False
+    return state != "Z"
+
+
+def _wait_for_children(proc, count: int, seconds: float = 120) -> list[int]:
+    deadline = time.monotonic() + seconds
+    while proc.poll() is None and len(_children(proc.pid)) < count and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return _children(proc.pid)
+
+
+def _gone_within(pids, seconds: float) -> bool:
+    deadline = time.monotonic() + seconds
+    while any(_alive(pid) for pid in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return not any(_alive(pid) for pid in pids)
+
+
+BENCH_ON_WORKERS = ("bench", "pendulum", "--method", "rk4", "--repeats", "200", "--workers", "2")
+
+
+@pytest.mark.skipif(not LINUX, reason="reads /proc")
+def test_killing_the_parent_kills_its_workers():
+    """`kill -9` of `rkhp bench --workers 2`: its two workers end within seconds (they would
+    compute for minutes, orphaned)."""
+    proc = _start(BENCH_ON_WORKERS, signal.SIGTERM, start_new_session=True)
+    workers = _wait_for_children(proc, 2)
+    assert len(workers) >= 2, workers
+    time.sleep(1.0)
+    proc.kill()
+    proc.communicate(timeout=60)
+    assert _gone_within(workers, 10), [pid for pid in workers if _alive(pid)]
+
+
+@pytest.mark.skipif(not LINUX, reason="reads /proc")
+def test_sigterm_of_the_parent_stops_its_workers_at_once():
+    """SIGTERM of `rkhp bench --workers 2`: status 143 and one line within seconds, not after the
+    workers' running tasks; no worker left."""
+    proc = _start(BENCH_ON_WORKERS, signal.SIGTERM, start_new_session=True)
+    workers = _wait_for_children(proc, 2)
+    assert len(workers) >= 2, workers
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    start = time.monotonic()
+    out, err = proc.communicate(timeout=60)
+    assert time.monotonic() - start < 15
+    assert proc.returncode == 143 and err == "rkhp: interrupted by SIGTERM: the points finished so far are shown\n"
+    assert _gone_within(workers, 10)
+
+
+@pytest.mark.skipif(not LINUX, reason="reads /proc")
+def test_killing_rkhp_compile_kills_its_compile_workers(tmp_path):
+    """`kill -9` of `rkhp compile --jobs 2` on an empty cache, both workers compiling: they end
+    within seconds."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"))
+    proc = _start(("compile", "--jobs", "2"), signal.SIGTERM, env=env, start_new_session=True)
+    workers = _wait_for_children(proc, 2)
+    assert len(workers) >= 2, workers
+    time.sleep(1.0)
+    proc.kill()
+    proc.communicate(timeout=60)
+    assert _gone_within(workers, 10), [pid for pid in workers if _alive(pid)]
+
+
+def test_a_worker_started_after_its_parent_ended_ends_at_once():
+    """die_with_parent in a process whose parent has already ended (the race between the fork
+    and the parent-death signal being set: the process was given the pid of a parent that is no
+    longer its parent) ends at once; with its parent alive it goes on."""
+    script = ("import os, sys\nfrom rkhp.base.executors import die_with_parent\n"
+              "die_with_parent(int(sys.argv[1]))\nprint('alive')\n")
+    ended = subprocess.run([sys.executable, "-c", script, "1"], capture_output=True, text=True, timeout=60)
+    assert ended.returncode == 1 and ended.stdout == ""  # its parent is this process, not pid 1
+    alive = subprocess.run([sys.executable, "-c", script, str(os.getpid())], capture_output=True, text=True,
+                           timeout=60)
+    assert alive.returncode == 0 and alive.stdout == "alive\n"
+
+
 # --------------------------------------------------------------------------- closed standard streams
 
 
@@ -473,6 +566,71 @@ def test_a_failed_check_is_1_with_stderr_closed(tmp_path):
 
 
 # --------------------------------------------------------------------------- a Dask scheduler
+
+
+def _http_server() -> tuple[socket.socket, int]:
+    """A server on the loopback that answers every connection as a web server does to a request
+    it cannot read (an HTTP 400), as a Dask dashboard does."""
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(16)
+
+    def answer(conn):
+        with conn:
+            try:
+                conn.recv(65536)
+                conn.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 11\r\nConnection: close\r\n\r\n"
+                             b"Bad Request")
+            except OSError:
+                pass
+
+    def serve():
+        while True:
+            try:
+                conn, _ = server.accept()
+            except OSError:
+                return
+            threading.Thread(target=answer, args=(conn,), daemon=True).start()
+
+    threading.Thread(target=serve, daemon=True).start()
+    return server, server.getsockname()[1]
+
+
+def test_a_server_that_is_not_a_scheduler_is_one_line_at_once():
+    """`--scheduler` at a web server's port: one line saying so, status 2, within seconds (it was
+    a line about allocating 3.07 EiB, then a Client.__del__ traceback and 20 s of waiting)."""
+    pytest.importorskip("distributed")
+    server, port = _http_server()
+    try:
+        start = time.monotonic()
+        proc = _rkhp("converge", "pendulum", "--method", "rk4", "--scheduler", f"tcp://127.0.0.1:{port}")
+        seconds = time.monotonic() - start
+    finally:
+        server.close()
+    assert proc.returncode == 2
+    assert proc.stderr == (f"rkhp: error: the server at tcp://127.0.0.1:{port} is not a Dask scheduler: it does "
+                           "not speak Dask's protocol (MemoryError) (a scheduler listens on port 8786 by default; "
+                           "8787 is its dashboard)\n")
+    assert seconds < 10
+
+
+def test_a_scheduler_killed_during_a_run_is_one_line():
+    """The scheduler killed during `converge --scheduler`: one line naming it, status 1, within
+    seconds; none of distributed's tracebacks."""
+    pytest.importorskip("distributed")
+    from rkhp.base.executors import loopback_cluster
+
+    with loopback_cluster(2) as cluster:
+        proc = _start((*LONG_CONVERGE, "--scheduler", cluster.address), signal.SIGTERM)
+        time.sleep(3.0)
+        assert proc.poll() is None
+        cluster.scheduler.kill()
+        start = time.monotonic()
+        out, err = proc.communicate(timeout=120)
+        assert time.monotonic() - start < 20
+    assert proc.returncode == 1, err[-3000:]
+    assert err == (f"rkhp: error: lost the Dask scheduler at {cluster.address} during the run: its tasks were "
+                   "cancelled (scheduler-connection-lost); the tasks not finished cannot be had\n")
 
 
 # --------------------------------------------------------------------------- memory
