@@ -27,9 +27,7 @@ import sys
 from rkhp.base import interrupts
 
 INTERRUPTED = "rkhp: interrupted"
-#: the signals handled as an interrupt: Ctrl-C, a request to end (batch schedulers' time limits,
-#: `timeout`, `docker stop`), a closed terminal or ssh session
-INTERRUPT_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+INTERRUPT_SIGNALS = interrupts.INTERRUPT_SIGNALS
 
 
 def interrupted_line(signum: int | None = None) -> str:

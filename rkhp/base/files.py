@@ -19,12 +19,15 @@ full disk or an interrupt leaves the old file or nothing, never a 0-byte or trun
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import os
+import signal
 import tempfile
 from pathlib import Path
 
 from .errors import InputError, WriteFailed
+from .interrupts import INTERRUPT_SIGNALS
 
 #: the names of the temporary files (NAME: the target's name), as docs/input.md gives them
 TEMPORARY_GLOB = ".{name}.*.tmp"
@@ -56,13 +59,16 @@ def atomic_path(path, what: str = "output file", force: bool = False):
     nothing written."""
     path = check_target(path, what, force)
     folder = path.parent
+    tmp = None
     try:
-        fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    except OSError as exc:
-        raise WriteFailed(f"{what} {path}: cannot write in {folder} ({exc.strerror or exc}); "
-                          "nothing was written") from None
-    tmp = Path(name)
-    try:
+        with _interrupts_held():  # an interrupt between the file's creation and its name kept would leave it
+            try:
+                fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+            except OSError as exc:
+                raise WriteFailed(f"{what} {path}: cannot write in {folder} ({exc.strerror or exc}); "
+                                  "nothing was written") from None
+            tmp = Path(name)
+            _PENDING.add(tmp)
         os.fchmod(fd, 0o666 & ~_umask())
         os.close(fd)
         yield tmp
@@ -82,8 +88,36 @@ def atomic_path(path, what: str = "output file", force: bool = False):
         raise WriteFailed(f"{what} {path}: cannot write the file ({exc.strerror or exc}); "
                           "nothing was written") from None
     finally:
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+            _PENDING.discard(tmp)
+
+
+#: the temporary files being written; those an interrupt left (it can land between the generator
+#: of `atomic_path` and the `with` block that would have cleaned up) are removed at the exit
+_PENDING: set[Path] = set()
+
+
+@atexit.register
+def _remove_pending() -> None:
+    for tmp in list(_PENDING):
         with contextlib.suppress(OSError):
             tmp.unlink()
+
+
+@contextlib.contextmanager
+def _interrupts_held():
+    """The interrupt signals held back in this thread while the block runs, and delivered when it
+    ends (POSIX; elsewhere nothing is held)."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, INTERRUPT_SIGNALS)  # rkhp.base.interrupts
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def _sync(path: Path) -> None:

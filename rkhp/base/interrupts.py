@@ -13,6 +13,10 @@ from __future__ import annotations
 
 import signal
 
+#: the signals handled as an interrupt: Ctrl-C, a request to end (batch schedulers' time limits,
+#: `timeout`, `docker stop`), a closed terminal or ssh session
+INTERRUPT_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+
 _NOTED: list[int] = []
 
 
