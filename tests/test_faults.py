@@ -741,6 +741,47 @@ def test_a_failed_write_is_write_failed_not_input_error(tmp_path, monkeypatch):
 # --------------------------------------------------------------------------- rkhp check's tolerance
 
 
+def _blocks(n: int) -> str:
+    """A spec of the general family on R^n (n even): n/2 canonical planes, each with the Poisson
+    bracket {x_2k-1, x_2k} = 1 + x_2k-1^2 + x_2k^2 of its own variables. Each block is a 2-d
+    structure (Poisson for every function) and the blocks commute: Poisson by construction."""
+    rows = [["0"] * n for _ in range(n)]
+    for k in range(0, n, 2):
+        size = f"(1 + x{k + 1}^2 + x{k + 2}^2)"
+        rows[k][k + 1], rows[k + 1][k] = size, f"-{size}"
+    energy = " + ".join(f"x{i + 1}^2/2" for i in range(n))
+    x0 = [0.3 * (i + 1) / n for i in range(n)]
+    return (f'name = "blocks{n}"\nfamily = "general"\npoisson = {json.dumps(rows)}\n'
+            f'hamiltonian = "{energy}"\nx0 = {x0}\n')
+
+
+def test_check_does_not_call_a_correct_system_wrong(tmp_path):
+    """An 8-variable structure of size 1 + |x|^2, Poisson by construction: seed 7 put a sample's
+    {beta_i, beta_j} 1.07e-12 off pi against a fixed 1e-12, so the check failed it. Measured
+    against the size of each bracket (2n max|dF| max|dG|), every axiom holds at 1e-12 with room,
+    and the sizes are said."""
+    from rkhp.systems import get_system
+    from rkhp.systems.check import TOLERANCE_RULE, check_birealisation
+
+    path = tmp_path / "blocks8.toml"
+    path.write_text(_blocks(8))
+    system = get_system(str(path))
+    result = check_birealisation(system, samples=100, seed=7)
+    assert result.ok and max(result.deviations.values()) < 1e-13, result.deviations
+    assert result.scale > 100  # the brackets' size: round-off of size 1e-16 x scale would have failed
+    document = result.to_json()
+    assert document["tolerance"] == 1e-12 and document["tolerance_rule"] == TOLERANCE_RULE
+    assert document["scale"] == result.scale
+
+
+def test_check_still_fails_a_realisation_that_is_not_one(run_cli):
+    """The spray series truncated at degree 3 is a birealisation only to O(p^4) (docs/theory.md
+    §9): its axioms fail by about 1e-3, nine orders of magnitude above the tolerance."""
+    status, out, err = run_cli("check", "nambu", "--realisation", "truncated:3", "--samples", "10")
+    assert status == 1 and err.startswith("rkhp: check failed: nambu (truncated:3): birealisation axioms violated")
+    assert "relative to the brackets' size, at most" in err and "FAILED" in out
+
+
 # --------------------------------------------------------------------------- rkhp.integrate
 
 
