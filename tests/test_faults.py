@@ -785,3 +785,14 @@ def test_check_still_fails_a_realisation_that_is_not_one(run_cli):
 # --------------------------------------------------------------------------- rkhp.integrate
 
 
+def test_integrate_raises_on_a_failed_run():
+    """A blow-up (docs/exit-status.md "Divergence"): rkhp.integrate raises NumericalFailure naming
+    the step, as `rkhp integrate` exits 1; the failed trajectory travels with it, or is returned
+    when asked for."""
+    with pytest.raises(NumericalFailure, match="failed at step 5") as caught:
+        rkhp.integrate("pendulum", "paper-three-stage", 1e5, 10)
+    failed = caught.value.trajectory
+    assert not failed.ok and failed.failed_step == 5 and len(failed.states) == 6
+    kept = rkhp.integrate("pendulum", "paper-three-stage", 1e5, 10, allow_failure=True)
+    assert not kept.ok and np.array_equal(kept.states, failed.states)
+    assert rkhp.integrate("pendulum", "paper-three-stage", 0.1, 10).ok
