@@ -226,7 +226,7 @@ def out_of_memory(exc: BaseException) -> str:
     loader's of a library, when there is one."""
     cause = _memory_cause(exc) or exc
     detail = one_line(str(cause))
-    if isinstance(cause, OSError) and not isinstance(cause, MemoryError):
+    if isinstance(cause, OSError) and "shared object" in detail:
         detail = f"a shared library could not be loaded: {detail.rsplit(': ', 1)[-1]}"
     return ("out of memory" + (f": {detail}" if detail else "") +
             " (the process's memory limit, `ulimit -v`, or the machine's; docs/input.md#memory)")

@@ -369,6 +369,17 @@ def test_sigterm_from_outside_is_never_a_traceback():
         assert err.count("\n") == 1 and err.startswith("rkhp: interrupted by SIGTERM"), err
 
 
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
+def test_a_signal_while_the_command_starts_is_its_line(signum):
+    """SIGTERM or SIGHUP as soon as the process handles it (during its imports, before the
+    command's own handler): the same one line and status, not a silent end."""
+    proc = _start(LONG_CONVERGE, signum)
+    proc.send_signal(signum)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 128 + signum, (proc.returncode, err[-3000:])
+    assert err.startswith(f"rkhp: interrupted by {signal.Signals(signum).name}") and err.count("\n") == 1, err
+
+
 SLOW_DISK = r'''
 import sys, time
 from rkhp.base import files
