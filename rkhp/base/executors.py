@@ -409,12 +409,13 @@ class DaskCluster:
                                  f"{self.workers_seconds:g} s: its tasks cannot run")
 
     def _lost(self, task) -> ClusterLost:
-        """The ClusterLost of a task cancelled under this executor, with distributed's reason
-        (``scheduler-connection-lost`` for a scheduler gone)."""
+        """The ClusterLost of a task cancelled under this executor, with distributed's reason when
+        it gave one (``scheduler-connection-lost`` for a scheduler gone)."""
         cancelled = getattr(getattr(task, "_state", None), "exception", None)  # a FutureCancelledError
-        reason = getattr(cancelled, "reason", None) or "unknown"
+        reason = getattr(cancelled, "reason", None)
+        said = f" ({reason})" if reason and reason != "unknown" else ""
         return ClusterLost(f"lost the Dask scheduler at {self.address} during the run: its tasks were "
-                           f"cancelled ({reason}); the tasks not finished cannot be had")
+                           f"cancelled{said}; the tasks not finished cannot be had")
 
     def cancel(self, tasks) -> None:
         if self._client.status != "running":  # a lost scheduler: nothing to tell it
