@@ -55,6 +55,8 @@ class LazyGroup(click.Group):
             return super().invoke(ctx)
         except KeyboardInterrupt:
             raise _Interrupt from None
+        except EOFError as exc:  # click would report it as an interrupt (Abort): it is an error
+            raise RuntimeError(f"unexpected end of input ({exc})") from exc
 
     def list_commands(self, ctx):
         return list(COMMANDS)
@@ -71,11 +73,12 @@ class LazyGroup(click.Group):
             formatter.write_dl(rows)
 
     def main(self, *args, **kwargs):
-        from rkhp.base.errors import CheckFailed, InputError, NumericalFailure
+        from rkhp.base.errors import CheckFailed, ClusterLost, InputError, NumericalFailure, WriteFailed
 
-        from .terminal import install_interrupt_handler
+        from .terminal import install_interrupt_handler, install_warning_line
 
         install_interrupt_handler()
+        install_warning_line()
         kwargs["standalone_mode"] = False
         given = args[0] if args else kwargs.get("args")
         kwargs.setdefault("obj", Invocation(tuple(sys.argv[1:] if given is None else given)))
@@ -99,6 +102,10 @@ class LazyGroup(click.Group):
             _fail(f"rkhp: numerical failure: {one_line(str(exc))}", 1)
         except CheckFailed as exc:
             _fail(f"rkhp: check failed: {one_line(str(exc))}", 1)
+        except (WriteFailed, ClusterLost) as exc:
+            _fail(f"rkhp: error: {one_line(str(exc))}", 1)
+        except MemoryError as exc:  # numpy's _ArrayMemoryError included
+            _fail(f"rkhp: error: {out_of_memory(exc)}", 1)
         except BrokenPipeError:  # the reader went away (`rkhp ... | head`): nothing more to say
             from .terminal import silence_stdout
 
@@ -114,12 +121,17 @@ class LazyGroup(click.Group):
 
                 silence_stdout()
                 _fail(f"rkhp: error: cannot write the output: {exc.strerror or exc}", 1)
+            if is_out_of_memory(exc):
+                _fail(f"rkhp: error: {out_of_memory(exc)}", 1)
             raise
         _exit(rv if isinstance(rv, int) else 0)
 
 
 def _exit(status: int):
-    """Exit with `status`, stdout flushed first (a failed flush: one line, status 1)."""
+    """Exit with `status`, stdout flushed first (a failed flush: one line, status 1; after an
+    interrupt, whose line is said, the interrupt's status: a hung-up terminal takes both)."""
+    from rkhp.base import interrupts
+
     try:
         sys.stdout.flush()
     except KeyboardInterrupt:
@@ -132,15 +144,17 @@ def _exit(status: int):
         from .terminal import silence_stdout
 
         silence_stdout()
-        _fail(f"rkhp: error: cannot write the output: {exc.strerror or exc}", 1)
+        if not interrupts.requested():
+            _fail(f"rkhp: error: cannot write the output: {exc.strerror or exc}", 1)
     sys.exit(status)
 
 
 def _fail(line: str, status: int):
-    """One line on stderr (control characters escaped), then exit with `status`."""
+    """One line on stderr (control characters escaped), then exit with `status`, whether or not
+    stderr can be written."""
     from .terminal import printable
 
-    sys.stderr.write(printable(line) + "\n")
+    _say(printable(line))
     try:
         sys.stdout.flush()
     except OSError:
@@ -150,23 +164,72 @@ def _fail(line: str, status: int):
     sys.exit(status)
 
 
+def _say(line: str) -> None:
+    """``line`` on stderr; a stderr that cannot be written (full, closed) loses it."""
+    try:
+        sys.stderr.write(line + "\n")
+        sys.stderr.flush()
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
 def _interrupted():
     """The one line and status of an interrupt (docs/exit-status.md)."""
-    from .terminal import INTERRUPT_STATUS, INTERRUPTED, silence_stdout
+    from .terminal import interrupt_status, interrupted_line, silence_stdout
 
     try:
         sys.stdout.flush()
     except (OSError, ValueError, KeyboardInterrupt):
         silence_stdout()
-    sys.stderr.write(INTERRUPTED + "\n")
-    sys.exit(INTERRUPT_STATUS)
+    _say(interrupted_line())
+    sys.exit(interrupt_status())
 
 
 def _is_stdout_error(exc: OSError) -> bool:
-    """Whether writing stdout raised `exc` (a full or failing device): the errors of a write."""
+    """Whether writing stdout raised `exc` (a full or failing device, a closed stdout): the errors
+    of a write, on no named file. Errors of numba's cache, under the cache folder, are warnings
+    (rkhp.taylor.kernel_cache) and do not reach here."""
     import errno
 
-    return exc.errno in (errno.ENOSPC, errno.EIO, errno.EDQUOT, errno.EFBIG, errno.EPIPE) and exc.filename is None
+    return (exc.errno in (errno.ENOSPC, errno.EIO, errno.EDQUOT, errno.EFBIG, errno.EPIPE, errno.EBADF)
+            and exc.filename is None)
+
+
+#: how the dynamic loader says that it could not map a shared library (llvmlite's, loaded by numba
+#: at its import), which under a memory limit means that the memory ran out
+_NOT_MAPPED = ("failed to map segment from shared object", "cannot allocate memory")
+
+
+def _memory_cause(exc: BaseException) -> BaseException | None:
+    """The exception in ``exc``'s chain of causes and contexts that says the memory ran out: a
+    MemoryError (numpy's included), an OSError of ENOMEM or a shared library not mapped."""
+    import errno
+
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, MemoryError) or (isinstance(exc, OSError) and exc.errno == errno.ENOMEM):
+            return exc
+        if isinstance(exc, OSError) and any(text in str(exc).lower() for text in _NOT_MAPPED):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
+def is_out_of_memory(exc: BaseException) -> bool:
+    """Whether ``exc`` says that the memory ran out (`_memory_cause`)."""
+    return _memory_cause(exc) is not None
+
+
+def out_of_memory(exc: BaseException) -> str:
+    """The line of a run that ran out of memory, with numpy's account of the allocation, or the
+    loader's of a library, when there is one."""
+    cause = _memory_cause(exc) or exc
+    detail = one_line(str(cause))
+    if isinstance(cause, OSError) and "shared object" in detail:
+        detail = f"a shared library could not be loaded: {detail.rsplit(': ', 1)[-1]}"
+    return ("out of memory" + (f": {detail}" if detail else "") +
+            " (the process's memory limit, `ulimit -v`, or the machine's; docs/input.md#memory)")
 
 
 class Invocation(NamedTuple):
@@ -199,10 +262,13 @@ GC_THRESHOLDS = (50_000, 20, 10)
 
 
 def main() -> None:
-    """The `rkhp` command: the collector's thresholds (`GC_THRESHOLDS`), the group, then no
-    Ctrl-C past the chosen exit status."""
-    from .terminal import ignore_late_interrupts
+    """The `rkhp` command: closed standard streams given stand-ins and stderr made forgiving
+    (`rkhp_cli.terminal`), the collector's thresholds (`GC_THRESHOLDS`), the group, then no
+    interrupt past the chosen exit status."""
+    from .terminal import forgiving_stderr, ignore_late_interrupts, open_standard_streams
 
+    open_standard_streams()
+    forgiving_stderr()
     gc.set_threshold(*GC_THRESHOLDS)
     try:
         rkhp.main(prog_name="rkhp")

@@ -84,7 +84,8 @@ def systems(fmt):
 @format_option("table", "json")
 def check(system, realisation, samples, seed, fmt):
     """Check the birealisation axioms of SYSTEM (built-in name or spec file) by automatic
-    differentiation at random points; exit status 1 if a deviation exceeds 1e-12."""
+    differentiation at random points; exit status 1 if a deviation exceeds 1e-12 of the size of
+    what it is computed from (a bracket's: 2n max|dF| max|dG|)."""
     from rkhp.systems import get_system
     from rkhp.systems.check import check_birealisation
 
@@ -112,13 +113,18 @@ def check(system, realisation, samples, seed, fmt):
         print_table(out, table)
         out.print(f"degenerate: {'yes' if result.degenerate else 'no'}    "
                   f"symmetric: {'yes' if result.symmetric else 'no'}    "
-                  f"axioms: {'ok' if result.ok else 'FAILED'} (tolerance {result.tolerance:g})")
+                  f"axioms: {'ok' if result.ok else 'FAILED'} ({_tolerance_words(result)})")
     if not result.ok:
         from rkhp.base.errors import CheckFailed
 
         bad = ", ".join(f"{k} {v:.2e}" for k, v in result.deviations.items() if v > result.tolerance)
         raise CheckFailed(f"{result.system} ({result.realisation}): birealisation axioms violated "
-                          f"({bad} > {result.tolerance:g})")
+                          f"({bad} > {_tolerance_words(result)})")
+
+
+def _tolerance_words(result) -> str:
+    """The tolerance of a check as used: relative, and the largest size it was applied to."""
+    return f"tolerance {result.tolerance:g} relative to the brackets' size, at most {result.scale:.3g}"
 
 
 def failure_status(system, trajectory, h: float) -> str:

@@ -153,6 +153,40 @@ def test_cache_save_precondition_sees_a_changed_save():
     assert cache_save_precondition(types.SimpleNamespace(__name__="empty")) == ["empty has no IndexDataCacheFile"]
 
 
+def test_numba_cache_has_the_form_the_healing_expects():
+    """Fails loudly when a numba release changes the cache loads and saves that
+    rkhp.taylor.kernel_cache replaces: a damaged cache file would then be a traceback again."""
+    from numba.core import caching
+
+    import rkhp.taylor.compiler  # noqa: F401 - applies the healing
+    from rkhp.taylor.kernel_cache import heal_precondition
+
+    missing = heal_precondition(caching)
+    assert not missing, (f"numba {metadata.version('numba')}'s cache changed; damaged cache files are not "
+                         f"healed: {'; '.join(missing)}")
+    assert caching.Cache.rkhp_robust
+
+
+def test_heal_precondition_sees_a_changed_cache_module():
+    from rkhp.taylor.kernel_cache import heal_precondition
+
+    class Cache:
+        def _load_overload(self, sig, target_context):
+            return self._cache_file.load((sig, target_context))  # no rebuild: another form
+
+        def save_overload(self, sig, data):  # numba's own form
+            with self._guard_against_spurious_io_errors():
+                self._save_overload(sig, data)
+
+    module = types.SimpleNamespace(__name__="fake_numba_caching", Cache=Cache, IndexDataCacheFile=object)
+    missing = heal_precondition(module)
+    assert any("Cache._load_overload does not use exactly" in m for m in missing), missing
+    assert "IndexDataCacheFile has no _load_index" in missing
+    assert not any("save_overload" in m for m in missing)
+    assert heal_precondition(types.SimpleNamespace(__name__="empty")) == ["empty has no Cache or no "
+                                                                           "IndexDataCacheFile"]
+
+
 def _save_entries(folder: str, first: int, count: int) -> None:
     """Save ``count`` entries, keys first..first+count-1, each with its own key as data, into the
     index of one function in ``folder`` (a process of the race test below)."""

@@ -18,7 +18,10 @@ imported only when a scheduler is used.
 
 from __future__ import annotations
 
+import asyncio
+import ctypes
 import json
+import logging
 import multiprocessing
 import os
 import pickle
@@ -36,7 +39,7 @@ from contextlib import closing, contextmanager
 from pathlib import Path
 from typing import Any, Protocol
 
-from .errors import InputError
+from .errors import ClusterLost, InputError
 from .interrupts import is_interrupt
 
 #: The environment variable Dask itself reads for the scheduler's address.
@@ -50,6 +53,8 @@ WORKERS_SECONDS = 30
 POLL_SECONDS = 0.01
 #: How often a Dask executor asks the scheduler how many worker threads it has (seconds).
 SLOTS_SECONDS = 5.0
+#: Seconds a Dask client may take to close (a scheduler that is gone does not answer).
+CLOSE_SECONDS = 2
 #: Largest --workers accepted (a local pool; a larger run belongs on a cluster).
 MAX_LOCAL_WORKERS = 256
 _ADDRESS = re.compile(r"((tcp|tls|ws|wss|ucx)://)?(\[[0-9A-Fa-f:.]{2,60}\]|[A-Za-z0-9_.\-]{1,200}):([0-9]{1,5})")
@@ -89,6 +94,10 @@ class Executor(Protocol):
     def close(self) -> None:
         """Release the workers (a Dask cluster itself keeps running)."""
 
+    def terminate(self) -> None:
+        """Stop the tasks now, running ones included (local workers are killed): after an
+        interrupt, whose unfinished tasks' results are not used."""
+
 
 def first_done(executor: Executor, tasks: Iterable[Task]) -> Task:
     """The first of ``tasks`` to finish (waits for it)."""
@@ -123,6 +132,8 @@ def _run(executor, fn, argument_tuples, on_done, keep_on_interrupt: bool) -> tup
                 on_done(count, len(tasks))
     except BaseException as exc:
         executor.cancel(tasks)
+        if is_interrupt(exc):
+            executor.terminate()  # the running tasks' results would not be used
         if keep_on_interrupt and is_interrupt(exc):
             partial = getattr(exc, "partial", None)
             running = next((k for k, t in enumerate(tasks) if not t.done()), None)
@@ -194,13 +205,52 @@ class InProcess:
     def close(self) -> None:
         pass
 
+    def terminate(self) -> None:
+        pass
+
 
 # ----------------------------------------------------------------------------- processes on this machine
 
 
-def _ignore_sigint() -> None:
-    """Pool workers leave Ctrl-C to the parent, which cancels and reports."""
+#: Linux's prctl option that sets the signal a process receives when its parent ends
+PR_SET_PDEATHSIG = 1
+#: how often a worker without the parent-death signal looks whether its parent has ended (seconds)
+PARENT_WATCH_SECONDS = 1.0
+
+
+def die_with_parent(parent: int) -> None:
+    """This process (a worker forked by ``parent``) is killed when its parent ends, however the
+    parent ends (SIGKILL included): on Linux by the parent-death signal (prctl PR_SET_PDEATHSIG,
+    SIGKILL), elsewhere by a thread that looks every PARENT_WATCH_SECONDS whether the parent is
+    still its parent. A parent that ended before this was set: the process ends now."""
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            armed = libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0) == 0
+        except (OSError, AttributeError):
+            armed = False
+        if armed:
+            if os.getppid() != parent:
+                os._exit(1)
+            return
+    threading.Thread(target=_watch_parent, args=(parent,), name="rkhp-parent-watch", daemon=True).start()
+
+
+def _watch_parent(parent: int) -> None:
+    while os.getppid() == parent:
+        time.sleep(PARENT_WATCH_SECONDS)
+    os._exit(1)
+
+
+def _start_worker(parent: int) -> None:
+    """A pool worker's start: Ctrl-C left to the parent, which cancels and reports; SIGTERM and
+    SIGHUP at their default action (the fork copied the command's handlers, which would turn the
+    pool's SIGTERM into a task's exception); ended with its parent (`die_with_parent`)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for name in ("SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), signal.SIG_DFL)
+    die_with_parent(parent)
 
 
 def _call_pickled(payload: bytes):
@@ -216,7 +266,7 @@ class LocalProcesses:
     def __init__(self, workers: int):
         self.slots = workers
         self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
-                                         initializer=_ignore_sigint)
+                                         initializer=_start_worker, initargs=(os.getpid(),))
 
     def submit(self, fn, /, *args):
         import cloudpickle
@@ -248,8 +298,32 @@ class LocalProcesses:
 # ----------------------------------------------------------------------------- a Dask cluster
 
 
+#: the package whose loggers an open `DaskCluster` silences: their errors reach the caller as
+#: rkhp's exceptions (a lost scheduler is one ClusterLost, not distributed's reconnection tracebacks)
+DASK_LOGGERS = "distributed"
+
+
+class _QuietLogs:
+    """distributed's loggers (`DASK_LOGGERS` and those below it, which Dask's configuration gives
+    levels of their own) silenced, and their levels put back by `restore`."""
+
+    def __init__(self):
+        names = [name for name in list(logging.root.manager.loggerDict)
+                 if name == DASK_LOGGERS or name.startswith(DASK_LOGGERS + ".")]
+        self._levels = [(logging.getLogger(name), logging.getLogger(name).level) for name in [DASK_LOGGERS, *names]]
+        for logger, _ in self._levels:
+            logger.setLevel(logging.CRITICAL + 1)
+
+    def restore(self) -> None:
+        for logger, level in self._levels:
+            logger.setLevel(level)
+
+
 class DaskCluster:
-    """The workers of the Dask scheduler at ``address``; ``slots`` = their threads."""
+    """The workers of the Dask scheduler at ``address``; ``slots`` = their threads. While it is
+    open, distributed's own log lines are silenced: what goes wrong reaches the caller as one
+    exception (InputError for a scheduler that cannot be used, ClusterLost for one lost during a
+    run)."""
 
     kind = "dask"
 
@@ -259,7 +333,12 @@ class DaskCluster:
             import distributed  # noqa: F401
         except ImportError:
             raise InputError("--scheduler needs Dask: pip install 'rkhp[distributed]'") from None
-        self._client = _connect(address, connect_seconds)
+        self._quiet = _QuietLogs()
+        try:
+            self._client = _connect(address, connect_seconds)
+        except BaseException:
+            self._quiet.restore()
+            raise
         self.address = address
         self.workers_seconds = workers_seconds
         self._slots = (0.0, 1)
@@ -271,7 +350,7 @@ class DaskCluster:
         deadline = time.monotonic() + self.workers_seconds
         while not self._worker_count():
             if time.monotonic() > deadline:
-                self._client.close()
+                self.close()
                 raise InputError(f"the Dask scheduler at {self.address} has no workers (waited "
                                  f"{self.workers_seconds:g} s; start some with `dask worker {self.address}`)")
             time.sleep(0.2)
@@ -299,8 +378,9 @@ class DaskCluster:
 
     def as_completed(self, tasks):
         """The tasks as they finish; InputError when the cluster has had no worker for
-        workers_seconds (nothing would ever finish). Polls distributed's stream every
-        POLL_SECONDS and the workers every second."""
+        workers_seconds (nothing would ever finish), ClusterLost when a task was cancelled by
+        anyone but this executor (distributed cancels every task of a client that lost its
+        scheduler). Polls distributed's stream every POLL_SECONDS and the workers every second."""
         from distributed import as_completed
 
         stream = as_completed(list(tasks), loop=self._client.loop)
@@ -310,7 +390,10 @@ class DaskCluster:
             batch = stream.next_batch(block=False)
             if batch:
                 idle_since = None
-                yield from batch
+                for task in batch:
+                    if task.cancelled():
+                        raise self._lost(task)
+                    yield task
                 continue
             time.sleep(POLL_SECONDS)
             now = time.monotonic()
@@ -325,13 +408,34 @@ class DaskCluster:
                 raise InputError(f"the Dask cluster at {self.address} has had no workers for "
                                  f"{self.workers_seconds:g} s: its tasks cannot run")
 
+    def _lost(self, task) -> ClusterLost:
+        """The ClusterLost of a task cancelled under this executor, with distributed's reason when
+        it gave one (``scheduler-connection-lost`` for a scheduler gone)."""
+        cancelled = getattr(getattr(task, "_state", None), "exception", None)  # a FutureCancelledError
+        reason = getattr(cancelled, "reason", None)
+        said = f" ({reason})" if reason and reason != "unknown" else ""
+        return ClusterLost(f"lost the Dask scheduler at {self.address} during the run: its tasks were "
+                           f"cancelled{said}; the tasks not finished cannot be had")
+
     def cancel(self, tasks) -> None:
+        if self._client.status != "running":  # a lost scheduler: nothing to tell it
+            return
         tasks = [t for t in tasks if not t.done()]
         if tasks:
             self._client.cancel(tasks)
 
     def close(self) -> None:
-        self._client.close()
+        """The client closed (without waiting for a scheduler that is gone), distributed's log
+        levels put back."""
+        try:
+            self._client.close(timeout=CLOSE_SECONDS)
+        except Exception:  # noqa: BLE001 - a scheduler gone: the client is closed all the same
+            pass
+        finally:
+            self._quiet.restore()
+
+    def terminate(self) -> None:
+        """Nothing beyond `cancel`: the scheduler stops cancelled tasks on its workers."""
 
 
 #: getaddrinfo's answers that a host name has no address (not a resolver that failed for now)
@@ -360,13 +464,47 @@ def _refuse_early(address: str, seconds: float) -> None:
         return
 
 
+class NotAScheduler(Exception):
+    """The server at a scheduler's address answered, but not as a Dask scheduler."""
+
+
+def _identity(address: str, seconds: float) -> dict:
+    """What the server at ``address`` says it is (distributed's ``identity`` operation), over one
+    connection of Dask's protocol (with the security settings of Dask's configuration, as a
+    Client's); NotAScheduler when it does not speak that protocol (an HTTP server, a dashboard:
+    its answer read as Dask's frames is nonsense, such as a frame of exabytes)."""
+    from distributed.comm import connect
+    from distributed.security import Security
+
+    async def ask():
+        comm = await connect(address, timeout=seconds, **Security().get_connection_args("client"))
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    try:
+        answer = asyncio.run(asyncio.wait_for(ask(), seconds))
+    except (TimeoutError, OSError):
+        raise
+    except Exception as exc:  # noqa: BLE001 - frames that are not Dask's: any error of decoding them
+        raise NotAScheduler(f"it does not speak Dask's protocol ({type(exc).__name__})") from None
+    if not isinstance(answer, dict) or answer.get("type") != "Scheduler":
+        kind = answer.get("type") if isinstance(answer, dict) else None
+        raise NotAScheduler(f"it is a Dask {kind}, not a scheduler" if isinstance(kind, str)
+                            else "its answer is not a Dask scheduler's")
+    return answer
+
+
 def _connect(address: str, seconds: float):
     """A distributed Client of the scheduler at ``address``, or InputError in one line within
     about ``seconds``: an address Dask cannot use (no port, an unknown scheme), an unknown host, a
     refused or unanswered connection (an unknown host or a refused connection at once:
-    `_refuse_early`), a server that is not a Dask scheduler. The connection runs in a thread that
-    is abandoned if it has not answered after 1.5 ``seconds`` (some failures never answer: a
-    server that accepts and is silent)."""
+    `_refuse_early`), a server that is not a Dask scheduler (asked first: `_identity`, so that no
+    Client is made of it). The connection runs in a thread that is abandoned if it has not
+    answered after 1.5 ``seconds`` (some failures never answer: a server that accepts and is
+    silent)."""
     from distributed import Client
 
     outcome: dict = {}
@@ -374,6 +512,7 @@ def _connect(address: str, seconds: float):
     def connect():
         try:
             _refuse_early(address, seconds)
+            _identity(address, seconds)
             outcome["client"] = Client(address, timeout=seconds, set_as_default=False)
         except BaseException as exc:  # noqa: BLE001 - handed to the caller as one line
             outcome["error"] = exc
@@ -387,6 +526,9 @@ def _connect(address: str, seconds: float):
     if error is not None:
         if isinstance(error, KeyboardInterrupt):
             raise error
+        if isinstance(error, NotAScheduler):
+            raise InputError(f"the server at {address} is not a Dask scheduler: {error} (a scheduler "
+                             "listens on port 8786 by default; 8787 is its dashboard)") from None
         if isinstance(error, ConnectionRefusedError):
             raise InputError(f"cannot reach the Dask scheduler at {address}: connection refused "
                              "(nothing listens on that port)") from None
@@ -451,6 +593,10 @@ def open_executor(workers: int = 1, scheduler: str | None = None, environ=None):
     executor = make_executor(workers, scheduler, environ)
     try:
         yield executor
+    except BaseException as exc:
+        if is_interrupt(exc):
+            executor.terminate()  # not waiting for the running tasks
+        raise
     finally:
         executor.close()
 
@@ -464,11 +610,13 @@ class LoopbackCluster:
     Attributes:
         address: the scheduler's address (give it to ``--scheduler``).
         workers: the worker processes (subprocess.Popen), e.g. to stop one.
+        scheduler: the scheduler's process (subprocess.Popen), e.g. to kill it during a run.
     """
 
-    def __init__(self, address: str, workers: list):
+    def __init__(self, address: str, workers: list, scheduler=None):
         self.address = address
         self.workers = workers
+        self.scheduler = scheduler
 
 
 #: how long a process of `loopback_cluster` may take to stop once terminated before it is killed
@@ -510,7 +658,7 @@ def loopback_cluster(workers: int = 2, threads: int = 1, start_seconds: float = 
 
             with Client(address, timeout=start_seconds, set_as_default=False) as client:
                 client.wait_for_workers(workers, timeout=start_seconds)
-            yield LoopbackCluster(address, pool)
+            yield LoopbackCluster(address, pool, procs[0])
         finally:
             for proc in reversed(procs):
                 proc.terminate()

@@ -12,16 +12,25 @@ full disk or an interrupt leaves the old file or nothing, never a 0-byte or trun
   the rename, which does not replace a file created in between.
 - A symbolic link at the name is never followed: without ``force`` it is refused, with ``force``
   the link itself is replaced by the file (its target is left as it is).
+- A write that fails once the work is done (a full disk, a failing device, a folder removed
+  meanwhile) is a WriteFailed (the command line's status 1), not bad input: nothing was written.
+- The temporary file is named ``.NAME.XXXXXXXX.tmp`` (`TEMPORARY_GLOB`), in NAME's folder.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import os
+import signal
 import tempfile
 from pathlib import Path
 
-from .errors import InputError
+from .errors import InputError, WriteFailed
+from .interrupts import INTERRUPT_SIGNALS
+
+#: the names of the temporary files (NAME: the target's name), as docs/input.md gives them
+TEMPORARY_GLOB = ".{name}.*.tmp"
 
 
 def check_target(path, what: str = "output file", force: bool = False) -> Path:
@@ -45,16 +54,21 @@ def _umask() -> int:
 @contextlib.contextmanager
 def atomic_path(path, what: str = "output file", force: bool = False):
     """``with atomic_path(path) as tmp:`` write the content to ``tmp`` (a new file in the same
-    folder, same extension); on leaving without an error it becomes ``path`` (see the module), on
-    an error it is removed. OSError: InputError naming the file, nothing written."""
+    folder, named by `TEMPORARY_GLOB`); on leaving without an error it becomes ``path`` (see the
+    module), on an error or an interrupt it is removed. OSError: WriteFailed naming the file,
+    nothing written."""
     path = check_target(path, what, force)
     folder = path.parent
+    tmp = None
     try:
-        fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=folder)
-    except OSError as exc:
-        raise InputError(f"{what} {path}: cannot write in {folder} ({exc.strerror or exc})") from None
-    tmp = Path(name)
-    try:
+        with _interrupts_held():  # an interrupt between the file's creation and its name kept would leave it
+            try:
+                fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+            except OSError as exc:
+                raise WriteFailed(f"{what} {path}: cannot write in {folder} ({exc.strerror or exc}); "
+                                  "nothing was written") from None
+            tmp = Path(name)
+            _PENDING.add(tmp)
         os.fchmod(fd, 0o666 & ~_umask())
         os.close(fd)
         yield tmp
@@ -65,14 +79,45 @@ def atomic_path(path, what: str = "output file", force: bool = False):
             try:
                 os.link(tmp, path)  # fails if the name was taken meanwhile: nothing replaced
             except FileExistsError:
-                raise InputError(f"{what} {path}: the file exists; give --force to replace it") from None
+                raise WriteFailed(f"{what} {path}: the file was created meanwhile; nothing was written "
+                                  "(give --force to replace it)") from None
             tmp.unlink()
+    except WriteFailed:
+        raise
     except OSError as exc:
-        raise InputError(f"{what} {path}: cannot write the file ({exc.strerror or exc}); "
-                         "nothing was written") from None
+        raise WriteFailed(f"{what} {path}: cannot write the file ({exc.strerror or exc}); "
+                          "nothing was written") from None
     finally:
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+            _PENDING.discard(tmp)
+
+
+#: the temporary files being written; those an interrupt left (it can land between the generator
+#: of `atomic_path` and the `with` block that would have cleaned up) are removed at the exit
+_PENDING: set[Path] = set()
+
+
+@atexit.register
+def _remove_pending() -> None:
+    for tmp in list(_PENDING):
         with contextlib.suppress(OSError):
             tmp.unlink()
+
+
+@contextlib.contextmanager
+def _interrupts_held():
+    """The interrupt signals held back in this thread while the block runs, and delivered when it
+    ends (POSIX; elsewhere nothing is held)."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, INTERRUPT_SIGNALS)  # rkhp.base.interrupts
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def _sync(path: Path) -> None:

@@ -1,6 +1,8 @@
 """Ctrl-C: how the library and the command line tell an interrupt from a failure.
 
-An interrupt can land anywhere: in Python code (KeyboardInterrupt), inside a compiled kernel
+An interrupt is Ctrl-C (SIGINT), or a request to end that the command line handles the same way:
+SIGTERM (a batch scheduler's time limit, `timeout`, `docker stop`) and SIGHUP (a closed terminal
+or ssh session). It can land anywhere: in Python code (KeyboardInterrupt), inside a compiled kernel
 (numba then reports the pending KeyboardInterrupt as a SystemError raised from it) or during a
 compilation (a later call may then fail with a RuntimeError). The command line's handler of
 SIGINT records the interrupt here (:func:`note`); :func:`is_interrupt` takes any exception raised
@@ -9,17 +11,29 @@ after that, or one caused by a KeyboardInterrupt, as the interrupt (docs/exit-st
 
 from __future__ import annotations
 
-_NOTED: list[bool] = []
+import signal
+
+#: the signals handled as an interrupt: Ctrl-C, a request to end (batch schedulers' time limits,
+#: `timeout`, `docker stop`), a closed terminal or ssh session
+INTERRUPT_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+
+_NOTED: list[int] = []
 
 
-def note() -> None:
-    """Record that the user interrupted the run (called by the command line's SIGINT handler)."""
-    _NOTED.append(True)
+def note(signum: int = signal.SIGINT) -> None:
+    """Record that the run was interrupted by signal ``signum`` (called by the command line's
+    handler of SIGINT, SIGTERM and SIGHUP)."""
+    _NOTED.append(int(signum))
 
 
 def requested() -> bool:
     """Whether an interrupt was recorded by :func:`note`."""
     return bool(_NOTED)
+
+
+def signal_number() -> int:
+    """The signal of the first interrupt recorded (SIGINT when none was)."""
+    return _NOTED[0] if _NOTED else int(signal.SIGINT)
 
 
 def is_interrupt(exc: BaseException) -> bool:

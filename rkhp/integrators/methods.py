@@ -32,7 +32,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from ..base.errors import InputError
+from ..base.errors import InputError, NumericalFailure
 from ..trees.conditions import conditions_of_order
 
 DEFAULT_METHODS = ("euler", "paper-two-stage", "paper-three-stage", "rk4")
@@ -265,12 +265,24 @@ def resolve_system(system, realisation: str = "symmetric", x0=None):
     return started
 
 
-def integrate(system, method, h, n_steps, x0=None, *, realisation: str = "symmetric"):
+def integrate(system, method, h, n_steps, x0=None, *, realisation: str = "symmetric",
+              allow_failure: bool = False):
     """Integrate ``system`` (a name, a spec file or a PoissonSystem) with ``method`` (any name of
     the grammar above, a Tableau or a Method): ``n_steps`` steps of size ``h`` from ``x0`` (default:
     the system's start). Returns a :class:`~rkhp.integrators.trajectory.Trajectory`.
 
+    A run that fails (Newton did not converge, the state left the system's domain or diverged:
+    docs/exit-status.md) raises :class:`~rkhp.base.errors.NumericalFailure` naming the step, as
+    `rkhp integrate` exits with status 1; the failed trajectory is the exception's
+    ``trajectory``. With ``allow_failure=True`` it is returned instead: ``ok`` False, ``cause``,
+    ``failed_step``, and the states before the failure.
+
     ``rkhp.integrate("rigid-body", "rk4", 0.1, 100)`` integrates the rigid body (symmetric
     realisation) with RK4 used as an RKHP method.
     """
-    return resolve_method(method).integrate(resolve_system(system, realisation), h, n_steps, x0)
+    chosen, resolved = resolve_method(method), resolve_system(system, realisation)
+    trajectory = chosen.integrate(resolved, h, n_steps, x0)
+    if not trajectory.ok and not allow_failure:
+        raise NumericalFailure(f"{resolved.name}, {chosen.name}, h = {h:g}: {trajectory.status}",
+                               trajectory=trajectory)
+    return trajectory

@@ -240,6 +240,8 @@ def run_restarts(problem: Problem, restarts: int, seed: int = 0, executor=None,
             record(result)
     except KeyboardInterrupt:
         interrupted = True
+        executor.cancel([t for t, _ in pending.values()])
+        executor.terminate()  # the running restarts' results would not be used
     finally:
         executor.cancel([t for t, _ in pending.values()])
     attempts = tuple(done[k] for k in sorted(done))

@@ -5,6 +5,8 @@
 - `rkhp.taylor.tape`: recording programs as tapes (TapeBuilder, Var, composite operations and
   sub-programs);
 - `rkhp.taylor.compiler`: numba's cache folder and compile settings;
+- `rkhp.taylor.kernel_cache`: numba's cache kept working through damaged files, failed saves
+  and unusable folders;
 - `rkhp.taylor.jets`: jet spaces (monomial tables) and the jet kernels (product, composition);
 - `rkhp.taylor.elementary`: the Taylor coefficients of every elementary function;
 - `rkhp.taylor.rows`: evaluation of elementary rows (the main program's and sub-programs');

@@ -8,7 +8,9 @@ and of the numba and llvmlite versions: $XDG_CACHE_HOME/rkhp/numba/<hash> (defau
 ~/.cache/rkhp/numba/<hash>). Inside it a module's kernels are found by its package folder's name,
 not by its path on disk (`SourcesLocator`), so every checkout or installation of the same sources
 shares one compile. A NUMBA_CACHE_DIR set by the user is respected (with numba's own locator).
-Every compiled module imports numba and its settings from here.
+A folder that cannot be used is said once and replaced by a folder of the user's in the temporary
+folder, and damaged cache files or failed saves cost a compile, never a run
+(`rkhp.taylor.kernel_cache`). Every compiled module imports numba and its settings from here.
 
 numba's own writes to that cache are made safe for processes compiling side by side
 (`_save_locked`), its inliner cheaper (`_cheap_inlining`), and its cache shared by every copy of
@@ -119,10 +121,14 @@ import numba  # noqa: E402
 from numba.core import caching, inline_closurecall  # noqa: E402
 from numba.extending import overload  # noqa: E402
 
-#: rkhp's cache folder when numba uses it (None: the user's NUMBA_CACHE_DIR)
-RKHP_CACHE_DIR = None if os.environ.get("NUMBA_CACHE_DIR") else str(cache_dir())
+from .kernel_cache import make_cache_robust, usable_folder  # noqa: E402
+
+#: rkhp's cache folder when numba uses it (None: the user's NUMBA_CACHE_DIR): `cache_dir`, or
+#: where it cannot be used, the fallback of `rkhp.taylor.kernel_cache.usable_folder`
+RKHP_CACHE_DIR = None if os.environ.get("NUMBA_CACHE_DIR") else str(usable_folder(cache_dir()).path)
 if RKHP_CACHE_DIR is not None:
     numba.config.CACHE_DIR = RKHP_CACHE_DIR
+make_cache_robust(caching)
 
 
 class _OneMemo:
@@ -323,7 +329,10 @@ class SourcesLocator(_USER_FOLDER_LOCATOR):
     a hash of its file's content, so another clone, another virtual environment or ``pip install
     .`` beside ``pip install -e .`` of the same sources loads what any of them compiled. Other
     functions, and every function while the cache is a user's NUMBA_CACHE_DIR, are left to numba's
-    locators (`from_function` answers None)."""
+    locators (`from_function` answers None). The folder is not tried for writing here, as numba's
+    locators do before they answer: one that cannot be written was said once
+    (`rkhp.taylor.kernel_cache.usable_folder`), and numba must then keep nothing rather than write
+    into the sources' ``__pycache__``."""
 
     def __init__(self, py_func, py_file):
         super().__init__(py_func, py_file)
@@ -333,7 +342,7 @@ class SourcesLocator(_USER_FOLDER_LOCATOR):
     def from_function(cls, py_func, py_file):
         if RKHP_CACHE_DIR is None or numba.config.CACHE_DIR != RKHP_CACHE_DIR or not is_compiled_source(py_file):
             return None
-        return super().from_function(py_func, py_file)
+        return cls(py_func, py_file)
 
 
 def locator_precondition(module=caching) -> list[str]:
