@@ -1,5 +1,5 @@
-"""The series of a composition of RKHP steps against the Butcher product (issue 14;
-docs/modified.md, docs/theory.md §11).
+"""The series of a composition of RKHP steps against the Butcher product
+(docs/modified.md, docs/theory.md §11).
 
 Outside values: the harmonic oscillator, where a generating function S = c H is the Cayley
 rotation by 2 arctan(c/2), so two implicit midpoint steps (RKHP Euler) have c = 2h/(1 - h^2/4);

@@ -1,4 +1,4 @@
-"""Searches, studies and ensembles on a Dask cluster (issue 16; docs/distributed.md).
+"""Searches, studies and ensembles on a Dask cluster (docs/distributed.md).
 
 The reference values are the single-process runs with the same seed: a restart, a convergence row
 or a chunk of an ensemble is a pure function of its arguments, so the cluster must give the same

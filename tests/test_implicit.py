@@ -1,4 +1,4 @@
-"""Implicit tableaux in the RKHP engine (issue 13; docs/implicit.md, docs/theory.md §10).
+"""Implicit tableaux in the RKHP engine (docs/implicit.md, docs/theory.md §10).
 
 Values from outside the code: the classical orders of the Gauss methods (2s with s stages: Butcher
 1964; Hairer, Norsett & Wanner I, Table II.7.x), the paper's one-stage implicit method of

@@ -1,4 +1,4 @@
-"""The RKHP engine, the Taylor (THP) integrator and `rkhp integrate` (issue 5)."""
+"""The RKHP engine, the Taylor (THP) integrator and `rkhp integrate`."""
 
 from __future__ import annotations
 

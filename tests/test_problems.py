@@ -1,4 +1,4 @@
-"""The field's reference problems (issue 10, part D: rkhp.systems.problems).
+"""The field's reference problems (rkhp.systems.problems).
 
 Values from outside the code: the vector fields as the sources write them (GeometricProblems.jl
 v0.8.2: MasslessChargedParticle, PointVortices, LotkaVolterra4d; Flaschka's equations of the Toda

@@ -1,4 +1,4 @@
-"""The exact Poisson-spray realisation of the general family (issue 10, part E).
+"""The exact Poisson-spray realisation of the general family (rkhp.systems.spray).
 
 Values from outside the code: the closed forms of docs/theory.md §4 (so(3)*: the rigid body's
 c(|p|^2) realisation; se(3)*: phi(K(p)) x) which the spray realisation reduces to for linear pi,

@@ -1,4 +1,4 @@
-"""Checks of Poisson matrices given as expressions (issue 10, part A: rkhp.systems.structure).
+"""Checks of Poisson matrices given as expressions (rkhp.systems.structure).
 
 The structures come from outside the code: so(3)* (Lie–Poisson of the rigid body), the Nambu
 bracket pi v = grad C x v (Poisson for every C; Nambu 1973), 1/B(x) J in 2-d (every antisymmetric
