@@ -209,14 +209,14 @@ def integrate(system, method, steps, h, t_final, x0, modified_order, realisation
     times = _output_times(t_eval, t_eval_count, end)
     series = None
     if modified_order is not None:
-        from .modified_cmd import modified_series
+        from .modified_views import modified_series
 
         series = modified_series(poisson, chosen, modified_order, fmt != "json")
     compile_notice((chosen.kind,), fmt != "json", poisson)
     trajectory = chosen.integrate(poisson, step, n)
     report = integration_report(poisson, trajectory, chosen.name, step, n)
     if series is not None and trajectory.ok:
-        from .modified_cmd import modified_energy_report
+        from .modified_views import modified_energy_report
 
         report.update(modified_energy_report(poisson, series, step, trajectory.states, fmt != "json"))
     timed = None
