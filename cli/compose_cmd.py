@@ -23,7 +23,7 @@ def compose(methods, order, degenerate, symmetric, seed, fmt):
     is the exact flow) and compare the generating function of the composition with the Butcher products
     of the methods' characters. Exact, on generic systems modulo primes (docs/modified.md)."""
     from rkhp.base.errors import InputError
-    from rkhp.series.composition import MAX_ORDER, composition_series
+    from rkhp.series.composed_steps import MAX_ORDER, composition_series
     from rkhp.trees.rooted import check_order
 
     cls = condition_class_of(degenerate, symmetric)

@@ -15,7 +15,7 @@ from fractions import Fraction
 import pytest
 
 from rkhp.base.errors import InputError
-from rkhp.series.composition import composition_series
+from rkhp.series.composed_steps import composition_series
 from rkhp.series.modified import method_character
 from rkhp.tableaux.files import load_tableau
 from rkhp.trees.algebra import exact_flow_character
