@@ -50,6 +50,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..base.errors import InputError
+from ..systems import families
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
 from ..taylor.elementary import TWO_PI
@@ -71,7 +72,7 @@ from .failure import Failure
 
 CONSTANT, LIE_POISSON, LOG_CANONICAL = 0, 1, 2
 """The families of `ClosedForm.kind`."""
-KINDS = {"constant": CONSTANT, "lie-poisson": LIE_POISSON, "log-canonical": LOG_CANONICAL}
+KINDS = {families.CONSTANT: CONSTANT, families.LIE_POISSON: LIE_POISSON, families.LOG_CANONICAL: LOG_CANONICAL}
 PHI_GUARD = 0.9 * TWO_PI
 """The bound on |K|_F of the family's phi (`rkhp.taylor.composites.phimv`), kept here so that
 the direct form fails where the engine does."""

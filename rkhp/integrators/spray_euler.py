@@ -48,6 +48,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..base.errors import InputError
+from ..systems.families import GENERAL
 from ..taylor.collocation import TABLE_A, TABLE_B, TABLE_E, TABLE_W
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
@@ -538,7 +539,7 @@ def field_tape(alpha_tape: Tape, n: int) -> Tape:
 def spray_tapes(system) -> SprayTapes:
     """The tapes of the direct form for a system of the general family with the symmetric
     (full spray) realisation; InputError otherwise."""
-    if system.family != "general" or system.realisation != "symmetric":
+    if system.family != GENERAL or system.realisation != "symmetric":
         raise InputError(f"{system.name}: the direct Euler step is that of the Poisson-spray "
                          f"realisation (family general, realisation symmetric); this system is "
                          f"{system.family}, realisation {system.realisation}")
