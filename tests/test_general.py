@@ -33,7 +33,7 @@ from rkhp.taylor.interpreter import evaluate
 
 
 def _tape_values(n, program, x, p):
-    return evaluate(tp.record(n, program), np.concatenate([x, p]))
+    return evaluate(tp.record_tape(n, program), np.concatenate([x, p]))
 
 
 def _cross(a, b):

@@ -56,7 +56,7 @@ def rigid_body_exact(inertia, x0) -> Callable | None:
         B = (a1 - a3) * A * C / lam
         m = (a2 - a1) * A * A / ((a3 - a2) * C * C)
 
-    def at(t: float) -> list[float]:
+    def state_at(t: float) -> list[float]:
         with mpmath.workdps(EXACT_DIGITS):
             tau = lam * mpmath.mpf(t)
             return [float(A * mpmath.ellipfun("cn", tau, m=m)), float(B * mpmath.ellipfun("sn", tau, m=m)),
@@ -64,7 +64,7 @@ def rigid_body_exact(inertia, x0) -> Callable | None:
 
     def solution(t):
         times = np.asarray(t, dtype=np.float64)
-        values = np.array([at(float(v)) for v in times.ravel()])
+        values = np.array([state_at(float(v)) for v in times.ravel()])
         return values.reshape(*times.shape, 3)
 
     return solution

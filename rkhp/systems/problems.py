@@ -69,16 +69,16 @@ class ProblemData:
         return len(self.x0)
 
 
-def _read(texts, n: int, where: str):
+def _read_expressions(texts, n: int, where: str):
     return tuple(parse_expression(t, variable_names(n), where=where) for t in texts)
 
 
 def expressions(data: ProblemData):
     """(pi, H, Casimirs) of a problem as sympy expressions in the real symbols x1..xn."""
     n = data.dim
-    entries = tuple(_read(row, n, f"{data.name}: poisson") for row in data.poisson)
-    (H,) = _read([data.hamiltonian], n, f"{data.name}: hamiltonian")
-    return entries, H, _read(data.casimirs, n, f"{data.name}: casimirs")
+    entries = tuple(_read_expressions(row, n, f"{data.name}: poisson") for row in data.poisson)
+    (H,) = _read_expressions([data.hamiltonian], n, f"{data.name}: hamiltonian")
+    return entries, H, _read_expressions(data.casimirs, n, f"{data.name}: casimirs")
 
 
 def _matrix_text(entries) -> tuple:

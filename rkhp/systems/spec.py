@@ -67,7 +67,7 @@ def _read(path: Path) -> dict:
     return data
 
 
-def parse_expression(text, n: int, where: str):
+def parse_spec_expression(text, n: int, where: str):
     """A sympy expression in x1..xn read by the safe reader (`rkhp.base.expressions`), with its
     symbols (InputError naming unknown symbols, bad syntax or anything outside the grammar)."""
     names = variable_names(n)
@@ -176,7 +176,7 @@ def system_from_keys(data: dict, where: str, default_name: str, source: str,
     x0 = np.array(documents.number_list(data["x0"], f"{where}: x0", max_size=MAX_DIMENSION))
     n = x0.size
     name = documents.string(data.get("name", default_name), f"{where}: name")
-    t_final = documents.number(data.get("t_final", 10.0), f"{where}: t_final", 0.0, low_open=True)
+    t_final = documents.document_number(data.get("t_final", 10.0), f"{where}: t_final", 0.0, low_open=True)
     needed = FAMILIES[family].spec_key
     for key in set(spec_keys()) - set(COMMON_KEYS):
         if key != needed and key in data:
@@ -190,12 +190,12 @@ def system_from_keys(data: dict, where: str, default_name: str, source: str,
         raise InputError(f"{where}: x0 has {n} entries but {needed} is {size} x {size}: the state has one "
                          f"entry per row of {needed}")
     structure = FAMILIES[family].read(data[needed], n, f"{where}: {needed}")
-    h_expr, symbols = parse_expression(data["hamiltonian"], n, f"{where}: hamiltonian")
+    h_expr, symbols = parse_spec_expression(data["hamiltonian"], n, f"{where}: hamiltonian")
     exprs = []
     if "casimirs" in data:
         if not isinstance(data["casimirs"], list):
             raise InputError(f"{where}: casimirs must be a list of expressions")
-        exprs = [parse_expression(c, n, f"{where}: casimirs[{i + 1}]")[0]
+        exprs = [parse_spec_expression(c, n, f"{where}: casimirs[{i + 1}]")[0]
                  for i, c in enumerate(data["casimirs"])]
     H = to_program(h_expr, symbols)
     casimirs = tuple(numeric_function(e, symbols) for e in exprs)
