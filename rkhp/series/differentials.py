@@ -35,7 +35,7 @@ import numpy as np
 
 from ..base.modular import to_residue
 from ..systems.core import realisation as realisation_kind
-from ..systems.families import SO3, LieAlgebra
+from ..systems.families import CONSTANT, LIE_POISSON, LOG_CANONICAL, SO3, LieAlgebra
 from ..systems.families import family as poisson_family
 from ..trees.rooted import Tree
 
@@ -549,11 +549,11 @@ EXACT_FUNCTIONS = SimpleNamespace(exp=_exact_exp, phimv=_exact_phimv, crb=_no_cl
 def _random_structure(family: str, dim: int, batch: int, rng: np.random.Generator, p: int):
     """A random instance of a family's structure mod p: so(3)* for lie-poisson (dim 3), random
     antisymmetric lambda or pi (one per instance) for log-canonical and constant."""
-    if family == "lie-poisson":
+    if family == LIE_POISSON:
         if dim != 3:
             raise ValueError("the Lie–Poisson instances here are so(3)*, dimension 3")
         return LieAlgebra(SO3)
-    if family not in ("log-canonical", "constant"):
+    if family not in (LOG_CANONICAL, CONSTANT):
         raise ValueError(f"no random instances of family {family!r}")
     upper = rng.integers(0, p, size=(dim, dim, batch), dtype=np.int64)
     matrix = np.empty((dim, dim), dtype=object)

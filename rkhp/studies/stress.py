@@ -31,6 +31,7 @@ from ..integrators.failure import Failure
 from ..integrators.methods import condition_class, require_steps, resolve_method, resolve_methods, resolve_system
 from ..integrators.modified_energy import ModifiedEnergy, method_series
 from ..series.modified import MAX_ORDER, method_character
+from ..systems.families import LOG_CANONICAL
 from .converge import check_t_final, study_methods
 from .fit import fit_order
 from .invariants import invariant_deviations, max_deviations, window_maxima
@@ -319,7 +320,7 @@ def near_singular(methods, system, t_final: float, steps: int = SINGULAR_STEPS,
                   values=SINGULAR_VALUES, executor=None) -> SingularResult:
     """Part (c): starts with the first species at 1e-3 and 1e-6 (log-canonical systems only), one
     task per start and method on ``executor`` (rkhp.base.executors)."""
-    if system.family != "log-canonical":
+    if system.family != LOG_CANONICAL:
         return SingularResult(False, (), f"near-singular starts are defined for log-canonical systems, "
                                          f"{system.name} is {system.family}")
     runs = run_all(executor or InProcess(), _near_singular_run,

@@ -37,7 +37,7 @@ from ..base.errors import InputError
 from ..base.expressions import parse_expression as read
 from ..base.expressions import variable_names
 from .core import PoissonSystem
-from .families import FAMILIES, family_system, short
+from .families import FAMILIES, GENERAL, family_system, short
 from .general import general
 from .program import numeric_function, to_program
 from .structure import check_structure
@@ -202,7 +202,7 @@ def system_from_keys(data: dict, where: str, default_name: str, source: str,
     names = tuple(str(e) for e in exprs)
     common = dict(name=name, t_final=t_final, realisation=realisation, x0=x0,
                   description=f"from {source}: H = {H.expression}", hamiltonian_expression=lambda: h_expr)
-    if family == "general":
+    if family == GENERAL:
         # the structure and the declared Casimirs are checked (docs/theory.md §9)
         system = general(structure, H, casimirs=exprs, where=f"{where}: poisson", **common)
     else:
@@ -213,7 +213,7 @@ def system_from_keys(data: dict, where: str, default_name: str, source: str,
     expressions = [("hamiltonian", h_expr)] + [(f"casimir {i + 1}", e) for i, e in enumerate(exprs)]
     check_finite_at(expressions, symbols, x0, where)
     system.extra["expressions"] = (symbols, expressions)
-    if family != "general":  # the general family checks its structure and Casimirs itself
+    if family != GENERAL:  # the general family checks its structure and Casimirs itself
         check_structure(FAMILIES[family].symbolic(structure), casimirs=exprs, x0=x0,
                         where=f"{where}: the {family} structure")
     return system
