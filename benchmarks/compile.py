@@ -68,15 +68,15 @@ FAMILY_COMMAND = ["integrate", "{system}", "--method", "paper-three-stage", "--s
 
 STEP_CODE = """
 import json, sys, time
-from rkhp.integrators import integrate
+from rkhp.integrators import integrate_rkhp
 from rkhp.systems import get_system
 system, out = get_system("rigid-body"), {}
 for method in sys.argv[1:]:
-    integrate(system, method, 0.05, 2)
+    integrate_rkhp(system, method, 0.05, 2)
     best = float("inf")
     for _ in range(%d):
         start = time.process_time()
-        integrate(system, method, 0.05, 1000)
+        integrate_rkhp(system, method, 0.05, 1000)
         best = min(best, time.process_time() - start)
     out[method] = best / 1000 * 1e6
 print(json.dumps(out))
@@ -134,7 +134,7 @@ event.register("numba:compile", Timer())
 system, rk4 = get_system("rigid-body"), load_tableau("rk4")
 system.hamiltonian(system.x0)
 hamiltonian_values(system, np.array([system.x0, system.x0]))
-rkhp_method.integrate(system, rk4, 0.05, 2)
+rkhp_method.integrate_rkhp(system, rk4, 0.05, 2)
 integrate_classical(system, rk4, 0.05, 2)
 integrate_midpoint(system, 0.05, 2)
 print(json.dumps(out))

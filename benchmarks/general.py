@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from rkhp.integrators import integrate
+from rkhp.integrators import integrate_rkhp
 from rkhp.systems import get_system
 from rkhp.systems.general import PoissonMatrix, general
 from rkhp.systems.problems import as_general
@@ -64,12 +64,12 @@ def through_collocation(system):
 def us_per_step(systems: dict, h: float, steps: int) -> dict:
     """CPU us/step of paper-three-stage for each system, minima over REPEATS alternating runs."""
     for s in systems.values():
-        integrate(s, "paper-three-stage", h, 2)  # compile / load the cache
+        integrate_rkhp(s, "paper-three-stage", h, 2)  # compile / load the cache
     best = {k: np.inf for k in systems}
     for _ in range(REPEATS):
         for key, s in systems.items():
             c = time.process_time()
-            traj = integrate(s, "paper-three-stage", h, steps)
+            traj = integrate_rkhp(s, "paper-three-stage", h, steps)
             assert traj.ok, traj.status
             best[key] = min(best[key], (time.process_time() - c) / steps * 1e6)
     return best
@@ -120,8 +120,8 @@ def main() -> None:
     print("1. rigid body, paper-three-stage, h = 0.1 (CPU us/step, min of "
           f"{REPEATS} alternating runs of 2000 steps)")
     closed, spray = get_system("rigid-body"), rigid_body_general()
-    a = integrate(closed, "paper-three-stage", 0.1, 100)
-    b = integrate(spray, "paper-three-stage", 0.1, 100)
+    a = integrate_rkhp(closed, "paper-three-stage", 0.1, 100)
+    b = integrate_rkhp(spray, "paper-three-stage", 0.1, 100)
     print(f"   100 steps: largest difference of the two trajectories "
           f"{np.abs(a.states - b.states).max():.1e}")
     t = us_per_step({"closed form": closed, "spray": spray,

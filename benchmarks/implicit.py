@@ -25,7 +25,7 @@ from math import comb
 import numpy as np
 import scipy.linalg
 
-from rkhp.integrators import integrate
+from rkhp.integrators import integrate_rkhp
 from rkhp.integrators.methods import resolve_method
 from rkhp.integrators.tower_substep import stage_solve, tableau_arrays
 from rkhp.systems import get_system
@@ -36,11 +36,11 @@ STEPS = 1000
 
 def per_step(system, method, h, steps=STEPS):
     """(us/step CPU, mean Newton iterations, mean stage sweeps), the best of REPEATS runs."""
-    integrate(system, method, h, 2)
+    integrate_rkhp(system, method, h, 2)
     best, run = np.inf, None
     for _ in range(REPEATS):
         c = time.process_time()
-        run = integrate(system, method, h, steps).raise_if_failed()
+        run = integrate_rkhp(system, method, h, steps).raise_if_failed()
         best = min(best, time.process_time() - c)
     sweeps = float(np.mean(run.stage_sweeps)) if run.stage_sweeps.size else 0.0
     return best / steps * 1e6, float(np.mean(run.newton_iterations)), sweeps

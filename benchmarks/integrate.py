@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from rkhp.integrators import integrate, integrate_ensemble
+from rkhp.integrators import integrate_ensemble, integrate_rkhp
 from rkhp.systems import get_system
 
 REPEATS = 5
@@ -38,11 +38,11 @@ def timed(fn):
 
 def per_step(system, method, h, steps):
     """(us/step wall, us/step CPU, mean Newton iterations), minima over REPEATS runs."""
-    integrate(system, method, h, 2)
+    integrate_rkhp(system, method, h, 2)
     runs, cpus = [], []
     for _ in range(REPEATS):
         c = time.process_time()
-        runs.append(integrate(system, method, h, steps))
+        runs.append(integrate_rkhp(system, method, h, steps))
         cpus.append(time.process_time() - c)
     assert all(r.ok for r in runs)
     return (min(r.run_seconds for r in runs) / steps * 1e6, min(cpus) / steps * 1e6,
@@ -50,8 +50,8 @@ def per_step(system, method, h, steps):
 
 
 def fresh_compile_seconds() -> float:
-    code = ("from rkhp.systems import get_system; from rkhp.integrators import integrate; "
-            "print(integrate(get_system('rigid-body'), 'paper-three-stage', 0.1, 1)"
+    code = ("from rkhp.systems import get_system; from rkhp.integrators import integrate_rkhp; "
+            "print(integrate_rkhp(get_system('rigid-body'), 'paper-three-stage', 0.1, 1)"
             ".compile_seconds)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return float(out.stdout.split()[-1])
@@ -60,7 +60,7 @@ def fresh_compile_seconds() -> float:
 def main() -> None:
     rb = get_system("rigid-body")
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}")
-    integrate(rb, "paper-three-stage", 0.1, 1)  # fill the cache
+    integrate_rkhp(rb, "paper-three-stage", 0.1, 1)  # fill the cache
     print(f"[1] compile (fresh process, cache warm): {fresh_compile_seconds():.2f} s "
           "(target <= 3 s)")
     for h, steps in ((0.1, 1000), (0.01, 1000)):
@@ -95,11 +95,11 @@ def work_precision(rb) -> None:
     T, target = 10.0, 1e-8
     exact = rb.exact_solution(T)
     for n in range(100, 400, 5):
-        tr = integrate(rb, "paper-three-stage", T / n, n)
+        tr = integrate_rkhp(rb, "paper-three-stage", T / n, n)
         err = float(np.abs(tr.final_state - exact).max())
         if err <= target:
             break
-    wall, cpu = timed(lambda: integrate(rb, "paper-three-stage", T / n, n))
+    wall, cpu = timed(lambda: integrate_rkhp(rb, "paper-three-stage", T / n, n))
     print(f"[4] RKHP paper-three-stage: {n} steps, error {err:.2e}: wall {wall * 1e3:.2f} ms, "
           f"CPU {cpu * 1e3:.2f} ms (including the Python call)")
     inertia = np.array([2.0, 1.0, 2.0 / 3.0])

@@ -36,7 +36,7 @@ from rkhp.taylor.interpreter import (
     tape_work,
 )
 from rkhp.taylor.jets import jet_space
-from rkhp.taylor.tape import record
+from rkhp.taylor.tape import record_tape
 
 
 @nb.njit(**NJIT_NORC)
@@ -89,7 +89,7 @@ def main() -> None:
     parser.add_argument("--calls", type=int, default=1_000_000, help="calls per loop (1000000)")
     count = parser.parse_args().calls
     h_tape = get_system("rigid-body").h_tape
-    one_row = record(1, lambda x, p: [x[0]])
+    one_row = record_tape(1, lambda x, p: [x[0]])
     space = jet_space(3, 2)
     work = tape_work((h_tape, one_row), space.size)
     work.W[:6, 0] = 0.5

@@ -47,7 +47,7 @@ def commands() -> None:
 
 
 def rigid_body() -> None:
-    from rkhp.integrators import integrate
+    from rkhp.integrators import integrate_rkhp
     from rkhp.integrators.modified_energy import ModifiedEnergy, energy_errors
     from rkhp.series.modified import method_character, modified_hamiltonian
     from rkhp.systems import get_system
@@ -56,7 +56,7 @@ def rigid_body() -> None:
     system = get_system("rigid-body")
     tableau = load_tableau("paper-three-stage")
     h, steps = 0.2, 10_000
-    states = integrate(system, tableau, h, steps).states
+    states = integrate_rkhp(system, tableau, h, steps).states
     print(f"\nrigid body, paper-three-stage, h = {h}, {steps} steps, symmetric realisation")
     print("  N   max|H~_N - H~_N(y0)|   max|H - H(y0)|   ratio   per state [ms]")
     a = method_character(tableau, 8)

@@ -5,9 +5,8 @@ from __future__ import annotations
 
 import click
 
-from .modified_cmd import character_of
-from .options import SEED, console, emit_json, format_option, integer, progress
-from .trees_cmd import _class_of
+from .modified_views import character_of
+from .options import SEED, condition_class_of, console, emit_json, format_option, integer, progress
 
 
 @click.command()
@@ -24,10 +23,10 @@ def compose(methods, order, degenerate, symmetric, seed, fmt):
     is the exact flow) and compare the generating function of the composition with the Butcher products
     of the methods' characters. Exact, on generic systems modulo primes (docs/modified.md)."""
     from rkhp.base.errors import InputError
-    from rkhp.series.composition import MAX_ORDER, composition_series
+    from rkhp.series.composed_steps import MAX_ORDER, composition_series
     from rkhp.trees.rooted import check_order
 
-    cls = _class_of(degenerate, symmetric)
+    cls = condition_class_of(degenerate, symmetric)
     check_order(order, MAX_ORDER, what="order of the composition")
     names = [m.strip() for m in methods.split(",")]
     if len(names) < 2 or not all(names):

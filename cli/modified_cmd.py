@@ -5,23 +5,8 @@ from __future__ import annotations
 
 import click
 
-from .options import SEED, console, emit_json, format_option, integer, progress
-from .trees_cmd import _class_of
-
-EXACT = "exact"
-"""The method name of the exact flow in `modified` and `compose` (character e(t) = 1/gamma(t))."""
-
-
-def character_of(name: str, order: int):
-    """(name, character a(t) on T up to `order`) of a method name of docs/methods.md, or of `exact`."""
-    from rkhp.integrators.methods import resolve_method
-    from rkhp.series.modified import method_character
-    from rkhp.trees.algebra import exact_flow_character
-
-    if name == EXACT:
-        return EXACT, exact_flow_character(order)
-    chosen = resolve_method(name)
-    return chosen.name, method_character(chosen, order)
+from .modified_views import character_of
+from .options import SEED, condition_class_of, console, emit_json, format_option, integer, progress
 
 
 @click.command()
@@ -46,7 +31,7 @@ def modified(method, order, degenerate, symmetric, modifying, seed, fmt):
     from rkhp.series.modified import MAX_ORDER, modified_hamiltonian, modifying_hamiltonian
     from rkhp.trees.rooted import check_order
 
-    cls = _class_of(degenerate, symmetric)
+    cls = condition_class_of(degenerate, symmetric)
     check_order(order, MAX_ORDER, what="order of the modified Hamiltonian")
     name, character = character_of(method, order)
     solve = modifying_hamiltonian if modifying else modified_hamiltonian
@@ -127,26 +112,3 @@ def _latex(series, method: str) -> None:
     title = escape_text(f"{series.kind.capitalize()} Hamiltonian of {method} ({series.cls} class, to order "
                         f"{series.order}): ") + f"${symbol} = \\sum_t h^{{|t|-1}} c(t)\\,F(t)$"
     click.echo(standalone(longtable(("h^{k}", "t", "c(t)"), rows), title=title, tables=True, trees=True))
-
-
-def modified_series(system, method, order: int, show_progress: bool):
-    """The modified Hamiltonian of an RKHP or THP method (rkhp.integrators.methods.Method) to ``order``, in the
-    class of the system's realisation (for ``rkhp integrate --modified N``)."""
-    from rkhp.integrators.methods import condition_class
-    from rkhp.series.modified import MAX_ORDER, method_character, modified_hamiltonian
-    from rkhp.trees.rooted import check_order
-
-    check_order(order, MAX_ORDER, what="--modified order")
-    character = method_character(method, order)
-    with progress(show_progress) as bar:
-        bar.add_task(f"modified Hamiltonian to order {order}", total=None)
-        return modified_hamiltonian(character, order, condition_class(system))
-
-
-def modified_energy_report(system, series, h: float, states, show_progress: bool) -> dict:
-    """The keys that ``rkhp integrate --modified N`` adds (docs/modified.md)."""
-    from rkhp.integrators.modified_energy import energy_errors
-
-    with progress(show_progress) as bar:
-        task = bar.add_task(f"H~_{series.order} along the run", total=len(states))
-        return energy_errors(system, series, h, states, lambda: bar.advance(task))

@@ -143,6 +143,13 @@ FORMAT_HELP = {"table": "rich table for people", "json": "json with stable keys 
                "csv": "csv for spreadsheets and data frames (docs/results.md)"}
 
 
+def condition_class_of(degenerate: bool, symmetric: bool = False) -> str:
+    """The condition class that the --degenerate and --symmetric flags choose (general without either)."""
+    if degenerate and symmetric:
+        raise click.UsageError("--symmetric and --degenerate are exclusive: choose one condition class")
+    return "symmetric" if symmetric else "degenerate" if degenerate else "general"
+
+
 def format_option(*choices: str, default: str = "table"):
     """The `--format` option every command has."""
     return click.option(

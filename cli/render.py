@@ -113,3 +113,45 @@ def print_table(console, table) -> None:
         console.print(block)
     if table.caption:
         console.print(table.caption)
+
+
+def print_array(out, tab, fmt, heading: str) -> None:
+    """The Butcher array as a block when it fits the console, else its non-zero entries row by
+    row, packed into lines (a number is never split across lines)."""
+    from rich.text import Text
+
+    from rkhp.tableaux.tableau import butcher_text, is_zero
+
+    block = butcher_text(tab, fmt)
+    out.print()
+    if max(len(line) for line in block.splitlines()) <= out.width:
+        out.print(heading)
+        out.print(Text(block))
+        return
+    out.print(f"{heading}; non-zero entries row by row (the array is wider than the output)")
+    s = tab.stages
+    for i in range(s):
+        items = [f"c[{i + 1}] = {fmt(tab.c[i])}"] + [
+            f"a[{i + 1},{j + 1}] = {fmt(x)}" for j, x in enumerate(tab.A[i]) if not is_zero(x)]
+        for line in pack(items, out.width):
+            out.print(Text(line))
+    for line in pack([f"b[{j + 1}] = {fmt(x)}" for j, x in enumerate(tab.b) if not is_zero(x)],
+                     out.width):
+        out.print(Text(line))
+
+
+def pack(items: list[str], width: int, gap: str = "   ", indent: str = "  ") -> list[str]:
+    """Items joined by ``gap`` into lines of at most ``width`` (an item longer than a line stands
+    alone); lines after the first are indented."""
+    lines: list[str] = []
+    current = ""
+    for item in items:
+        candidate = item if not current else current + gap + item
+        if current and len(candidate) > width:
+            lines.append(current)
+            current = indent + item
+        else:
+            current = candidate
+    if current:
+        lines.append(current)
+    return lines

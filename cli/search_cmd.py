@@ -8,6 +8,7 @@ from rkhp.base import bounds
 
 from .options import (
     SEED,
+    condition_class_of,
     console,
     emit_json,
     executor_options,
@@ -18,15 +19,8 @@ from .options import (
     progress,
     real,
 )
-from .render import print_table
-from .show_cmd import print_array
+from .render import print_array, print_table
 from .terminal import plain
-
-
-def _class_of(degenerate: bool, symmetric: bool) -> str:
-    if degenerate and symmetric:
-        raise click.UsageError("--symmetric and --degenerate are exclusive: choose one condition class")
-    return "symmetric" if symmetric else "degenerate" if degenerate else "general"
 
 
 @click.command()
@@ -76,7 +70,7 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
     from rkhp.search.driver import search as run_search
     from rkhp.search.system import check_problem
 
-    cls = _class_of(degenerate, symmetric)
+    cls = condition_class_of(degenerate, symmetric)
     check_problem(stages, order)
     if optimize and prove and order is not None:
         raise click.UsageError("--optimize needs --order N to be reached while --prove needs it "

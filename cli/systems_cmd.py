@@ -235,7 +235,7 @@ def integrate(system, method, steps, tol, h, t_final, x0, modified_order, realis
         _implicit_notice(chosen, fmt != "json")
     series = None
     if modified_order is not None and chosen is not None:
-        from .modified_cmd import modified_series
+        from .modified_views import modified_series
 
         series = modified_series(poisson, chosen, modified_order, fmt != "json")
     compile_notice((chosen.kind,) if chosen is not None else ("rkhp", "composition"), fmt != "json", poisson)
@@ -246,11 +246,11 @@ def integrate(system, method, steps, tol, h, t_final, x0, modified_order, realis
         chosen, trajectory, report = _run_to_tolerance(poisson, method, end, tol, fmt)
         step, n = report["h"], report["steps"]
         if modified_order is not None and series is None:
-            from .modified_cmd import modified_series
+            from .modified_views import modified_series
 
             series = modified_series(poisson, chosen, modified_order, fmt != "json")
     if series is not None and trajectory.ok:
-        from .modified_cmd import modified_energy_report
+        from .modified_views import modified_energy_report
 
         report.update(modified_energy_report(poisson, series, step, trajectory.states, fmt != "json"))
     timed = None

@@ -16,7 +16,7 @@ from rkhp.trees.rooted import (
     trees_up_to,
 )
 
-from .options import console, emit_json, format_option, integer
+from .options import condition_class_of, console, emit_json, format_option, integer
 from .render import print_table
 
 FORMATS = ("table", "json", "latex", "markdown")
@@ -26,12 +26,6 @@ def _order_option(f):
     return click.option("--order", "-n", "order", type=integer(1, name="N"), required=True,
                         help=f"Largest tree order N (1..{MAX_ENUMERATION_ORDER}; "
                              f"up to {MAX_COUNT_ORDER} with --count).")(f)
-
-
-def _class_of(degenerate: bool, symmetric: bool = False) -> str:
-    if degenerate and symmetric:
-        raise click.UsageError("--symmetric and --degenerate are exclusive: choose one condition class")
-    return "symmetric" if symmetric else "degenerate" if degenerate else "general"
 
 
 _CLASS_TREES = {"general": "T", "degenerate": "T_0", "symmetric": "T_0 (symmetric birealisations)"}
@@ -90,7 +84,7 @@ def conditions(order, degenerate, symmetric, exact_order, fmt):
     with --symmetric the fewer conditions of symmetric birealisations, as combinations of the
     residuals r(t) = gamma(t) a(t) - 1 over T_0.
     """
-    cls = _class_of(degenerate, symmetric)
+    cls = condition_class_of(degenerate, symmetric)
     check_order(order, MAX_ENUMERATION_ORDER)
     check_tree_memory(order, cls != "general", "the conditions", per_tree=BYTES_PER_CONDITION)
     conds = order_conditions(order, cls, exact_order)

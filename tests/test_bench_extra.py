@@ -1,4 +1,4 @@
-"""The `bench` extra makes nodepy importable, so `make bench` compares with it (issue 15)."""
+"""The `bench` extra makes nodepy importable, so `make bench` compares with it."""
 
 from __future__ import annotations
 

@@ -86,11 +86,11 @@ def test_midpoint_order_and_quadratic_casimir(rigid):
 
 def test_midpoint_equals_rkhp_euler_on_constant_pi():
     """docs/theory.md §5: RKHP Euler on a constant Poisson structure is the implicit midpoint rule."""
-    from rkhp.integrators import integrate
+    from rkhp.integrators import integrate_rkhp
 
     pendulum = get_system("pendulum")
     a = integrate_midpoint(pendulum, 0.1, 200)
-    b = integrate(pendulum, load_tableau("euler"), 0.1, 200)
+    b = integrate_rkhp(pendulum, load_tableau("euler"), 0.1, 200)
     assert a.ok and b.ok
     assert np.max(np.abs(a.states - b.states)) < 1e-12
 

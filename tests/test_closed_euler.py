@@ -19,7 +19,7 @@ from rkhp.integrators.closed_euler import closed_form
 from rkhp.integrators.driver import integrate_closed_euler, run
 from rkhp.integrators.failure import Failure
 from rkhp.integrators.methods import integrate, resolve_method
-from rkhp.integrators.rkhp_method import integrate as engine_integrate
+from rkhp.integrators.rkhp_method import integrate_rkhp as engine_integrate
 from rkhp.integrators.substeps import CLOSED, TOWER, choose
 from rkhp.studies.converge import converge
 from rkhp.systems import get_system

@@ -1,4 +1,4 @@
-"""At 80 columns no table cuts a number or a name across lines (issue 15).
+"""At 80 columns no table cuts a number or a name across lines.
 
 The checker reads a command's JSON (or a saved file) and asks that every name and every number
 it holds appear whole, as one token, in the table the same command prints with COLUMNS=80: a
@@ -91,7 +91,7 @@ def test_the_checker_sees_a_cut_number_and_a_cut_name():
 
 
 def test_search_at_80_columns(tmp_path):
-    # the issue's example: 6 stages, general order 5 (30-digit entries, shown to 12 digits)
+    # 6 stages, general order 5 (30-digit entries, shown to 12 digits)
     path = tmp_path / "found.json"
     table = _run("search", "--stages", "6", "--order", "5", "--seed", "0", "--save", str(path))
     saved = json.loads(path.read_text())

@@ -1,4 +1,4 @@
-"""The first run on a machine says that it compiles (issue 15): one line on stderr when stderr is a
+"""The first run on a machine says that it compiles: one line on stderr when stderr is a
 terminal, nothing in JSON mode or through a pipe (the rules of the progress bars).
 
 numba keeps compiled kernels in its disk cache; an empty NUMBA_CACHE_DIR is a machine that has

@@ -26,12 +26,11 @@ import json
 import os
 import re
 import stat
-import subprocess
-import sys
 from collections import Counter
 from pathlib import Path
 
 import pytest
+from fork_client import ENV, ForkServer
 
 CORPUS = Path(__file__).with_name("data") / "hostile_corpus.jsonl"
 #: wall bound of a case (a refusal is meant to be immediate; the bound allows a loaded machine)
@@ -39,8 +38,6 @@ SECONDS = 10.0
 #: limits of the case's process: CPU seconds and address space
 CPU_SECONDS = 20
 ADDRESS_SPACE = 2 << 30
-#: one thread per library, so that the CPU time is the case's own
-ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 COMMANDS = ("trees", "conditions", "verify", "tables", "show", "search", "systems", "check", "integrate", "compose",
             "modified", "stability", "relations", "converge", "bench", "long-time", "stress", "compile")
 CLASSES = ("bad-number", "size", "expression", "malformed", "file", "format", "unknown", "step", "contradictory",
@@ -104,25 +101,6 @@ def _snapshot(folder: Path) -> dict:
 
 
 # --------------------------------------------------------------------------- the server
-
-
-class ForkServer:
-    """tests/forkserver.py: a process that has imported the command line and forks one per case."""
-
-    def __init__(self):
-        self.proc = subprocess.Popen([sys.executable, str(Path(__file__).with_name("forkserver.py"))],
-                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-                                     env={**os.environ, **ENV})
-        assert json.loads(self.proc.stdout.readline()) == {"ready": True}
-
-    def run(self, request: dict) -> dict:
-        self.proc.stdin.write(json.dumps(request) + "\n")
-        self.proc.stdin.flush()
-        return json.loads(self.proc.stdout.readline())
-
-    def close(self) -> None:
-        self.proc.stdin.close()
-        self.proc.wait(timeout=60)
 
 
 @pytest.fixture(scope="module")

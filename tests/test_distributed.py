@@ -1,4 +1,4 @@
-"""Searches, studies and ensembles on a Dask cluster (issue 16; docs/distributed.md).
+"""Searches, studies and ensembles on a Dask cluster (docs/distributed.md).
 
 The reference values are the single-process runs with the same seed: a restart, a convergence row
 or a chunk of an ensemble is a pure function of its arguments, so the cluster must give the same
@@ -137,9 +137,9 @@ def test_ensemble_on_the_cluster_equals_the_single_process_run(cluster):
         spread = integrate_ensemble(system, "paper-three-stage", 0.05, 40, starts, executor=dask)
     assert np.array_equal(alone, spread)
     # each final state is the one trajectory's (not a reordering of the chunks)
-    from rkhp.integrators import integrate
+    from rkhp.integrators import integrate_rkhp
 
-    assert np.array_equal(spread[5], integrate(system, "paper-three-stage", 0.05, 40, x0=starts[5]).final_state)
+    assert np.array_equal(spread[5], integrate_rkhp(system, "paper-three-stage", 0.05, 40, x0=starts[5]).final_state)
 
 
 def test_stress_bench_and_relations_on_the_cluster_equal_the_single_process_runs(cluster):

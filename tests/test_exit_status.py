@@ -1,4 +1,4 @@
-"""Exit status (docs/exit-status.md): 0 success, 1 a failed check, 2 bad input (issue 15)."""
+"""Exit status (docs/exit-status.md): 0 success, 1 a failed check, 2 bad input."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The general family and the truncated spray realisations (issue 10, parts B and C).
+"""The general family (rkhp.systems.general) and the truncated spray realisations.
 
 Values from outside the code: the so(3)* closed form c(r) = (1 - (r/2) cot(r/2)) / r^2 (its Taylor
 coefficients by mpmath), phi(z) = z / (1 - e^-z) = sum B_k^+ z^k / k! (Bernoulli numbers by
@@ -33,7 +33,7 @@ from rkhp.taylor.interpreter import evaluate
 
 
 def _tape_values(n, program, x, p):
-    return evaluate(tp.record(n, program), np.concatenate([x, p]))
+    return evaluate(tp.record_tape(n, program), np.concatenate([x, p]))
 
 
 def _cross(a, b):

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 import pytest
+from fork_client import ENV, ForkServer
 
 #: limits the child runs under (the acceptance's: 10 s, 1 GiB); CPU time is what a case costs
 #: (the wall time of a loaded machine is longer), the wall guard catches a process that blocks
@@ -551,27 +552,6 @@ class Outcome(NamedTuple):
     created: list
 
 
-#: the environment of every case (one thread per library: CPU time is the case's own)
-ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-
-
-class ForkServer:
-    """tests/forkserver.py, started once per test process: it forks a process per case."""
-
-    def __init__(self):
-        self.proc = subprocess.Popen([sys.executable, str(Path(__file__).with_name("forkserver.py"))],
-                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-                                     env={**os.environ, **ENV})
-        assert json.loads(self.proc.stdout.readline()) == {"ready": True}
-
-    def run(self, request: dict) -> dict:
-        self.proc.stdin.write(json.dumps(request) + "\n")
-        self.proc.stdin.flush()
-        return json.loads(self.proc.stdout.readline())
-
-    def close(self) -> None:
-        self.proc.stdin.close()
-        self.proc.wait(timeout=60)
 
 
 def _run(case: Case, folder: Path, server: ForkServer) -> Outcome:

@@ -1,4 +1,4 @@
-"""Implicit tableaux in the RKHP engine (issue 13; docs/implicit.md, docs/theory.md §10).
+"""Implicit tableaux in the RKHP engine (docs/implicit.md, docs/theory.md §10).
 
 Values from outside the code: the classical orders of the Gauss methods (2s with s stages: Butcher
 1964; Hairer, Norsett & Wanner I, Table II.7.x), the paper's one-stage implicit method of
@@ -17,7 +17,7 @@ import pytest
 from click.testing import CliRunner
 from rkhp_cli.main import rkhp
 
-from rkhp.integrators import integrate
+from rkhp.integrators import integrate_rkhp
 from rkhp.integrators.failure import Failure
 from rkhp.integrators.methods import resolve_method
 from rkhp.studies.converge import converge
@@ -60,7 +60,7 @@ def test_gauss1_on_the_harmonic_oscillator_is_the_midpoint_rule_of_a_longer_step
     gauss1 = Tableau.from_arrays([[0.5]], [1.0], name="gauss1")
     for h in (0.1, 0.5):
         n = 40
-        tr = integrate(system, gauss1, h, n).raise_if_failed()
+        tr = integrate_rkhp(system, gauss1, h, n).raise_if_failed()
         step = 8.0 / h * (1.0 - math.sqrt(1.0 - h * h / 4.0))
         # round-off only: about one unit in the last place per step
         assert np.abs(tr.states - midpoint_rotation(system.x0, step, n)).max() < n * 1e-15
@@ -116,15 +116,15 @@ def test_one_compilation_serves_every_explicit_and_every_implicit_tableau():
 
     system = get_system("pendulum")
     for method in ("paper-three-stage", "gauss2"):
-        integrate(system, method, 0.1, 5).raise_if_failed()
+        integrate_rkhp(system, method, 0.1, 5).raise_if_failed()
     compiled = len(drive.signatures)
     for method in ("rk4", "paper-implicit", "lobatto-iiia3"):
-        integrate(system, method, 0.1, 5).raise_if_failed()
+        integrate_rkhp(system, method, 0.1, 5).raise_if_failed()
     assert len(drive.signatures) == compiled
 
 
 def test_a_step_too_large_for_the_stages_is_one_line_exit_1(run_cli):
-    tr = integrate(get_system("rigid-body"), "gauss2", 5.0, 2)
+    tr = integrate_rkhp(get_system("rigid-body"), "gauss2", 5.0, 2)
     assert tr.cause == Failure.STAGES_NO_CONVERGENCE and tr.failed_step == 0
     rc, out, err = run_cli("integrate", "rigid-body", "--method", "gauss2", "--h", "5")
     assert rc == 1 and err.count("\n") == 1 and "Traceback" not in err

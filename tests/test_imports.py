@@ -258,3 +258,36 @@ def test_public_names_survive_importing_every_submodule():
     from rkhp import verify
 
     assert verify("rk4").order == 4
+
+
+CLI = ROOT.parent / "cli"
+
+
+def _cli_imports(path: Path) -> set[str]:
+    """The rkhp_cli modules a module of cli/ imports (relative imports or ``rkhp_cli.X``)."""
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom) and node.level == 1:
+            out |= {node.module} if node.module else {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom | ast.Import):
+            names = [node.module] if isinstance(node, ast.ImportFrom) else [a.name for a in node.names]
+            out |= {n.split(".")[1] for n in names if n and n.startswith("rkhp_cli.")}
+    return out
+
+
+def test_no_command_module_imports_another():
+    """The modules that define the commands (rkhp_cli.main.COMMANDS) share code only through the
+    shared modules of cli/ (options, render, terminal, the views): none imports another."""
+    from rkhp_cli.main import COMMANDS
+
+    commands = {module.removeprefix("rkhp_cli.") for module, _, _ in COMMANDS.values()}
+    assert len(commands) > 5 and all((CLI / f"{m}.py").is_file() for m in commands)
+    bad = {m: sorted(_cli_imports(CLI / f"{m}.py") & commands - {m}) for m in sorted(commands)}
+    assert not any(bad.values()), bad
+
+
+def test_the_cli_import_reader_sees_both_spellings(tmp_path):
+    path = tmp_path / "x_cmd.py"
+    path.write_text("from .a_cmd import f\nfrom . import b_cmd\nimport rkhp_cli.c_cmd\n"
+                    "def g():\n    from rkhp_cli.d_cmd import h\n")
+    assert _cli_imports(path) == {"a_cmd", "b_cmd", "c_cmd", "d_cmd"}

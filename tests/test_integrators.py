@@ -1,4 +1,4 @@
-"""The RKHP engine, the Taylor (THP) integrator and `rkhp integrate` (issue 5)."""
+"""The RKHP engine, the Taylor (THP) integrator and `rkhp integrate`."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from click.testing import CliRunner
 from rkhp_cli.main import rkhp
 
 from rkhp.base.errors import InputError, NumericalFailure
-from rkhp.integrators import integrate, integrate_ensemble
+from rkhp.integrators import integrate_ensemble, integrate_rkhp
 from rkhp.integrators.failure import Failure
 from rkhp.systems import get_system
 from rkhp.tableaux.tableau import Tableau
@@ -24,7 +24,7 @@ def observed_order(system, method, steps=STEPS, t_final=T_ORDERS) -> float:
     hs, errors = [], []
     for n in steps:
         h = t_final / n
-        tr = integrate(system, method, h, n).raise_if_failed()
+        tr = integrate_rkhp(system, method, h, n).raise_if_failed()
         hs.append(h)
         errors.append(np.abs(tr.final_state - system.exact_solution(t_final)).max())
     return float(np.polyfit(np.log(hs), np.log(errors), 1)[0])
@@ -47,8 +47,8 @@ def test_tableau_is_data():
     a = 0.5 * np.sqrt(3.0)
     own = Tableau.from_arrays([[0, 0, 0], [-a / 2, 0, 0], [0, 0.75, 0]],
                               [11 / 27, 0, 16 / 27], name="mine")
-    ref = integrate(system, "paper-three-stage", 0.1, 30)
-    mine = integrate(system, own, 0.1, 30)
+    ref = integrate_rkhp(system, "paper-three-stage", 0.1, 30)
+    mine = integrate_rkhp(system, own, 0.1, 30)
     assert np.abs(mine.states - ref.states).max() < 1e-15
 
 
@@ -72,28 +72,28 @@ def test_euler_on_constant_pi_is_implicit_midpoint():
     """docs/theory.md §5: RKHP Euler on a constant pi is the implicit midpoint rule."""
     for realisation in ("symmetric",):
         system = get_system("pendulum", realisation)
-        tr = integrate(system, "euler", 0.1, 50).raise_if_failed()
+        tr = integrate_rkhp(system, "euler", 0.1, 50).raise_if_failed()
         assert np.abs(tr.states - _implicit_midpoint(system, 0.1, 50)).max() < 1e-13
 
 
 @pytest.mark.parametrize("name", ["rigid-body", "lotka-volterra"])
 def test_casimirs_kept_over_10k_steps(name):
     system = get_system(name)
-    tr = integrate(system, "paper-three-stage", 1e-3, 10_000).raise_if_failed()
+    tr = integrate_rkhp(system, "paper-three-stage", 1e-3, 10_000).raise_if_failed()
     values = np.array([system.casimir_values(x) for x in tr.states[::50]])
     assert np.abs(values - values[0]).max() <= 1e-13
 
 
 def test_too_large_h_is_a_newton_failure():
     system = get_system("lotka-volterra")
-    tr = integrate(system, "rk4", 1.0, 10)
+    tr = integrate_rkhp(system, "rk4", 1.0, 10)
     assert not tr.ok and "Newton did not converge" in tr.status
     assert tr.cause == Failure.NEWTON_NO_CONVERGENCE
     assert tr.failed_step == 0 and len(tr.states) == 1 and "t = 0" in tr.status
     with pytest.raises(NumericalFailure):
         tr.raise_if_failed()
     # failure after some good steps keeps exactly those
-    tr = integrate(get_system("pendulum"), "rk4", 3.0, 5)
+    tr = integrate_rkhp(get_system("pendulum"), "rk4", 3.0, 5)
     assert not tr.ok and "Newton" in tr.status
     assert len(tr.states) == tr.failed_step + 1 and np.all(np.isfinite(tr.states))
 
@@ -102,13 +102,13 @@ def test_bad_input():
     system = get_system("rigid-body")
     for h in (0.0, -0.0, float("nan"), float("inf"), -float("inf")):  # negative h runs backwards
         with pytest.raises(InputError):
-            integrate(system, "euler", h, 10)
+            integrate_rkhp(system, "euler", h, 10)
     with pytest.raises(InputError):
-        integrate(system, "no-such-method", 0.1, 10)
+        integrate_rkhp(system, "no-such-method", 0.1, 10)
     with pytest.raises(InputError, match="components"):
-        integrate(system, "euler", 0.1, 10, x0=[1.0, 2.0])
+        integrate_rkhp(system, "euler", 0.1, 10, x0=[1.0, 2.0])
     with pytest.raises(InputError, match="domain"):
-        integrate(get_system("lotka-volterra"), "euler", 0.1, 10, x0=[1.0, -2.0, 1.0])
+        integrate_rkhp(get_system("lotka-volterra"), "euler", 0.1, 10, x0=[1.0, -2.0, 1.0])
 
 
 def test_ensemble_matches_single_runs():
@@ -117,7 +117,7 @@ def test_ensemble_matches_single_runs():
     x0s = system.x0 * rng.uniform(0.8, 1.2, size=(16, 3))
     finals = integrate_ensemble(system, "paper-three-stage", 0.05, 40, x0s)
     for x0, xf in zip(x0s, finals, strict=True):
-        single = integrate(system, "paper-three-stage", 0.05, 40, x0=x0)
+        single = integrate_rkhp(system, "paper-three-stage", 0.05, 40, x0=x0)
         assert np.abs(single.final_state - xf).max() < 1e-15
 
 
@@ -127,8 +127,8 @@ def test_spec_file_integrates_like_builtin(tmp_path):
     path = tmp_path / "rb.toml"
     path.write_text(SPEC_RIGID_BODY)
     for realisation in ("symmetric", "shifted"):
-        spec = integrate(get_system(path, realisation), "paper-three-stage", 0.05, 100)
-        ref = integrate(get_system("rigid-body", realisation), "paper-three-stage", 0.05, 100)
+        spec = integrate_rkhp(get_system(path, realisation), "paper-three-stage", 0.05, 100)
+        ref = integrate_rkhp(get_system("rigid-body", realisation), "paper-three-stage", 0.05, 100)
         assert np.abs(spec.states - ref.states).max() < 1e-13
 
 
@@ -161,7 +161,7 @@ def test_thp_two_over_t0_is_rkhp_euler():
 
     system = get_system("rigid-body")
     thp = integrate_taylor(system, 2, True, 0.1, 20).raise_if_failed()
-    euler = integrate(system, "euler", 0.1, 20)
+    euler = integrate_rkhp(system, "euler", 0.1, 20)
     assert np.abs(thp.states - euler.states).max() <= 1e-15
 
 
@@ -199,17 +199,17 @@ def test_taylor_arithmetic_against_sympy():
     import sympy
 
     from rkhp.base.expressions import FUNCTIONS
-    from rkhp.systems.spec import parse_expression, to_program
+    from rkhp.systems.spec import parse_spec_expression, to_program
     from rkhp.taylor.interpreter import interpreter, tape_work
     from rkhp.taylor.jets import jet_space, monomials
-    from rkhp.taylor.tape import record
+    from rkhp.taylor.tape import record_tape
 
     text = ("exp(x1) * sin(x2) / (1 + x1^2) + sqrt(x2 + 2) * cos(x1 * x2) + log(x1 + 3) "
             "- x2^(-3) + (x1 + 2)^1.5 + tan(x1 / 3) + cosh(x2) * tanh(x1) + sinh(x1 - x2) "
             "+ atan(x1 * x2 - 1)")
     assert all(f"{name}(" in text for name in FUNCTIONS)
-    expr, symbols = parse_expression(text, 2, "test")
-    tape = record(2, lambda x, p: [to_program(expr, symbols)(x)])
+    expr, symbols = parse_spec_expression(text, 2, "test")
+    tape = record_tape(2, lambda x, p: [to_program(expr, symbols)(x)])
     x0 = (0.3, 0.7)
     D = 4
     space = jet_space(2, D)

@@ -1,4 +1,4 @@
-"""Every JSON key of the commands is documented in docs/json.md, in one style (issue 15).
+"""Every JSON key of the commands is documented in docs/json.md, in one style.
 
 Each command runs once, small, with --format json; every key of every object it prints (except
 the keys that are data: numbers such as the orders of `counts`) must be lower snake_case (or `A`,

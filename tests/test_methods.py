@@ -1,4 +1,4 @@
-"""One method grammar for every command and the Python API (issue 15; docs/methods.md).
+"""One method grammar for every command and the Python API (docs/methods.md).
 
 Expected values come from outside the code: the rigid body's closed-form solution (Jacobi
 elliptic functions), the orders of the methods (RK4: 4; THP of order N: N, paper Thm 5.1; the

@@ -1,4 +1,4 @@
-"""Modified and modifying Hamiltonians (issue 14; docs/modified.md, docs/theory.md §11).
+"""Modified and modifying Hamiltonians (docs/modified.md, docs/theory.md §11).
 
 Expected values come from outside the code: the exact flow (H~ = H), the principal error terms of
 first-order backward error analysis, the implicit midpoint rule's modified Hamiltonian on the
@@ -255,7 +255,7 @@ def test_stress_long_run_has_the_modified_energy():
 
 @pytest.mark.slow
 def test_rigid_body_modified_energy_of_the_paper_method(run_cli):
-    """Issue 14: paper-three-stage on the rigid body, h = 0.2, 10^4 steps: the error of H~_N falls as
+    """paper-three-stage on the rigid body, h = 0.2, 10^4 steps: the error of H~_N falls as
     N goes 4, 6, 8, and at N = 8 it is at least 100 times below the energy error of H."""
     errors = {}
     for N in (4, 6, 8):

@@ -1,4 +1,4 @@
-"""Property-based tests of every parser of user input (issue 12): trees in bracket notation,
+"""Property-based tests of every parser of user input: trees in bracket notation,
 tableau entries, expressions, spec and tableau documents, the option readers and the JSON output.
 
 Whatever the text, a parser returns a value or raises InputError (never another exception), and

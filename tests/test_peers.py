@@ -147,7 +147,7 @@ def test_cfunc_field_agrees_with_the_plain_one(name):
     from numbalsoda import lsoda_sig
 
     system, f = _plain(name)
-    rhs = numba.cfunc(lsoda_sig)(compiled(P.field_code(system, "cfunc")))
+    rhs = numba.cfunc(lsoda_sig)(compiled(P.cached_field_code(system, "cfunc")))
     pointer = ctypes.POINTER(ctypes.c_double)
     for x in _points(system):
         u, du, p = np.array(x), np.empty(x.size), np.zeros(1)
@@ -162,7 +162,7 @@ def test_jax_field_agrees_with_the_plain_one(name):
     import jax.numpy as jnp
 
     system, f = _plain(name)
-    g = compiled(P.field_code(system, "jax"))
+    g = compiled(P.cached_field_code(system, "jax"))
     for x in _points(system):
         np.testing.assert_allclose(np.asarray(g(0.0, jnp.asarray(x), None)), f(0.0, x), rtol=1e-13, atol=1e-15)
 

@@ -1,4 +1,4 @@
-"""The field's reference problems (issue 10, part D: rkhp.systems.problems).
+"""The field's reference problems (rkhp.systems.problems).
 
 Values from outside the code: the vector fields as the sources write them (GeometricProblems.jl
 v0.8.2: MasslessChargedParticle, PointVortices, LotkaVolterra4d; Flaschka's equations of the Toda
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from rkhp.base.errors import InputError
-from rkhp.integrators import integrate
+from rkhp.integrators import integrate_rkhp
 from rkhp.studies.reference import reference
 from rkhp.systems import builtin_systems, get_system
 from rkhp.systems.problems import PROBLEMS, expressions, problem_data
@@ -170,7 +170,7 @@ def test_rkhp_integration_against_reference(name, steps, tolerance):
     ref = reference(s, s.t_final)
     errors = []
     for n in (steps, 2 * steps):
-        traj = integrate(s, "paper-three-stage", s.t_final / n, n)
+        traj = integrate_rkhp(s, "paper-three-stage", s.t_final / n, n)
         assert traj.ok
         errors.append(np.abs(traj.final_state - ref.state).max())
     assert errors[0] < tolerance
@@ -203,7 +203,7 @@ def test_lotka_volterra_5d_euler_keeps_energy_and_casimir(name):
     bounded at O(h) (the first-order modified Hamiltonian, docs/theory.md §11): it does not grow
     from the first to the second half of the run."""
     s = system(name)
-    traj = integrate(s, "euler", 0.01, 5000)
+    traj = integrate_rkhp(s, "euler", 0.01, 5000)
     assert traj.ok
     casimir = np.array([s.casimir_values(x) for x in traj.states]) - s.casimir_values(s.x0)
     assert np.abs(casimir).max() < 1e-12

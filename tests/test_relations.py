@@ -1,4 +1,4 @@
-"""Relations among elementary differentials of symmetric birealisations (docs/theory.md §8, issue 7)."""
+"""Relations among elementary differentials of symmetric birealisations (docs/theory.md §8)."""
 
 from __future__ import annotations
 

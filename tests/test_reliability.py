@@ -253,7 +253,7 @@ def _errors_with_local_orders(orders, h0=0.1):
 
 
 def test_a_steady_fall_of_the_local_orders_is_not_a_higher_order():
-    """The issue's rows: local orders 3.95, 3.92, 3.86, 3.74 (all in the fit), expected 3."""
+    """Rows whose local orders fall steadily: 3.95, 3.92, 3.86, 3.74 (all in the fit), expected 3."""
     from rkhp.studies.fit import drift, fit_order, verdict
 
     h, e = _errors_with_local_orders([3.95, 3.92, 3.86, 3.74])

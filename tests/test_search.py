@@ -1,4 +1,4 @@
-"""Tests of `rkhp search` (issue 4): residual system, multistart, polishing, closed forms, proofs.
+"""Tests of `rkhp search`: residual system, multistart, polishing, closed forms, proofs.
 
 Expected values come from outside the code: the paper's minimal stage counts (degenerate order 3
 with 2 stages, order 4 with 3 stages), classical Runge–Kutta theory (order 4 needs 4 stages,

@@ -1,4 +1,4 @@
-"""`rkhp show`, the tableau's text and LaTeX forms, and standalone LaTeX output (issue 15).
+"""`rkhp show`, the tableau's text and LaTeX forms, and standalone LaTeX output.
 
 Expected entries are RK4's Butcher array (Kutta 1901; Hairer, Norsett & Wanner I, Table II.1.2)
 and the two-stage Gauss method's (c = 1/2 -+ sqrt(3)/6; HW II, Table IV.5.1); the conditions

@@ -1,4 +1,4 @@
-"""The exact Poisson-spray realisation of the general family (issue 10, part E).
+"""The exact Poisson-spray realisation of the general family (rkhp.systems.spray).
 
 Values from outside the code: the closed forms of docs/theory.md §4 (so(3)*: the rigid body's
 c(|p|^2) realisation; se(3)*: phi(K(p)) x) which the spray realisation reduces to for linear pi,
@@ -17,7 +17,7 @@ import pytest
 from click.testing import CliRunner
 from rkhp_cli.main import rkhp
 
-from rkhp.integrators import integrate
+from rkhp.integrators import integrate_rkhp
 from rkhp.systems import get_system
 from rkhp.systems.check import check_birealisation
 from rkhp.systems.problems import as_general
@@ -196,8 +196,8 @@ def test_rigid_body_spray_is_the_closed_form(rigid_body_general):
 
 def test_rigid_body_trajectory_matches_the_builtin(rigid_body_general):
     """Acceptance: 100 steps of paper-three-stage at h = 0.1 agree to <= 1e-12."""
-    a = integrate(get_system("rigid-body"), "paper-three-stage", 0.1, 100)
-    b = integrate(rigid_body_general, "paper-three-stage", 0.1, 100)
+    a = integrate_rkhp(get_system("rigid-body"), "paper-three-stage", 0.1, 100)
+    b = integrate_rkhp(rigid_body_general, "paper-three-stage", 0.1, 100)
     assert a.ok and b.ok
     assert np.abs(a.states - b.states).max() <= 1e-12
 
@@ -212,8 +212,8 @@ def test_heavy_top_spray_is_phi_of_K():
         x, p = rng.normal(size=6), 0.4 * rng.normal(size=6) / math.sqrt(6)
         assert np.allclose(spray.alpha(x, p), closed.alpha(x, p), rtol=0, atol=5e-15)
         assert np.allclose(spray.beta(x, p), closed.beta(x, p), rtol=0, atol=5e-15)
-    a = integrate(closed, "paper-three-stage", 0.1, 50)
-    b = integrate(spray, "paper-three-stage", 0.1, 50)
+    a = integrate_rkhp(closed, "paper-three-stage", 0.1, 50)
+    b = integrate_rkhp(spray, "paper-three-stage", 0.1, 50)
     assert np.abs(a.states - b.states).max() <= 1e-12
 
 
@@ -234,7 +234,7 @@ def test_failure_is_nan_never_a_wrong_value():
     integration reports a numerical failure (exit 1)."""
     s = get_system("nambu")
     assert np.all(np.isnan(s.alpha(s.x0, [1.2, 2.0, -3.2])))
-    traj = integrate(s, "paper-three-stage", 4.0, 3)
+    traj = integrate_rkhp(s, "paper-three-stage", 4.0, 3)
     assert not traj.ok and "non-finite" in traj.status
     res = CliRunner().invoke(rkhp, ["integrate", "nambu", "--method", "paper-three-stage",
                                     "--h", "4", "--t-final", "12"])
@@ -260,7 +260,7 @@ def test_check_json_on_a_general_spec(rigid_body_spec):
 def test_nambu_casimir_over_1e5_steps():
     """Acceptance: the Casimir of nambu stays within 1e-12 over 10^5 steps (h = 0.1)."""
     s = get_system("nambu")
-    traj = integrate(s, "paper-three-stage", 0.1, 100_000)
+    traj = integrate_rkhp(s, "paper-three-stage", 0.1, 100_000)
     assert traj.ok
     C = np.array([s.casimir_values(x)[0] for x in traj.states])
     assert np.abs(C - C[0]).max() <= 1e-12

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from rkhp.base.errors import InputError
-from rkhp.integrators import integrate, integrate_midpoint
+from rkhp.integrators import integrate_midpoint, integrate_rkhp
 from rkhp.integrators.driver import integrate_spray_euler
 from rkhp.integrators.failure import Failure
 from rkhp.integrators.spray_euler import spray_tapes
@@ -27,7 +27,7 @@ from rkhp.taylor.interpreter import evaluate
 from rkhp.taylor.ops import CRB, FUNCTION, OPS
 from rkhp.taylor.scalar import SCALAR_CODES, gradients, shared, values
 from rkhp.taylor.tape import functions as f
-from rkhp.taylor.tape import record
+from rkhp.taylor.tape import record_tape
 
 TRIPLE_JUMP = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
 
@@ -40,7 +40,7 @@ def system(request):
 def test_euler_is_the_engine_euler(system):
     """Measured: 1.4e-14 (charged particle), 4.1e-15 (nambu) after 50 steps of h = 0.1."""
     direct = integrate_spray_euler(system, (1.0,), 0.1, 50)
-    engine = integrate(system, "euler", 0.1, 50)
+    engine = integrate_rkhp(system, "euler", 0.1, 50)
     assert direct.ok and engine.ok
     assert np.abs(direct.states - engine.states).max() < 3e-14
     np.testing.assert_allclose(direct.times, engine.times, rtol=0, atol=1e-15)
@@ -153,7 +153,7 @@ def all_functions(x, p):
 @pytest.mark.parametrize("tape", ["functions", "field", "hamiltonian"])
 def test_scalar_values_and_gradients_are_the_interpreters(tape):
     if tape == "functions":
-        t, inputs = record(2, all_functions), np.array([0.3, -0.7, 0.2, 0.9])
+        t, inputs = record_tape(2, all_functions), np.array([0.3, -0.7, 0.2, 0.9])
     else:
         t = getattr(spray_tapes(get_system("nambu")), tape)
         inputs = np.array([0.4, -0.3, 0.8, 0.05, -0.02, 0.07])
@@ -174,7 +174,7 @@ def test_shared_rows_are_computed_once():
         c = 1.0 + x[0] * x[0]
         return [p[0] / b, p[1] / c, x[1] * x[0] + x[0] * x[1]]
 
-    t = record(2, twice)
+    t = record_tape(2, twice)
     s = shared(t)
     inputs = np.array([0.3, 2.0, 0.5, -1.0])
     assert len(s.ops) == len(t.ops) - 3  # the second 1 + x0^2 (2 rows) and x0 x1 (1 row)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import sympy
 
-from rkhp.integrators import integrate
+from rkhp.integrators import integrate_rkhp
 from rkhp.systems.families import family_system
 from rkhp.tableaux.files import builtin_names, load_tableau
 from rkhp.tableaux.stability import (
@@ -121,7 +121,7 @@ def symmetric_oscillator():
 def test_one_step_rotation_equals_the_integrator(name, symmetric_oscillator):
     tableau = load_tableau(name)
     for z in (0.3, 1.0, 2.5):
-        run = integrate(symmetric_oscillator, tableau, z, 1)
+        run = integrate_rkhp(symmetric_oscillator, tableau, z, 1)
         assert run.status == "ok"
         x = run.final_state
         assert math.hypot(*x) == pytest.approx(1.0, abs=1e-13)  # amplitude is exact
@@ -133,7 +133,7 @@ def test_one_step_rotation_equals_the_integrator(name, symmetric_oscillator):
 def test_implicit_rotation_equals_the_integrator(name, symmetric_oscillator):
     tableau = load_tableau(name)
     for z in (0.3, 1.0):
-        x = integrate(symmetric_oscillator, tableau, z, 1).final_state
+        x = integrate_rkhp(symmetric_oscillator, tableau, z, 1).final_state
         assert clockwise_angle(x) == pytest.approx(rotation_angle(tableau, z), abs=1e-12)
 
 
@@ -151,7 +151,7 @@ def test_two_frequencies_angle_per_mode():
     system = family_system("constant", pi, hamiltonian,
                            name="two-frequencies", x0=(1.0, 1.0, 0.0, 0.0), t_final=h * steps)
     tableau = load_tableau("paper-three-stage")
-    x = integrate(system, tableau, h, steps).final_state
+    x = integrate_rkhp(system, tableau, h, steps).final_state
     for (i, j), w in (((0, 2), w1), ((1, 3), w2)):
         expected = math.remainder(steps * predicted_theta(tableau, h * w), 2 * math.pi)
         assert math.atan2(-x[j], x[i]) == pytest.approx(expected, abs=1e-12)
@@ -208,13 +208,14 @@ def test_wrap_limit_where_theta_turns():
     assert r.wrap_limit.exact == "2*sqrt(6)/3"
     z0 = r.wrap_limit.value
     system = oscillator()
-    angle = [clockwise_angle(integrate(system, NEGATIVE_WEIGHT, z, 1).final_state) for z in (z0 - 0.1, z0, z0 + 0.1)]
+    angle = [clockwise_angle(integrate_rkhp(system, NEGATIVE_WEIGHT, z, 1).final_state)
+             for z in (z0 - 0.1, z0, z0 + 0.1)]
     assert angle[0] < angle[1] and angle[2] < angle[1]
     # without an exact m(z) (35 stages): found numerically, and the integrator turns there too
     feagin = load_tableau("feagin14")
     z1 = analyse(feagin).wrap_limit.value
     assert 2.12 < z1 < 2.15
-    angle = [clockwise_angle(integrate(system, feagin, z, 1).final_state) for z in (z1 - 0.02, z1, z1 + 0.02)]
+    angle = [clockwise_angle(integrate_rkhp(system, feagin, z, 1).final_state) for z in (z1 - 0.02, z1, z1 + 0.02)]
     assert angle[0] < angle[1] and angle[2] < angle[1]
 
 
@@ -261,7 +262,7 @@ def test_shifted_trace_equals_the_integrator_step_matrix():
         tableau = load_tableau(name)
         trace = shifted_trace(tableau)
         for z in (0.3, 1.0, 2.5):
-            columns = [integrate(system, tableau, z, 1, x0=e).final_state for e in ((1.0, 0.0), (0.0, 1.0))]
+            columns = [integrate_rkhp(system, tableau, z, 1, x0=e).final_state for e in ((1.0, 0.0), (0.0, 1.0))]
             R = np.array(columns).T
             assert np.trace(R) == pytest.approx(float(trace.subs(Z, sympy.Rational(str(z)))), abs=1e-13)
             assert np.allclose(R, step_matrix_shifted(tableau, z), atol=1e-13)
@@ -274,8 +275,8 @@ def test_shifted_interval_by_integration():
     z0 = r.stability_interval.value
     assert z0 == pytest.approx(0.887236173133650, rel=1e-14)
     system = oscillator("shifted")
-    inside = integrate(system, NEGATIVE_WEIGHT, 0.97 * z0, 2000)
-    outside = integrate(system, NEGATIVE_WEIGHT, 1.03 * z0, 2000)
+    inside = integrate_rkhp(system, NEGATIVE_WEIGHT, 0.97 * z0, 2000)
+    outside = integrate_rkhp(system, NEGATIVE_WEIGHT, 1.03 * z0, 2000)
     assert inside.ok and np.linalg.norm(inside.final_state) < 10
     # the growth is a divergence: the run ends when the energy error passes 1e8 (docs/exit-status.md)
     assert outside.cause.name == "DIVERGED" and np.linalg.norm(outside.final_state) > 1e3
@@ -286,12 +287,12 @@ def test_shifted_positive_weights_are_elliptic_for_every_z():
     at z = 20 the run stays bounded."""
     r = analyse(load_tableau("rk4"), realisation="shifted")
     assert r.stability_interval.exact == "oo"
-    x = integrate(oscillator("shifted"), load_tableau("rk4"), 20.0, 500).final_state
+    x = integrate_rkhp(oscillator("shifted"), load_tableau("rk4"), 20.0, 500).final_state
     assert np.linalg.norm(x) < 10
 
 
 def _step_matrix_of_the_integrator(system, tableau, z):
-    return np.array([integrate(system, tableau, z, 1, x0=e).final_state for e in ((1.0, 0.0), (0.0, 1.0))]).T
+    return np.array([integrate_rkhp(system, tableau, z, 1, x0=e).final_state for e in ((1.0, 0.0), (0.0, 1.0))]).T
 
 
 @pytest.mark.parametrize("tableau", [GAUSS1, load_tableau("paper-implicit"), load_tableau("gauss2"),
@@ -346,17 +347,17 @@ def test_shifted_implicit_interval_by_integration():
     system = oscillator("shifted")
     for tableau in (GAUSS1, load_tableau("gauss2")):
         z0 = analyse(tableau, realisation="shifted").stability_interval.value
-        inside = integrate(system, tableau, 0.98 * z0, 200)
+        inside = integrate_rkhp(system, tableau, 0.98 * z0, 200)
         assert inside.ok and np.linalg.norm(inside.final_state) < 10
-        outside = integrate(system, tableau, 1.02 * z0, 200)
+        outside = integrate_rkhp(system, tableau, 1.02 * z0, 200)
         assert not outside.ok and "did not converge" in outside.status
     r = analyse(NEGATIVE_WEIGHT_IMPLICIT, realisation="shifted")
     z0, fold = r.stability_interval.value, r.existence_limit.value
     assert z0 < 0.97 * fold
     assert abs(np.trace(_step_matrix_of_the_integrator(system, NEGATIVE_WEIGHT_IMPLICIT, z0))) \
         == pytest.approx(2.0, abs=1e-12)
-    inside = integrate(system, NEGATIVE_WEIGHT_IMPLICIT, 0.97 * z0, 2000)
-    outside = integrate(system, NEGATIVE_WEIGHT_IMPLICIT, 1.03 * z0, 2000)
+    inside = integrate_rkhp(system, NEGATIVE_WEIGHT_IMPLICIT, 0.97 * z0, 2000)
+    outside = integrate_rkhp(system, NEGATIVE_WEIGHT_IMPLICIT, 1.03 * z0, 2000)
     assert inside.ok and np.linalg.norm(inside.final_state) < 10
     assert outside.cause.name == "DIVERGED" and np.linalg.norm(outside.final_state) > 1e3
 
@@ -376,7 +377,7 @@ def test_triple_jump_of_euler_has_phase_order_4():
     x = (1.0, 0.0)
     for gamma in (g, 1 - 2 * g, g):
         system = oscillator(omega=float(np.sign(float(gamma))))
-        x = integrate(system, "euler", abs(float(gamma)) * h, 1, x0=x).final_state
+        x = integrate_rkhp(system, "euler", abs(float(gamma)) * h, 1, x0=x).final_state
     long = composition_phase(load_tableau("euler"), [g, 1 - 2 * g, g], order=31)
     series = h + sum(c.value * h**k for k, c in long.coefficients)
     assert clockwise_angle(x) == pytest.approx(series, abs=1e-13)

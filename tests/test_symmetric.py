@@ -1,4 +1,4 @@
-"""Symmetric birealisations as a third class (issue 7, docs/theory.md §8): the quartic realisation, the
+"""Symmetric birealisations as a third class (docs/theory.md §8): the quartic realisation, the
 symmetric check, minimal stage counts, saved tableaux, and convergence on the integrators.
 
 Values from outside the code: the birealisation axioms and the definition of the quartic

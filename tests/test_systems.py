@@ -1,4 +1,4 @@
-"""Poisson systems, birealisations, spec files and `rkhp systems` / `rkhp check` (issue 5)."""
+"""Poisson systems, birealisations, spec files and `rkhp systems` / `rkhp check`."""
 
 from __future__ import annotations
 
@@ -221,7 +221,7 @@ def test_cli_systems_and_check_json():
     assert res.exit_code == 0
     doc = json.loads(res.output)
     keys = ["system", "realisation", "degenerate", "samples", "deviations", "ok"]
-    assert [k for k in doc if k in keys] == keys  # the issue's keys, in order (others may follow)
+    assert [k for k in doc if k in keys] == keys  # the documented keys, in order (others may follow)
     assert list(doc["deviations"]) == ["identity", "poisson", "anti_poisson", "commute"]
     assert doc["ok"] is True and doc["degenerate"] is False and doc["samples"] == 10
 

@@ -17,7 +17,8 @@ from rkhp.tableaux.tableau import GivenDecimal, Tableau, parse_entry
 
 PUBLISHED = Path(__file__).resolve().parent / "data" / "published"
 
-# The built-ins the issue lists (issue 3, item 3), plus the two optional ones.
+# The built-in tableaux that must ship: the paper's, the classical explicit and implicit ones and
+# Feagin's; Curtis's and Ono's last.
 REQUIRED = ["euler", "paper-two-stage", "paper-three-stage", "paper-implicit", "midpoint", "heun",
             "ralston", "kutta3", "ssprk3", "rk4", "rk38", "butcher5", "dopri5", "dop853",
             "gauss2", "gauss3", "radau-iia3", "lobatto-iiia3", "lobatto-iiic3", "feagin10",

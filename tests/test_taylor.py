@@ -165,7 +165,7 @@ def test_subprogram_rules():
     with pytest.raises(ValueError, match="only use its own"):
         builder.subprogram(1, lambda v: [v[0] * x])
     with pytest.raises(ValueError, match="composite"):
-        builder.subprogram(3, lambda v: tp.phimv([[v[0]]], [v[1]]))
+        builder.subprogram(3, lambda v: tp.record_phimv([[v[0]]], [v[1]]))
     with pytest.raises(ValueError, match="do not nest"):
         builder.subprogram(1, lambda v: [builder.subprogram(1, lambda w: w).outputs])
 

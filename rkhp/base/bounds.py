@@ -73,7 +73,16 @@ DIVIDES_TOLERANCE = 1e-9
 # ----------------------------------------------------------------------------- numbers
 
 
-def _shown(value) -> str:
+def float_or_infinity(x) -> float:
+    """float(x), or +-inf when x is beyond the float range (an int of 310 digits or more)."""
+    try:
+        return float(x)
+    except OverflowError:
+        return math.inf if x > 0 else -math.inf
+
+
+def shown(value) -> str:
+    """A value as an error message quotes it: its repr, cut to 40 characters."""
     text = repr(value)
     return text if len(text) <= 40 else text[:37] + "..."
 
@@ -81,11 +90,11 @@ def _shown(value) -> str:
 def integer(value, what: str, low: int | None = None, high: int | None = None) -> int:
     """An integer low <= value <= high (booleans and floats are not integers)."""
     if isinstance(value, bool) or not isinstance(value, int):
-        raise InputError(f"{what} must be an integer, got {_shown(value)}")
+        raise InputError(f"{what} must be an integer, got {shown(value)}")
     if low is not None and value < low:
-        raise InputError(f"{what} must be at least {low}, got {_shown(value)}")
+        raise InputError(f"{what} must be at least {low}, got {shown(value)}")
     if high is not None and value > high:
-        raise InputError(f"{what} must be at most {high}, got {_shown(value)}")
+        raise InputError(f"{what} must be at most {high}, got {shown(value)}")
     return value
 
 
@@ -93,11 +102,11 @@ def number(value, what: str, low: float | None = None, high: float | None = None
            low_open: bool = False, high_open: bool = False) -> float:
     """A finite float within [low, high] (or open ends); booleans and text are not numbers."""
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise InputError(f"{what} must be a number, got {_shown(value)}")
+        raise InputError(f"{what} must be a number, got {shown(value)}")
     try:
         x = float(value)
     except OverflowError:
-        raise InputError(f"{what} is too large: {_shown(value)}") from None
+        raise InputError(f"{what} is too large: {shown(value)}") from None
     if not math.isfinite(x):
         raise InputError(f"{what} must be finite, got {x}")
     if low is not None and (x < low or (low_open and x == low)):
@@ -148,7 +157,7 @@ def parse_int(text: str, what: str) -> int:
     """An integer written in decimal (at most MAX_INT_DIGITS digits, so that no bignum is ever parsed)."""
     s = text.strip()
     if not re.fullmatch(rf"[+-]?[0-9]{{1,{MAX_INT_DIGITS}}}", s):
-        raise InputError(f"{what}: {_shown(s)} is not a valid integer")
+        raise InputError(f"{what}: {shown(s)} is not a valid integer")
     return int(s)
 
 
@@ -162,11 +171,11 @@ def parse_float(text: str, what: str) -> float:
     s = text.strip()
     if len(s) > 100 or not DECIMAL.fullmatch(s):
         if s.lower().lstrip("+-") in ("nan", "inf", "infinity"):
-            raise InputError(f"{what}: expected a finite number, got {_shown(s)}")
-        raise InputError(f"{what}: expected a number, got {_shown(s)}")
+            raise InputError(f"{what}: expected a finite number, got {shown(s)}")
+        raise InputError(f"{what}: expected a number, got {shown(s)}")
     x = float(s)
     if not math.isfinite(x):
-        raise InputError(f"{what}: expected a finite number, got {_shown(s)}")
+        raise InputError(f"{what}: expected a finite number, got {shown(s)}")
     return x
 
 
@@ -179,14 +188,14 @@ def check_step(h, n_steps, dim: int | None = None) -> tuple[float, int]:
     0 <= n_steps <= MAX_STEPS an integer (numpy's integers too; 0 steps: the start alone); with the
     dimension, the stored trajectory within the memory limit."""
     if isinstance(h, bool) or not isinstance(h, numbers.Real):
-        raise InputError(f"step size h must be a number, got {type(h).__name__} {_shown(h)}")
+        raise InputError(f"step size h must be a number, got {type(h).__name__} {shown(h)}")
     try:
         h = float(h)
     except OverflowError:
         raise InputError("step size h is too large for a float") from None
     h = nonzero(h, "step size h")
     if isinstance(n_steps, bool) or not hasattr(n_steps, "__index__"):
-        raise InputError(f"number of steps must be an integer, got {_shown(n_steps)}")
+        raise InputError(f"number of steps must be an integer, got {shown(n_steps)}")
     n = integer(n_steps.__index__(), "number of steps", 0, MAX_STEPS)
     if dim is not None:
         check_trajectory(n, dim)
@@ -242,7 +251,7 @@ def real_vector(values, what: str = "x0") -> list[float]:
         if len(out) >= MAX_LIST:
             raise InputError(f"{what} has more than {MAX_LIST} components")
         if isinstance(v, bool) or not isinstance(v, numbers.Real):
-            raise InputError(f"{what}[{k}] must be a real number, got {type(v).__name__} {_shown(v)}")
+            raise InputError(f"{what}[{k}] must be a real number, got {type(v).__name__} {shown(v)}")
         try:
             x = float(v)
         except OverflowError:
@@ -331,7 +340,7 @@ def check_output_path(path, suffixes: tuple[str, ...] = (), what: str = "output 
     try:  # a name too long, a loop of links: OSError from any of these
         return _checked_output_path(path, what)
     except OSError as exc:
-        raise InputError(f"{what} {_shown(str(path))}: {exc.strerror or exc}") from None
+        raise InputError(f"{what} {shown(str(path))}: {exc.strerror or exc}") from None
 
 
 def _probe(folder: Path, what: str, path: Path) -> None:

@@ -11,10 +11,10 @@ A spec file or a tableau file comes from elsewhere, so before any parser sees it
 - JSON objects may not repeat a key, and JSON's non-standard ``NaN``/``Infinity``, numbers that
   overflow a float and integers of more than 30 digits are refused (the field readers refuse such
   integers from TOML too; TOML refuses repeated keys
-  itself; its ``nan`` and ``inf`` are refused by :func:`number`).
+  itself; its ``nan`` and ``inf`` are refused by :func:`document_number`).
 
-The field readers (:func:`number`, :func:`integer`, :func:`string`, :func:`number_list`,
-:func:`matrix`) refuse type confusion: a boolean is not a number (``t_final = true``), a string is
+The field readers (:func:`document_number`, :func:`document_integer`, :func:`string`,
+:func:`number_list`, :func:`matrix`) refuse type confusion: a boolean is not a number (``t_final = true``), a string is
 not a number, a list is not a matrix unless every row has the same length.
 """
 
@@ -193,38 +193,38 @@ def _type(value) -> str:
         type(value), type(value).__name__)
 
 
-def number(value, where: str, low: float | None = None, high: float | None = None, *,
+def document_number(value, where: str, low: float | None = None, high: float | None = None, *,
            low_open: bool = False) -> float:
     """A finite number (int or float, not a boolean, not text) within the bounds."""
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise InputError(f"{where} must be a number, got {_type(value)} {_short(value)}")
+        raise InputError(f"{where} must be a number, got {_type(value)} {bounds.shown(value)}")
     if isinstance(value, int) and abs(value) >= 10**bounds.MAX_INT_DIGITS:
         raise InputError(f"{where}: an integer of more than {bounds.MAX_INT_DIGITS} digits (TOML and JSON alike)")
     return bounds.number(value, where, low, high, low_open=low_open)
 
 
-def integer(value, where: str, low: int | None = None, high: int | None = None) -> int:
+def document_integer(value, where: str, low: int | None = None, high: int | None = None) -> int:
     """An integer (not a boolean, not a float such as 1.0) within the bounds."""
     if isinstance(value, bool) or not isinstance(value, int):
-        raise InputError(f"{where} must be an integer, got {_type(value)} {_short(value)}")
+        raise InputError(f"{where} must be an integer, got {_type(value)} {bounds.shown(value)}")
     return bounds.integer(value, where, low, high)
 
 
 def string(value, where: str) -> str:
     if not isinstance(value, str):
-        raise InputError(f"{where} must be a string, got {_type(value)} {_short(value)}")
+        raise InputError(f"{where} must be a string, got {_type(value)} {bounds.shown(value)}")
     return value
 
 
 def number_list(value, where: str, size: int | None = None, max_size: int | None = None) -> list[float]:
     """A non-empty list of finite numbers (of `size` entries when given)."""
     if not isinstance(value, list) or not value:
-        raise InputError(f"{where} must be a non-empty list of numbers, got {_type(value)} {_short(value)}")
+        raise InputError(f"{where} must be a non-empty list of numbers, got {_type(value)} {bounds.shown(value)}")
     if max_size is not None and len(value) > max_size:
         raise InputError(f"{where} has {len(value)} entries; at most {max_size}")
     if size is not None and len(value) != size:
         raise InputError(f"{where} must have {size} entries, got {len(value)}")
-    return [number(v, f"{where}[{i + 1}]") for i, v in enumerate(value)]
+    return [document_number(v, f"{where}[{i + 1}]") for i, v in enumerate(value)]
 
 
 def matrix(value, where: str, n: int) -> list[list[float]]:
@@ -235,9 +235,5 @@ def matrix(value, where: str, n: int) -> list[list[float]]:
     for i, row in enumerate(value):
         if len(row) != n:
             raise InputError(f"{where}: row {i + 1} has {len(row)} entries; expected {n}")
-    return [[number(v, f"{where}[{i + 1}][{j + 1}]") for j, v in enumerate(row)] for i, row in enumerate(value)]
-
-
-def _short(value) -> str:
-    text = repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
+    return [[document_number(v, f"{where}[{i + 1}][{j + 1}]") for j, v in enumerate(row)]
+            for i, row in enumerate(value)]

@@ -109,7 +109,7 @@ def run_all(executor: Executor, fn: Callable, argument_tuples: Iterable[tuple], 
     """``[fn(*args) for args in argument_tuples]`` on the executor, results in the given order;
     ``on_done(done, total)`` after each completion (progress from the workers' finished tasks).
     On an error or Ctrl-C the unfinished tasks are cancelled and the exception goes on."""
-    results, finished = _run(executor, fn, argument_tuples, on_done, keep_on_interrupt=False)
+    results, finished = _gather(executor, fn, argument_tuples, on_done, keep_on_interrupt=False)
     return results
 
 
@@ -118,10 +118,10 @@ def run_until_interrupted(executor: Executor, fn: Callable, argument_tuples: Ite
     """As :func:`run_all`, but an interrupt (`rkhp.base.interrupts.is_interrupt`) cancels the
     unfinished tasks and returns what finished: (results in the given order, None where a task did
     not finish; whether the run was interrupted)."""
-    return _run(executor, fn, argument_tuples, on_done, keep_on_interrupt=True)
+    return _gather(executor, fn, argument_tuples, on_done, keep_on_interrupt=True)
 
 
-def _run(executor, fn, argument_tuples, on_done, keep_on_interrupt: bool) -> tuple[list, bool]:
+def _gather(executor, fn, argument_tuples, on_done, keep_on_interrupt: bool) -> tuple[list, bool]:
     tasks = [executor.submit(fn, *args) for args in argument_tuples]
     order = {id(t): k for k, t in enumerate(tasks)}
     results: list = [None] * len(tasks)

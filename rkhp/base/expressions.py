@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from ..taylor.ops import FUNCTIONS as _TAPE_FUNCTIONS
+from .bounds import float_or_infinity
 from .errors import InputError
 
 #: function name -> name of the sympy function it builds (documented in README "Expressions"):
@@ -78,12 +79,12 @@ _CONSTRUCTS = {
 }
 
 
-def _shown(text: str) -> str:
+def _quoted(text: str) -> str:
     return repr(text) if len(text) <= 60 else repr(text[:57] + "...")
 
 
 def _refuse(where: str, text: str, reason: str):
-    return InputError(f"{where}: cannot read {_shown(text)}: {reason}")
+    return InputError(f"{where}: cannot read {_quoted(text)}: {reason}")
 
 
 #: a number token: a digit (or a point and a digit) not inside a name, up to the end of the literal
@@ -188,14 +189,6 @@ _FLOAT_FUNCTIONS = {name: value for name, (_, value) in _TAPE_FUNCTIONS.items()}
 _CONSTANT_VALUES = {"pi": math.pi, "E": math.e}
 
 
-def _float(value) -> float:
-    """A literal's float value, +-inf beyond the float range (an int of 310 digits or more)."""
-    try:
-        return float(value)
-    except OverflowError:
-        return math.inf if value > 0 else -math.inf
-
-
 def _approx(function, *args) -> float:
     try:
         return float(function(*args))
@@ -225,7 +218,7 @@ def _sizes(node: ast.expr, text: str, where: str, limits: Limits, variables) -> 
             size = None if current.id in variables else _Size(1.0, _CONSTANT_VALUES[current.id])
         elif isinstance(current, ast.Constant):
             literal = ast.get_source_segment(source, current) or ""
-            size = _Size(_literal_digits(literal), _float(current.value))
+            size = _Size(_literal_digits(literal), float_or_infinity(current.value))
         elif None in sub:
             size = None
         elif isinstance(current, ast.Call):

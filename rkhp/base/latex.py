@@ -62,12 +62,12 @@ def tree_latex(tree) -> str:
     """``\\rkhptree{...}``: the tree in TikZ, for :func:`standalone`'s ``\\rkhptree`` macro."""
     nodes, edges = tree_layout(tree)
 
-    def at(k: int) -> str:
+    def node_at(k: int) -> str:
         x, d = nodes[k]
         return f"({x:g},{d})"
 
-    draw = "".join(f"\\draw {at(p)}--{at(c)};" for p, c in edges)
-    dots = "".join(f"\\rkhpnode{{{at(k)}}}" for k in range(len(nodes)))
+    draw = "".join(f"\\draw {node_at(p)}--{node_at(c)};" for p, c in edges)
+    dots = "".join(f"\\rkhpnode{{{node_at(k)}}}" for k in range(len(nodes)))
     return "\\rkhptree{" + draw + dots + "}"
 
 

@@ -1,7 +1,7 @@
 """RKHP integrators: Taylor-tower step, Newton, compiled loops, classical peers (paper §5.2).
 
 Names load lazily (numba is imported only when an integrator runs):
-`integrate`, `integrate_ensemble` (RKHP, explicit tableaux), `integrate_taylor` (THP, paper
+`integrate_rkhp`, `integrate_ensemble` (RKHP, explicit tableaux), `integrate_taylor` (THP, paper
 Thm 5.1), `integrate_classical`, `integrate_midpoint` (peers), `integrate_spray_euler` (RKHP
 Euler and its compositions on the spray realisation, direct form), `integrate_closed_euler` (the
 same on the constant, lie-poisson and log-canonical families), `Trajectory`, `states_at`
@@ -13,7 +13,7 @@ from __future__ import annotations
 from .._lazy import lazy_getattr
 
 _LAZY = {
-    "integrate": "rkhp.integrators.rkhp_method",
+    "integrate_rkhp": "rkhp.integrators.rkhp_method",
     "integrate_ensemble": "rkhp.integrators.rkhp_method",
     "integrate_taylor": "rkhp.integrators.taylor",
     "integrate_classical": "rkhp.integrators.classical",

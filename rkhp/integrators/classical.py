@@ -67,7 +67,7 @@ class FieldAt(NamedTuple):
     wa: object
 
 
-class Field(NamedTuple):
+class CompiledField(NamedTuple):
     """The compiled field's arguments: the address of the interpreter of the system's class of
     tapes (`rkhp.taylor.interpreter.Interpreter.address`) and the work."""
 
@@ -231,20 +231,20 @@ def _midpoint_loop(run, ws, h, n_steps, x0, domain, tol, max_it, states, newton)
 # Python API
 
 
-def _workspace(system) -> Field:
+def _workspace(system) -> CompiledField:
     """The address of the interpreter of the system's tapes (compiled or loaded from numba's
     cache here), and its H and alpha tapes, first-order jets in n variables and work arrays for
     each tape."""
     space = jet_space(system.dim, 1)
     ht, at = system.h_tape, system.alpha_tape
     work = FieldWork(as_plain(ht), as_plain(at), space, tape_work((ht,), space.size), tape_work((at,), space.size))
-    return Field(interpreter(ht).address, work)
+    return CompiledField(interpreter(ht).address, work)
 
 
 _VERIFIED: set[str] = set()
 
 
-def _verify(name: str, system, field: Field) -> None:
+def _verify_kernel(name: str, system, field: CompiledField) -> None:
     """Once per process and kernel, compare a compiled kernel with the system's own evaluation
     (``system.vector_field``, ``system.hamiltonian``, through ``rkhp.taylor.interpreter.evaluate``).
 
@@ -314,7 +314,7 @@ def integrate_classical(system, tableau, h, n_steps, x0=None) -> Trajectory:
     h, n_steps = check_step(h, n_steps, system.dim)
     if not tableau.is_explicit:
         raise InputError(f"tableau {tableau.name} is {tableau.kind}; the classical peer needs an explicit one")
-    # writable copies (a tableau's arrays are read-only): the array types of `_verify`'s call, so
+    # writable copies (a tableau's arrays are read-only): the array types of `_verify_kernel`'s call, so
     # that numba compiles one specialisation of the loop, not two
     A = np.array(tableau.A_float, dtype=np.float64)
     b = np.array(tableau.b_float, dtype=np.float64)
@@ -325,7 +325,7 @@ def integrate_classical(system, tableau, h, n_steps, x0=None) -> Trajectory:
     states = np.empty((n_steps + 1, x.size))
     loaded = time.perf_counter() - started  # the class's interpreter, compiled or loaded
     compile_s = loaded + _warm_up(_rk_loop, (*field, A, b, h, 1, x, domain, np.empty((2, x.size))))
-    _verify("rk", system, field)
+    _verify_kernel("rk", system, field)
     k_done, cause = _rk_loop(*field, A, b, h, n_steps, x, domain, states)
     newton = np.zeros(n_steps, dtype=np.int64)
     return _trajectory(system, f"classical {tableau.name}", h, k_done, cause, states, newton, started, compile_s)
@@ -359,7 +359,7 @@ def integrate_midpoint(system, h, n_steps, x0=None) -> Trajectory:
     loaded = time.perf_counter() - started  # the class's interpreter, compiled or loaded
     compile_s = loaded + _warm_up(_midpoint_loop, (*field, h, 1, x, domain, tol, max_it, np.empty((2, x.size)),
                                                    np.zeros(1, dtype=np.int64)))
-    _verify("midpoint", system, field)
+    _verify_kernel("midpoint", system, field)
     k_done, cause = _midpoint_loop(*field, h, n_steps, x, domain, tol, max_it, states, newton)
     extra = {"newton_tolerance": tol, "newton_max_iterations": max_it}
     return _trajectory(system, "implicit midpoint", h, k_done, cause, states, newton, started, compile_s, extra)

@@ -50,6 +50,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..base.errors import InputError
+from ..systems import families
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
 from ..taylor.elementary import TWO_PI
@@ -71,7 +72,7 @@ from .failure import Failure
 
 CONSTANT, LIE_POISSON, LOG_CANONICAL = 0, 1, 2
 """The families of `ClosedForm.kind`."""
-KINDS = {"constant": CONSTANT, "lie-poisson": LIE_POISSON, "log-canonical": LOG_CANONICAL}
+KINDS = {families.CONSTANT: CONSTANT, families.LIE_POISSON: LIE_POISSON, families.LOG_CANONICAL: LOG_CANONICAL}
 PHI_GUARD = 0.9 * TWO_PI
 """The bound on |K|_F of the family's phi (`rkhp.taylor.composites.phimv`), kept here so that
 the direct form fails where the engine does."""
@@ -201,12 +202,13 @@ class ChordMemory(NamedTuple):
 
 def closed_work(form: ClosedForm, n: int) -> ClosedWork:
     """The work arrays for dimension n."""
-    def vec():
+    def vector():
         return np.zeros(n)
 
-    return ClosedWork(np.zeros((form.hamiltonian.n_slots, n + 1)), vec(), vec(), vec(), vec(), vec(),
-                      vec(), np.zeros(form.pairs.shape[0]), np.zeros((n, n)), np.zeros((n, n)), vec(),
-                      vec(), vec(), vec(), vec(), vec(), np.zeros(n, np.int64), vec(), vec())
+    return ClosedWork(np.zeros((form.hamiltonian.n_slots, n + 1)), vector(), vector(), vector(), vector(), vector(),
+                      vector(), np.zeros(form.pairs.shape[0]), np.zeros((n, n)), np.zeros((n, n)),
+                      vector(), vector(), vector(), vector(), vector(), vector(),
+                      np.zeros(n, np.int64), vector(), vector())
 
 
 def chord_memory(s: int, n: int) -> ChordMemory:
@@ -370,7 +372,7 @@ def _target(hs, form, work, n):
 
 
 @nb.njit(**NJIT_NORC)
-def _refresh(i, y0, hs, form, work, memory, n):
+def _refresh_chord_z(i, y0, hs, form, work, memory, n):
     """Substep i's chord matrix M = I - G'(y0) x'(0) with step hs (x'(0) = pi(y0) / 2, or
     diag(y0) lambda / 2 for log-canonical), its inverse into the memory (its contraction, until
     measured, taken as REFRESH_CONTRACTION); Failure.OK or SINGULAR."""
@@ -471,7 +473,7 @@ def _store_inverse(i, hs, form, work, memory, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _predict(i, y0, hs, form, work, memory, n):
+def _predict_z(i, y0, hs, form, work, memory, n):
     """work.z from substep i's previous solutions (their polynomial extrapolation in the step
     index, `rkhp.integrators.direct_form.weight`), or G(y0) without any."""
     count = memory.count[i]
@@ -490,7 +492,7 @@ def _predict(i, y0, hs, form, work, memory, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _remember(i, memory, work, n):
+def _remember_z(i, memory, work, n):
     """Push the converged z of substep i into its history."""
     for r in range(HISTORY - 1, 0, -1):
         for k in range(n):
@@ -543,10 +545,10 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
     update has improved B (measured below 1e-4 on the rigid body)."""
     n = y0.shape[0]
     scale = max(1.0, max_abs(y0))
-    _predict(i, y0, hs, form, work, memory, n)
+    _predict_z(i, y0, hs, form, work, memory, n)
     fresh = False
     if memory.ready[i] == 0 or memory.rate[i] > REFRESH_CONTRACTION:
-        cause = _refresh(i, y0, hs, form, work, memory, n)
+        cause = _refresh_chord_z(i, y0, hs, form, work, memory, n)
         if cause != Failure.OK:
             return cause, 0
         fresh = True
@@ -592,7 +594,7 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
             break
         if since >= 2 and not fresh and theta > SLOW_CONTRACTION and size > 1e3 * solver.tol * scale:
             fresh = True
-            cause = _refresh(i, y0, hs, form, work, memory, n)
+            cause = _refresh_chord_z(i, y0, hs, form, work, memory, n)
             if cause != Failure.OK:
                 return cause, it
             since = 0
@@ -602,7 +604,7 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
     cause = _point(y0, form, work, n)
     if cause != Failure.OK:
         return cause, it
-    _remember(i, memory, work, n)
+    _remember_z(i, memory, work, n)
     return Failure.OK, it
 
 
@@ -611,7 +613,7 @@ def newton_substep(i, y0, hs, form, work, memory, solver):
     """One Euler substep of step hs in direct form from y0 by Newton's method (form.exact): its
     increment y1 - y0 into work.dy; returns (Failure, iterations).
 
-    Starts from the extrapolated z (`_predict`); each iteration evaluates x(z), factorises the
+    Starts from the extrapolated z (`_predict_z`); each iteration evaluates x(z), factorises the
     exact Jacobian there (`_exact_factors`) when the last correction exceeded NEWTON_REFRESH max(1, |y0|)
     (always at the first: a Newton step; below it a chord step with the last Jacobian, which
     already contracts by about L |d|), and corrects z by the Jacobian's inverse times G(x(z)) - z.
@@ -622,7 +624,7 @@ def newton_substep(i, y0, hs, form, work, memory, solver):
     y1 are taken at the final z."""
     n = y0.shape[0]
     scale = max(1.0, max_abs(y0))
-    _predict(i, y0, hs, form, work, memory, n)
+    _predict_z(i, y0, hs, form, work, memory, n)
     previous = np.inf
     newton = False  # whether the last correction was a Newton step
     refresh = True
@@ -672,7 +674,7 @@ def newton_substep(i, y0, hs, form, work, memory, solver):
     cause = _point(y0, form, work, n)
     if cause != Failure.OK:
         return cause, it
-    _remember(i, memory, work, n)
+    _remember_z(i, memory, work, n)
     return Failure.OK, it
 
 

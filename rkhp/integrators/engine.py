@@ -15,7 +15,7 @@ is polynomial in s (see `rkhp_step`).
 
 The tableau, h and the states are data: one compilation serves every system and tableau. The
 compiled data are small named groups (docs/engine.md "The state of the step loop"):
-`SystemTapes` (the four tapes), `rkhp.taylor.jets.JetSpace`, `Method` (A, b, h), `Solver`,
+`SystemTapes` (the four tapes), `rkhp.taylor.jets.JetSpace`, `StepTableau` (A, b, h), `Solver`,
 `StageSolve`, `StepBuffers` (every work array of the step loop,
 allocated once by `step_buffers`; the scalars kept between towers and steps in the named slots
 MEMO_HISTORY ... MEMO_STAGE_NEWTON_FAILS of its memo). A run ends
@@ -179,7 +179,7 @@ class StageSolve(NamedTuple):
     max_sweeps: int
 
 
-class Method(NamedTuple):
+class StepTableau(NamedTuple):
     """An RKHP step: the tableau's A (s, s) and b (s,), and the step size h."""
 
     A: np.ndarray

@@ -1,7 +1,7 @@
 """RKHP integration of a Poisson system with any tableau, explicit or implicit, by the Taylor tower
 (paper §5.2; docs/theory.md §5, §10): the Python API of the tower's substeps run by the driver.
 
-`integrate(system, tableau, h, n_steps, x0=None)` returns a :class:`Trajectory`;
+`integrate_rkhp(system, tableau, h, n_steps, x0=None)` returns a :class:`Trajectory`;
 `integrate_ensemble` runs many initial conditions at once (threads over the compiled loop, which
 releases the GIL). Compile time (first call in a process: compiling, or loading numba's cache) is
 measured apart from run time. A method by name (`rkhp.integrators.methods.integrate`) runs on the
@@ -20,7 +20,7 @@ from .tower_substep import resolve_tableau
 from .trajectory import Trajectory
 
 
-def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLERANCE,
+def integrate_rkhp(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLERANCE,
               max_iter: int = NEWTON_MAX_ITERATIONS, stage_degree: int | None = None) -> Trajectory:
     """Integrate `system` with the RKHP method of `tableau`, explicit or implicit (paper §5.2;
     docs/theory.md §5, §10), by the Taylor tower.
@@ -39,7 +39,7 @@ def integrate(system, tableau, h, n_steps, x0=None, *, tol: float = NEWTON_TOLER
 def integrate_ensemble(system, tableau, h, n_steps, x0s, *, tol: float = NEWTON_TOLERANCE,
                        max_iter: int = NEWTON_MAX_ITERATIONS, threads: int | None = None,
                        executor=None, stage_degree: int | None = None) -> np.ndarray:
-    """Final states of many trajectories of `integrate` at once (shape (m, n)), in `threads`
+    """Final states of many trajectories of `integrate_rkhp` at once (shape (m, n)), in `threads`
     threads (default: the CPUs available) running the compiled loop without the GIL (the "vmap");
     with an `executor` (rkhp.base.executors), the starts are cut into one chunk per slot and each
     chunk runs so on a worker (same final states: each trajectory is computed on its own).

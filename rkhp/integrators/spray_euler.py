@@ -48,6 +48,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..base.errors import InputError
+from ..systems.families import GENERAL
 from ..taylor.collocation import TABLE_A, TABLE_B, TABLE_E, TABLE_W
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
@@ -142,12 +143,13 @@ def euler_work(tapes: SprayTapes, n: int) -> EulerWork:
     """The work arrays of one substep for dimension n."""
     m = (MAX_NODES + 1) * n
 
-    def vec():
+    def euler_vector():
         return np.zeros(n)
 
     slots = max(tapes.field.n_slots, tapes.hamiltonian.n_slots)
     return EulerWork(np.zeros((slots, 2 * n + 1)), np.zeros((MAX_NODES, n)), np.zeros((MAX_NODES, n)),
-                     vec(), vec(), vec(), vec(), vec(), vec(), np.zeros((n, n)), np.zeros(m), np.zeros(m))
+                     euler_vector(), euler_vector(), euler_vector(), euler_vector(), euler_vector(), euler_vector(),
+                     np.zeros((n, n)), np.zeros(m), np.zeros(m))
 
 
 def substep_memory(s: int, n: int) -> SubstepMemory:
@@ -188,7 +190,7 @@ def _field_at(tapes, work, y0, j, n):
 
 
 @nb.njit(**NJIT_NORC)
-def _refresh(i, y0, hs, tapes, work, memory, n, current):
+def _refresh_chord_p(i, y0, hs, tapes, work, memory, n, current):
     """Substep i's chord matrix with step hs at (y0, work.p) (see the module): J, P, Q and the
     factors of the matrix into the memory; the stages restarted by `_start_stages` when Q differs
     from `current`, the number of nodes work.Z holds (0 for none). Returns Failure.OK,
@@ -270,7 +272,7 @@ def _theta(y0, tapes, work, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _predict(i, y0, hs, tapes, work, memory, n):
+def _predict_p(i, y0, hs, tapes, work, memory, n):
     """work.p from substep i's previous solutions (their polynomial extrapolation in the step
     index, `weight`), or hs grad H(y0) without any."""
     count = memory.counts[i, 0]
@@ -320,7 +322,7 @@ def _start_stages(i, q, memory, work, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _remember(i, q, memory, work, n):
+def _remember_p(i, q, memory, work, n):
     """Push the converged (p, Z) of substep i into its history."""
     for r in range(HISTORY - 1, 0, -1):
         for k in range(n):
@@ -406,7 +408,7 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     evaluated at the final (Z, p) and y1 = y0 + sum_j b_j X_j."""
     n = y0.shape[0]
     scale = max(1.0, max_abs(y0))
-    _predict(i, y0, hs, tapes, work, memory, n)
+    _predict_p(i, y0, hs, tapes, work, memory, n)
     fresh = False
     q = memory.nodes[i]
     if q > 0:
@@ -414,7 +416,7 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
         if needed > q or needed < q - 1:
             q = 0
     if q == 0:
-        cause = _refresh(i, y0, hs, tapes, work, memory, n, np.int64(0))
+        cause = _refresh_chord_p(i, y0, hs, tapes, work, memory, n, np.int64(0))
         if cause != Failure.OK:
             return cause, 0
         fresh = True
@@ -449,7 +451,7 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
             break
         if since >= 2 and not fresh and theta > SLOW_CONTRACTION and size > 1e3 * tol * scale:
             fresh = True
-            cause = _refresh(i, y0, hs, tapes, work, memory, n, q)
+            cause = _refresh_chord_p(i, y0, hs, tapes, work, memory, n, q)
             if cause != Failure.OK:
                 return cause, it
             q = memory.nodes[i]
@@ -464,7 +466,7 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
         for j in range(q):
             acc += TABLE_B[q, j] * work.X[j, k]
         work.dy[k] = acc
-    _remember(i, q, memory, work, n)
+    _remember_p(i, q, memory, work, n)
     return Failure.OK, it
 
 
@@ -537,7 +539,7 @@ def field_tape(alpha_tape: Tape, n: int) -> Tape:
 def spray_tapes(system) -> SprayTapes:
     """The tapes of the direct form for a system of the general family with the symmetric
     (full spray) realisation; InputError otherwise."""
-    if system.family != "general" or system.realisation != "symmetric":
+    if system.family != GENERAL or system.realisation != "symmetric":
         raise InputError(f"{system.name}: the direct Euler step is that of the Poisson-spray "
                          f"realisation (family general, realisation symmetric); this system is "
                          f"{system.family}, realisation {system.realisation}")

@@ -176,17 +176,17 @@ _OPTIONS = dict(_nrt=NJIT_NORC["_nrt"], error_model=NJIT_NORC["error_model"])
 def _begin(data, y0):
     impl = _by_class(data).begin
 
-    def call(data, y0):
+    def begin_with(data, y0):
         return impl(data, y0)
 
-    return call
+    return begin_with
 
 
 @overload(substep, inline="always", jit_options=_OPTIONS)
 def _substep(data, context, i, hs, solver):
     impl = _by_class(data).substep_for(data)
 
-    def call(data, context, i, hs, solver):
+    def substep_with(data, context, i, hs, solver):
         return impl(data, context, i, hs, solver)
 
-    return call
+    return substep_with

@@ -29,8 +29,8 @@ from .engine import (
     MEMO_HISTORY,
     MEMO_NEWTON_L,
     EngineData,
-    Method,
     StageSolve,
+    StepTableau,
     SystemTapes,
     interpreted,
     rkhp_step,
@@ -179,7 +179,7 @@ def explicit_substep(data, program, i, hs, solver):
     buf = data.buf
     n = buf.y.shape[0]
     _swap_history(buf, data.memory, i, n, True)
-    cause, it, sweeps = rkhp_step(Method(data.A, data.b, hs), program, data.space, buf, solver, None)
+    cause, it, sweeps = rkhp_step(StepTableau(data.A, data.b, hs), program, data.space, buf, solver, None)
     _swap_history(buf, data.memory, i, n, False)
     if cause == Failure.OK:
         for k in range(n):
@@ -193,7 +193,7 @@ def implicit_substep(data, program, i, hs, solver):
     buf = data.buf
     n = buf.y.shape[0]
     _swap_history(buf, data.memory, i, n, True)
-    cause, it, sweeps = rkhp_step(Method(data.A, data.b, hs), program, data.space, buf, solver, data.stage)
+    cause, it, sweeps = rkhp_step(StepTableau(data.A, data.b, hs), program, data.space, buf, solver, data.stage)
     _swap_history(buf, data.memory, i, n, False)
     if cause == Failure.OK:
         for k in range(n):

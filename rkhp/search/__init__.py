@@ -15,7 +15,7 @@ Modules, one idea each:
 
 from __future__ import annotations
 
-import importlib
+from .._lazy import lazy_getattr
 
 _LAZY = {"search": "rkhp.search.driver", "SearchOptions": "rkhp.search.driver",
          "SearchResult": "rkhp.search.driver", "prove_impossible": "rkhp.search.prove",
@@ -23,8 +23,4 @@ _LAZY = {"search": "rkhp.search.driver", "SearchOptions": "rkhp.search.driver",
 
 __all__ = sorted(_LAZY)
 
-
-def __getattr__(name: str):
-    if name in _LAZY:
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(f"module 'rkhp.search' has no attribute {name!r}")
+__getattr__ = lazy_getattr("rkhp.search", _LAZY)

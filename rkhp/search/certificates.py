@@ -117,19 +117,19 @@ def check_certificate(cert: Certificate) -> CertificateCheck:
     if cert.eliminated:
         ideal = ideal.reduced(cert.eliminated)
 
-    def fail(reason: str, terms: int = 0) -> CertificateCheck:
+    def refuse(reason: str, terms: int = 0) -> CertificateCheck:
         return CertificateCheck(False, reason, terms, time.perf_counter() - t0)
 
     if ideal.eliminated != cert.eliminated:
         return CertificateCheck(False, "these variables cannot be eliminated", 0,
                                 time.perf_counter() - t0)
     if ideal.variables != cert.variables or ideal.substitution != cert.substitution:
-        return fail("the variables are not those of the problem's condition ideal")
+        return refuse("the variables are not those of the problem's condition ideal")
     R = ideal.ring()
     expected = ideal.polynomials()
     stored = [parse_polynomial(t, R) for t in cert.generators]
     if stored != expected:
-        return fail("the generators are not the problem's order-condition polynomials")
+        return refuse("the generators are not the problem's order-condition polynomials")
     cofactors = [parse_polynomial(t, R) for t in cert.cofactors]
     terms = sum(len(g) for g in cofactors)
     total = R.zero
@@ -137,7 +137,7 @@ def check_certificate(cert: Certificate) -> CertificateCheck:
         if g:
             total += g * f
     if total != R.one:
-        return fail("sum g_i f_i is not 1", terms)
+        return refuse("sum g_i f_i is not 1", terms)
     return CertificateCheck(True, "", terms, time.perf_counter() - t0)
 
 

@@ -24,7 +24,7 @@ from .multistart import Problem, Restarts, run_restarts
 from .optimise import KnownMethod, known_methods, minimise_error, minimise_phase, polish_phase, refine_optimum
 from .polish import polish
 from .prove import Proof, choose_engine, prove_impossible
-from .recognise import closed_form, recognise_point
+from .recognise import find_closed_form, recognise_point
 from .system import MAX_SEARCH_ORDER, check_problem
 
 #: Digits of the polished solutions unless asked otherwise, and the accepted range.
@@ -264,13 +264,13 @@ def make_tableau(problem: Problem, entries, name: str):
 def verified(problem: Problem, x_float, polished, digits: int, closed: bool, name: str,
              restart: int | None) -> Found | None:
     """Verify a polished solution: exactly when its entries (or, with ``closed``, those of a
-    nearby member of its family, see :func:`~rkhp.search.recognise.closed_form`) have closed
+    nearby member of its family, see :func:`~rkhp.search.recognise.find_closed_form`) have closed
     forms that satisfy the conditions, else at D digits. None if the verification disagrees with
     the search."""
     from ..tableaux.verification import verify
     exact = recognise_point(problem.system(), polished)
     if exact is None and closed:
-        exact, _ = closed_form(problem.system(), x_float, digits)
+        exact, _ = find_closed_form(problem.system(), x_float, digits)
     if exact is not None:
         tab = make_tableau(problem, exact, name)
         ver = verify(tab, max_order=problem.order + 1, precision="exact")

@@ -197,7 +197,7 @@ def run_restarts(problem: Problem, restarts: int, seed: int = 0, executor=None,
     interrupted = timed_out = False
     first_at = None
 
-    def record(a: Attempt) -> None:
+    def keep_attempt(a: Attempt) -> None:
         nonlocal first_at
         done[a.index] = a
         if a.success and first_at is None:
@@ -237,7 +237,7 @@ def run_restarts(problem: Problem, restarts: int, seed: int = 0, executor=None,
             if result.timed_out:  # the limit passed inside it: stop, the unfinished restart does not count
                 timed_out = True
                 break
-            record(result)
+            keep_attempt(result)
     except KeyboardInterrupt:
         interrupted = True
         executor.cancel([t for t, _ in pending.values()])

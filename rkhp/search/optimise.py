@@ -102,13 +102,13 @@ def minimise_phase(system: ResidualSystem, starts, max_iterations: int = 500) ->
     top = system.order + 2 + 2 * max(1, system.n_unknowns - system.n_conditions)
     coefficients = _phase_equations(system, top)
 
-    def equations(x, zeros):
+    def phase_equations(x, zeros):
         return np.concatenate([system.residuals(np.asarray(x, dtype=float), jacobian=False)[0],
                                coefficients(np.asarray(x, dtype=float))[zeros]])
 
     def feasible(x, zeros):
         return (bool(np.all(np.isfinite(x))) and np.max(np.abs(x)) <= 20
-                and np.max(np.abs(equations(x, zeros))) <= PHASE_ZERO)
+                and np.max(np.abs(phase_equations(x, zeros))) <= PHASE_ZERO)
 
     best = None
     for x in (np.asarray(s, dtype=float) for s in starts):
@@ -116,12 +116,12 @@ def minimise_phase(system: ResidualSystem, starts, max_iterations: int = 500) ->
         while power <= top:
             if system.n_conditions + len(zeros) < system.n_unknowns:
                 with np.errstate(all="ignore"):
-                    res = least_squares(equations, x, args=(zeros + [power],), xtol=1e-15, ftol=1e-15,
+                    res = least_squares(phase_equations, x, args=(zeros + [power],), xtol=1e-15, ftol=1e-15,
                                         gtol=1e-15)
                 if feasible(res.x, zeros + [power]):
                     x, zeros, power = res.x, zeros + [power], power + 2
                     continue
-            constraints = [{"type": "eq", "fun": lambda x, z=tuple(zeros): equations(x, list(z))}]
+            constraints = [{"type": "eq", "fun": lambda x, z=tuple(zeros): phase_equations(x, list(z))}]
             with np.errstate(all="ignore"):
                 res = minimize(lambda x, k=power: coefficients(x)[k] ** 2 * 1e8, x, method="SLSQP",
                                constraints=constraints, options={"maxiter": max_iterations, "ftol": 1e-30})
@@ -135,7 +135,7 @@ def minimise_phase(system: ResidualSystem, starts, max_iterations: int = 500) ->
         if k is None:
             continue
         candidate = PhaseOptimum(tuple(float(v) for v in x), k - 1, float(c[k]), tuple(zeros),
-                                 float(np.max(np.abs(equations(x, zeros)))), len(starts))
+                                 float(np.max(np.abs(phase_equations(x, zeros)))), len(starts))
         if best is None or (candidate.phase_order, -abs(candidate.phase_constant)) > \
                 (best.phase_order, -abs(best.phase_constant)):
             best = candidate

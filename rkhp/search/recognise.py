@@ -133,7 +133,7 @@ def exact_residuals_vanish(system: ResidualSystem, exact: list) -> bool:
     return True
 
 
-def closed_form(system: ResidualSystem, x_float, digits: int = 30, tries: int = 4):
+def find_closed_form(system: ResidualSystem, x_float, digits: int = 30, tries: int = 4):
     """Try to reach an exactly verified closed form near a solution.
 
     Explores up to ``tries`` branches of :func:`fix_free_unknowns` (each avoiding the previous

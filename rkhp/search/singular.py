@@ -99,7 +99,7 @@ else {
 """
 
 
-def _run(path: str, variables, generators, body: str, deadline: float, on_wait=None,
+def _run_script(path: str, variables, generators, body: str, deadline: float, on_wait=None,
          characteristic: int = 0) -> SingularRun:
     """Run the script until it ends or ``deadline`` (time.monotonic()); poll ``on_wait()``."""
     version = singular_version(path)
@@ -143,9 +143,9 @@ def singular_basis(path, variables, generators, deadline, on_wait=None,
                    characteristic: int = 0) -> SingularRun:
     """Reduced Groebner basis over Q (or modulo the prime ``characteristic``): lines
     ``BASIS size dim vdim`` then ``POLY g`` each."""
-    return _run(path, variables, generators, _BASIS, deadline, on_wait, characteristic)
+    return _run_script(path, variables, generators, _BASIS, deadline, on_wait, characteristic)
 
 
 def singular_cofactors(path, variables, generators, deadline, on_wait=None) -> SingularRun:
     """Cofactors of 1 over Q: ``UNIT`` then one ``POLY g_i`` per generator, or ``PROPER``."""
-    return _run(path, variables, generators, _COFACTORS, deadline, on_wait)
+    return _run_script(path, variables, generators, _COFACTORS, deadline, on_wait)

@@ -79,17 +79,17 @@ class ResidualSystem:
         error_trees = tuple(condition_trees(order + 1, cls)) if with_error else ()
         needed: set[Tree] = set()
 
-        def add(t: Tree) -> None:
+        def add_with_subtrees(t: Tree) -> None:
             if t not in needed:
                 needed.add(t)
                 for child in t.children:
-                    add(child)
+                    add_with_subtrees(child)
 
         for cond in conds:
             for t in cond.trees:
-                add(t)
+                add_with_subtrees(t)
         for t in error_trees:
-            add(t)
+            add_with_subtrees(t)
         trees = tuple(sorted(needed, key=lambda t: (t.order, t.key)))
         index = {t: k for k, t in enumerate(trees)}
         children = tuple(tuple(index[c] for c in t.children) for t in trees)

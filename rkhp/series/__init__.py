@@ -1,3 +1,3 @@
 """Series of the RKHP step evaluated on Poisson systems: elementary differentials
 (`rkhp.series.differentials`), modified Hamiltonians (`rkhp.series.modified`) and compositions
-of generating functions (`rkhp.series.composition`); docs/theory.md §8, §11."""
+of generating functions (`rkhp.series.composed_steps`); docs/theory.md §8, §11."""

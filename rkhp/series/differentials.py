@@ -35,7 +35,7 @@ import numpy as np
 
 from ..base.modular import to_residue
 from ..systems.core import realisation as realisation_kind
-from ..systems.families import SO3, LieAlgebra
+from ..systems.families import CONSTANT, LIE_POISSON, LOG_CANONICAL, SO3, LieAlgebra
 from ..systems.families import family as poisson_family
 from ..trees.rooted import Tree
 
@@ -181,7 +181,7 @@ def elementary_differentials(trees, max_order: int, ring: JetRing, partials, tra
             for pos in range(k - 1, -1, -1):
                 u = vectors(t.children[pos], m)
                 table = {
-                    J: _sum(ring, [ring.mul(u[i], table[_sorted_insert(J, i)], m) for i in range(nvars)])
+                    J: _jet_sum(ring, [ring.mul(u[i], table[_sorted_insert(J, i)], m) for i in range(nvars)])
                     for J in _multisets(nvars, pos)
                 }
             value = table[()]
@@ -228,7 +228,7 @@ def _index_tuple(exponent) -> tuple[int, ...]:
     return tuple(v for v in range(len(exponent)) for _ in range(int(exponent[v])))
 
 
-def _sum(ring: JetRing, terms: list[np.ndarray]) -> np.ndarray:
+def _jet_sum(ring: JetRing, terms: list[np.ndarray]) -> np.ndarray:
     total = terms[0].copy()
     for x in terms[1:]:
         total += x
@@ -284,13 +284,13 @@ def constant_matrix_jets(trees, max_order: int, K: np.ndarray, D: np.ndarray, p:
     D = ring.reduce(D)
     dK = _derivatives(ring, ring.reduce(K))
 
-    def partials(J, m):
+    def constant_partials(J, m):
         return dK(J)[: ring.size(m)]
 
     def transform(grad, m):
-        return [_sum(ring, [ring.reduce(D[i, j][None, :] * grad[j]) for j in range(dim)]) for i in range(dim)]
+        return [_jet_sum(ring, [ring.reduce(D[i, j][None, :] * grad[j]) for j in range(dim)]) for i in range(dim)]
 
-    return elementary_differentials(trees, max_order, ring, partials, transform, dim, jets)
+    return elementary_differentials(trees, max_order, ring, constant_partials, transform, dim, jets)
 
 
 class PolynomialShift:
@@ -332,7 +332,7 @@ class PolynomialShift:
         dK = _derivatives(ring, K)
         pcache: dict[tuple[int, ...], np.ndarray] = {(): K}
 
-        def partials(J, m):
+        def tree_partials(J, m):
             if J not in pcache:
                 pexp, scale = _exponent(J, dim)
                 size = ring.size(basis.degree - len(J))
@@ -343,7 +343,7 @@ class PolynomialShift:
                 pcache[J] = ring.reduce(total * scale)
             return pcache[J][: ring.size(m)]
 
-        return elementary_differentials(trees, max_order, ring, partials, lambda grad, m: grad, dim, jets)
+        return elementary_differentials(trees, max_order, ring, tree_partials, lambda grad, m: grad, dim, jets)
 
 
 @dataclass(eq=False)
@@ -438,14 +438,14 @@ def _composite_partials(alpha_increment, H, dim: int, ring2: JetRing):
     xi_basis = monomial_basis(dim, D)
 
     @cache
-    def rows(J, m):
+    def composite_rows(J, m):
         pexp, scale = _exponent(J, dim)
         ids = [index2[tuple(int(x) for x in xi_basis.exponents[i]) + pexp]
                for i in range(xi_basis.sizes[m])]
         return np.array(ids, dtype=np.int64), scale
 
     def partials(J, m):
-        ids, scale = rows(J, m)
+        ids, scale = composite_rows(J, m)
         return ring2.reduce(f[ids] * scale)
 
     return partials
@@ -549,11 +549,11 @@ EXACT_FUNCTIONS = SimpleNamespace(exp=_exact_exp, phimv=_exact_phimv, crb=_no_cl
 def _random_structure(family: str, dim: int, batch: int, rng: np.random.Generator, p: int):
     """A random instance of a family's structure mod p: so(3)* for lie-poisson (dim 3), random
     antisymmetric lambda or pi (one per instance) for log-canonical and constant."""
-    if family == "lie-poisson":
+    if family == LIE_POISSON:
         if dim != 3:
             raise ValueError("the Lie–Poisson instances here are so(3)*, dimension 3")
         return LieAlgebra(SO3)
-    if family not in ("log-canonical", "constant"):
+    if family not in (LOG_CANONICAL, CONSTANT):
         raise ValueError(f"no random instances of family {family!r}")
     upper = rng.integers(0, p, size=(dim, dim, batch), dtype=np.int64)
     matrix = np.empty((dim, dim), dtype=object)

@@ -120,12 +120,12 @@ def modified_hamiltonian(character: Mapping, order: int, cls: str = "general", s
     :func:`method_character`, or any character; Fractions, integers or sympy algebraic numbers).
     Raises NotATreeSeries when a term of H~ is not a combination of the F(t) of the class.
     """
-    return _series("modified", character, order, cls, seed)
+    return _hamiltonian_series("modified", character, order, cls, seed)
 
 
 def modifying_hamiltonian(character: Mapping, order: int, cls: str = "general", seed: int = 0) -> HamiltonianSeries:
     """H^ whose RKHP step (character a) is the exact flow of H: S_a[H^] = S_e[H]."""
-    return _series("modifying", character, order, cls, seed)
+    return _hamiltonian_series("modifying", character, order, cls, seed)
 
 
 def method_character(method, order: int) -> dict[Tree, object]:
@@ -175,7 +175,7 @@ def canonical_coefficients(coefficients: Mapping, n: int, cls: str) -> dict[Tree
                 for t, r in zip(trees, row):
                     if r:
                         c[t] = c[t] - factor * r
-    return {t: v for t, v in c.items() if not _is_zero(v)}
+    return {t: v for t, v in c.items() if not _is_exact_zero(v)}
 
 
 # ----------------------------------------------------------------------------- the solve
@@ -193,7 +193,7 @@ class _Problem:
     seed: int
 
 
-def _series(kind: str, character: Mapping, order: int, cls: str, seed: int) -> HamiltonianSeries:
+def _hamiltonian_series(kind: str, character: Mapping, order: int, cls: str, seed: int) -> HamiltonianSeries:
     check_seed(seed)
     check_class(cls)
     check_order(order, MAX_ORDER, what="order of the modified Hamiltonian")
@@ -201,7 +201,7 @@ def _series(kind: str, character: Mapping, order: int, cls: str, seed: int) -> H
     method = read_character(character, trees)
     exact = {t: t.e for t in trees}
     inner, target = (exact, method) if kind == "modified" else (method, exact)
-    if _is_zero(inner[LEAF]):
+    if _is_exact_zero(inner[LEAF]):
         raise InputError("a(b) = 0: the method is not consistent, its steps are no near-identity flows")
     embeddings = FieldEmbeddings(field_of(method.values()))
     if embeddings.degree > MAX_FIELD_DEGREE:
@@ -209,17 +209,17 @@ def _series(kind: str, character: Mapping, order: int, cls: str, seed: int) -> H
                          f"once per embedding and handles degree <= {MAX_FIELD_DEGREE}")
     basis = tuple(canonical_basis(n, cls) for n in range(1, order + 1))
     problem = _Problem(kind, cls, order, inner, target, embeddings, basis, seed)
-    coordinates, checks = _solve(problem)
+    coordinates, checks = _series_coordinates(problem)
     coefficients = {}
     for level in basis:
         for t in level:
             value = embeddings.element(coordinates[t])
-            if not _is_zero(value):
+            if not _is_exact_zero(value):
                 coefficients[t] = value
     return HamiltonianSeries(kind, cls, order, basis, coefficients, checks)
 
 
-def _solve(problem: _Problem):
+def _series_coordinates(problem: _Problem):
     """Coordinates of every basis coefficient, over primes until a further prime confirms."""
     keys = [t for level in problem.basis for t in level]
     try:
@@ -409,7 +409,7 @@ def field_of(values):
     return number_field(values)
 
 
-def _is_zero(x) -> bool:
+def _is_exact_zero(x) -> bool:
     if isinstance(x, (int, Fraction)):
         return x == 0
     return bool(x.is_zero)

@@ -58,6 +58,7 @@ def derive_relations(max_order: int, seed: int = 0, dim: int = 6, extra: int = 1
     import numpy as np
 
     from ..base.modular import PRIMES
+    from ..systems.families import LIE_POISSON
 
     check_order(max_order, MAX_REGENERATE_ORDER, what="relation order")
     if dim < 2:
@@ -77,7 +78,7 @@ def derive_relations(max_order: int, seed: int = 0, dim: int = 6, extra: int = 1
     tell(f"constant pi, dimension {dim}, {batch} instances modulo {', '.join(map(str, PRIMES[:first]))}"
          + (f"; Lie–Poisson so(3)*, {batch} instances modulo {PRIMES[0]}" if cross_check else ""))
     tasks = [executor.submit(_prime_null_spaces, *prime_task(k)) for k in range(first)]
-    lie = (executor.submit(_general_null_spaces, all_trees, max_order, "lie-poisson", batch, streams[-1], PRIMES[0])
+    lie = (executor.submit(_general_null_spaces, all_trees, max_order, LIE_POISSON, batch, streams[-1], PRIMES[0])
            if cross_check else None)
     try:
         spaces = [t.result() for t in tasks]

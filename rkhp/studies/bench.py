@@ -207,23 +207,23 @@ class Setting(NamedTuple):
 
 
 def _method_call(method: Method, system, ref: Reference, n: int, t_final: float) -> Callable[[], Outcome]:
-    def call() -> Outcome:
+    def call_method() -> Outcome:
         traj = method.integrate(system, t_final / n, n)
         measured = float(np.linalg.norm(traj.final_state - ref.state)) if traj.ok else None
         return Outcome(measured, None, traj.status, float(traj.compile_seconds))
 
-    return call
+    return call_method
 
 
 def _peer_call(prepared, system, ref: Reference, rtol: float) -> Callable[[], Outcome]:
     x0 = np.asarray(system.x0, dtype=float)
 
-    def call() -> Outcome:
+    def call_peer() -> Outcome:
         sol = prepared.solve(x0, rtol)
         measured = float(np.linalg.norm(sol.state - ref.state)) if sol.ok else None
         return Outcome(measured, sol.evaluations, sol.message, prepared.compile_seconds)
 
-    return call
+    return call_peer
 
 
 def _settings(curves, system, ref: Reference, steps, tolerances, t_final: float) -> list[Setting]:
@@ -288,15 +288,15 @@ def _interleaved_curves(curves, system, ref: Reference, steps, tolerances, t_fin
     built = []
     for k, m in enumerate(curves):
         points = tuple(
-            _point(o.measured, ref.floor, steps=s.steps, tolerance=s.tolerance, seconds=min(t), cpu_seconds=min(c),
-                   evaluations=o.evaluations, status=o.status)
+            _bench_point(o.measured, ref.floor, steps=s.steps, tolerance=s.tolerance, seconds=min(t),
+                         cpu_seconds=min(c), evaluations=o.evaluations, status=o.status)
             for s, t, c, o in zip(settings, times, cpu, outcomes, strict=True) if s.curve == k and t)
         if points or not interrupted:
             built.append(BenchCurve(m.name, m.kind, compile_seconds[k], 1, points))
     return built, interrupted
 
 
-def _point(measured: float | None, ref_floor: float, **fields) -> BenchPoint:
+def _bench_point(measured: float | None, ref_floor: float, **fields) -> BenchPoint:
     error = measured if measured is not None and measured > ref_floor else None
     return BenchPoint(error=error, measured_error=measured, **fields)
 
@@ -368,18 +368,20 @@ def _ensemble_errors(ensemble_states, refs) -> float | None:
 def _ensemble_method_curve(method: Method, system, refs, floor, starts, steps, t_final, repeats,
                            executor=None) -> BenchCurve:
     if method.kind == "rkhp":
-        def run(n):
+        def run_all_starts(n):
             return np.asarray(_final_states(integrate_ensemble(system, method.tableau, t_final / n, n, starts,
                                                                executor=executor)))
 
+        run = run_all_starts
         count = len(starts)
     else:
         count = min(len(starts), ENSEMBLE_TIMED)
 
-        def run(n):
+        def run_each(n):
             return np.array([method.integrate(system, t_final / n, n, x0=x).raise_if_failed().final_state
                              for x in starts[:count]])
 
+        run = run_each
     warm_start = time.perf_counter()
     run(steps[0])
     warm = time.perf_counter() - warm_start
@@ -389,7 +391,7 @@ def _ensemble_method_curve(method: Method, system, refs, floor, starts, steps, t
         if n == steps[0]:
             fastest_first = seconds
         measured = _ensemble_errors(finals, refs)
-        points.append(_point(measured, floor, steps=n, tolerance=None, seconds=seconds / count,
+        points.append(_bench_point(measured, floor, steps=n, tolerance=None, seconds=seconds / count,
                              evaluations=None, status="ok" if measured is not None else "non-finite state"))
     compile_seconds = max(0.0, warm - fastest_first) if method.kind == "rkhp" else 0.0
     return BenchCurve(method.name, method.kind, compile_seconds, count, tuple(points))
@@ -411,15 +413,15 @@ def _ensemble_peer_curve(method, system, refs, floor, starts, tolerances, t_fina
     prepared = prepare(peer_of(method), system, t_final, starts[0])
     points = []
     for rtol in tolerances:
-        def run(rtol=rtol):
+        def run_peer(rtol=rtol):
             sols = [prepared.solve(x, rtol) for x in starts[:count]]
             counted = all(s.evaluations is not None for s in sols)
             return (np.array([s.state if s.ok else np.full(len(x), np.nan) for s, x in zip(sols, starts)]),
                     sum(s.evaluations for s in sols) // count if counted else None)
 
-        seconds, (finals, evaluations) = _least_seconds(run, repeats)
+        seconds, (finals, evaluations) = _least_seconds(run_peer, repeats)
         measured = _ensemble_errors(finals, refs)
-        points.append(_point(measured, floor, steps=None, tolerance=rtol, seconds=seconds / count,
+        points.append(_bench_point(measured, floor, steps=None, tolerance=rtol, seconds=seconds / count,
                              evaluations=evaluations, status="ok" if measured is not None else "failed"))
     return BenchCurve(method.name, method.kind, prepared.compile_seconds, count, tuple(points))
 

@@ -48,7 +48,7 @@ class Growth:
                 "status": self.status, "invariant_errors_max": list(self.invariant_errors)}
 
 
-def sample_times(t_final: float, h: float) -> np.ndarray:
+def log_sample_times(t_final: float, h: float) -> np.ndarray:
     """SAMPLES times log-spaced from 10 h to t_final."""
     return np.geomspace(10 * h, t_final, SAMPLES)
 
@@ -74,7 +74,7 @@ def energy_growth(system, method, h: float, steps: int, tolerance: float = 1e-10
     to t = h * steps at rtol `tolerance`) and fit the growth of its energy error."""
     m: Method = resolve_method(method)
     t_final = h * steps
-    times = sample_times(t_final, h)
+    times = log_sample_times(t_final, h)
     if m.kind == "scipy":
         sol = solve_peer(system, m.solver, np.asarray(system.x0, dtype=float), t_final, tolerance)
         if not sol.success:

@@ -110,7 +110,7 @@ class Prepared(NamedTuple):
 _CODES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def field_code(system, form: str):
+def cached_field_code(system, form: str):
     """The system's field in ``form`` (`rkhp.systems.field_code`), generated once per system."""
     codes = _CODES.setdefault(system, {})
     if form not in codes:
@@ -120,7 +120,7 @@ def field_code(system, form: str):
 
 def plain_field(system):
     """``f(t, x)``: the system's field written with plain arithmetic (form ``numpy``)."""
-    return compiled(field_code(system, "numpy"))
+    return compiled(cached_field_code(system, "numpy"))
 
 
 def _scipy(peer: Peer, system, t_final: float, samples: int):
@@ -129,32 +129,32 @@ def _scipy(peer: Peer, system, t_final: float, samples: int):
     f = plain_field(system)
     times = sample_times(t_final, samples) if samples > 1 else None
 
-    def solve(x0, rtol):
+    def solve_scipy(x0, rtol):
         sol = solve_ivp(f, (0.0, t_final), x0, method=peer.solver, rtol=rtol, atol=ATOL_RATIO * rtol, t_eval=times)
         end = sol.y[:, -1]
         ok = bool(sol.success and np.all(np.isfinite(end)))
         return Solution(end, ok, int(sol.nfev), "ok" if ok else f"failed: {sol.message}", sol.y.T)
 
-    return solve
+    return solve_scipy
 
 
 def _numbalsoda(peer: Peer, system, t_final: float, samples: int):
     import numba
     from numbalsoda import dop853, lsoda_sig
 
-    rhs = numba.cfunc(lsoda_sig)(compiled(field_code(system, "cfunc")))
+    rhs = numba.cfunc(lsoda_sig)(compiled(cached_field_code(system, "cfunc")))
     address = rhs.address
     times = sample_times(t_final, samples)
 
-    def solve(x0, rtol):
+    def solve_numbalsoda(x0, rtol):
         usol, ok = dop853(address, np.asarray(x0, dtype=np.float64), times, rtol=rtol, atol=ATOL_RATIO * rtol,
                           mxstep=MAX_STEPS)
         end = usol[-1].copy()
         ok = bool(ok and np.all(np.isfinite(end)))
         return Solution(end, ok, None, "ok" if ok else "failed: dop853 stopped before T", usol)
 
-    solve.keep = rhs  # the cfunc lives as long as the solve that calls it at its address
-    return solve
+    solve_numbalsoda.keep = rhs  # the cfunc lives as long as the solve that calls it at its address
+    return solve_numbalsoda
 
 
 def enable_float64() -> None:
@@ -170,24 +170,24 @@ def _diffrax(peer: Peer, system, t_final: float, samples: int):
     import jax
     import jax.numpy as jnp
 
-    term = diffrax.ODETerm(compiled(field_code(system, "jax")))
+    term = diffrax.ODETerm(compiled(cached_field_code(system, "jax")))
     solver = getattr(diffrax, peer.solver)()
     saveat = diffrax.SaveAt(ts=sample_times(t_final, samples)) if samples > 1 else diffrax.SaveAt(t1=True)
 
     @jax.jit
-    def run(y0, rtol):
+    def diffeqsolve_jit(y0, rtol):
         sol = diffrax.diffeqsolve(term, solver, 0.0, float(t_final), None, y0,
                                   stepsize_controller=diffrax.PIDController(rtol=rtol, atol=ATOL_RATIO * rtol),
                                   saveat=saveat, max_steps=MAX_STEPS, throw=False)
         return sol.ys, sol.result == diffrax.RESULTS.successful
 
-    def solve(x0, rtol):
-        states, ok = jax.block_until_ready(run(jnp.asarray(x0, dtype=jnp.float64), jnp.float64(rtol)))
+    def solve_diffrax(x0, rtol):
+        states, ok = jax.block_until_ready(diffeqsolve_jit(jnp.asarray(x0, dtype=jnp.float64), jnp.float64(rtol)))
         states = np.asarray(states)
         ok = bool(ok) and bool(np.all(np.isfinite(states[-1])))
         return Solution(states[-1], ok, None, "ok" if ok else "failed: diffrax stopped before T", states)
 
-    return solve
+    return solve_diffrax
 
 
 _BUILDERS = {"scipy": _scipy, "numbalsoda": _numbalsoda, "diffrax": _diffrax}

@@ -31,6 +31,7 @@ from ..integrators.failure import Failure
 from ..integrators.methods import condition_class, require_steps, resolve_method, resolve_methods, resolve_system
 from ..integrators.modified_energy import ModifiedEnergy, method_series
 from ..series.modified import MAX_ORDER, method_character
+from ..systems.families import LOG_CANONICAL
 from .converge import check_t_final, study_methods
 from .fit import fit_order
 from .invariants import declared_errors, invariant_deviations, max_deviations, window_maxima
@@ -279,7 +280,7 @@ def long_run(methods, system, h: float, steps: int = LONG_STEPS, windows: int = 
 
 
 @dataclass(frozen=True)
-class SingularRun:
+class NearSingularRun:
     """Part (c): one method from a start with the first species at ``first_species``."""
 
     method: str
@@ -304,7 +305,7 @@ class SingularResult:
     """Part (c): every run, or why the part does not apply."""
 
     applicable: bool
-    runs: tuple[SingularRun, ...]
+    runs: tuple[NearSingularRun, ...]
     reason: str = ""
 
     def verdict(self) -> str:
@@ -327,22 +328,22 @@ def near_singular(methods, system, t_final: float, steps: int = SINGULAR_STEPS,
                   values=SINGULAR_VALUES, executor=None) -> SingularResult:
     """Part (c): starts with the first species at 1e-3 and 1e-6 (log-canonical systems only), one
     task per start and method on ``executor`` (rkhp.base.executors)."""
-    if system.family != "log-canonical":
+    if system.family != LOG_CANONICAL:
         return SingularResult(False, (), f"near-singular starts are defined for log-canonical systems, "
                                          f"{system.name} is {system.family}")
-    runs = run_all(executor or InProcess(), _singular_run,
+    runs = run_all(executor or InProcess(), _near_singular_run,
                    [(m, system, t_final, steps, value) for value in values for m in methods])
     return SingularResult(True, tuple(runs))
 
 
-def _singular_run(method, system, t_final: float, steps: int, value: float) -> SingularRun:
+def _near_singular_run(method, system, t_final: float, steps: int, value: float) -> NearSingularRun:
     x0 = np.array(system.x0, dtype=float)
     x0[0] = value
     traj = method.integrate(system, t_final / steps, steps, x0=x0)
     if not traj.ok:
-        return SingularRun(method.name, value, traj.status, None, None, traj.cause)
+        return NearSingularRun(method.name, value, traj.status, None, None, traj.cause)
     casimir, _ = max_deviations(system, traj.states)
-    return SingularRun(method.name, value, "ok", float(traj.states.min()), casimir)
+    return NearSingularRun(method.name, value, "ok", float(traj.states.min()), casimir)
 
 
 def _floor_row(fit) -> int | None:
@@ -426,11 +427,11 @@ class StressStudy:
 
     def verdicts(self) -> dict[str, str]:
         """Each part's verdict ("not run (interrupted)" for a part an interrupt left out)."""
-        def of(part):
+        def verdict_of(part):
             return NOT_RUN if part is None else part.verdict()
 
         return {"a": " | ".join(s.verdict() for s in self.sweep) if self.sweep or not self.interrupted else NOT_RUN,
-                "b": of(self.long_run), "c": of(self.near_singular), "d": of(self.round_off)}
+                "b": verdict_of(self.long_run), "c": verdict_of(self.near_singular), "d": verdict_of(self.round_off)}
 
     def to_json(self) -> dict:
         def of(part):

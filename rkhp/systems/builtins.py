@@ -13,7 +13,7 @@ import numpy as np
 from ..base.errors import InputError
 from ..taylor import tape as tp
 from .core import PoissonSystem
-from .families import SO3, LieAlgebra, family_system
+from .families import CONSTANT, LIE_POISSON, LOG_CANONICAL, SO3, LieAlgebra, family_system
 from .problems import PROBLEMS, build, problem_data
 from .spec import load_spec
 from .structure import symbols_of
@@ -56,7 +56,7 @@ def rigid_body_exact(inertia, x0) -> Callable | None:
         B = (a1 - a3) * A * C / lam
         m = (a2 - a1) * A * A / ((a3 - a2) * C * C)
 
-    def at(t: float) -> list[float]:
+    def state_at(t: float) -> list[float]:
         with mpmath.workdps(EXACT_DIGITS):
             tau = lam * mpmath.mpf(t)
             return [float(A * mpmath.ellipfun("cn", tau, m=m)), float(B * mpmath.ellipfun("sn", tau, m=m)),
@@ -64,7 +64,7 @@ def rigid_body_exact(inertia, x0) -> Callable | None:
 
     def solution(t):
         times = np.asarray(t, dtype=np.float64)
-        values = np.array([at(float(v)) for v in times.ravel()])
+        values = np.array([state_at(float(v)) for v in times.ravel()])
         return values.reshape(*times.shape, 3)
 
     return solution
@@ -83,7 +83,7 @@ def rigid_body(realisation: str = "symmetric") -> PoissonSystem:
     H = sum x_i^2 / (2 I_i), I = (2, 1, 2/3) (HLW, docs/theory.md §6)."""
     inertia = RIGID_BODY_I
     return family_system(
-        "lie-poisson", LieAlgebra(SO3, closed_form=True),
+        LIE_POISSON, LieAlgebra(SO3, closed_form=True),
         lambda x: sum((0.5 / inertia[i]) * (x[i] * x[i]) for i in range(3)),
         name="rigid-body", x0=RIGID_BODY_X0, t_final=10.0, realisation=realisation,
         casimirs=(lambda x: 0.5 * float(np.dot(x, x)),), casimir_names=("|x|^2/2",),
@@ -96,7 +96,7 @@ def rigid_body(realisation: str = "symmetric") -> PoissonSystem:
 def lotka_volterra(realisation: str = "symmetric") -> PoissonSystem:
     """3-species Lotka–Volterra, log-canonical, H = sum (x_i - log x_i) (docs/theory.md §6)."""
     return family_system(
-        "log-canonical", np.array(LV_LAMBDA), lambda x: sum(x[i] - tp.log(x[i]) for i in range(3)),
+        LOG_CANONICAL, np.array(LV_LAMBDA), lambda x: sum(x[i] - tp.log(x[i]) for i in range(3)),
         name="lotka-volterra", x0=LV_X0, t_final=10.0, realisation=realisation,
         casimirs=(lambda x: float(np.log(x[0]) - 2.0 * np.log(x[1]) + np.log(x[2])),),
         casimir_names=("log x1 - 2 log x2 + log x3",),
@@ -107,7 +107,7 @@ def lotka_volterra(realisation: str = "symmetric") -> PoissonSystem:
 
 def pendulum(realisation: str = "symmetric") -> PoissonSystem:
     """Mathematical pendulum, canonical pi = [[0, 1], [-1, 0]], H = p^2/2 - cos q, x = (q, p)."""
-    return family_system("constant", np.array(((0.0, 1.0), (-1.0, 0.0))),
+    return family_system(CONSTANT, np.array(((0.0, 1.0), (-1.0, 0.0))),
                          lambda x: 0.5 * (x[1] * x[1]) - tp.cos(x[0]),
                          name="pendulum", x0=PENDULUM_X0, t_final=10.0, realisation=realisation,
                          description="pendulum, canonical (constant pi), H = p^2/2 - cos q",

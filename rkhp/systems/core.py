@@ -282,9 +282,9 @@ def build_system(*, name: str, family: str, dim: int, poisson: Callable, hamilto
 
     x0 = np.asarray(x0, dtype=np.float64)
     h_tape, f_tape, alpha_tape, beta_tape = tp.common_class(
-        (tp.record(dim, lambda x, p: [hamiltonian(x)]),
-         tp.record(dim, lambda x, p: [hamiltonian(alpha(x, p))]),
-         tp.record(dim, alpha), tp.record(dim, beta)))
+        (tp.record_tape(dim, lambda x, p: [hamiltonian(x)]),
+         tp.record_tape(dim, lambda x, p: [hamiltonian(alpha(x, p))]),
+         tp.record_tape(dim, alpha), tp.record_tape(dim, beta)))
     return PoissonSystem(
         name=name, dim=dim, family=family, realisation=kind.name, degenerate=kind.degenerate,
         poisson=poisson, x0=x0, t_final=float(t_final),

@@ -200,7 +200,7 @@ def _read_structure_constants(value, n: int, where: str) -> LieAlgebra:
         i, j, k = entry[:3]
         if not all(type(q) is int and 1 <= q <= n for q in (i, j, k)):
             raise InputError(f"{where}: indices in {short(entry)} must be integers from 1 to {n}")
-        v = documents.number(entry[3], f"{where}: value in {short(entry)}")
+        v = documents.document_number(entry[3], f"{where}: value in {short(entry)}")
         if i == j:
             raise InputError(f"{where}: {{x_{i}, x_{i}}} = 0 by antisymmetry, got {entry!r}")
         for key, val in (((i, j, k), v), ((j, i, k), -v)):
@@ -226,10 +226,10 @@ def _check_lie(structure: LieAlgebra) -> int:
 def _lie_poisson(structure: LieAlgebra):
     C = np.asarray(structure.constants, dtype=np.float64)
 
-    def poisson(x):
+    def lie_poisson_at(x):
         return np.einsum("ijk,k->ij", C, np.asarray(x, dtype=np.float64))
 
-    return poisson
+    return lie_poisson_at
 
 
 def _linear(coefficients, y):
@@ -251,7 +251,7 @@ def _lie_program(structure: LieAlgebra):
     return lambda y: [[_linear(C[i, j], y) for j in range(n)] for i in range(n)]
 
 
-def _cross(a, b):
+def _cross_product(a, b):
     return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 
 
@@ -267,8 +267,8 @@ def _lie_base(structure: LieAlgebra, sign: float):
 
     def so3_closed(x, p, f):
         # alpha = x + (p x x)/2 + c(|p|^2) p x (p x x) (beta: sign -1; docs/theory.md §4)
-        px = _cross(p, x)
-        ppx = _cross(p, px)
+        px = _cross_product(p, x)
+        ppx = _cross_product(p, px)
         c = f.crb(p)
         return [x[i] + (0.5 * sign) * px[i] + c * ppx[i] for i in range(3)]
 
@@ -303,14 +303,14 @@ def _log_canonical_base(lam, sign: float):
     L = np.asarray(lam)
     n = L.shape[0]
 
-    def base(x, p, f):
+    def log_canonical_base(x, p, f):
         out = []
         for i in range(n):
             terms = [(-0.5 * sign * L[i, j]) * (x[j] * p[j]) for j in range(n) if L[i, j] != 0]
             out.append(x[i] * f.exp(sum(terms[1:], terms[0])) if terms else x[i])
         return out
 
-    return base
+    return log_canonical_base
 
 
 def _log_canonical_casimirs(lam):
@@ -333,11 +333,11 @@ def _log_canonical_program(lam):
 def _log_canonical_poisson(lam):
     L = np.asarray(lam, dtype=np.float64)
 
-    def poisson(x):
+    def log_canonical_at(x):
         x = np.asarray(x, dtype=np.float64)
         return L * np.outer(x, x)
 
-    return poisson
+    return log_canonical_at
 
 
 register_family(PoissonFamily(
@@ -355,11 +355,11 @@ def _constant_base(pi, sign: float):
     P = np.asarray(pi)
     n = P.shape[0]
 
-    def base(x, p, f):
+    def constant_base(x, p, f):
         return [x[i] + sum((-0.5 * sign * P[i, j]) * p[j] for j in range(n) if P[i, j] != 0)
                 for i in range(n)]
 
-    return base
+    return constant_base
 
 
 def _constant_casimirs(pi):

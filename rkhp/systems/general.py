@@ -3,7 +3,7 @@
 The structure (:class:`PoissonMatrix`) is checked on construction (`rkhp.systems.structure`:
 antisymmetry, the Jacobi identity, the declared Casimirs, finiteness at x0). Its birealisation is
 the Poisson-spray realisation (Weinstein; Crainic–Mărcuț), symmetric: evaluated to round-off in
-the engine's Taylor arithmetic by the composite operation `rkhp.taylor.tape.spray` (Gauss
+the engine's Taylor arithmetic by the composite operation `rkhp.taylor.tape.record_spray` (Gauss
 collocation with the average constraint, `rkhp.taylor.composites.spray`; docs/theory.md §9.3), or
 its series truncated at degree K in p (``truncated:K``, `rkhp.systems.spray`).
 
@@ -24,7 +24,7 @@ from ..base.expressions import parse_expression, variable_names
 from .core import PoissonSystem
 from .families import GENERAL, PoissonFamily, family_system, register_family, short
 from .program import matrix_program, numeric_function
-from .structure import StructureCheck, check_finite_at, check_structure, symbols_of
+from .structure import StructureCheck, check_matrix_finite_at, check_structure, symbols_of
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,11 +90,11 @@ def numeric_poisson(structure: PoissonMatrix) -> Callable:
     n = structure.dim
     f = sympy.lambdify(symbols_of(n), [e for row in structure.entries for e in row], "numpy")
 
-    def poisson(x):
+    def poisson_at(x):
         values = f(*np.asarray(x, dtype=np.float64))
         return np.array([float(v) for v in values]).reshape(n, n)
 
-    return poisson
+    return poisson_at
 
 
 def poisson_program(structure: PoissonMatrix):
@@ -103,16 +103,16 @@ def poisson_program(structure: PoissonMatrix):
 
 
 def spray_base(structure: PoissonMatrix, sign: float):
-    """The symmetric base: alpha (sign +1) or beta (sign -1) of the Poisson-spray realisation,
-    one composite operation f.spray (`rkhp.taylor.tape.spray`) giving both."""
+    """The symmetric spray_base_point: alpha (sign +1) or beta (sign -1) of the Poisson-spray realisation,
+    one composite operation f.spray (`rkhp.taylor.tape.record_spray`) giving both."""
     program = poisson_program(structure)
     n = structure.dim
 
-    def base(x, p, f):
+    def spray_base_point(x, p, f):
         pair = f.spray(program, x, p)
         return pair[:n] if sign > 0 else pair[n:]
 
-    return base
+    return spray_base_point
 
 
 register_family(PoissonFamily(
@@ -136,7 +136,7 @@ def general(structure: PoissonMatrix, hamiltonian: Callable, *, name: str, x0, t
     """
     x0 = np.asarray(x0, dtype=np.float64)
     rows = structure.entries
-    check_finite_at(rows, x0, where)
+    check_matrix_finite_at(rows, x0, where)
     if checked is None:
         checked = check_structure(rows, casimirs=casimirs, x0=x0, seed=seed, where=where)
     symbols = symbols_of(structure.dim)

@@ -39,7 +39,7 @@ from ..base.bounds import MAX_DIMENSION
 from ..base.errors import InputError
 from ..base.expressions import parse_expression, variable_names
 from .core import PoissonSystem
-from .families import LieAlgebra, family_system
+from .families import GENERAL, LIE_POISSON, LOG_CANONICAL, LieAlgebra, family_system
 from .general import PoissonMatrix
 from .general import general as general_family
 from .program import numeric_function, to_program
@@ -61,7 +61,7 @@ class ProblemData:
     x0: tuple
     t_final: float
     description: str
-    family: str = "general"
+    family: str = GENERAL
     constants: np.ndarray | None = None
 
     @property
@@ -69,16 +69,16 @@ class ProblemData:
         return len(self.x0)
 
 
-def _read(texts, n: int, where: str):
+def _read_expressions(texts, n: int, where: str):
     return tuple(parse_expression(t, variable_names(n), where=where) for t in texts)
 
 
 def expressions(data: ProblemData):
     """(pi, H, Casimirs) of a problem as sympy expressions in the real symbols x1..xn."""
     n = data.dim
-    entries = tuple(_read(row, n, f"{data.name}: poisson") for row in data.poisson)
-    (H,) = _read([data.hamiltonian], n, f"{data.name}: hamiltonian")
-    return entries, H, _read(data.casimirs, n, f"{data.name}: casimirs")
+    entries = tuple(_read_expressions(row, n, f"{data.name}: poisson") for row in data.poisson)
+    (H,) = _read_expressions([data.hamiltonian], n, f"{data.name}: hamiltonian")
+    return entries, H, _read_expressions(data.casimirs, n, f"{data.name}: casimirs")
 
 
 def _matrix_text(entries) -> tuple:
@@ -165,7 +165,7 @@ def heavy_top() -> ProblemData:
     return ProblemData("heavy-top", _linear_text(C), "x1^2/4 + x2^2/2 + 3*x3^2/4 + x6",
                        ("x4^2 + x5^2 + x6^2", "x1*x4 + x2*x5 + x3*x6"), ("|Gamma|^2", "M . Gamma"),
                        (math.cos(1.1), 0.0, math.sin(1.1), 0.6, 0.0, 0.8), 10.0,
-                       "heavy top, se(3)*, I = (2, 1, 2/3), m g l = 1", "lie-poisson", C)
+                       "heavy top, se(3)*, I = (2, 1, 2/3), m g l = 1", LIE_POISSON, C)
 
 
 def _linear_text(C) -> tuple:
@@ -196,7 +196,7 @@ def toda(n: int = 6) -> ProblemData:
                         "*".join(f"x{k}" for k in range(1, N + 1))),
                        ("b_1 + ... + b_N", "a_1 ... a_N"), tuple(float(v) for v in x0), 10.0,
                        f"periodic Toda lattice, Flaschka variables, N = {N} (n = {n})",
-                       "lie-poisson", C)
+                       LIE_POISSON, C)
 
 
 def volterra_lattice(n: int = 5) -> ProblemData:
@@ -220,7 +220,7 @@ def volterra_lattice(n: int = 5) -> ProblemData:
     return ProblemData("volterra-lattice" if n == 5 else f"volterra-lattice:{n}",
                        _log_text(L), " + ".join(f"x{k}" for k in range(1, n + 1)),
                        tuple(casimirs), tuple(names), tuple(float(v) for v in x0), 10.0,
-                       f"periodic Volterra lattice, log-canonical, n = {n}", "log-canonical", L)
+                       f"periodic Volterra lattice, log-canonical, n = {n}", LOG_CANONICAL, L)
 
 
 def _log_text(L) -> tuple:
@@ -241,7 +241,7 @@ def lotka_volterra_4d() -> ProblemData:
                        "x1 + x2 + x3 + x4 - log(x1) - 2*log(x2) - log(x3) - log(x4)", (), (),
                        (2.0, 1.0, 1.0, 1.0), 10.0,
                        "4-d Lotka-Volterra, log-canonical (GeometricProblems.jl)",
-                       "log-canonical", L)
+                       LOG_CANONICAL, L)
 
 
 def lotka_volterra_5d() -> ProblemData:
@@ -268,7 +268,7 @@ def lotka_volterra_5d() -> ProblemData:
                        (" + ".join(f"log(x{k})" for k in range(1, n + 1)),),
                        ("log x1 + ... + log x5",), tuple(float(v) for v in x0), 10.0,
                        "5-d Lotka-Volterra, integrable: periodic Kac-van Moerbeke lattice, "
-                       "H = sum (x_i - log x_i)", "log-canonical", L)
+                       "H = sum (x_i - log x_i)", LOG_CANONICAL, L)
 
 
 def lotka_volterra_5d_nonintegrable() -> ProblemData:
@@ -293,7 +293,7 @@ def lotka_volterra_5d_nonintegrable() -> ProblemData:
                        ("log(x1) - log(x2) + log(x3) - log(x4) + log(x5)",),
                        ("sum (-1)^(i+1) log x_i",), (3.0, 0.5, 1.0, 2.0, 0.5), 10.0,
                        "5-d Lotka-Volterra, non-integrable: lambda_ij = sign(j - i), "
-                       "H = sum (x_i - log x_i)", "log-canonical", L)
+                       "H = sum (x_i - log x_i)", LOG_CANONICAL, L)
 
 
 #: name -> (problem data constructor, whether it takes a size, the default size)
@@ -335,12 +335,12 @@ def build(data: ProblemData, realisation: str = "symmetric", general: bool = Fal
     common = dict(name=data.name, x0=data.x0, t_final=data.t_final, realisation=realisation,
                   description=data.description, hamiltonian_expression=lambda: H)
     hamiltonian = to_program(H, symbols)
-    if general or data.family == "general":
+    if general or data.family == GENERAL:
         return general_family(PoissonMatrix(entries), hamiltonian, casimirs=casimirs,
                               casimir_names=data.casimir_names, where=f"{data.name}: poisson",
                               **common)
     numeric = tuple(numeric_function(c, symbols) for c in casimirs)
-    structure = LieAlgebra(data.constants) if data.family == "lie-poisson" else data.constants
+    structure = LieAlgebra(data.constants) if data.family == LIE_POISSON else data.constants
     return family_system(data.family, structure, hamiltonian, casimirs=numeric,
                          casimir_names=data.casimir_names, **common)
 

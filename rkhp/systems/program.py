@@ -40,10 +40,10 @@ def expression_program(expr, symbols):
         (a,) = args
         return tp.RECORDERS[type(e).__name__](a)
 
-    def program(x):
+    def expression_values(x):
         return conv(expr, x)
 
-    return program
+    return expression_values
 
 
 def to_program(expr, symbols):
@@ -51,22 +51,22 @@ def to_program(expr, symbols):
     is recorded as x1 * 0 + c so that the result is always a Var)."""
     value = expression_program(expr, symbols)
 
-    def program(x):
+    def tape_value(x):
         v = value(x)
         return v if isinstance(v, tp.Var) else x[0] * 0.0 + v
 
-    program.expression = str(expr)
-    return program
+    tape_value.expression = str(expr)
+    return tape_value
 
 
 def matrix_program(entries, symbols):
     """A program y -> n x n entries (floats where constant) of a matrix of sympy expressions."""
     programs = [[expression_program(e, symbols) for e in row] for row in entries]
 
-    def program(y):
+    def matrix_values(y):
         return [[f(y) for f in row] for row in programs]
 
-    return program
+    return matrix_values
 
 
 def numeric_function(expr, symbols):

@@ -39,7 +39,7 @@ from ..base.errors import InputError
 from ..base.expressions import parse_expression as read
 from ..base.expressions import variable_names
 from .core import PoissonSystem
-from .families import FAMILIES, family_system, short
+from .families import FAMILIES, GENERAL, family_system, short
 from .general import general
 from .program import numeric_function, to_program
 from .structure import check_structure
@@ -73,7 +73,7 @@ def _read(path: Path) -> dict:
     return data
 
 
-def parse_expression(text, n: int, where: str):
+def parse_spec_expression(text, n: int, where: str):
     """A sympy expression in x1..xn read by the safe reader (`rkhp.base.expressions`), with its
     symbols (InputError naming unknown symbols, bad syntax or anything outside the grammar)."""
     names = variable_names(n)
@@ -178,7 +178,7 @@ def _expressions(data: dict, key: str, n: int, where: str) -> list:
         raise InputError(f"{where}: {key} must be a list of expressions")
     if len(data[key]) > MAX_EXPRESSIONS:
         raise InputError(f"{where}: {len(data[key])} {key}; at most {MAX_EXPRESSIONS}")
-    return [parse_expression(c, n, f"{where}: {key}[{i + 1}]")[0] for i, c in enumerate(data[key])]
+    return [parse_spec_expression(c, n, f"{where}: {key}[{i + 1}]")[0] for i, c in enumerate(data[key])]
 
 
 def check_invariants(system, exprs, symbols, where: str) -> None:
@@ -210,7 +210,7 @@ def system_from_keys(data: dict, where: str, default_name: str, source: str,
     x0 = np.array(documents.number_list(data["x0"], f"{where}: x0", max_size=MAX_DIMENSION))
     n = x0.size
     name = documents.string(data.get("name", default_name), f"{where}: name")
-    t_final = documents.number(data.get("t_final", 10.0), f"{where}: t_final", 0.0, low_open=True)
+    t_final = documents.document_number(data.get("t_final", 10.0), f"{where}: t_final", 0.0, low_open=True)
     needed = FAMILIES[family].spec_key
     for key in set(spec_keys()) - set(COMMON_KEYS):
         if key != needed and key in data:
@@ -224,7 +224,7 @@ def system_from_keys(data: dict, where: str, default_name: str, source: str,
         raise InputError(f"{where}: x0 has {n} entries but {needed} is {size} x {size}: the state has one "
                          f"entry per row of {needed}")
     structure = FAMILIES[family].read(data[needed], n, f"{where}: {needed}")
-    h_expr, symbols = parse_expression(data["hamiltonian"], n, f"{where}: hamiltonian")
+    h_expr, symbols = parse_spec_expression(data["hamiltonian"], n, f"{where}: hamiltonian")
     exprs = _expressions(data, "casimirs", n, where)
     invariant_exprs = _expressions(data, "invariants", n, where)
     H = to_program(h_expr, symbols)
@@ -232,7 +232,7 @@ def system_from_keys(data: dict, where: str, default_name: str, source: str,
     names = tuple(str(e) for e in exprs)
     common = dict(name=name, t_final=t_final, realisation=realisation, x0=x0,
                   description=f"from {source}: H = {H.expression}", hamiltonian_expression=lambda: h_expr)
-    if family == "general":
+    if family == GENERAL:
         # the structure and the declared Casimirs are checked (docs/theory.md §9)
         system = general(structure, H, casimirs=exprs, where=f"{where}: poisson", **common)
     else:
@@ -248,7 +248,7 @@ def system_from_keys(data: dict, where: str, default_name: str, source: str,
         system = replace(system, invariants=tuple(numeric_function(e, symbols) for e in invariant_exprs),
                          invariant_names=tuple(str(e) for e in invariant_exprs))
     system.extra["expressions"] = (symbols, expressions)
-    if family != "general":  # the general family checks its structure and Casimirs itself
+    if family != GENERAL:  # the general family checks its structure and Casimirs itself
         check_structure(FAMILIES[family].symbolic(structure), casimirs=exprs, x0=x0,
                         where=f"{where}: the {family} structure")
     return system

@@ -40,27 +40,27 @@ MAX_TRUNCATION = 12
 # univariate Taylor series in eps over tape values, evaluated order by order at several nodes
 
 
-def _is_zero(v) -> bool:
+def _is_constant_zero(v) -> bool:
     return not isinstance(v, tp.Var) and float(v) == 0.0
 
 
 def _add(a, b):
-    if _is_zero(a):
+    if _is_constant_zero(a):
         return b
-    if _is_zero(b):
+    if _is_constant_zero(b):
         return a
     return a + b
 
 
 def _mul(a, b):
-    if _is_zero(a) or _is_zero(b):
+    if _is_constant_zero(a) or _is_constant_zero(b):
         return 0.0
     if not isinstance(a, tp.Var) and not isinstance(b, tp.Var):
         return float(a) * float(b)
     return a * b
 
 
-def _sum(values):
+def _sum_vars(values):
     out = 0.0
     for v in values:
         out = _add(out, v)
@@ -68,7 +68,7 @@ def _sum(values):
 
 
 def _scale(c: float, v):
-    return 0.0 if c == 0.0 or _is_zero(v) else (float(c) * float(v) if not isinstance(v, tp.Var)
+    return 0.0 if c == 0.0 or _is_constant_zero(v) else (float(c) * float(v) if not isinstance(v, tp.Var)
                                                 else v * c)
 
 
@@ -111,7 +111,7 @@ class Series:
         if isinstance(other, tp.Var):
             return Series(self.graph, "add", (self, self._lift(other)))
         if not isinstance(other, Series):
-            return self if _is_zero(other) else Series(self.graph, "shift", (self,), float(other))
+            return self if _is_constant_zero(other) else Series(self.graph, "shift", (self,), float(other))
         return Series(self.graph, "add", (self, other))
 
     __radd__ = __add__
@@ -204,43 +204,43 @@ class Series:
             return _add(u[m][q], self.param) if m == 0 else u[m][q]
         if op == "mul":
             v = args[1].coef
-            return _sum(_mul(u[k][q], v[m - k][q]) for k in range(m + 1))
+            return _sum_vars(_mul(u[k][q], v[m - k][q]) for k in range(m + 1))
         w = self.coef
         if op == "div":
             v = args[1].coef
             if m == 0:
                 return u[0][q] / v[0][q] if isinstance(u[0][q], tp.Var) or isinstance(
                     v[0][q], tp.Var) else float(u[0][q]) / float(v[0][q])
-            num = _add(u[m][q], _scale(-1.0, _sum(_mul(v[k][q], w[m - k][q])
+            num = _add(u[m][q], _scale(-1.0, _sum_vars(_mul(v[k][q], w[m - k][q])
                                                   for k in range(1, m + 1))))
             return _div(num, v[0][q])
         if op == "exp":
             if m == 0:
                 return _apply(tp.exp, math.exp, u[0][q])
-            return _scale(1.0 / m, _sum(_scale(k, _mul(u[k][q], w[m - k][q]))
+            return _scale(1.0 / m, _sum_vars(_scale(k, _mul(u[k][q], w[m - k][q]))
                                         for k in range(1, m + 1)))
         if op == "log":
             if m == 0:
                 return _apply(tp.log, math.log, u[0][q])
-            tail = _sum(_scale(k / m, _mul(w[k][q], u[m - k][q])) for k in range(1, m))
+            tail = _sum_vars(_scale(k / m, _mul(w[k][q], u[m - k][q])) for k in range(1, m))
             return _div(_add(u[m][q], _scale(-1.0, tail)), u[0][q])
         if op in ("sin", "cos"):
             if m == 0:
                 return _apply(getattr(tp, op), getattr(math, op), u[0][q])
             other = self.param.coef
             sign = 1.0 if op == "sin" else -1.0
-            return _scale(sign / m, _sum(_scale(k, _mul(u[k][q], other[m - k][q]))
+            return _scale(sign / m, _sum_vars(_scale(k, _mul(u[k][q], other[m - k][q]))
                                          for k in range(1, m + 1)))
         if op == "chain":
             if m == 0:
                 return _apply(getattr(tp.functions, self.param.name), self.param.value, u[0][q])
             d = args[1].coef
-            return _scale(1.0 / m, _sum(_scale(k, _mul(u[k][q], d[m - k][q])) for k in range(1, m + 1)))
+            return _scale(1.0 / m, _sum_vars(_scale(k, _mul(u[k][q], d[m - k][q])) for k in range(1, m + 1)))
         if op == "pow":
             r = self.param
             if m == 0:
                 return u[0][q] ** r if isinstance(u[0][q], tp.Var) else float(u[0][q]) ** r
-            acc = _sum(_scale((r + 1.0) * k - m, _mul(u[k][q], w[m - k][q]))
+            acc = _sum_vars(_scale((r + 1.0) * k - m, _mul(u[k][q], w[m - k][q]))
                        for k in range(1, m + 1))
             return _div(_scale(1.0 / m, acc), u[0][q])
         raise AssertionError(f"unknown series operation {op}")
@@ -251,7 +251,7 @@ def _apply(tape_function, float_function, v):
 
 
 def _div(a, b):
-    if _is_zero(a):
+    if _is_constant_zero(a):
         return 0.0
     if isinstance(a, tp.Var) or isinstance(b, tp.Var):
         return a / b
@@ -293,21 +293,21 @@ def spray_series(poisson, x, p, K: int) -> SpraySeries:
     for m in range(1, K + 1):
         _compute(graph, m - 1)
 
-        def entry(v, q, k=m - 1):
+        def series_entry(v, q, k=m - 1):
             if isinstance(v, Series):
                 return v.coef[k][q]
             return v if k == 0 else 0.0
 
         # F_{m-1}(s_q) = [pi(Y)]_{m-1}(s_q) p
-        F = [[_sum(_mul(entry(P[i][j], q), p[j]) for j in range(n)) for i in range(n)]
+        F = [[_sum_vars(_mul(series_entry(P[i][j], q), p[j]) for j in range(n)) for i in range(n)]
              for q in range(K)]
-        a = [_scale(-1.0, _sum(_scale(quad.w[r], F[r][i]) for r in range(K))) for i in range(n)]
+        a = [_scale(-1.0, _sum_vars(_scale(quad.w[r], F[r][i]) for r in range(K))) for i in range(n)]
         start.append(a)
-        end.append([_add(a[i], _sum(_scale(quad.b[r], F[r][i]) for r in range(K)))
+        end.append([_add(a[i], _sum_vars(_scale(quad.b[r], F[r][i]) for r in range(K)))
                     for i in range(n)])
         if m < K:
             for i in range(n):
-                y[i].coef.append([_add(a[i], _sum(_scale(quad.A[q, r], F[r][i])
+                y[i].coef.append([_add(a[i], _sum_vars(_scale(quad.A[q, r], F[r][i])
                                                   for r in range(K))) for q in range(K)])
     return SpraySeries(start, end)
 
@@ -317,12 +317,12 @@ def truncated_realisation(poisson, K: int):
     degree K in p: alpha_K = x + sum a_m, beta_K = x + sum (-1)^m a_m (module docstring)."""
 
     def make(sign: float):
-        def program(x, p):
+        def spray_program(x, p):
             terms = spray_series(poisson, x, p, K).start
-            return [_sum([x[i]] + [_scale(sign**m, terms[m - 1][i]) for m in range(1, K + 1)])
+            return [_sum_vars([x[i]] + [_scale(sign**m, terms[m - 1][i]) for m in range(1, K + 1)])
                     for i in range(len(x))]
 
-        return program
+        return spray_program
 
     return make(1.0), make(-1.0)
 

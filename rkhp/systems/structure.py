@@ -18,7 +18,7 @@ How each identity is decided (:func:`decide_zero`):
    are small, which can only prove them zero. Sizes are bounded before each step (operation counts,
    a bound on the number of expanded terms) and the whole symbolic work has a time budget
    (:data:`SYMBOLIC_SECONDS`); what is left undecided is decided numerically;
-2. numerically, at seeded random points near x0 (:func:`sample_points`): a residual passes when
+2. numerically, at seeded random points near x0 (:func:`random_points_near`): a residual passes when
    it is at most :data:`TOLERANCE` times the sum of the absolute values of its terms (the size of
    its rounding errors). The numeric test runs on every identity first (it is cheap and finds
    every failure that is not tiny); the symbolic one then proves the rest or finds a failure
@@ -152,7 +152,7 @@ def _entries(matrix, where: str):
     return rows
 
 
-def check_antisymmetric(matrix, where: str = "poisson", budget: _Budget | None = None) -> None:
+def check_antisymmetric_expressions(matrix, where: str = "poisson", budget: _Budget | None = None) -> None:
     """pi_ij + pi_ji = 0 for every i <= j, decided symbolically (numerically at random points for
     an expression the bounded symbolic effort does not decide); InputError naming the first
     failing entry otherwise."""
@@ -192,7 +192,7 @@ def symbols_of(n: int):
     return tuple(sympy.Symbol(name, real=True) for name in variable_names(n))
 
 
-def sample_points(x0, points: int = POINTS, seed: int = 0) -> np.ndarray:
+def random_points_near(x0, points: int = POINTS, seed: int = 0) -> np.ndarray:
     """Seeded random points near x0: x0_i + max(|x0_i| / 2, 1/4) * N(0, 1) per component
     (the numeric check keeps the points where pi is finite)."""
     x0 = np.asarray(x0, dtype=np.float64)
@@ -267,7 +267,7 @@ def _jacobi_expression(rows, symbols, i: int, j: int, k: int):
     return sympy.Add(*terms) if terms else None
 
 
-def _point(x: np.ndarray) -> str:
+def _point_text(x: np.ndarray) -> str:
     return "(" + ", ".join(f"{v:.6g}" for v in x) + ")"
 
 
@@ -291,7 +291,7 @@ def _casimir_numeric(casimir, symbols, num: _Numeric, where: str):
             num.x[good], grad)
 
 
-def _short(expr, limit: int = 160) -> str:
+def _abridged(expr, limit: int = 160) -> str:
     text = str(expr)
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
@@ -308,9 +308,9 @@ def check_structure(matrix, *, casimirs=(), x0=None, seed: int = 0, where: str =
     n = len(rows)
     symbols = symbols_of(n)
     budget = _Budget(symbolic_seconds)
-    check_antisymmetric(rows, where, budget)
+    check_antisymmetric_expressions(rows, where, budget)
     x0 = np.zeros(n) if x0 is None else np.asarray(x0, dtype=np.float64)
-    num = _evaluate(rows, symbols, sample_points(x0, POINTS, seed), where)
+    num = _evaluate(rows, symbols, random_points_near(x0, POINTS, seed), where)
     J, scale = _jacobi_numeric(num)
     rel = _relative(J, scale)
     largest = rel.max(axis=0)
@@ -327,7 +327,7 @@ def check_structure(matrix, *, casimirs=(), x0=None, seed: int = 0, where: str =
             raise InputError(
                 f"{where} fails the Jacobi identity at (i, j, k) = ({i + 1}, {j + 1}, {k + 1}): "
                 f"{{x{i + 1},{{x{j + 1},x{k + 1}}}}} + cyclic = {J[m, i, j, k]:.6g} at x = "
-                f"{_point(num.x[m])} (terms of size {scale[m, i, j, k]:.3g}; tolerance "
+                f"{_point_text(num.x[m])} (terms of size {scale[m, i, j, k]:.3g}; tolerance "
                 f"{TOLERANCE:g} relative)")
     triples = [(t, expr) for t in combinations(range(n), 3)
                if (expr := _jacobi_expression(rows, symbols, *t)) is not None]
@@ -335,7 +335,7 @@ def check_structure(matrix, *, casimirs=(), x0=None, seed: int = 0, where: str =
     for (i, j, k), expr in triples:
         verdict = decide_zero(expr, budget)
         if verdict is False:
-            residual = _short(expr)
+            residual = _abridged(expr)
             raise InputError(
                 f"{where} fails the Jacobi identity at (i, j, k) = ({i + 1}, {j + 1}, {k + 1}): "
                 f"{{x{i + 1},{{x{j + 1},x{k + 1}}}}} + cyclic = {residual} (exact)")
@@ -355,10 +355,10 @@ def check_structure(matrix, *, casimirs=(), x0=None, seed: int = 0, where: str =
             if verdict is None and not rc[m, i] > TOLERANCE:
                 continue
             if not verdict:
-                shown = (f"{value[m, i]:.6g} at x = {_point(points[m])} (terms of size "
+                shown = (f"{value[m, i]:.6g} at x = {_point_text(points[m])} (terms of size "
                          f"{size[m, i]:.3g}; tolerance {TOLERANCE:g} relative)"
-                         if verdict is None else f"{_short(expr)} (exact)")
-                raise InputError(f"casimir {c_index + 1} ({_short(casimir, 60)}) is not a Casimir of {where}: "
+                         if verdict is None else f"{_abridged(expr)} (exact)")
+                raise InputError(f"casimir {c_index + 1} ({_abridged(casimir, 60)}) is not a Casimir of {where}: "
                                  f"{{C, x{i + 1}}} = {shown}")
             proved_c += 1
     return StructureCheck(dim=n, jacobi_triples=len(triples), jacobi_symbolic=proved,
@@ -375,7 +375,7 @@ def _casimir_expression(grad, rows, i: int):
     return sympy.Add(*terms) if terms else None
 
 
-def check_finite_at(matrix, x0, where: str = "poisson") -> np.ndarray:
+def check_matrix_finite_at(matrix, x0, where: str = "poisson") -> np.ndarray:
     """pi(x0) as floats; InputError naming the first entry that is not finite there (a pole of
     the structure at the initial point)."""
     import sympy
@@ -389,7 +389,7 @@ def check_finite_at(matrix, x0, where: str = "poisson") -> np.ndarray:
     for q, v in enumerate(values):
         if not (np.isfinite(v) and v.imag == 0.0):
             i, j = divmod(q, n)
-            raise InputError(f"{where} is singular at x0 = {_point(x0)}: entry ({i + 1}, {j + 1}) "
+            raise InputError(f"{where} is singular at x0 = {_point_text(x0)}: entry ({i + 1}, {j + 1}) "
                              f"= {rows[i][j]} is not finite (or not real) there")
     return np.array([v.real for v in values]).reshape(n, n)
 

@@ -99,13 +99,13 @@ class Composition:
     @cached_property
     def consistent(self) -> bool:
         """Whether the coefficients sum to 1 (to the digits given)."""
-        return abs(_residual_sum(self.gamma, self.digits)) <= _tolerance(self.digits)
+        return abs(_residual_sum(self.gamma, self.digits)) <= _residual_tolerance(self.digits)
 
     @cached_property
     def symmetric(self) -> bool:
         """Whether gamma reads the same backwards (to the digits given): with a symmetric base the
         composition is then symmetric (HLW §V.3.1)."""
-        tol = _tolerance(self.digits)
+        tol = _residual_tolerance(self.digits)
         with mpmath.workdps(_dps(self.digits)):
             values = [_mp(g) for g in self.gamma]
             return all(abs(a - b) <= tol for a, b in zip(values, reversed(values)))
@@ -161,7 +161,7 @@ def _dps(digits: int | None) -> int:
     return EXACT_DIGITS + 15 if digits is None else digits + 15
 
 
-def _tolerance(digits: int | None):
+def _residual_tolerance(digits: int | None):
     """A residual at most this is zero: 10^-(d - 5) for coefficients of d digits, 10^-50 for
     exact ones evaluated at 60 digits."""
     return mpmath.mpf(10) ** -(EXACT_DIGITS - 10 if digits is None else max(digits - 5, 3))
@@ -207,7 +207,7 @@ def product_coefficients(gamma, weights: tuple[int, ...], max_weight: int):
         yield p, {w: after[-1][w] for w in layer}
 
 
-def _target(w: tuple[int, ...], exact: bool):
+def _exp_coefficient(w: tuple[int, ...], exact: bool):
     """The coefficient of w in exp(F_1) (a Fraction, or an mpmath number)."""
     value = Fraction(1, math.factorial(len(w))) if all(k == 1 for k in w) else Fraction(0)
     return value if exact else mpmath.mpf(value.numerator) / value.denominator
@@ -225,10 +225,10 @@ def composition_order(comp: Composition, base_order: int = 2, base_symmetric: bo
     weights = letters(base_order, base_symmetric, top)
     with mpmath.workdps(_dps(digits)):
         gamma = list(comp.gamma) if exact else [_mp(g) for g in comp.gamma]
-        tol = 0 if exact else _tolerance(digits)
+        tol = 0 if exact else _residual_tolerance(digits)
         order, count, failing = 0, 0, None
         for p, coeff in product_coefficients(gamma, weights, top):
-            residuals = [abs(c - _target(w, exact)) for w, c in coeff.items()]
+            residuals = [abs(c - _exp_coefficient(w, exact)) for w, c in coeff.items()]
             count += len(residuals)
             worst = max(residuals, default=0)
             if worst > tol:
@@ -257,7 +257,7 @@ def _builtin_files() -> tuple[tuple[str, dict], ...]:
 
 
 @lru_cache(maxsize=1)
-def _registry() -> dict[str, str]:
+def _composition_registry() -> dict[str, str]:
     """name or alias (lower case) -> file name of every built-in composition."""
     out = {}
     for file, data in _builtin_files():
@@ -274,7 +274,7 @@ def builtin_compositions() -> list[str]:
 def is_composition_name(spec: str) -> bool:
     """Whether `spec` names a built-in composition or a composition file: ``kind = "composition"``,
     or no ``kind`` and the key ``gamma`` without a Butcher matrix ``A`` (a tableau has A)."""
-    if spec.lower() in _registry():
+    if spec.lower() in _composition_registry():
         return True
     path = Path(spec)
     if path.suffix.lower() in (".toml", ".json") and path.is_file():
@@ -289,8 +289,8 @@ def is_composition_name(spec: str) -> bool:
 def load_composition(spec: str) -> Composition:
     """A built-in composition by name or alias, or a composition file (.toml/.json)."""
     key = spec.lower()
-    if key in _registry():
-        file = _registry()[key]
+    if key in _composition_registry():
+        file = _composition_registry()[key]
         return composition_from_dict(dict(_builtin_files())[file], file[:-5], f"built-in {file}")
     path = Path(spec)
     if not path.is_file():

@@ -296,14 +296,14 @@ class Tableau:
         def ready(x):  # the entry types, computed mpmath values included (kept at their precision)
             return isinstance(x, (Fraction, mpmath.mpf)) or type(x).__module__.startswith("sympy")
 
-        def rows(value, label):
+        def entry_rows(value, label):
             if isinstance(value, (str, bytes, dict)) or not hasattr(value, "__iter__"):
                 raise InputError(f"{where}: {label} must be a list, got {type(value).__name__}")
             return list(value)
 
-        A = [rows(r, f"row {i + 1} of A") for i, r in enumerate(rows(self.A, "A"))]
-        b = rows(self.b, "b")
-        c = None if self.c_given is None else rows(self.c_given, "c")
+        A = [entry_rows(r, f"row {i + 1} of A") for i, r in enumerate(entry_rows(self.A, "A"))]
+        b = entry_rows(self.b, "b")
+        c = None if self.c_given is None else entry_rows(self.c_given, "c")
         if all(ready(x) for r in A for x in r) and all(ready(x) for x in b) and all(ready(x) for x in c or ()):
             if not (isinstance(self.A, tuple) and all(isinstance(r, tuple) for r in self.A)
                     and isinstance(self.b, tuple)):

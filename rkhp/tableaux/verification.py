@@ -57,7 +57,7 @@ APPROXIMATION_DENOMINATOR = 10**7
 BYTES_PER_VALUE = 120
 
 
-class Failure(NamedTuple):
+class FailingCondition(NamedTuple):
     """A failing condition: the tree (single-tree classes) or the OrderCondition, and its residual.
 
     The residual is a float; in exact precision ``Verification.failing_exact`` holds its exact
@@ -78,7 +78,7 @@ class Failure(NamedTuple):
 
 
 class FailureList(Sequence):
-    """The failures of one class, largest residual first; Failure values built on access."""
+    """The failures of one class, largest residual first; FailingCondition values built on access."""
 
     def __init__(self, items=(), residuals=()):
         self._items = items
@@ -90,7 +90,7 @@ class FailureList(Sequence):
     def __getitem__(self, k):
         if isinstance(k, slice):
             return [self[i] for i in range(*k.indices(len(self)))]
-        return Failure(self._items[k], float(self._residuals[k]))
+        return FailingCondition(self._items[k], float(self._residuals[k]))
 
     def __repr__(self) -> str:
         return f"FailureList({len(self)} failures)"

@@ -27,6 +27,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..base.bounds import float_or_infinity
 from ..base.errors import InputError
 from ..trees.rooted import LEAF, Tree, check_order, count_trees, trees_up_to
 from .tableau import Tableau, as_sympy, is_exact, to_fraction
@@ -107,14 +108,6 @@ def tree_plan(max_order: int) -> TreePlan:
 
 MAX_PRECISION_DIGITS = 2000
 """Most decimal digits of a fixed-point verification."""
-
-
-def _float(x) -> float:
-    """float(x), or +-inf when x is beyond the float range."""
-    try:
-        return float(x)
-    except OverflowError:
-        return math.inf if x > 0 else -math.inf
 
 
 class FloatArithmetic:
@@ -211,7 +204,7 @@ class FixedPointArithmetic:
         """Float values of fixed-point integers (or of Fractions of them)."""
         scale = Fraction(1, 1 << self.bits)
         return np.array([math.ldexp(float(x), -self.bits) if isinstance(x, int)
-                         and abs(x) < 1 << 1000 else _float(Fraction(x) * scale) for x in r])
+                         and abs(x) < 1 << 1000 else float_or_infinity(Fraction(x) * scale) for x in r])
 
 
 class ExactArithmetic:
@@ -277,8 +270,8 @@ class ExactArithmetic:
     def to_floats(self, r):
         """Float values for display (+-inf beyond the float range: the decisions are exact)."""
         if self.field is None:
-            return np.array([_float(x) for x in r])
-        return np.array([_float(self.to_sympy(x).evalf(30)) for x in r])
+            return np.array([float_or_infinity(x) for x in r])
+        return np.array([float_or_infinity(self.to_sympy(x).evalf(30)) for x in r])
 
     def scale(self, x, w: Fraction):
         """x * w for a rational w."""

@@ -37,7 +37,7 @@ from .composites import phimv, spray
 from .jets import jet_space
 from .ops import FIRST_COMPOSITE, PHIMV, SPRAY
 from .rows import rows
-from .tape import Tape, record
+from .tape import Tape, record_tape
 
 
 class TapeWork(NamedTuple):
@@ -147,7 +147,7 @@ def plain_signature():
     """The signature every compiled interpreter is called with, ``none(tape, int64, space,
     work)``: numba's types of a plain `Tape`, a `JetSpace` and :class:`TapeWork` arrays (those of
     every tape, space and work arrays the library makes)."""
-    tape = record(1, lambda x, p: [x[0]])
+    tape = record_tape(1, lambda x, p: [x[0]])
     typeof = nb.typeof
     return nb.types.none(typeof(tape), nb.types.int64, typeof(jet_space(0, 0)), typeof(tape_work((tape,), 1)))
 
@@ -185,10 +185,10 @@ def address_of(typingctx, value):
     _plain_member(value, "address_of")
     to = nb.types.CPointer(value)
 
-    def codegen(context, builder, sig, args):
+    def address_codegen(context, builder, sig, args):
         return _copy_address(context, builder, args[0], to)
 
-    return to(value), codegen
+    return to(value), address_codegen
 
 
 def _call(context, builder, address, pointers, degree):
@@ -221,11 +221,11 @@ def run_from(typingctx, address, tape_at, D, space_at, work_at):
         raise TypingError(f"run_from takes the addresses of a plain tape, a jet space and work arrays, "
                           f"not {tape_at}, {space_at}, {work_at}")
 
-    def codegen(context, builder, sig, args):
+    def run_from_codegen(context, builder, sig, args):
         degree = context.cast(builder, args[2], D, nb.types.int64)
         return _call(context, builder, args[0], (args[1], args[3], args[4]), degree)
 
-    return nb.types.none(address, tape_at, D, space_at, work_at), codegen
+    return nb.types.none(address, tape_at, D, space_at, work_at), run_from_codegen
 
 
 @intrinsic
@@ -239,12 +239,12 @@ def run_at(typingctx, address, tape, D, space, work):
         raise TypingError(f"run_at takes a plain tape, a jet space and work arrays, not {tape}, {space}, {work}")
     targets = pointer_signature().args
 
-    def codegen(context, builder, sig, args):
+    def run_at_codegen(context, builder, sig, args):
         pointers = [_copy_address(context, builder, args[i], targets[j]) for i, j in ((1, 0), (3, 2), (4, 3))]
         degree = context.cast(builder, args[2], D, nb.types.int64)
         return _call(context, builder, args[0], pointers, degree)
 
-    return nb.types.none(address, tape, D, space, work), codegen
+    return nb.types.none(address, tape, D, space, work), run_at_codegen
 
 
 @nb.njit(**NJIT_NORC)

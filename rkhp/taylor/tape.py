@@ -312,7 +312,7 @@ def _unary(code: int):
     row = BY_CODE[code]
     name = row.name
 
-    def op(v):
+    def unary_op(v):
         if isinstance(v, Var):
             return v.builder.emit(code, v)
         method = getattr(v, name, None)
@@ -322,8 +322,8 @@ def _unary(code: int):
             return v.apply(row)
         raise TypeError("tape functions take tape values")
 
-    op.__name__ = name
-    return op
+    unary_op.__name__ = name
+    return unary_op
 
 
 #: the FUNCTION ops as recorders of tape Vars, by name (exp, log, sin, cos, sqrt, ...)
@@ -334,11 +334,11 @@ del _PRIMITIVE["powi"], _PRIMITIVE["powr"]  # recorded by ** (Var.__pow__)
 
 
 def _derived(d):
-    def op(v):
+    def derived_op(v):
         return d.expand(_NAMESPACE, v)
 
-    op.__name__ = d.name
-    return op
+    derived_op.__name__ = d.name
+    return derived_op
 
 
 _NAMESPACE = SimpleNamespace(**_PRIMITIVE)
@@ -363,7 +363,7 @@ def crb(p: list[Var]) -> Var:
     return Var(builder, out)
 
 
-def phimv(K: list[list], x: list) -> list[Var]:
+def record_phimv(K: list[list], x: list) -> list[Var]:
     """phi(K) x with phi(z) = z / (1 - exp(-z)) (docs/theory.md §4, Lie–Poisson realisation):
     a composite operation whose operand list is K row-major, then x."""
     builder = next(v.builder for v in [*x, *(e for row in K for e in row)] if isinstance(v, Var))
@@ -377,31 +377,31 @@ def degree_in(rows, inputs, outputs) -> float:
     or a divisor that depends on them); other slots are constants (degree 0)."""
     degree = dict.fromkeys(inputs, 1.0)
 
-    def of(slot):
+    def degree_of(slot):
         return degree.get(slot, 0.0)
 
     for code, out, a, b, k in rows:
         if code == CONST:
             d = 0.0
         elif code == MUL:
-            d = of(a) + of(b)
+            d = degree_of(a) + degree_of(b)
         elif code in (ADD, SUB):
-            d = max(of(a), of(b))
+            d = max(degree_of(a), degree_of(b))
         elif code in (NEG, MULC, ADDC):
-            d = of(a)
+            d = degree_of(a)
         elif code == DIV:
-            d = of(a) if of(b) == 0.0 else math.inf
+            d = degree_of(a) if degree_of(b) == 0.0 else math.inf
         elif code == POWI and k >= 0:
-            d = k * of(a) if k > 0 else 0.0
+            d = k * degree_of(a) if k > 0 else 0.0
         elif code == CRB:  # a, b: its operand list, not slots
             d = math.inf
         else:
-            d = 0.0 if of(a) == 0.0 and of(b) == 0.0 else math.inf
+            d = 0.0 if degree_of(a) == 0.0 and degree_of(b) == 0.0 else math.inf
         degree[out] = d
-    return max((of(s) for s in outputs), default=0.0)
+    return max((degree_of(s) for s in outputs), default=0.0)
 
 
-def spray(poisson, x: list, p: list) -> list[Var]:
+def record_spray(poisson, x: list, p: list) -> list[Var]:
     """alpha and beta of the Poisson-spray realisation of pi (docs/theory.md §9.3), 2n Vars:
     a composite operation whose sub-program is X(y, p) = pi(y) p (`poisson(y)`: the n x n
     entries of pi, numbers or values computed from y) and whose operands are x, then p. Its
@@ -427,10 +427,10 @@ def spray(poisson, x: list, p: list) -> list[Var]:
 
 
 #: the functions a family's base program calls on tape Vars (`rkhp.systems.families`)
-functions = SimpleNamespace(**_PRIMITIVE, crb=crb, phimv=phimv, spray=spray)
+functions = SimpleNamespace(**_PRIMITIVE, crb=crb, phimv=record_phimv, spray=record_spray)
 
 
-def record(n: int, program) -> Tape:
+def record_tape(n: int, program) -> Tape:
     """Record `program(x, p) -> list of outputs` (x, p lists of n Vars) as a tape on 2n inputs."""
     builder = TapeBuilder(2 * n)
     v = builder.inputs()

@@ -189,21 +189,21 @@ def parse_tree(text: str) -> Tree:
         raise InputError("empty tree string (expected bracket notation such as b[b,b[b]])")
     shown = text.strip() if len(text.strip()) <= 60 else text.strip()[:57] + "..."
 
-    def fail(msg: str, pos: int):
+    def syntax_error(msg: str, pos: int):
         raise InputError(f"malformed tree {shown!r}: {msg} at position {pos}")
 
     stack: list[list[Tree]] = []  # the children read so far of each open b[
     pos, vertices = 0, 0
     while True:  # at pos a tree starts
         if pos >= len(s) or s[pos] != "b":
-            fail("expected 'b'", pos)
+            syntax_error("expected 'b'", pos)
         vertices += 1
         if vertices > MAX_PARSE_ORDER:
-            fail(f"more than {MAX_PARSE_ORDER} vertices", pos)
+            syntax_error(f"more than {MAX_PARSE_ORDER} vertices", pos)
         pos += 1
         if pos < len(s) and s[pos] == "[":
             if len(stack) >= MAX_DEPTH:
-                fail(f"more than {MAX_DEPTH} levels", pos)
+                syntax_error(f"more than {MAX_DEPTH} levels", pos)
             stack.append([])
             pos += 1
             continue
@@ -211,14 +211,14 @@ def parse_tree(text: str) -> Tree:
         while True:  # a tree is complete: attach it, closing the brackets that end here
             if not stack:
                 if pos != len(s):
-                    fail("unexpected text after the tree", pos)
+                    syntax_error("unexpected text after the tree", pos)
                 return tree
             stack[-1].append(tree)
             if pos < len(s) and s[pos] == ",":
                 pos += 1
                 break
             if pos >= len(s) or s[pos] != "]":
-                fail("expected ',' or ']'", pos)
+                syntax_error("expected ',' or ']'", pos)
             pos += 1
             tree = from_children(stack.pop())
 

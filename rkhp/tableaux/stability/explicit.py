@@ -11,7 +11,7 @@ import sympy
 from ...base.errors import InputError
 from ..tableau import Tableau
 from .field import Number, Z, tableau_field
-from .phase import polynomial_text
+from .phase import series_text
 from .roots import first_positive_root
 
 #: the explicit m(z) is written out exactly up to this many stages (its degree is 2^s - 1)
@@ -49,7 +49,7 @@ def m_polynomial(tableau: Tableau):
 
 def poly_text(p) -> str:
     """A polynomial in z in increasing powers."""
-    return polynomial_text([(k[0], sympy.radsimp(c)) for k, c in zip(p.monoms(), p.coeffs(), strict=True)])
+    return series_text([(k[0], sympy.radsimp(c)) for k, c in zip(p.monoms(), p.coeffs(), strict=True)])
 
 
 def wrap_limit_explicit(m) -> Number | None:

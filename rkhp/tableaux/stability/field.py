@@ -36,7 +36,7 @@ UNBOUNDED = Number("oo", math.inf)
 
 
 @dataclass(frozen=True)
-class Field:
+class NumberField:
     """The number field K of a tableau's entries (sympy domain QQ or QQ<alpha>), the entries as
     elements of K, and whether they are exact (False: decimals read at their digits)."""
 
@@ -77,7 +77,7 @@ def exact_number(g):
     return sympy.Rational(g.numerator, g.denominator) if isinstance(g, Fraction) else sympy.Integer(g)
 
 
-def tableau_field(tableau: Tableau, extra=()) -> Field:
+def tableau_field(tableau: Tableau, extra=()) -> NumberField:
     """The field of the entries of A and b (and of `extra` sympy numbers, e.g. composition
     coefficients): decimals known to D digits enter as the rationals they spell."""
     values = [as_sympy(x) if is_exact(x) else sympy.Rational(*_pair(to_fraction(x, 0)))
@@ -88,7 +88,7 @@ def tableau_field(tableau: Tableau, extra=()) -> Field:
     s = tableau.stages
     A = tuple(tuple(elements[i * s + j] for j in range(s)) for i in range(s))
     b = tuple(elements[s * s: s * s + s])
-    return Field(K, A, b, tableau.is_exact, tableau.digits)
+    return NumberField(K, A, b, tableau.is_exact, tableau.digits)
 
 
 def _pair(q: Fraction) -> tuple[int, int]:

@@ -61,7 +61,7 @@ def _residual(A, m, z):
     return mpmath.matrix([m[i] - z * sum(A[i, j] * (1 + m[j] ** 2 / 4) for j in range(s)) for i in range(s)])
 
 
-def _jacobian(A, m, z):
+def _fold_jacobian(A, m, z):
     s = len(m)
     return mpmath.matrix([[(1 if i == j else 0) - z * A[i, j] * m[j] / 2 for j in range(s)] for i in range(s)])
 
@@ -92,7 +92,7 @@ def _solve_at(A, m, z, iterations=60):
     for _ in range(iterations):
         r = _residual(A, m, z)
         try:
-            dm = mpmath.lu_solve(_jacobian(A, m, z), r)
+            dm = mpmath.lu_solve(_fold_jacobian(A, m, z), r)
         except ZeroDivisionError:
             return None
         m = m - dm
@@ -105,7 +105,7 @@ def _dm_dz(A, b, m, z):
     """d m/dz along the branch: dm_i/dz from J dm = A w, then the total."""
     s = len(m)
     w = mpmath.matrix([1 + m[j] ** 2 / 4 for j in range(s)])
-    dms = mpmath.lu_solve(_jacobian(A, m, z), A * w)
+    dms = mpmath.lu_solve(_fold_jacobian(A, m, z), A * w)
     return sum(b[i] * (w[i] + z * m[i] * dms[i] / 2) for i in range(s))
 
 
@@ -123,7 +123,7 @@ def branch_point(A, z_target, start=None):
         predicted = m + dz * _tangent(A, m, z)
         trial = _solve_at(A, predicted, z + dz, iterations=12)
         if trial is None or mpmath.norm(trial - predicted) > dz * (1 + mpmath.norm(m)) \
-                or abs(_det(_jacobian(A, trial, z + dz))) < mpmath.mpf(10) ** -4:
+                or abs(_det(_fold_jacobian(A, trial, z + dz))) < mpmath.mpf(10) ** -4:
             if dz < mpmath.mpf(10) ** -9 * (1 + z_target):
                 return None  # within about 1e-8 of the fold (det J ~ sqrt(z* - z)): the branch ends
             dz /= 2
@@ -149,7 +149,7 @@ def implicit_branch(tableau: Tableau) -> Branch:
         while z < MAX_CONTINUATION_Z:
             trial = _solve_at(A, m + dz * _tangent(A, m, z), z + dz, iterations=12)
             if trial is None or mpmath.norm(trial - m) > 4 * dz * (1 + mpmath.norm(m)) \
-                    or abs(_det(_jacobian(A, trial, z + dz))) < mpmath.mpf(10) ** -12:
+                    or abs(_det(_fold_jacobian(A, trial, z + dz))) < mpmath.mpf(10) ** -12:
                 if dz < mpmath.mpf(10) ** -25:
                     break
                 dz /= 4
@@ -173,23 +173,23 @@ def implicit_branch(tableau: Tableau) -> Branch:
 def _tangent(A, m, z):
     s = len(m)
     w = mpmath.matrix([1 + m[j] ** 2 / 4 for j in range(s)])
-    return mpmath.lu_solve(_jacobian(A, m, z), A * w)
+    return mpmath.lu_solve(_fold_jacobian(A, m, z), A * w)
 
 
 def _refine_fold(A, m, z):
     """Newton on (F(m, z) = 0, det(I - z A diag(m/2)) = 0) from a point just before the fold."""
     s = len(m)
 
-    def equations(*u):
+    def fold_equations(*u):
         mm, zz = mpmath.matrix(u[:s]), u[s]
         r = _residual(A, mm, zz)
-        return [r[i] for i in range(s)] + [_det(_jacobian(A, mm, zz))]
+        return [r[i] for i in range(s)] + [_det(_fold_jacobian(A, mm, zz))]
 
     try:
-        root = mpmath.findroot(equations, [m[i] for i in range(s)] + [z], tol=mpmath.mpf(10) ** (10 - 2 * DIGITS),
+        root = mpmath.findroot(fold_equations, [m[i] for i in range(s)] + [z], tol=mpmath.mpf(10) ** (10 - 2 * DIGITS),
                                maxsteps=200)
     except (ValueError, ZeroDivisionError) as exc:
-        raise NumericalFailure(f"the fold of the stage equations near z = {float(z):.6g} did not converge: "
+        raise NumericalFailure(f"the fold of the stage fold_equations near z = {float(z):.6g} did not converge: "
                                f"{exc}") from None
     return root[s]
 
@@ -219,14 +219,14 @@ def _exact_fold(tableau: Tableau, z_fold) -> str | None:
     ms = sympy.symbols(f"m1:{s + 1}")
     r = sympy.Dummy("r")
 
-    def entry(x):
+    def fold_entry(x):
         if K == sympy.QQ:
             return K.to_sympy(x)
         coeffs = x.to_list()
         return sum(sympy.Rational(int(q.numerator), int(q.denominator)) * r**(len(coeffs) - 1 - i)
                    for i, q in enumerate(coeffs))
 
-    Ar = sympy.Matrix(s, s, lambda i, j: entry(F.A[i][j]))
+    Ar = sympy.Matrix(s, s, lambda i, j: fold_entry(F.A[i][j]))
     eqs = [ms[i] - Z * sum(Ar[i, j] * (1 + ms[j] ** 2 / 4) for j in range(s)) for i in range(s)]
     jac = sympy.Matrix(s, s, lambda i, j: sympy.diff(eqs[i], ms[j]))
     polys = [sympy.expand(e * 4) for e in eqs] + [sympy.expand(jac.det() * 2**s)]

@@ -10,7 +10,7 @@ import sympy
 from ...base.errors import InputError
 from ...base.expressions import parse_expression
 from ..tableau import Tableau
-from .field import Field, Number, Z, exact_number, tableau_field
+from .field import Number, NumberField, Z, exact_number, tableau_field
 from .series import m_series, theta_minus_z
 
 #: largest order of the series of theta(z) - z
@@ -36,10 +36,10 @@ class Phase:
         terms = [(k, c) for k, c in self.coefficients if c.exact is not None and c.exact != "0"]
         if any(c.exact is None for _, c in self.coefficients):
             return None
-        return polynomial_text([(k, parse_expression(c.exact, where="phase coefficient")) for k, c in terms])
+        return series_text([(k, parse_expression(c.exact, where="phase coefficient")) for k, c in terms])
 
 
-def polynomial_text(terms) -> str:
+def series_text(terms) -> str:
     """sum c_k z^k in increasing powers (``z + z^3/12 + 3*z^7/16384``), ``0`` for none."""
     expr = sum((c * Z**k for k, c in terms), sympy.Integer(0))
     if expr == 0:
@@ -48,7 +48,7 @@ def polynomial_text(terms) -> str:
     return text.replace("**", "^")
 
 
-def phase_of(F: Field, series_of, order: int) -> Phase:
+def phase_of(F: NumberField, series_of, order: int) -> Phase:
     """The Phase from `series_of(n)` (theta - z to z^n), growing n until a non-zero coefficient
     shows (at most PHASE_SEARCH_ORDER)."""
     n = order
@@ -71,7 +71,7 @@ def phase_of(F: Field, series_of, order: int) -> Phase:
 def phase(tableau: Tableau, order: int = 9) -> Phase:
     """Phase of an RKHP tableau on the oscillator with the symmetric realisation: theta(z) - z to
     z^order, the phase order and constant (docs/theory.md §13)."""
-    check_order(order)
+    check_series_order(order)
     F = tableau_field(tableau)
     return phase_of(F, lambda n: theta_minus_z(F.K, m_series(F, n), n), order)
 
@@ -81,7 +81,7 @@ def composition_phase(tableau: Tableau, gammas, order: int = 9) -> Phase:
     gamma_s h (sympy numbers): the substeps are rotations about the same centre, so
     theta(z) = sum_i theta_base(gamma_i z) and the coefficient of z^k is theta_base's times
     sum_i gamma_i^k (docs/stability.md, "Compositions")."""
-    check_order(order)
+    check_series_order(order)
     gammas = [exact_number(g) for g in gammas]
     if not gammas:
         raise InputError("a composition needs at least one substep")
@@ -105,7 +105,7 @@ def composition_phase(tableau: Tableau, gammas, order: int = 9) -> Phase:
     return phase_of(F, series_of, order)
 
 
-def check_order(order: int) -> None:
+def check_series_order(order: int) -> None:
     if not 1 <= order <= MAX_SERIES_ORDER:
         raise InputError(f"the order of the phase series must be from 1 to {MAX_SERIES_ORDER}, got {order}")
 

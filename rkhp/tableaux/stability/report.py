@@ -13,7 +13,7 @@ from ..tableau import Tableau
 from .explicit import explicit_angles, m_polynomial, poly_text, wrap_limit_explicit, wrap_limit_numeric
 from .field import Number, exact_text, tableau_field
 from .implicit import branch_point, implicit_branch, mp_tableau
-from .phase import Phase, check_order, composition_phase, phase, phase_of
+from .phase import Phase, check_series_order, composition_phase, phase, phase_of
 from .shifted import (
     shifted_branch,
     shifted_stage_equations,
@@ -52,7 +52,7 @@ class Stability:
 
 def analyse(tableau: Tableau, order: int = 9, realisation: str = "symmetric") -> Stability:
     """The linear stability and phase of an RKHP tableau (see the module)."""
-    check_order(order)
+    check_series_order(order)
     if realisation not in REALISATIONS:
         raise InputError(f"unknown realisation {realisation!r} for the linear analysis; choose one of "
                          f"{', '.join(REALISATIONS)}")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import sympy
 
 from ...base.errors import NumericalFailure
-from .field import Field
+from .field import NumberField
 
 
 def mul(K, u, v, n):
@@ -58,7 +58,7 @@ def sqrt(K, v, n):
     return out
 
 
-def _stage_map(F: Field, ms, n):
+def _stage_map(F: NumberField, ms, n):
     """One application of m_i <- z sum_j a_ij (1 + m_j^2/4) to series ms (truncated after z^n)."""
     K = F.K
     quarter = K.one / K.convert(4)
@@ -77,7 +77,7 @@ def _stage_map(F: Field, ms, n):
     return out, shift(K, total, n)
 
 
-def m_series(F: Field, n: int) -> list:
+def m_series(F: NumberField, n: int) -> list:
     """The series of m(z) to z^n on the branch through m(0) = 0 (explicit or implicit): each
     application of the stage map gains one power of z, so n + 1 applications from 0 suffice."""
     K = F.K
@@ -115,14 +115,14 @@ def phase_coefficients_numeric(A, b, n: int):
     dtype = np.asarray(b).dtype
     zero = np.zeros(n + 1, dtype=dtype) * b[0]
 
-    def mul(u, v):
+    def mul_numeric(u, v):
         out = zero.copy()
         for i in range(n + 1):
             if u[i]:
                 out[i:] += u[i] * v[: n + 1 - i]
         return out
 
-    def shift(u):
+    def shift_numeric(u):
         out = zero.copy()
         out[1:] = u[:n]
         return out
@@ -131,17 +131,17 @@ def phase_coefficients_numeric(A, b, n: int):
     ms = [zero.copy() for _ in range(s)]
     m = zero.copy()
     for _ in range(n + 2):
-        w = [mul(mi, mi) / 4 for mi in ms]
+        w = [mul_numeric(mi, mi) / 4 for mi in ms]
         for wi in w:
             wi[0] += 1
-        ms = [shift(sum((A[i][j] * w[j] for j in range(s)), zero.copy())) for i in range(s)]
-        m = shift(sum((b[i] * w[i] for i in range(s)), zero.copy()))
+        ms = [shift_numeric(sum((A[i][j] * w[j] for j in range(s)), zero.copy())) for i in range(s)]
+        m = shift_numeric(sum((b[i] * w[i] for i in range(s)), zero.copy()))
     u = m / 2
-    u2 = mul(u, u)
+    u2 = mul_numeric(u, u)
     total, power, k = zero.copy(), u, 0
     while k <= n:
         total = total + power * (2 * (-1) ** k) / (2 * k + 1)
-        power = mul(power, u2)
+        power = mul_numeric(power, u2)
         k += 1
     total[1] -= 1
     return total

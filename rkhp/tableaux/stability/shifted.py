@@ -13,7 +13,7 @@ import sympy
 
 from ...base.errors import InputError, NumericalFailure
 from ..tableau import Tableau
-from .field import DIGITS, UNBOUNDED, Field, Number, Z, exact_text, tableau_field
+from .field import DIGITS, UNBOUNDED, Number, NumberField, Z, exact_text, tableau_field
 from .implicit import MAX_CONTINUATION_Z, mp_tableau
 from .phase import Phase, phase_of
 from .roots import first_positive_root
@@ -94,7 +94,7 @@ def _zero_multiplicity(p) -> int:
     return k
 
 
-def trace_phase(F: Field, trace, order: int) -> Phase:
+def trace_phase(F: NumberField, trace, order: int) -> Phase:
     """The rotation number of an elliptic step, theta = arccos(tr R/2), as a series: theta - z to
     z^order, tr R(z) a rational function (explicit tableaux)."""
     K = F.K
@@ -142,7 +142,7 @@ def shifted_stage_equations(tableau: Tableau) -> tuple[str, ...]:
     return tuple(out)
 
 
-def _mat_series(K, F: Field, n: int):
+def _mat_series(K, F: NumberField, n: int):
     """The series of the stages M_i and of P to z^n (lists [[m00, m01], [m10, m11]] of coefficient
     lists): n + 1 applications of the stage map from M_i = 0, each exact to one more power."""
     D = [[K.from_sympy(x) for x in row] for row in (SHIFT_Q - J / 2).tolist()]
@@ -170,7 +170,7 @@ def _mat_series(K, F: Field, n: int):
     return combine(F.b, [gram(M) for M in Ms])
 
 
-def shifted_trace_series(F: Field, n: int) -> list:
+def shifted_trace_series(F: NumberField, n: int) -> list:
     """tr R(z) to z^n for any tableau (explicit or implicit) with the shifted realisation:
     R = (I + D' P)(I + D P)^-1, tr R = tr((I + D'P) adj(I + DP)) / det(I + DP)."""
     K = F.K
@@ -393,16 +393,16 @@ def _refine_shifted_fold(tableau: Tableau, u, z):
     with mpmath.workdps(DIGITS):
         A, _, D, _ = _shifted_arrays(tableau, exact=True)
 
-        def equations(*v):
+        def shifted_fold_equations(*v):
             uu = np.array(v[:n], dtype=object)
             r = _shifted_residual(A, D, uu, v[n])
             return [r[i] for i in range(n)] + [mpmath.det(mpmath.matrix(_shifted_jacobian(A, D, uu, v[n]).tolist()))]
 
         try:
-            root = mpmath.findroot(equations, [mpmath.mpf(float(x)) for x in u] + [mpmath.mpf(z)],
+            root = mpmath.findroot(shifted_fold_equations, [mpmath.mpf(float(x)) for x in u] + [mpmath.mpf(z)],
                                    tol=mpmath.mpf(10) ** (10 - 2 * DIGITS), maxsteps=200)
         except (ValueError, ZeroDivisionError) as exc:
-            raise NumericalFailure(f"the fold of the shifted stage equations near z = {z:.6g} did not "
+            raise NumericalFailure(f"the fold of the shifted stage shifted_fold_equations near z = {z:.6g} did not "
                                    f"converge: {exc}") from None
         return root[n]
 

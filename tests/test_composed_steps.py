@@ -1,5 +1,5 @@
-"""The series of a composition of RKHP steps against the Butcher product (issue 14;
-docs/modified.md, docs/theory.md §11).
+"""The series of a composition of RKHP steps against the Butcher product
+(docs/modified.md, docs/theory.md §11).
 
 Outside values: the harmonic oscillator, where a generating function S = c H is the Cayley
 rotation by 2 arctan(c/2), so two implicit midpoint steps (RKHP Euler) have c = 2h/(1 - h^2/4);
@@ -15,7 +15,7 @@ from fractions import Fraction
 import pytest
 
 from rkhp.base.errors import InputError
-from rkhp.series.composition import composition_series
+from rkhp.series.composed_steps import composition_series
 from rkhp.series.modified import method_character
 from rkhp.tableaux.files import load_tableau
 from rkhp.trees.algebra import exact_flow_character

@@ -143,7 +143,7 @@ def _groupoid(chars, order, cls, basis, embeddings, seed):
     top = order
     while top >= 1:
         try:
-            coords, checks = _solve(
+            coords, checks = _composition_coordinates(
                 lambda p, roots, rng, n=top: _groupoid_modulo(chars, n, cls, basis[:n], embeddings, p, roots, rng),
                 basis[:top], embeddings, seed)
             return _elements(coords, embeddings), top, checks
@@ -153,12 +153,13 @@ def _groupoid(chars, order, cls, basis, embeddings, seed):
 
 
 def _restart(chars, order, cls, basis, embeddings, seed):
-    coords, _ = _solve(lambda p, roots, rng: _restart_modulo(chars, order, cls, basis, embeddings, p, roots, rng),
-                       basis, embeddings, seed)
+    coords, _ = _composition_coordinates(
+        lambda p, roots, rng: _restart_modulo(chars, order, cls, basis, embeddings, p, roots, rng),
+        basis, embeddings, seed)
     return _elements(coords, embeddings)
 
 
-def _solve(compute, basis, embeddings, seed):
+def _composition_coordinates(compute, basis, embeddings, seed):
     keys = [t for level in basis for t in level]
     try:
         coords, primes, last = solve_over_primes(compute, keys, embeddings, seed, MAX_PRIMES)
@@ -347,15 +348,15 @@ def _groupoid_modulo(chars, order, cls, basis, emb, p, roots, rng):
     w = _fixed_point(J, lambda w: [(w0[i] + a) % p for i, a in enumerate(_apply_A(J, real, _at(J, P, w)))], w0)
     grad = _at(J, P, w)
 
-    def V_of(level, e):
+    def groupoid_columns(level, e):
         cols = slice(e * batch, (e + 1) * batch)
         return np.array([np.concatenate([FH[t][1 + i][cols] for i in range(n)]) for t in level], dtype=np.int64).T
 
-    def rhs(m, e):
+    def groupoid_rhs(m, e):
         cols = slice(e * batch, (e + 1) * batch)
         return np.concatenate([grad[i][J.monomial((0,) * n, m)][cols] for i in range(n)])
 
-    out = _solve_levels(basis, V_of, rhs, d, batch, p)
+    out = _solve_levels(basis, groupoid_columns, groupoid_rhs, d, batch, p)
     if isinstance(out, int):
         return out
     return {t: emb.coordinates_mod(v, p, roots) for t, v in out.items()}
@@ -398,7 +399,7 @@ def _restart_modulo(chars, order, cls, basis, emb, p, roots, rng):
             derivs[index] = _padded(J, J.ring.derivative(dH(index[:-1]), index[-1], order - len(index)))
         return derivs[index]
 
-    def transform(grad, m):
+    def restart_transform(grad, m):
         return J.matvec(real.D, grad)
 
     S = J.zero()  # S_1 = B(a_1)(0): at the zero section only the class's trees count
@@ -411,23 +412,23 @@ def _restart_modulo(chars, order, cls, basis, emb, p, roots, rng):
         powers = J.powers([(J.variable(i) + Dg[i]) % p for i in range(n)], order)
         cache: dict = {}
 
-        def partials(index, m, powers=powers, cache=cache):
+        def restart_partials(index, m, powers=powers, cache=cache):
             if index not in cache:
                 cache[index] = J.substitute(dH(index), powers)
             return cache[index][: J.ring.size(m)]
 
-        F = elementary_differentials(all_trees, order, J.ring, partials, transform, n, jets=True)
+        F = elementary_differentials(all_trees, order, J.ring, restart_partials, restart_transform, n, jets=True)
         for t in all_trees:
             S = (S + _weights(emb, a, t, p, roots, batch) * J.shift_h(_padded(J, F[t]), t.order)) % p
 
-    def V_of(level, e):
+    def restart_columns(level, e):
         cols = slice(e * batch, (e + 1) * batch)
         return np.array([FH[t][0][cols] for t in level], dtype=np.int64).T
 
-    def rhs(m, e):
+    def restart_rhs(m, e):
         return S[J.monomial((0,) * n, m)][e * batch:(e + 1) * batch]
 
-    out = _solve_levels(basis, V_of, rhs, d, batch, p)
+    out = _solve_levels(basis, restart_columns, restart_rhs, d, batch, p)
     if isinstance(out, int):
         raise NumericalFailure(f"order {out}: the Hamilton–Jacobi composition is not a tree series on the generic "
                                f"instances modulo {p}; rerun with another --seed")
