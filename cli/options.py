@@ -322,3 +322,10 @@ class _SilentProgress:
 
     def advance(self, *args, **kwargs):
         pass
+
+
+def realisation_option():
+    return click.option("--realisation", default="symmetric", show_default=True,
+                        help="Birealisation: symmetric (degenerate), shifted (x + Q p; general), "
+                             "quartic (x + grad K(p); degenerate, not symmetric), truncated:K (the "
+                             "spray series to degree K in p, K = 1..12; symmetric).")

@@ -22,11 +22,11 @@ from .options import (
     parse_x0,
     progress,
     real,
+    realisation_option,
     run_provenance,
     x0_option,
 )
-from .render import compact_table, print_table
-from .systems_cmd import plan_line, realisation_option
+from .render import compact_table, plan_line, print_table
 from .terminal import plain
 
 #: the points the table shows (all of them: --format csv or json)

@@ -155,3 +155,18 @@ def pack(items: list[str], width: int, gap: str = "   ", indent: str = "  ") -> 
     if current:
         lines.append(current)
     return lines
+
+
+def plan_line(planned) -> str:
+    """The line --tol prints before the run: the pilot's estimate and the steps chosen."""
+    c = planned.choice
+    pilot = c.pilot
+    auto = ""
+    if planned.candidates:
+        auto = "method auto: " + ", ".join(
+            f"{k.method} {k.choice.steps} steps ~{k.choice.predicted_seconds:.2g} s" if k.choice else
+            f"{k.method} left out" for k in planned.candidates) + "; "
+    return (f"{auto}tol {c.tolerance:g}: {c.method} (order {c.order}), pilot {pilot.steps[0]}..{pilot.finest_steps} "
+            f"steps, estimated error {pilot.estimate:.2g} at {pilot.finest_steps} steps"
+            f"{' (round-off)' if pilot.round_off else ''}; chose {c.steps} steps of h = {c.h:.6g} "
+            f"(predicted error {c.predicted_error:.2g}, about {c.predicted_seconds:.2g} s)")

@@ -25,19 +25,13 @@ from .options import (
     parse_x0,
     progress,
     real,
+    realisation_option,
     reals,
     run_provenance,
     x0_option,
 )
-from .render import compact_table, print_table
+from .render import compact_table, plan_line, print_table
 from .terminal import plain
-
-
-def realisation_option():
-    return click.option("--realisation", default="symmetric", show_default=True,
-                        help="Birealisation: symmetric (degenerate), shifted (x + Q p; general), "
-                             "quartic (x + grad K(p); degenerate, not symmetric), truncated:K (the "
-                             "spray series to degree K in p, K = 1..12; symmetric).")
 
 
 def _fmt(v, digits=6) -> str:
@@ -348,21 +342,6 @@ def tolerance_report(planned, choice, estimate) -> dict:
             "predicted_error": choice.predicted_error, "estimated_error": estimate,
             "met": estimate is not None and estimate <= choice.tolerance,
             "candidates": [c.to_json() for c in planned.candidates]}
-
-
-def plan_line(planned) -> str:
-    """The line --tol prints before the run: the pilot's estimate and the steps chosen."""
-    c = planned.choice
-    pilot = c.pilot
-    auto = ""
-    if planned.candidates:
-        auto = "method auto: " + ", ".join(
-            f"{k.method} {k.choice.steps} steps ~{k.choice.predicted_seconds:.2g} s" if k.choice else
-            f"{k.method} left out" for k in planned.candidates) + "; "
-    return (f"{auto}tol {c.tolerance:g}: {c.method} (order {c.order}), pilot {pilot.steps[0]}..{pilot.finest_steps} "
-            f"steps, estimated error {pilot.estimate:.2g} at {pilot.finest_steps} steps"
-            f"{' (round-off)' if pilot.round_off else ''}; chose {c.steps} steps of h = {c.h:.6g} "
-            f"(predicted error {c.predicted_error:.2g}, about {c.predicted_seconds:.2g} s)")
 
 
 def _output_times(t_eval, count, end: float):

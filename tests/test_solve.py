@@ -112,7 +112,7 @@ def test_the_pilot_estimate_is_richardson_of_the_method_order():
     # Euler (order 2 on the symmetric realisation) on the rigid body: d_k / d_(k+1) -> 4
     system = resolve_system("rigid-body")
     method = rkhp.resolve_method("euler")
-    pilot = tolerance.pilot(system, method, tolerance.Span(0.0, 10.0), 2)
+    pilot = tolerance.pilot_runs(system, method, tolerance.Span(0.0, 10.0), 2)
     assert abs(pilot.observed_order - 2) < 0.2
     assert pilot.estimate == pytest.approx(pilot.differences[-1] / 3, rel=0.1)
 

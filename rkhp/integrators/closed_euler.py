@@ -412,7 +412,7 @@ def _exact_factors(i, y0, hs, form, work, memory, n):
         for a in range(n):
             for b in range(n):
                 D[a, b] = 0.5 * form.matrix[a, b] * (x[a] if form.kind == LOG_CANONICAL else 1.0)
-    _jacobian(i, hs, form, work, memory, n)
+    _jacobian_matrix(i, hs, form, work, memory, n)
     for k in range(n):
         work.xbar[k] = x[k]
     if not lu_factor(memory.inverse[i], work.perm):
@@ -421,7 +421,7 @@ def _exact_factors(i, y0, hs, form, work, memory, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _jacobian(i, hs, form, work, memory, n):
+def _jacobian_matrix(i, hs, form, work, memory, n):
     """memory.inverse[i] := I - hs G'(x) D with G'(x) = Hess H(x) (constant, lie-poisson) or
     diag(grad H(x)) + diag(x) Hess H(x) (log-canonical), x = work.xz, D = work.jac (x'). Hess H is
     the constant one of the form for a quadratic H, else by differences of the gradient
@@ -452,10 +452,10 @@ def _jacobian(i, hs, form, work, memory, n):
 
 @nb.njit(**NJIT_NORC)
 def _store_inverse(i, hs, form, work, memory, n):
-    """Substep i's chord matrix (`_jacobian`) inverted in place (memory.inverse[i]), marked
+    """Substep i's chord matrix (`_jacobian_matrix`) inverted in place (memory.inverse[i]), marked
     ready. Failure.OK or SINGULAR."""
     memory.refreshes[i] += 1
-    _jacobian(i, hs, form, work, memory, n)
+    _jacobian_matrix(i, hs, form, work, memory, n)
     M, D = memory.inverse[i], work.jac
     if not lu_factor(M, work.perm):
         return Failure.SINGULAR

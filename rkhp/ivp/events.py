@@ -65,12 +65,12 @@ def expression_event(text: str, dim: int, direction: float = 0.0, terminal=False
     symbols = [sympy.Symbol(name, real=True) for name in variable_names(dim)]
     function = sympy.lambdify(symbols, expr, "numpy")
 
-    def values(states, times):
+    def event_values(states, times):
         with np.errstate(all="ignore"):
             out = function(*np.asarray(states, dtype=np.float64).T)
         return np.broadcast_to(np.asarray(out, dtype=np.float64), (len(states),)).copy()
 
-    return Event(text, values, _direction(direction, where), _terminal(terminal, where))
+    return Event(text, event_values, _direction(direction, where), _terminal(terminal, where))
 
 
 def function_event(function: Callable, direction=None, terminal=None) -> Event:
@@ -80,10 +80,10 @@ def function_event(function: Callable, direction=None, terminal=None) -> Event:
     direction = getattr(function, "direction", 0.0) if direction is None else direction
     terminal = getattr(function, "terminal", False) if terminal is None else terminal
 
-    def values(states, times):
+    def function_values(states, times):
         return np.array([float(function(float(t), np.array(y))) for t, y in zip(times, states, strict=True)])
 
-    return Event(getattr(function, "__name__", "function"), values, _direction(direction, where),
+    return Event(getattr(function, "__name__", "function"), function_values, _direction(direction, where),
                  _terminal(terminal, where))
 
 

@@ -128,7 +128,7 @@ def trajectory(system, method, span: Span, steps: int, x0=None, on_progress=None
     t0 + n h those of one call of the method, ``on_progress(done, steps)`` after each chunk; a
     failed run keeps the states before the failure, as one call of the method would."""
     bounds.check_trajectory(steps, system.dim)
-    parts = list(_progress(chunks(system, method, span, steps, x0, exact_end=False), steps, on_progress))
+    parts = list(_with_progress(chunks(system, method, span, steps, x0, exact_end=False), steps, on_progress))
     states = np.concatenate([parts[0].states] + [c.states[1:] for c in parts[1:]])
     last = parts[-1]
     return Trajectory(np.concatenate([parts[0].times] + [c.times[1:] for c in parts[1:]]), states,
@@ -139,7 +139,7 @@ def trajectory(system, method, span: Span, steps: int, x0=None, on_progress=None
                       method.name, system.name, poisson=system)
 
 
-def _progress(parts, steps: int, on_progress):
+def _with_progress(parts, steps: int, on_progress):
     for chunk in parts:
         if on_progress is not None:
             on_progress(chunk.first + len(chunk.states) - 1, steps)

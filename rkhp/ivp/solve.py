@@ -44,7 +44,7 @@ class Candidate:
     """One method ``method="auto"`` considered: its step choice, or why it was left out."""
 
     method: str
-    choice: tolerances.StepChoice | None
+    choice: tolerances.ToleranceStep | None
     reason: str = ""
 
     def to_json(self) -> dict:
@@ -65,7 +65,7 @@ class Plan:
     steps: int
     h: float
     span: Span
-    choice: tolerances.StepChoice | None = None
+    choice: tolerances.ToleranceStep | None = None
     candidates: tuple[Candidate, ...] = ()
 
     def to_json(self) -> dict:
@@ -140,7 +140,7 @@ class SolveResult:
 
 def choose_method(system, span: Span, tol: float, x0=None, candidates=AUTO_CANDIDATES,
                   on_candidate: Callable[[int, int], None] | None = None
-                  ) -> tuple[Method, tolerances.StepChoice, tuple[Candidate, ...]]:
+                  ) -> tuple[Method, tolerances.ToleranceStep, tuple[Candidate, ...]]:
     """The candidate whose step choice for ``tol`` the pilot predicts to be cheapest (CPU time of
     a step in the pilot times the steps chosen), with every candidate's choice; a candidate whose
     pilot fails or that needs too many steps is left out with its reason. NumericalFailure when
@@ -149,7 +149,7 @@ def choose_method(system, span: Span, tol: float, x0=None, candidates=AUTO_CANDI
     for k, name in enumerate(candidates):
         method = resolve_method(name)
         try:
-            choice = tolerances.choose(system, method, span, tol, x0)
+            choice = tolerances.choose_tolerance_step(system, method, span, tol, x0)
         except (NumericalFailure, InputError) as exc:
             considered.append(Candidate(name, None, " ".join(str(exc).split())))
         else:
@@ -181,7 +181,7 @@ def plan(system, t_span=None, method=DEFAULT_METHOD, tol=None, steps=None, x0=No
         chosen, choice, considered = choose_method(system, span, tol, x0, on_candidate=on_candidate)
         return chosen, Plan(system.name, chosen.name, choice.steps, choice.h, span, choice, considered)
     chosen = require_steps([resolve_method(method)])[0]
-    choice = tolerances.choose(system, chosen, span, tol, x0)
+    choice = tolerances.choose_tolerance_step(system, chosen, span, tol, x0)
     return chosen, Plan(system.name, chosen.name, choice.steps, choice.h, span, choice)
 
 
@@ -339,7 +339,7 @@ def solve(system, t_span=None, method=DEFAULT_METHOD, tol=None, *, steps=None, t
         on_plan(planned)
     progress = _Progress(on_progress)
 
-    def attempt(steps: int):
+    def run_steps(steps: int):
         if keep_grid:
             bounds.check_trajectory(steps, poisson.dim)
         run = _Run(poisson, chosen, span, steps, times, keep_grid, event_list)
@@ -353,10 +353,10 @@ def solve(system, t_span=None, method=DEFAULT_METHOD, tol=None, *, steps=None, t
 
     choice, estimate = planned.choice, None
     if choice is None:
-        run, _ = attempt(planned.steps)
+        run, _ = run_steps(planned.steps)
         n = planned.steps
     else:
-        choice, run, estimate = tolerances.run_to_tolerance(choice, span, poisson, lambda c: attempt(c.steps))
+        choice, run, estimate = tolerances.run_to_tolerance(choice, span, poisson, lambda c: run_steps(c.steps))
         n = choice.steps
         if run.status == FAILED:
             estimate = None

@@ -80,7 +80,7 @@ class Pilot:
 
 
 @dataclass(frozen=True)
-class StepChoice:
+class ToleranceStep:
     """The step chosen for a tolerance: ``steps`` steps of size ``h`` of ``method`` (of order
     ``order`` on the system), from its ``pilot``; ``predicted_error`` is the model's error of that
     run relative to ``scale`` = max(1, |y(T)|), as the tolerance."""
@@ -109,7 +109,7 @@ def norm(x) -> float:
     return float(np.linalg.norm(x))
 
 
-def pilot(system, method, span: Span, order: int, x0=None, start: int = PILOT_START) -> Pilot:
+def pilot_runs(system, method, span: Span, order: int, x0=None, start: int = PILOT_START) -> Pilot:
     """The pilot runs of ``method`` (order ``order`` on ``system``) over ``span`` (module
     docstring); NumericalFailure when no pilot up to PILOT_MAX steps is in the asymptotic range."""
     ends: dict[int, np.ndarray | None] = {}
@@ -193,14 +193,15 @@ def too_many(method, system, tol: float, n: int) -> InputError:
                       f"{bounds.MAX_STEPS}); choose a looser tolerance or a method of higher order")
 
 
-def choose(system, method, span: Span, tol: float, x0=None, pilot_run: Pilot | None = None) -> StepChoice:
+def choose_tolerance_step(system, method, span: Span, tol: float, x0=None,
+                          pilot_run: Pilot | None = None) -> ToleranceStep:
     """The step of ``method`` (a Method) on ``system`` over ``span`` for the tolerance ``tol``
     (module docstring): the fewest steps, at least the pilot's coarsest run of the asymptotic
     range, whose modelled error is SAFETY times the tolerance; InputError when that is more than
     bounds.MAX_STEPS steps."""
     tol = check_tolerance(tol)
     order = method.expected_order_on(system)
-    found = pilot_run or pilot(system, method, span, order, x0)
+    found = pilot_run or pilot_runs(system, method, span, order, x0)
     scale = max(1.0, norm(found.finest))
     observed = found.observed_order
     n = max(steps_for(found.estimate, found.finest_steps, order, observed, SAFETY * tol * scale),
@@ -208,10 +209,10 @@ def choose(system, method, span: Span, tol: float, x0=None, pilot_run: Pilot | N
     if n > bounds.MAX_STEPS:
         raise too_many(method.name, system.name, tol, n)
     predicted = modelled(found.estimate, found.finest_steps, n, order, observed) / scale
-    return StepChoice(method.name, order, tol, scale, n, span.step(n), predicted, found)
+    return ToleranceStep(method.name, order, tol, scale, n, span.step(n), predicted, found)
 
 
-def estimated_error(choice: StepChoice, final: np.ndarray, steps: int | None = None,
+def estimated_error(choice: ToleranceStep, final: np.ndarray, steps: int | None = None,
                     reference: np.ndarray | None = None) -> float:
     """The error estimate of the chosen run's end state ``final``, relative to the scale: by
     Richardson against a coarser run (``reference`` of ``steps`` steps; default the finest pilot)
@@ -225,18 +226,18 @@ def estimated_error(choice: StepChoice, final: np.ndarray, steps: int | None = N
     return choice.predicted_error
 
 
-def refine(choice: StepChoice, error: float, span: Span, system) -> StepChoice:
+def refine(choice: ToleranceStep, error: float, span: Span, system) -> ToleranceStep:
     """A finer choice after a run whose estimated error ``error`` (relative) missed the tolerance."""
     observed = choice.pilot.observed_order
     n = max(steps_for(error, choice.steps, choice.order, observed, SAFETY * choice.tolerance), 2 * choice.steps)
     if n > bounds.MAX_STEPS:
         raise too_many(choice.method, system.name, choice.tolerance, n)
     predicted = modelled(error, choice.steps, n, choice.order, observed)
-    return StepChoice(choice.method, choice.order, choice.tolerance, choice.scale, n, span.step(n), predicted,
+    return ToleranceStep(choice.method, choice.order, choice.tolerance, choice.scale, n, span.step(n), predicted,
                       choice.pilot)
 
 
-def run_to_tolerance(choice: StepChoice, span: Span, system, run):
+def run_to_tolerance(choice: ToleranceStep, span: Span, system, run):
     """Run ``choice`` (``run(choice)`` returns the run's result and its end state at t1, or None
     when it did not reach t1) and estimate its error (:func:`estimated_error`); while the estimate
     misses the tolerance, a finer run (:func:`refine`, at most RETRIES), estimated against the
