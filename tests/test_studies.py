@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -300,10 +301,9 @@ def test_bench_error_falls_as_cost_rises(tmp_path):
         assert cost == sorted(cost) and len(set(cost)) == len(cost)
         assert all(e is not None for e in errors)
         assert all(b < a for a, b in zip(errors, errors[1:], strict=False)), c["method"]
-        if c["kind"] != "scipy":  # 16x more steps: the time difference is far above timing noise
-            slow = max(points, key=lambda p: p["seconds"])
-            fast = min(points, key=lambda p: p["seconds"])
-            assert slow["error"] < fast["error"]
+        # the times are measured, not asserted: a run of 10 steps preempted on a loaded machine can
+        # take longer than one of 160 (timings belong in benchmarks/)
+        assert all(p["seconds"] > 0 and math.isfinite(p["seconds"]) for p in points)
     targets = [c["target"] for c in data["cheapest"]]
     assert targets == [1e-4, 1e-6, 1e-8, 1e-10, 1e-12]
     for c in data["cheapest"]:
