@@ -8,7 +8,7 @@ A proper ideal (basis not [1]) proves that complex solutions exist; real ones ma
 
 Engines, chosen by measurement (docs/tableau-search.md, "Certificates of impossibility"):
 
-- ``singular`` (when the optional program is installed, :mod:`.singular`): first a Groebner
+- ``singular`` (when the optional program is installed, :mod:`rkhp.search.singular`): first a Groebner
   basis modulo the primes of :data:`EVIDENCE_PRIMES` (a quarter of the time limit at most; fast,
   and evidence only), then the reduced Groebner basis over Q (``slimgb``, degree reverse
   lexicographic), which decides; when it is [1], the cofactors of 1 = sum g_i f_i (``liftstd``),

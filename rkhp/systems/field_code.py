@@ -4,8 +4,8 @@ What a user hands an ODE solver is a right-hand side written with plain arithmet
 ``rkhp bench`` get that field, generated from the system itself, for every system (built-in or
 from a spec file):
 
-- pi(x) as sympy expressions from the system's family (:attr:`PoissonFamily.symbolic
-  <rkhp.systems.families.PoissonFamily>` of ``system.structure``);
+- pi(x) as sympy expressions from the system's family (the ``symbolic`` member of its
+  :class:`~rkhp.systems.families.PoissonFamily`, of ``system.structure``);
 - H(x) as a sympy expression read off the system's Hamiltonian tape (`rkhp.taylor.tape`: its
   arithmetic rows and elementary functions, one sympy node per row);
 - f_i = sum_j pi_ij dH/dx_j by sympy's differentiation, its common subexpressions named once
