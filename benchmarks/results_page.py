@@ -9,6 +9,7 @@ counts of a timed run, the versions compared) is a record here, with its provena
 that printed it, the date, the machine (CPU model, cores, load average) and the figures as the
 command printed or tabulated them. Each record names the manual page it serves; the page groups
 the records by that page, in the order of the file, and each manual page links to its section.
+The commits that records compare are listed once, by what each version is (`[versions]`).
 
 - without arguments: writes docs/results/index.md from the records;
 - --check: exits 1 if docs/results/index.md is not what the records give (a test runs this);
@@ -64,6 +65,12 @@ def records(path: Path = RECORDS) -> list[Record]:
     return out
 
 
+def versions(path: Path = RECORDS) -> dict[str, str]:
+    """The commits the records name (abbreviated hash: what that version is), from `[versions]`."""
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    return {str(k): str(v) for k, v in data.get("versions", {}).items()}
+
+
 def slug(title: str) -> str:
     """The anchor MyST gives a heading (myst_heading_anchors): what the manual's links point at."""
     return re.sub(r"[^\w\- ]", "", title.strip().lower()).replace(" ", "-")
@@ -109,8 +116,9 @@ def marked(figures: str) -> str:
     return "\n".join(out)
 
 
-def render(entries: list[Record]) -> str:
-    """The text of docs/results/index.md: the records grouped by the manual page they serve."""
+def render(entries: list[Record], named: dict[str, str]) -> str:
+    """The text of docs/results/index.md: the records grouped by the manual page they serve, then
+    the versions they compare, by what each is (`named`)."""
     titles = [r.title for r in entries]
     repeated = sorted({t for t in titles if titles.count(t) > 1})
     if repeated:
@@ -125,7 +133,7 @@ def render(entries: list[Record]) -> str:
         "",
         "Times on a shared machine depend on its load: compare figures of one record (measured in "
         "one run, interleaved), not figures of different records. Commit hashes name the versions "
-        "a run compared, as the run named them.",
+        "a run compared, as the run named them; the last section says what each version is.",
         "",
         "Work-precision against compiled peers is its own generated page: "
         "[work-precision](work-precision.md).",
@@ -137,6 +145,9 @@ def render(entries: list[Record]) -> str:
         for r in (r for r in entries if r.page == page):
             text += [f"### {r.title}", "", f"- command: {r.command}", f"- date: {r.date}",
                      f"- machine: {r.machine}", "", marked(from_results(r.figures, r.page)), ""]
+    if named:
+        text += ["## Versions named in the records", "", "| commit | what it is |", "|---|---|",
+                 *(f"| {commit} | {what} |" for commit, what in named.items()), ""]
     return "\n".join(text)
 
 
@@ -194,15 +205,15 @@ def main(argv: list[str]) -> int:
                 raise ValueError("record needs -- COMMAND")
             head, command = argv[:argv.index("--")], argv[argv.index("--") + 1:]
             new = record(_option(head, "--page"), _option(head, "--title"), command)
-            render([*records(), new])
+            render([*records(), new], versions())
             with RECORDS.open("a", encoding="utf-8") as f:
                 f.write(record_text(new))
-            PAGE.write_text(render(records()), encoding="utf-8")
+            PAGE.write_text(render(records(), versions()), encoding="utf-8")
             print(f"recorded: {new.title} ({new.date}); written: {PAGE.relative_to(ROOT)}")
             return 0
         if argv not in ([], ["--check"]):
             raise ValueError(f"unknown arguments: {' '.join(argv)}")
-        text = render(records())
+        text = render(records(), versions())
         if argv == ["--check"]:
             if not PAGE.exists() or PAGE.read_text(encoding="utf-8") != text:
                 print(f"{PAGE.relative_to(ROOT)} is not what the records give: "

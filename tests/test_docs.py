@@ -196,3 +196,9 @@ def test_results_page_is_what_the_records_give():
         assert DATE.search(record.date) and CORES.search(record.machine), record.title
         text = (ROOT / "docs" / record.page).read_text(encoding="utf-8")
         assert f"results/index.md#{results_page.slug(record.title)}" in text, record.title
+    # every commit a record names is said in words on the page
+    named = results_page.versions()
+    page = (GENERATED / "index.md").read_text(encoding="utf-8")
+    hashes = {h for line in page.splitlines() for h in provenance_in(line)
+              if not DATE.fullmatch(h) and not LOAD.fullmatch(h)}
+    assert hashes and hashes <= set(named), sorted(hashes - set(named))
