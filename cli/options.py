@@ -310,9 +310,12 @@ def compile_notice(kinds, enabled: bool, system=None) -> None:
 def cost_notice(methods, system, steps: int) -> None:
     """One line on stderr, before the work, per method whose estimated cost on `system` for
     `steps` steps (`Method.cost`: the Taylor tower's jets) exceeds COST_NOTICE_SECONDS."""
+    from rkhp.base.bounds import MAX_WORK_STEPS
     from rkhp.integrators.methods import COST_NOTICE_SECONDS
     from rkhp.integrators.tower_substep import MAX_PRODUCT_PAIRS
 
+    if steps > MAX_WORK_STEPS:  # refused with its own message
+        return
     for method in methods:
         cost = method.cost(system)
         if cost is None or cost.pairs > MAX_PRODUCT_PAIRS or cost.seconds(steps) <= COST_NOTICE_SECONDS:

@@ -132,7 +132,9 @@ def converge(system, methods, x0, realisation, t_final, steps, refinements, refe
     sys_, resolved = _setup(system, realisation, x0, methods, t_final, plot)
     compile_notice(_kinds(resolved), fmt != "json", sys_)
     if steps or refinements is not None:  # else pilot runs choose each method's steps
-        cost_notice(resolved, sys_, sum(step_counts(steps, refinements)))
+        counts = step_counts(steps, refinements)
+        bounds.check_trajectory(max(counts), sys_.dim, "the finest run")
+        cost_notice(resolved, sys_, sum(counts))
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("converge", total=len(resolved) * rows)
         study = run(sys_, resolved, steps, t_final, refinements, executor=executor, reference_kind=reference_kind,
@@ -297,7 +299,8 @@ def bench(system, methods, x0, realisation, peers, t_final, steps, tolerances, r
     if not _names(methods):  # the default list, less the methods too costly on this system
         resolved, _ = B.default_methods(sys_, step_list, repeats)
     compile_notice(_kinds((*resolved, *peer_methods)), fmt != "json", sys_)
-    cost_notice(resolved, sys_, B.bench_steps(step_list, repeats) * (ensemble or 1))
+    bounds.check_trajectory(max(step_list), sys_.dim, "the finest run")
+    cost_notice(resolved, sys_, B.bench_steps(step_list, repeats) * (ensemble or 1) * max(1, len(resolved)))
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("bench", total=len(resolved) + len(peer_list))
         study = B.bench(sys_, resolved if _names(methods) else (), peer_list, step_list, tol_list, t_final,

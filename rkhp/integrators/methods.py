@@ -29,10 +29,12 @@ RKHP method is (:func:`rkhp.tableaux.symmetry.rkhp_symmetry`).
 
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
 
+from ..base.documents import read_text
 from ..base.errors import InputError, NumericalFailure
 from ..trees.conditions import conditions_of_order
 
@@ -263,10 +265,6 @@ _UNREADABLE = object()
 def _file_text(name: str):
     """The text of the file `name` reads when it names a file (None when it names none;
     _UNREADABLE when the file cannot be read: the resolver then says why)."""
-    import os
-
-    from ..base.documents import read_text
-
     try:
         if not os.path.isfile(name):
             return None
