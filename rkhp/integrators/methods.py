@@ -169,12 +169,21 @@ class Method:
             return taylor_orders(self.order, self.degenerate)[condition_class]
         if self.kind == "scipy":
             raise InputError(f"{self.name} is adaptive: it has no order in h")
+        return self.orders_by_class[condition_class if self.kind != "classical" else "general"]
+
+    @cached_property
+    def orders_by_class(self) -> dict[str, int]:
+        """The order of an RKHP, classical or composition method on each realisation class, computed
+        once per method: its tableau's (:func:`rkhp.tableaux.verification.class_orders`) or, for a
+        composition, with its base's order and symmetry in the class
+        (:func:`rkhp.tableaux.compositions.class_composition_orders`)."""
         from ..tableaux.verification import class_orders
 
         if self.kind == "composition":
-            return composed_order(self.composition, self.tableau, condition_class)
-        return class_orders(self.tableau)[condition_class if self.kind == "rkhp" else "general"]
+            from ..tableaux.compositions import class_composition_orders
 
+            return {cls: o.order for cls, o in class_composition_orders(self.composition, self.tableau).items()}
+        return class_orders(self.tableau)
 
     def realisation_bound(self, system) -> int | None:
         """The order the system's realisation allows a method that runs through it (RKHP and THP;
@@ -186,14 +195,6 @@ class Method:
         order = self.expected_order(condition_class(system))
         bound = self.realisation_bound(system)
         return order if bound is None else min(order, bound)
-
-
-def composed_order(composition, base, condition_class: str) -> int:
-    """The order of a composition of the RKHP method `base` on a realisation of `condition_class`
-    (:func:`rkhp.tableaux.compositions.class_composition_orders`)."""
-    from ..tableaux.compositions import class_composition_orders
-
-    return class_composition_orders(composition, base)[condition_class].order
 
 
 def condition_class(system) -> str:

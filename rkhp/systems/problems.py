@@ -86,10 +86,10 @@ def _read_expressions(texts, n: int, where: str):
 def expressions(data: ProblemData):
     """(pi, H, Casimirs) of a problem as sympy expressions in the real symbols x1..xn."""
     H, casimirs = _functions(data)
-    return _entries(data), H, casimirs
+    return _poisson_entries(data), H, casimirs
 
 
-def _entries(data: ProblemData) -> tuple:
+def _poisson_entries(data: ProblemData) -> tuple:
     """pi of a problem as sympy expressions."""
     return tuple(_read_expressions(row, data.dim, f"{data.name}: poisson") for row in data.poisson_text())
 
@@ -348,7 +348,7 @@ def build(data: ProblemData, realisation: str = "symmetric", general: bool = Fal
                   description=data.description, hamiltonian_expression=lambda: H)
     hamiltonian = to_program(H, symbols)
     if general or data.family == GENERAL:
-        return general_family(PoissonMatrix(_entries(data)), hamiltonian, casimirs=casimirs,
+        return general_family(PoissonMatrix(_poisson_entries(data)), hamiltonian, casimirs=casimirs,
                               casimir_names=data.casimir_names, where=f"{data.name}: poisson",
                               **common)
     numeric = tuple(numeric_function(c, symbols) for c in casimirs)
