@@ -307,6 +307,25 @@ def compile_notice(kinds, enabled: bool, system=None) -> None:
         click.echo(COMPILE_NOTICE.format(seconds=cold.seconds), err=True)
 
 
+def cost_notice(methods, system, steps: int) -> None:
+    """One line on stderr, before the work, per method whose estimated cost on `system` for
+    `steps` steps (`Method.cost`: the Taylor tower's jets) exceeds COST_NOTICE_SECONDS."""
+    from rkhp.base.bounds import MAX_WORK_STEPS
+    from rkhp.integrators.methods import COST_NOTICE_SECONDS
+    from rkhp.integrators.tower_substep import MAX_PRODUCT_PAIRS
+
+    if steps > MAX_WORK_STEPS:  # refused with its own message
+        return
+    for method in methods:
+        cost = method.cost(system)
+        if cost is None or cost.pairs > MAX_PRODUCT_PAIRS or cost.seconds(steps) <= COST_NOTICE_SECONDS:
+            continue
+        click.echo(f"rkhp: note: {method.name} on {system.name} runs on Taylor polynomials of degree "
+                   f"{cost.degree} in {system.dim} variables ({cost.pairs} product terms): about "
+                   f"{cost.seconds(steps):.2g} s of CPU for {steps} steps (a composition of RKHP Euler "
+                   "grows linearly with the dimension: docs/methods.md)", err=True)
+
+
 class _SilentProgress:
     def __enter__(self):
         return self

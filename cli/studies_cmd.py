@@ -18,6 +18,7 @@ from .options import (
     T_FINAL,
     compile_notice,
     console,
+    cost_notice,
     emit_json,
     emit_table,
     executor_options,
@@ -130,6 +131,10 @@ def converge(system, methods, x0, realisation, t_final, steps, refinements, refe
     rows = len(step_counts(steps, refinements)) if steps or refinements is not None else ROWS
     sys_, resolved = _setup(system, realisation, x0, methods, t_final, plot)
     compile_notice(_kinds(resolved), fmt != "json", sys_)
+    if steps or refinements is not None:  # else pilot runs choose each method's steps
+        counts = step_counts(steps, refinements)
+        bounds.check_trajectory(max(counts), sys_.dim, "the finest run")
+        cost_notice(resolved, sys_, sum(counts))
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("converge", total=len(resolved) * rows)
         study = run(sys_, resolved, steps, t_final, refinements, executor=executor, reference_kind=reference_kind,
@@ -291,11 +296,16 @@ def bench(system, methods, x0, realisation, peers, t_final, steps, tolerances, r
     peer_list = peers or ()
     peer_methods = [B.resolve_peer(p) for p in peer_list]
     sys_, resolved = _setup(system, realisation, x0, methods, t_final, plot)
+    if not _names(methods):  # the default list, less the methods too costly on this system
+        resolved, _ = B.default_methods(sys_, step_list, repeats)
     compile_notice(_kinds((*resolved, *peer_methods)), fmt != "json", sys_)
+    bounds.check_trajectory(max(step_list), sys_.dim, "the finest run")
+    cost_notice(resolved, sys_, B.bench_steps(step_list, repeats) * (ensemble or 1) * max(1, len(resolved)))
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("bench", total=len(resolved) + len(peer_list))
-        study = B.bench(sys_, resolved, peer_list, step_list, tol_list, t_final, repeats, ensemble, seed,
-                        on_curve=lambda done, _: bar.update(task, completed=done), executor=executor)
+        study = B.bench(sys_, resolved if _names(methods) else (), peer_list, step_list, tol_list, t_final,
+                        repeats, ensemble, seed, on_curve=lambda done, _: bar.update(task, completed=done),
+                        executor=executor)
     if plot and not study.interrupted:
         from rkhp.studies.plots import plot_work_precision
 
@@ -360,6 +370,9 @@ def _render_bench(study, plot) -> None:
     out.print(f"reference: {ref.kind}, estimated error {ref.error_estimate:.1e}")
     for _, reason in study.absent_peers:
         out.print(plain(reason))
+    for name, seconds in study.left_out:
+        out.print(f"{plain(name)} left out of the default methods: about {seconds:.2g} s of CPU on this "
+                  "system (name it with --method to run it)")
     for c in study.curves:
         extra = f", compile {c.compile_seconds:.2f} s apart" if c.compile_seconds else ""
         timed = f", {c.trajectories} trajectories timed" if study.ensemble else ""

@@ -17,6 +17,7 @@ from .options import (
     STEPS,
     compile_notice,
     console,
+    cost_notice,
     emit_json,
     force_option,
     format_option,
@@ -234,6 +235,7 @@ def integrate(system, method, steps, tol, h, t_final, x0, modified_order, realis
         series = modified_series(poisson, chosen, modified_order, fmt != "json")
     compile_notice((chosen.kind,) if chosen is not None else ("rkhp", "composition"), fmt != "json", poisson)
     if tol is None:
+        cost_notice((chosen,), poisson, n)
         trajectory = _run(poisson, chosen, end, n, fmt)
         report = integration_report(poisson, trajectory, chosen.name, step, n)
     else:

@@ -4,6 +4,7 @@ importing a package costs nothing for what a command does not use (no numba, sym
 from __future__ import annotations
 
 import importlib
+import sys
 
 
 def lazy_getattr(package: str, table: dict[str, str]):
@@ -11,7 +12,9 @@ def lazy_getattr(package: str, table: dict[str, str]):
 
     def __getattr__(name: str):
         if name in table:
-            return getattr(importlib.import_module(table[name]), name)
+            value = getattr(importlib.import_module(table[name]), name)
+            setattr(sys.modules[package], name, value)  # found directly from now on
+            return value
         raise AttributeError(f"module {package!r} has no attribute {name!r}")
 
     return __getattr__

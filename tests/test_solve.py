@@ -259,10 +259,10 @@ def test_integrate_tol_says_its_steps_before_the_run_and_reports_its_estimate():
     code, out, _ = _invoke("integrate", "rigid-body", "--tol", "1e-8")
     assert code == 0
     first = out.splitlines()[0]
-    assert first.startswith("tol 1e-08: paper-three-stage (order 4)") and "chose 158 steps" in out
+    assert first.startswith("tol 1e-08: kahan-li8 (order 8)") and "chose 16" in out
     code, out, _ = _invoke("integrate", "rigid-body", "--tol", "1e-8", "--format", "json")
     doc = json.loads(out)
-    assert doc["steps"] == 158 and doc["tolerance"]["met"]
+    assert doc["steps"] == 16 and doc["tolerance"]["met"]
     assert doc["exact_error"] <= 1e-8 and doc["tolerance"]["estimated_error"] <= 1e-8
 
 

@@ -291,7 +291,7 @@ def test_bench_error_falls_as_cost_rises(tmp_path):
                         "--tolerances", "1e-4,1e-6,1e-8", "--repeats", "1", "--plot", str(plot)])
     assert plot.read_bytes().startswith(b"\x89PNG")
     assert set(data) == {"system", "realisation", "x0", "t_final", "reference", "repeats", "ensemble", "curves",
-                         "cheapest", "interrupted", "absent_peers", "provenance"}
+                         "cheapest", "interrupted", "absent_peers", "left_out", "provenance"}
     kinds = {c["method"]: c["kind"] for c in data["curves"]}
     assert kinds == {"paper-three-stage": "rkhp", "classical:rk4": "classical", "scipy:dop853": "scipy"}
     for c in data["curves"]:

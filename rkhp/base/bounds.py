@@ -187,6 +187,10 @@ def check_step(h, n_steps, dim: int | None = None) -> tuple[float, int]:
     number (negative: a backward run, docs/compositions.md "Backward steps"; not text, not a bool),
     0 <= n_steps <= MAX_STEPS an integer (numpy's integers too; 0 steps: the start alone); with the
     dimension, the stored trajectory within the memory limit."""
+    if type(h) is float and type(n_steps) is int and h != 0.0 and math.isfinite(h) and 0 <= n_steps <= MAX_STEPS:
+        if dim is not None:  # the common case, checked without the general path's conversions
+            check_trajectory(n_steps, dim)
+        return h, n_steps
     if isinstance(h, bool) or not isinstance(h, numbers.Real):
         raise InputError(f"step size h must be a number, got {type(h).__name__} {shown(h)}")
     try:

@@ -30,19 +30,22 @@ from ..taylor.compiler import numba as nb
 from .engine import Solver, state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS
+from .prepared import Lender, Lent
 from .substeps import CLOSED, PROVIDERS, SPRAY, begin, choose, substep
-from .trajectory import Trajectory, checked
+from .trajectory import GROWTH, Trajectory, checked
 
 
 class Record(NamedTuple):
     """Where a run writes: states (n_steps + 1, n) when every state is kept (states[k] = y_k), else
     (1, n) (the last state); per step, its Newton iterations and its stage sweeps (summed over its
-    substeps); whether every state is kept."""
+    substeps); whether every state is kept; peak (2,): the largest |component| of y_0 and of
+    every state recorded (what `trajectory.divergence` looks at first)."""
 
     states: np.ndarray
     iterations: np.ndarray
     sweeps: np.ndarray
     keep_all: bool
+    peak: np.ndarray
 
 
 @nb.njit(**NJIT_NORC)
@@ -55,8 +58,12 @@ def drive(y0, gammas, h, n_steps, data, solver, record):
     context = begin(data, y0)
     y = data.y
     n = y0.shape[0]
+    peak = 0.0
     for k in range(n):
         record.states[0, k] = y0[k]
+        peak = max(peak, abs(y0[k]))
+    record.peak[0] = peak
+    record.peak[1] = peak
     for step in range(n_steps):
         iterations = 0
         sweeps = 0
@@ -75,6 +82,8 @@ def drive(y0, gammas, h, n_steps, data, solver, record):
         row = step + 1 if record.keep_all else 0
         for k in range(n):
             record.states[row, k] = y[k]
+            peak = max(peak, abs(y[k]))
+        record.peak[1] = peak
     return n_steps, Failure.OK
 
 
@@ -93,7 +102,7 @@ def check_gammas(gammas) -> np.ndarray:
 def record(n_steps: int, n: int, keep_all: bool) -> Record:
     """The arrays a run of n_steps steps in dimension n writes."""
     return Record(np.empty((n_steps + 1 if keep_all else 1, n)), np.zeros(max(n_steps, 1), np.int64),
-                  np.zeros(max(n_steps, 1), np.int64), bool(keep_all))
+                  np.zeros(max(n_steps, 1), np.int64), bool(keep_all), np.zeros(2))
 
 
 class Setup(NamedTuple):
@@ -118,44 +127,108 @@ def setup(system, tableau, gammas=(1.0,), *, provider=None, tol: float | None = 
                  Solver(tol, max_iter, system.domain_code))
 
 
+PREPARED = Lender()
+"""The prepared runs of this process (`rkhp.integrators.prepared`): a provider's data is built
+once per system, base method, number of substeps, provider, solver settings and options, then
+lent to one run at a time."""
+
+ONE = check_gammas((1.0,))
+"""The substeps of a method of one step (a tableau alone)."""
+
+
+class Ready(NamedTuple):
+    """A Setup lent to runs, and the compiled loop to call with its arguments: `drive`'s entry
+    point for their types once a run has compiled it (`compiled_loop`), `drive` itself before."""
+
+    setup: Setup
+    loop: object
+
+
+def compiled_loop(args) -> object:
+    """The entry point of `drive` compiled for the types of `args` (a call that `drive` has made):
+    called directly, it skips the dispatcher's resolution of the types (about 6 us of a call);
+    the arguments of every later call must have the same types (arrays C-contiguous, of the same
+    dtype and dimensions; `Record`s of the same shape of fields). `drive` itself where numba
+    keeps no such entry."""
+    overload = drive.overloads.get(tuple(drive.typeof_pyval(a) for a in args))
+    return drive if overload is None else overload.entry_point
+
+
+def _take(system, tableau, g, provider, tol, max_iter, options) -> Lent:
+    """A Setup lent for a run of `g.size` substeps (see `setup`); its gammas are those it was
+    built for, the run passes its own."""
+    key = (g.size, None if provider is None else provider.name, tol, max_iter,
+           None if not options else tuple(sorted(options.items())))
+    return PREPARED.take(system, tableau, key, lambda: Ready(setup(system, tableau, g, provider=provider, tol=tol,
+                                                                   max_iter=max_iter, options=options), drive))
+
+
+def _warm(lent: Lent, y0, gammas, h) -> tuple[Lent, float]:
+    """A lent Ready whose loop is compiled (a run of 0 steps, on data built for this run: the
+    first compiles or loads numba's cache) and its compile seconds (0 for data run before)."""
+    if not lent.built:
+        return lent, 0.0
+    ready = lent.item.setup
+    args = (y0, gammas, h, 0, ready.data, ready.solver, record(0, y0.shape[0], True))
+    t0 = time.perf_counter()
+    drive(*args)
+    seconds = time.perf_counter() - t0
+    return lent._replace(item=Ready(ready, compiled_loop(args))), seconds
+
+
 def run(system, tableau, h, n_steps, x0=None, *, gammas=(1.0,), span: float | None = None,
         provider=None, keep_all: bool = True, tol: float | None = None, max_iter: int | None = None,
         options: dict | None = None, name: str | None = None, extra: dict | None = None) -> Trajectory:
     """Integrate `system` by n_steps steps of size h (negative: backwards) of the composition of
     substeps gammas[0] h, gammas[1] h, ... of the RKHP method of `tableau` (gammas = (1,): the
     method itself), from x0 (default: the system's start), by `provider` (default: `choose`'s,
-    its data built with `options`).
+    its data built with `options`; built once and lent to this run, `PREPARED`).
 
     A step advances the time by h span (default span: the sum of the gammas; a consistent
     composition passes 1, so that t_n = n h). Returns a Trajectory: states y_0..y_k with
     `keep_all`, else y_0 and the last state; Newton iterations and stage sweeps per step (all its
     substeps); a failed run keeps the states before the failing step and names it (with
     `keep_all`, a run that diverged ends before the state that diverged: `trajectory.checked`).
-    The first call compiles (or loads numba's cache): its seconds are `compile_seconds`, apart
-    from the run's. `extra` is added to what the trajectory reports of the run.
+    The first run of prepared data compiles the loop (or loads numba's cache): its seconds are
+    `compile_seconds`, apart from the run's (0 for data prepared before). `extra` is added to
+    what the trajectory reports of the run.
     """
+    g = check_gammas(gammas)
+    return run_checked(system, tableau, h, n_steps, x0, g, math.fsum(g) if span is None else float(span),
+                       provider=provider, keep_all=keep_all, tol=tol, max_iter=max_iter, options=options,
+                       name=name, extra=extra)
+
+
+def run_checked(system, tableau, h, n_steps, x0, gammas: np.ndarray, span: float, *, provider=None,
+                keep_all: bool = True, tol: float | None = None, max_iter: int | None = None,
+                options: dict | None = None, name: str | None = None, extra: dict | None = None) -> Trajectory:
+    """`run` with the substeps' coefficients already checked (an array from `check_gammas`, never
+    changed) and the span given: what a resolved method calls (`rkhp.integrators.methods`)."""
     h, n_steps = check_step(h, n_steps, system.dim)
-    ready = setup(system, tableau, gammas, provider=provider, tol=tol, max_iter=max_iter, options=options)
     y0 = system.start(x0)
     n = system.dim
-    args = (ready.gammas, h)
-    t0 = time.perf_counter()
-    drive(y0, *args, 0, ready.data, ready.solver, record(0, n, True))
-    compile_seconds = time.perf_counter() - t0
-    out = record(n_steps, n, keep_all)
-    t0 = time.perf_counter()
-    done, cause = drive(y0, *args, n_steps, ready.data, ready.solver, out)
-    run_seconds = time.perf_counter() - t0
-    cause = Failure(cause)
+    lent = _take(system, tableau, gammas, provider, tol, max_iter, options)
+    try:
+        lent, compile_seconds = _warm(lent, y0, gammas, h)
+        ready, loop = lent.item
+        out = record(n_steps, n, keep_all)
+        t0 = time.perf_counter()
+        done, cause = loop(y0, gammas, h, n_steps, ready.data, ready.solver, out)
+        run_seconds = time.perf_counter() - t0
+        details = {"substep": ready.provider.name, "newton_tolerance": ready.solver.tol,
+                   "newton_max_iterations": ready.solver.max_iter, "realisation": system.realisation,
+                   **ready.provider.extra(ready.data)}
+    finally:
+        PREPARED.give(lent)
+    if extra:
+        details.update(extra)
     failed = cause != Failure.OK
-    step = h * (math.fsum(ready.gammas) if span is None else span)
+    cause = Failure(cause) if failed else Failure.OK
+    step = h * span
     if keep_all:
         kept, times = out.states[: done + 1], step * np.arange(done + 1)
     else:
         kept, times = np.vstack([y0, out.states[0]]), np.array([0.0, step * done])
-    details = {"substep": ready.provider.name, "newton_tolerance": ready.solver.tol,
-               "newton_max_iterations": ready.solver.max_iter, "realisation": system.realisation,
-               **ready.provider.extra(ready.data), **(extra or {})}
     trajectory = Trajectory(
         times=times, states=kept, newton_iterations=out.iterations[: done + failed],
         stage_sweeps=out.sweeps[: done + failed], cause=cause,
@@ -163,42 +236,81 @@ def run(system, tableau, h, n_steps, x0=None, *, gammas=(1.0,), span: float | No
         failed_step=done if failed else None, compile_seconds=compile_seconds,
         run_seconds=run_seconds, method=name or getattr(tableau, "name", "custom"), system=system.name,
         extra=details, poisson=system)
-    return checked(trajectory, system) if keep_all else trajectory
+    grown = not out.peak[1] <= GROWTH * max(1.0, out.peak[0])
+    return checked(trajectory, system) if keep_all and grown else trajectory
+
+
+class Ensemble(NamedTuple):
+    """The runs of an ensemble, one row per trajectory: its final state (the last state it
+    reached, for a failed run the state before the failing step), the steps it completed and its
+    Failure code."""
+
+    finals: np.ndarray
+    done: np.ndarray
+    causes: np.ndarray
+
+
+def ensemble_plan(system, h, n_steps, x0s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The starts (m, n), step sizes (m,) and numbers of steps (m,) of an ensemble, checked: h
+    and n_steps are one value for every start or one per start (`check_step` each); every start
+    in the system's domain. InputError otherwise."""
+    x0s = np.array(x0s, dtype=np.float64)  # a copy: C-contiguous and writable, as the compiled loop takes it
+    if x0s.ndim != 2 or x0s.shape[1] != system.dim:
+        raise InputError(f"initial conditions must have shape (m, {system.dim}), got {x0s.shape}")
+    m = len(x0s)
+    hs, counts = (np.broadcast_to(np.asarray(v, dtype=object), (m,)) if np.ndim(v) == 0 or len(v) == m
+                  else None for v in (h, n_steps))
+    if hs is None or counts is None:
+        raise InputError(f"the step sizes and the numbers of steps must be one value or one per start ({m})")
+    steps = [check_step(hh, nn) for hh, nn in zip(hs, counts, strict=True)]
+    for i, x in enumerate(x0s):
+        if not system.in_domain(x):
+            raise InputError(f"initial condition {i} = {x.tolist()} is outside the domain")
+    return (x0s, np.array([s[0] for s in steps], dtype=np.float64).reshape(m),
+            np.array([s[1] for s in steps], dtype=np.int64).reshape(m))
 
 
 def run_ensemble(system, tableau, h, n_steps, x0s, *, gammas=(1.0,), provider=None,
                  tol: float | None = None, max_iter: int | None = None, options: dict | None = None,
                  threads: int | None = None, executor=None) -> np.ndarray:
-    """Final states of many trajectories at once (shape (m, n)), the arguments as `run`'s, in
-    `threads` threads (default: the CPUs available) running the compiled loop without the GIL; with an `executor`
-    (rkhp.base.executors), the starts are cut into one chunk per slot and each chunk runs so on a
-    worker (the same final states: each trajectory is computed on its own). NumericalFailure
-    naming the first failing trajectory if any fails."""
-    h, n_steps = check_step(h, n_steps)
-    x0s = np.ascontiguousarray(x0s, dtype=np.float64)
-    if x0s.ndim != 2 or x0s.shape[1] != system.dim:
-        raise InputError(f"initial conditions must have shape (m, {system.dim}), got {x0s.shape}")
-    for i, x in enumerate(x0s):
-        if not system.in_domain(x):
-            raise InputError(f"initial condition {i} = {x.tolist()} is outside the domain")
-    settings = (gammas, None if provider is None else provider.name, tol, max_iter, options, threads)
-    if executor is None:
-        finals, done, causes = _ensemble_chunk(system, tableau, h, n_steps, x0s, *settings)
-    else:
-        chunks = np.array_split(x0s, max(1, min(len(x0s), executor.slots)))
-        parts = run_all(executor, _ensemble_chunk, [(system, tableau, h, n_steps, c, *settings) for c in chunks])
-        finals, done, causes = (np.concatenate([p[k] for p in parts]) for k in range(3))
-    bad = np.flatnonzero(causes)
+    """Final states of many trajectories at once (shape (m, n)), the arguments as `run`'s, h and
+    n_steps one value or one per start (`ensemble_plan`), in `threads` threads (default: the CPUs
+    available) running the compiled loop without the GIL, each thread with prepared data of its
+    own; with an `executor` (rkhp.base.executors), the starts are cut into one chunk per slot and
+    each chunk runs so on a worker. Each trajectory is computed on its own, as `run` computes it:
+    the final states are those of one run at a time, bit for bit. NumericalFailure naming the
+    first failing trajectory if any fails."""
+    result = ensemble_runs(system, tableau, h, n_steps, x0s, gammas=gammas, provider=provider, tol=tol,
+                           max_iter=max_iter, options=options, threads=threads, executor=executor)
+    bad = np.flatnonzero(result.causes)
     if bad.size:
         i = int(bad[0])
-        raise NumericalFailure(f"trajectory {i} of {len(x0s)}: "
-                               + failure_status(Failure(causes[i]), int(done[i]), h, system.domain))
-    return finals
+        step = float(np.broadcast_to(h, (len(result.causes),))[i]) * math.fsum(check_gammas(gammas))
+        raise NumericalFailure(f"trajectory {i} of {len(result.causes)}: "
+                               + failure_status(Failure(result.causes[i]), int(result.done[i]), step,
+                                                system.domain))
+    return result.finals
 
 
-def _ensemble_chunk(system, tableau, h, n_steps, x0s, gammas, provider, tol, max_iter, options, threads):
-    """(final states, steps done, Failure codes) of the trajectories from ``x0s``, in threads, each
-    thread with data of its own; `provider` by name (a task of a pool: its arguments are sent)."""
+def ensemble_runs(system, tableau, h, n_steps, x0s, *, gammas=(1.0,), provider=None,
+                  tol: float | None = None, max_iter: int | None = None, options: dict | None = None,
+                  threads: int | None = None, executor=None) -> Ensemble:
+    """`run_ensemble`'s runs, failed ones included (an `Ensemble`)."""
+    x0s, hs, counts = ensemble_plan(system, h, n_steps, x0s)
+    g = check_gammas(gammas)
+    settings = (g, None if provider is None else provider.name, tol, max_iter, options, threads)
+    if executor is None:
+        return Ensemble(*_ensemble_chunk(system, tableau, hs, counts, x0s, *settings))
+    cuts = np.array_split(np.arange(len(x0s)), max(1, min(len(x0s), executor.slots)))
+    parts = run_all(executor, _ensemble_chunk,
+                    [(system, tableau, hs[c], counts[c], x0s[c], *settings) for c in cuts])
+    return Ensemble(*(np.concatenate([p[k] for p in parts]) for k in range(3)))
+
+
+def _ensemble_chunk(system, tableau, hs, counts, x0s, g, provider, tol, max_iter, options, threads):
+    """(final states, steps done, Failure codes) of the trajectories from ``x0s`` (step sizes
+    ``hs``, numbers of steps ``counts``), in threads, each thread with prepared data of its own;
+    `provider` by name (a task of a pool: its arguments are sent)."""
     provider = None if provider is None else PROVIDERS[provider]
     m = len(x0s)
     finals = np.zeros_like(x0s)
@@ -208,14 +320,24 @@ def _ensemble_chunk(system, tableau, h, n_steps, x0s, gammas, provider, tol, max
     bounds = np.linspace(0, m, min(threads, max(m, 1)) + 1).astype(int)
 
     def batch(lo, hi):
-        ready = setup(system, tableau, gammas, provider=provider, tol=tol, max_iter=max_iter, options=options)
-        out = record(n_steps, system.dim, False)
-        for t in range(lo, hi):
-            done[t], codes[t] = drive(x0s[t], ready.gammas, h, n_steps, ready.data, ready.solver, out)
-            finals[t] = out.states[0]
+        if lo == hi:
+            return
+        lent = _take(system, tableau, g, provider, tol, max_iter, options)
+        try:
+            lent, _ = _warm(lent, x0s[lo], g, float(hs[lo]))
+            ready, loop = lent.item
+            out = record(int(counts[lo:hi].max(initial=0)), system.dim, False)
+            for t in range(lo, hi):
+                done[t], codes[t] = loop(x0s[t], g, float(hs[t]), int(counts[t]), ready.data, ready.solver, out)
+                finals[t] = out.states[0]
+        finally:
+            PREPARED.give(lent)
 
-    with ThreadPoolExecutor(max_workers=len(bounds) - 1) as pool:
-        list(pool.map(batch, bounds[:-1], bounds[1:]))
+    if len(bounds) == 2:
+        batch(0, m)
+    else:
+        with ThreadPoolExecutor(max_workers=len(bounds) - 1) as pool:
+            list(pool.map(batch, bounds[:-1], bounds[1:]))
     return finals, done, codes
 
 

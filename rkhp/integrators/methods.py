@@ -29,17 +29,27 @@ RKHP method is (:func:`rkhp.tableaux.symmetry.rkhp_symmetry`).
 
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass
+from functools import cached_property, lru_cache
 
+from ..base.documents import read_text
 from ..base.errors import InputError, NumericalFailure
 from ..trees.conditions import conditions_of_order
 
 DEFAULT_METHODS = ("euler", "paper-two-stage", "paper-three-stage", "rk4")
-"""The methods `converge`, `bench` and `stress` compare when they are given none."""
-DEFAULT_METHOD = "paper-three-stage"
-"""The method `rkhp integrate` runs when it is given none: the paper's explicit three-stage
-method, of order 4 on degenerate birealisations (paper §5.2; docs/methods.md)."""
+"""The methods `converge` and `stress` compare when they are given none: the paper's."""
+BENCH_METHODS = ("paper-three-stage", "kahan-li6", "kahan-li8", "sofroniou-spaletta10")
+"""The methods `bench` races when it is given none: the paper's three-stage method and the
+compositions of RKHP Euler that the work-precision runs find cheapest (docs/methods.md), less
+those whose estimated cost on the system is too large (`rkhp.studies.bench`)."""
+DEFAULT_METHOD = "kahan-li8"
+"""The method `rkhp integrate` runs when it is given none: Kahan & Li's composition of 17 RKHP
+Euler substeps, of order 8 on symmetric birealisations (docs/compositions.md), whose cost grows
+linearly with the dimension (docs/methods.md "The default method")."""
+COST_NOTICE_SECONDS = 1.0
+"""A run whose estimated cost (`Method.cost`) exceeds this many CPU seconds is announced first."""
 CLASSICAL_PREFIX = "classical:"
 SCIPY_PREFIX = "scipy:"
 MIDPOINT = "implicit-midpoint"
@@ -77,15 +87,12 @@ class Method:
         and compositions run on the driver (`rkhp.integrators.driver`), by the substep provider
         that `rkhp.integrators.substeps.choose` picks for the system and the base method."""
         if self.kind in ("rkhp", "composition"):
-            from .driver import run
+            from .driver import ONE, run_checked
 
             if self.kind == "rkhp":
-                return run(system, self.tableau, h, n_steps, x0, name=self.name)
-            from .tower_substep import check_composable
-
-            check_composable(self.tableau, self.name)
-            return run(system, self.tableau, h, n_steps, x0, gammas=self.composition.gamma_float, span=1.0,
-                       name=self.name, extra={"base": self.tableau.name, "substeps": self.composition.substeps})
+                return run_checked(system, self.tableau, h, n_steps, x0, ONE, 1.0, name=self.name)
+            return run_checked(system, self.tableau, h, n_steps, x0, self._gammas, 1.0, name=self.name,
+                               extra={"base": self.tableau.name, "substeps": self.composition.substeps})
         if self.kind == "taylor":
             from .taylor import integrate_taylor
 
@@ -100,6 +107,52 @@ class Method:
             return integrate_midpoint(system, h, n_steps, x0)
         raise InputError(f"{self.name} is scipy's adaptive {self.solver}: it runs by tolerance, not "
                          "by steps (a peer of `rkhp bench`, --peers)")
+
+    def integrate_ensemble(self, system, h, n_steps, x0s, *, threads: int | None = None,
+                           executor=None):
+        """Final states (m, n) of the runs of :meth:`integrate` from the starts ``x0s`` (m, n),
+        h and n_steps one value or one per start. RKHP methods and compositions run them at once
+        (`rkhp.integrators.driver.run_ensemble`: threads over the compiled loop, or chunks on an
+        ``executor``), bit for bit the final states of one run at a time; other methods run one
+        after another. NumericalFailure naming the first failing run if any fails."""
+        if self.kind in ("rkhp", "composition"):
+            from .driver import run_ensemble
+
+            gammas = (1.0,) if self.kind == "rkhp" else self._gammas
+            return run_ensemble(system, self.tableau, h, n_steps, x0s, gammas=gammas, threads=threads,
+                                executor=executor)
+        import numpy as np
+
+        from .driver import ensemble_plan
+
+        x0s, hs, counts = ensemble_plan(system, h, n_steps, x0s)
+        return np.array([self.integrate(system, float(hh), int(nn), x0=x).raise_if_failed().final_state
+                         for x, hh, nn in zip(x0s, hs, counts, strict=True)]).reshape(x0s.shape)
+
+    @cached_property
+    def _gammas(self):
+        """A composition's coefficients as a float64 array, once its base is known to be
+        explicit."""
+        from .driver import check_gammas
+        from .tower_substep import check_composable
+
+        check_composable(self.tableau, self.name)
+        return check_gammas(self.composition.gamma_float)
+
+    def cost(self, system):
+        """The estimated cost of the method's steps on `system` when the Taylor tower runs them
+        (`rkhp.integrators.tower_substep.tower_cost`: jets of degree s + 1 in n variables, whose
+        size grows like n^(s + 1)), else None (a direct form, whose cost grows like n to n^3, a
+        classical peer, THP, or a method that runs by tolerance)."""
+        if self.kind not in ("rkhp", "composition"):
+            return None
+        from .substeps import TOWER, choose
+        from .tower_substep import tower_cost
+
+        if choose(system, self.tableau).provider is not TOWER:
+            return None
+        substeps = 1 if self.kind == "rkhp" else self.composition.substeps
+        return tower_cost(system, self.tableau, substeps)
 
     def rkhp_tableau(self, what: str):
         """The tableau of an RKHP method; InputError naming ``what`` needs one for other kinds."""
@@ -116,12 +169,21 @@ class Method:
             return taylor_orders(self.order, self.degenerate)[condition_class]
         if self.kind == "scipy":
             raise InputError(f"{self.name} is adaptive: it has no order in h")
+        return self.orders_by_class[condition_class if self.kind != "classical" else "general"]
+
+    @cached_property
+    def orders_by_class(self) -> dict[str, int]:
+        """The order of an RKHP, classical or composition method on each realisation class, computed
+        once per method: its tableau's (:func:`rkhp.tableaux.verification.class_orders`) or, for a
+        composition, with its base's order and symmetry in the class
+        (:func:`rkhp.tableaux.compositions.class_composition_orders`)."""
         from ..tableaux.verification import class_orders
 
         if self.kind == "composition":
-            return composed_order(self.composition, self.tableau, condition_class)
-        return class_orders(self.tableau)[condition_class if self.kind == "rkhp" else "general"]
+            from ..tableaux.compositions import class_composition_orders
 
+            return {cls: o.order for cls, o in class_composition_orders(self.composition, self.tableau).items()}
+        return class_orders(self.tableau)
 
     def realisation_bound(self, system) -> int | None:
         """The order the system's realisation allows a method that runs through it (RKHP and THP;
@@ -133,14 +195,6 @@ class Method:
         order = self.expected_order(condition_class(system))
         bound = self.realisation_bound(system)
         return order if bound is None else min(order, bound)
-
-
-def composed_order(composition, base, condition_class: str) -> int:
-    """The order of a composition of the RKHP method `base` on a realisation of `condition_class`
-    (:func:`rkhp.tableaux.compositions.class_composition_orders`)."""
-    from ..tableaux.compositions import class_composition_orders
-
-    return class_composition_orders(composition, base)[condition_class].order
 
 
 def condition_class(system) -> str:
@@ -179,23 +233,58 @@ def taylor_orders(order: int, degenerate: bool) -> dict[str, int]:
     return out
 
 
+METHODS_KEPT = 64
+"""How many methods resolved from names a process keeps (`resolve_method`)."""
+
+
 def resolve_method(spec) -> Method:
     """The method a name stands for (a Method or a Tableau is taken as it is).
 
-    InputError for an empty or unknown name, or a malformed THP or scipy name.
+    A name is resolved once: the same name, and for a name that reads a file (a tableau or a
+    composition file) the same text of that file, give back the same Method (the METHODS_KEPT
+    most recently used are kept); the file is read again on every call, so an edited file is
+    resolved again. InputError for an empty or unknown name, or a malformed THP or scipy name.
     """
-    from ..tableaux.files import load_tableau
-    from ..tableaux.tableau import Tableau
-
     if isinstance(spec, Method):
         return spec
-    if isinstance(spec, Tableau):
-        return Method(spec.name, "rkhp", spec)
     if not isinstance(spec, str):
+        from ..tableaux.tableau import Tableau
+
+        if isinstance(spec, Tableau):
+            return Method(spec.name, "rkhp", spec)
         raise InputError(f"a method is a name, a Tableau or a Method, got {type(spec).__name__}")
     spec = spec.strip()
     if not spec:
         raise InputError("empty method name")
+    text = _file_text(spec[len(CLASSICAL_PREFIX):] if spec.startswith(CLASSICAL_PREFIX) else spec)
+    return _resolve_name(spec) if text is _UNREADABLE else _resolved(spec, text)
+
+
+_UNREADABLE = object()
+
+
+def _file_text(name: str):
+    """The text of the file `name` reads when it names a file (None when it names none;
+    _UNREADABLE when the file cannot be read: the resolver then says why)."""
+    try:
+        if not os.path.isfile(name):
+            return None
+        return read_text(name, "method file")
+    except (OSError, ValueError, InputError):
+        return _UNREADABLE
+
+
+@lru_cache(maxsize=METHODS_KEPT)
+def _resolved(spec: str, text: str | None) -> Method:
+    """`_resolve_name(spec)`, kept by the name and the text of the file it reads (the key holds
+    the text itself: its hash finds the entry, an equal text confirms it)."""
+    return _resolve_name(spec)
+
+
+def _resolve_name(spec: str) -> Method:
+    """The method a stripped, non-empty name stands for (the grammar of the module)."""
+    from ..tableaux.files import load_tableau
+
     if spec == MIDPOINT:
         return Method(spec, "implicit-midpoint")
     taylor = _TAYLOR.fullmatch(spec)

@@ -15,6 +15,7 @@ provider's compiled functions (`rkhp.integrators.substeps`).
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -25,9 +26,7 @@ from ..taylor.compiler import numba as nb
 from ..taylor.interpreter import as_plain, interpreter
 from ..taylor.jets import jet_space
 from .engine import (
-    MEMO_FACTORED,
     MEMO_HISTORY,
-    MEMO_NEWTON_L,
     EngineData,
     StageSolve,
     StepTableau,
@@ -100,6 +99,45 @@ def implicit_degree(order: int) -> int:
     return max(order + 1, 2)
 
 
+SETUP_SECONDS = 4e-9
+"""CPU seconds per (product term x monomial) to build a jet space's tables (`rkhp.taylor.jets`):
+3.8e-9 measured for 24 variables at degree 4, 2.9e-9 for 12 at degree 5 (2026-12-06)."""
+STEP_SECONDS = 1.1e-7
+"""CPU seconds per (product term x stage) of one tower step: 1.07e-7 measured for
+paper-three-stage on toda:12 (12 variables, degree 4), 6.8e-8 on toda:6 (2026-12-06)."""
+
+
+class TowerCost(NamedTuple):
+    """What the tower's jets cost on a system (`tower_cost`): their degree, the product terms of
+    their multiplication table (monomials of that degree in 2n variables), the monomials (in n),
+    and the estimated CPU seconds of building the tables and of one step of `substeps`
+    substeps."""
+
+    degree: int
+    pairs: int
+    size: int
+    setup_seconds: float
+    step_seconds: float
+
+    def seconds(self, steps: int) -> float:
+        """Estimated CPU seconds of a run of `steps` steps, the tables built first."""
+        return self.setup_seconds + steps * self.step_seconds
+
+
+def tower_cost(system, tableau, substeps: int = 1) -> TowerCost:
+    """The cost of the tower's steps of `tableau` on `system`, estimated without building
+    anything: jets of degree D = s + 1 (explicit; an implicit tableau: `implicit_degree`) in n
+    variables have C(n + D, D) monomials and C(2n + D, D) product terms (pairs of monomials whose
+    degrees sum to at most D), and the work grows with both (SETUP_SECONDS, STEP_SECONDS)."""
+    tableau = resolve_tableau(tableau)
+    A, b = tableau_arrays(tableau)
+    degree = stage_solve(tableau, A).degree or len(b) + 1
+    n = system.dim
+    pairs, size = math.comb(2 * n + degree, degree), math.comb(n + degree, degree)
+    return TowerCost(degree, pairs, size, SETUP_SECONDS * pairs * size,
+                     STEP_SECONDS * pairs * len(b) * substeps)
+
+
 def engine_data(system, stages: int, stage):
     """`rkhp.integrators.engine.EngineData`: the tapes, interpreter and jet space for the
     compiled engine, jets in n variables of degree s + 1 (explicit) or the stage degree
@@ -158,15 +196,16 @@ def _swap_history(buf, memory, i, n, into_buffers):
 
 @nb.njit(inline="always", **NJIT_NORC)
 def begin(data, y0):
-    """Start a run at y0 (the state buf.y), every substep without history; returns the tapes
-    evaluated at their interpreter's address (`engine.interpreted`: copies on the stack of the
-    loop this is inlined into)."""
+    """Start a run at y0 (the state buf.y), every substep without history and every scalar the
+    steps keep (buf.memo: history, Lipschitz estimate, factorisation, stage solve) as in new
+    buffers, so that a run on data prepared before computes what it computes on new data;
+    returns the tapes evaluated at their interpreter's address (`engine.interpreted`: copies on
+    the stack of the loop this is inlined into)."""
     buf = data.buf
     for k in range(y0.shape[0]):
         buf.y[k] = y0[k]
-    buf.memo[MEMO_HISTORY] = 0.0
-    buf.memo[MEMO_NEWTON_L] = 0.0
-    buf.memo[MEMO_FACTORED] = 0.0
+    for j in range(buf.memo.shape[0]):
+        buf.memo[j] = 0.0
     for i in range(data.memory.count.shape[0]):
         data.memory.count[i] = 0.0
     return interpreted(data.tapes, data.run, data.space, buf.work)

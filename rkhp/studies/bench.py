@@ -17,10 +17,15 @@ reference's accuracy is not a measurement (``error`` None) but still counts as r
 error above that accuracy.
 
 Ensemble mode (``ensemble`` = K): every point times K initial conditions near x0 (seeded); RKHP
-methods run all K at once through ``rkhp.integrators.integrate_ensemble``, the peers one after
-another on the first min(K, ENSEMBLE_TIMED) starts; times are minimum wall times per trajectory (the
-RKHP ensemble may run on several threads: no ``cpu_seconds``) and the error is the largest over
-the first min(K, ENSEMBLE_CHECKED) starts, each against its own DOP853 reference.
+methods and compositions run all K at once (`Method.integrate_ensemble`: threads over the
+compiled loop, the final states those of one run at a time), the peers one after another on the
+first min(K, ENSEMBLE_TIMED) starts; times are minimum wall times per trajectory (the RKHP
+ensemble may run on several threads: no ``cpu_seconds``) and the error is the largest over the
+first min(K, ENSEMBLE_CHECKED) starts, each against its own DOP853 reference.
+
+Without methods, the bench races BENCH_METHODS (`rkhp.integrators.methods`), less any whose
+estimated cost on the system exceeds BENCH_DEFAULT_SECONDS (`default_methods`; named in
+``left_out``).
 """
 
 from __future__ import annotations
@@ -36,8 +41,7 @@ from ..base import bounds
 from ..base.errors import InputError
 from ..base.executors import run_until_interrupted
 from ..base.interrupts import Interrupted, is_interrupt
-from ..integrators import integrate_ensemble
-from ..integrators.methods import DEFAULT_METHODS, SCIPY_METHODS, Method, check_distinct, resolve_method, resolve_system
+from ..integrators.methods import BENCH_METHODS, SCIPY_METHODS, Method, check_distinct, resolve_method, resolve_system
 from .converge import check_t_final
 from .peers import (
     ADAPTIVE_KINDS,
@@ -141,6 +145,7 @@ class BenchStudy:
     x0: tuple[float, ...] = ()
     interrupted: bool = False
     absent_peers: tuple[tuple[str, str], ...] = ()
+    left_out: tuple[tuple[str, float], ...] = ()
 
     def to_json(self) -> dict:
         return {"system": self.system, "realisation": self.realisation, "x0": list(self.x0),
@@ -149,7 +154,8 @@ class BenchStudy:
                 "repeats": self.repeats, "ensemble": self.ensemble,
                 "curves": [c.to_json() for c in self.curves],
                 "cheapest": [c.to_json() for c in self.cheapest],
-                "absent_peers": [{"peer": name, "reason": reason} for name, reason in self.absent_peers]}
+                "absent_peers": [{"peer": name, "reason": reason} for name, reason in self.absent_peers],
+                "left_out": [{"method": name, "estimated_seconds": seconds} for name, seconds in self.left_out]}
 
 
 def resolve_peer(name) -> Method:
@@ -367,10 +373,9 @@ def _ensemble_errors(ensemble_states, refs) -> float | None:
 
 def _ensemble_method_curve(method: Method, system, refs, floor, starts, steps, t_final, repeats,
                            executor=None) -> BenchCurve:
-    if method.kind == "rkhp":
+    if method.kind in ("rkhp", "composition"):
         def run_all_starts(n):
-            return np.asarray(_final_states(integrate_ensemble(system, method.tableau, t_final / n, n, starts,
-                                                               executor=executor)))
+            return method.integrate_ensemble(system, t_final / n, n, starts, executor=executor)
 
         run = run_all_starts
         count = len(starts)
@@ -393,17 +398,8 @@ def _ensemble_method_curve(method: Method, system, refs, floor, starts, steps, t
         measured = _ensemble_errors(finals, refs)
         points.append(_bench_point(measured, floor, steps=n, tolerance=None, seconds=seconds / count,
                              evaluations=None, status="ok" if measured is not None else "non-finite state"))
-    compile_seconds = max(0.0, warm - fastest_first) if method.kind == "rkhp" else 0.0
+    compile_seconds = max(0.0, warm - fastest_first) if method.kind in ("rkhp", "composition") else 0.0
     return BenchCurve(method.name, method.kind, compile_seconds, count, tuple(points))
-
-
-def _final_states(result):
-    """Final states (K, n) from what integrate_ensemble returns (an array, or a value with states)."""
-    states = getattr(result, "final_states", None)
-    if states is None:
-        states = getattr(result, "states", result)
-    states = np.asarray(states)
-    return states[:, -1, :] if states.ndim == 3 else states
 
 
 def _ensemble_peer_curve(method, system, refs, floor, starts, tolerances, t_final, repeats) -> BenchCurve:
@@ -424,6 +420,31 @@ def _ensemble_peer_curve(method, system, refs, floor, starts, tolerances, t_fina
         points.append(_bench_point(measured, floor, steps=None, tolerance=rtol, seconds=seconds / count,
                              evaluations=evaluations, status="ok" if measured is not None else "failed"))
     return BenchCurve(method.name, method.kind, prepared.compile_seconds, count, tuple(points))
+
+
+BENCH_DEFAULT_SECONDS = 60.0
+"""A method of the default list whose estimated CPU time for the bench exceeds this is left out."""
+
+
+def bench_steps(steps, repeats: int) -> int:
+    """Steps of one method's curve in a bench: a warm-up run of the coarsest, then `repeats`
+    runs of each number of steps."""
+    return min(steps) + repeats * sum(steps)
+
+
+def default_methods(system, steps, repeats: int) -> tuple[tuple[Method, ...], tuple[tuple[str, float], ...]]:
+    """The methods of BENCH_METHODS whose estimated cost on `system` (`Method.cost`: the Taylor
+    tower's jets) for the bench's steps is at most BENCH_DEFAULT_SECONDS, and (name, estimated
+    CPU seconds) of those left out."""
+    kept, left_out = [], []
+    for method in map(resolve_method, BENCH_METHODS):
+        cost = method.cost(system)
+        seconds = None if cost is None else cost.seconds(bench_steps(steps, repeats))
+        if seconds is not None and seconds > BENCH_DEFAULT_SECONDS:
+            left_out.append((method.name, seconds))
+        else:
+            kept.append(method)
+    return tuple(kept), tuple(left_out)
 
 
 def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=DEFAULT_TOLERANCES,
@@ -453,8 +474,8 @@ def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=
         bounds.integer(ensemble, "--ensemble", 1, bounds.MAX_ENSEMBLE)
         bounds.check_memory(4 * 8.0 * ensemble * system.dim, f"an ensemble of {ensemble} starts")
     bounds.seed(seed)
-    curves_of = check_distinct([*(resolve_method(m) for m in methods or DEFAULT_METHODS),
-                                *(resolve_peer(p) for p in peers)])
+    chosen, left_out = (tuple(map(resolve_method, methods)), ()) if methods else default_methods(system, steps, repeats)
+    curves_of = check_distinct([*chosen, *(resolve_peer(p) for p in peers)])
     missing = {m.name: absent(peer_of(m)) for m in curves_of if m.kind in ADAPTIVE_KINDS}
     absent_peers = tuple((name, reason) for name, reason in missing.items() if reason)
     integrators = [m for m in curves_of if m.kind not in ADAPTIVE_KINDS]
@@ -494,4 +515,4 @@ def bench(system, methods, peers=DEFAULT_PEERS, steps=DEFAULT_STEPS, tolerances=
             interrupted = True
     return BenchStudy(system.name, system.realisation, t_final, ref, repeats, ensemble, tuple(curves),
                       cheapest(curves), x0=tuple(float(v) for v in system.x0), interrupted=interrupted,
-                      absent_peers=absent_peers)
+                      absent_peers=absent_peers, left_out=left_out)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import difflib
 import math
 from collections.abc import Callable
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,7 @@ from ..taylor import tape as tp
 from .core import PoissonSystem
 from .families import CONSTANT, LIE_POISSON, LOG_CANONICAL, SO3, LieAlgebra, family_system
 from .problems import PROBLEMS, build, problem_data
-from .spec import load_spec
+from .spec import spec_system, spec_text
 from .structure import symbols_of
 
 RIGID_BODY_I = (2.0, 1.0, 2.0 / 3.0)
@@ -128,20 +129,41 @@ def builtin_systems() -> tuple[str, ...]:
     return tuple(BUILTINS) + tuple(PROBLEMS)
 
 
+SYSTEMS_KEPT = 32
+"""How many systems built by name (and how many built from spec files) a process keeps."""
+
+
 def get_system(name_or_path, realisation: str = "symmetric") -> PoissonSystem:
     """A built-in system by name (``toda:12``: with its size), or a system from a spec file
-    (.toml or .json)."""
+    (.toml or .json).
+
+    A system is built once: the same name and realisation, or a spec file of the same path,
+    content and realisation, give back the same object (the SYSTEMS_KEPT most recently used of
+    each kind are kept); a spec file is read again on every call, so an edited file is built
+    again."""
     key = str(name_or_path)
-    if key in BUILTINS:
-        return BUILTINS[key](realisation)
-    data = problem_data(key)
-    if data is not None:
-        return build(data, realisation)
+    if key in BUILTINS or key.partition(":")[0] in PROBLEMS:
+        return _built_in(key, realisation)
     path = Path(key)
     if path.suffix.lower() in (".toml", ".json"):
-        return load_spec(path, realisation)
+        return _from_spec(key, spec_text(path), realisation)
     names = builtin_systems()
     close = difflib.get_close_matches(key, names, n=2)
     hint = f"; did you mean {' or '.join(close)}?" if close else ""
     raise InputError(f"unknown system {key!r} (built-ins: {', '.join(names)}, or a .toml/.json "
                      f"spec file){hint}")
+
+
+@lru_cache(maxsize=SYSTEMS_KEPT)
+def _built_in(key: str, realisation: str) -> PoissonSystem:
+    """The built-in system `key` (a name of BUILTINS or a problem's ``NAME[:SIZE]``)."""
+    if key in BUILTINS:
+        return BUILTINS[key](realisation)
+    return build(problem_data(key), realisation)
+
+
+@lru_cache(maxsize=SYSTEMS_KEPT)
+def _from_spec(path: str, text: str, realisation: str) -> PoissonSystem:
+    """The system of the spec file at `path` whose text is `text` (the cache's key holds the
+    text itself: its hash finds the entry, an equal text confirms it)."""
+    return spec_system(text, path, realisation)

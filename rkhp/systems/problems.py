@@ -48,13 +48,14 @@ from .structure import lie_poisson_matrix, log_canonical_matrix, symbols_of
 
 @dataclass(frozen=True)
 class ProblemData:
-    """A problem as expressions in x1..xn: `poisson` (n x n strings), `hamiltonian`, `casimirs`
-    (strings) with display names, the default x0 and t_final, its description and its family:
-    "general", or "lie-poisson" / "log-canonical" with the structure constants C[i, j, k] /
-    the matrix lambda in `constants`."""
+    """A problem as expressions in x1..xn: `poisson` (n x n strings; None for the lie-poisson
+    and log-canonical families, whose pi `poisson_text` writes from `constants`), `hamiltonian`,
+    `casimirs` (strings) with display names, the default x0 and t_final, its description and its
+    family: "general", or "lie-poisson" / "log-canonical" with the structure constants
+    C[i, j, k] / the matrix lambda in `constants`."""
 
     name: str
-    poisson: tuple
+    poisson: tuple | None
     hamiltonian: str
     casimirs: tuple
     casimir_names: tuple
@@ -68,6 +69,15 @@ class ProblemData:
     def dim(self) -> int:
         return len(self.x0)
 
+    def poisson_text(self) -> tuple:
+        """pi as n x n strings: `poisson`, or written from the constants of a lie-poisson
+        (pi_ij = sum_k C[i, j, k] x_k) or log-canonical (pi_ij = lambda_ij x_i x_j) problem."""
+        if self.poisson is not None:
+            return self.poisson
+        if self.family == LIE_POISSON:
+            return _matrix_text(lie_poisson_matrix(self.constants))
+        return _matrix_text(log_canonical_matrix(self.constants))
+
 
 def _read_expressions(texts, n: int, where: str):
     return tuple(parse_expression(t, variable_names(n), where=where) for t in texts)
@@ -75,10 +85,19 @@ def _read_expressions(texts, n: int, where: str):
 
 def expressions(data: ProblemData):
     """(pi, H, Casimirs) of a problem as sympy expressions in the real symbols x1..xn."""
-    n = data.dim
-    entries = tuple(_read_expressions(row, n, f"{data.name}: poisson") for row in data.poisson)
-    (H,) = _read_expressions([data.hamiltonian], n, f"{data.name}: hamiltonian")
-    return entries, H, _read_expressions(data.casimirs, n, f"{data.name}: casimirs")
+    H, casimirs = _functions(data)
+    return _poisson_entries(data), H, casimirs
+
+
+def _poisson_entries(data: ProblemData) -> tuple:
+    """pi of a problem as sympy expressions."""
+    return tuple(_read_expressions(row, data.dim, f"{data.name}: poisson") for row in data.poisson_text())
+
+
+def _functions(data: ProblemData):
+    """(H, Casimirs) of a problem as sympy expressions."""
+    (H,) = _read_expressions([data.hamiltonian], data.dim, f"{data.name}: hamiltonian")
+    return H, _read_expressions(data.casimirs, data.dim, f"{data.name}: casimirs")
 
 
 def _matrix_text(entries) -> tuple:
@@ -162,14 +181,10 @@ def heavy_top() -> ProblemData:
                     C[i, j, k] = -e
                     C[i, 3 + j, 3 + k] = -e
                     C[3 + j, i, 3 + k] = e
-    return ProblemData("heavy-top", _linear_text(C), "x1^2/4 + x2^2/2 + 3*x3^2/4 + x6",
+    return ProblemData("heavy-top", None, "x1^2/4 + x2^2/2 + 3*x3^2/4 + x6",
                        ("x4^2 + x5^2 + x6^2", "x1*x4 + x2*x5 + x3*x6"), ("|Gamma|^2", "M . Gamma"),
                        (math.cos(1.1), 0.0, math.sin(1.1), 0.6, 0.0, 0.8), 10.0,
                        "heavy top, se(3)*, I = (2, 1, 2/3), m g l = 1", LIE_POISSON, C)
-
-
-def _linear_text(C) -> tuple:
-    return _matrix_text(lie_poisson_matrix(C))
 
 
 def toda(n: int = 6) -> ProblemData:
@@ -191,7 +206,7 @@ def toda(n: int = 6) -> ProblemData:
     i = np.arange(1, N + 1)
     x0 = np.concatenate([0.5 + 0.1 * np.cos(2 * np.pi * i / N), 0.2 * np.sin(2 * np.pi * i / N)])
     H = " + ".join([f"x{k}^2" for k in range(1, N + 1)] + [f"x{k}^2/2" for k in range(N + 1, n + 1)])
-    return ProblemData("toda" if n == 6 else f"toda:{n}", _linear_text(C), H,
+    return ProblemData("toda" if n == 6 else f"toda:{n}", None, H,
                        (" + ".join(f"x{k}" for k in range(N + 1, n + 1)),
                         "*".join(f"x{k}" for k in range(1, N + 1))),
                        ("b_1 + ... + b_N", "a_1 ... a_N"), tuple(float(v) for v in x0), 10.0,
@@ -218,13 +233,9 @@ def volterra_lattice(n: int = 5) -> ProblemData:
         names.append("sum (-1)^i log u_i")
     x0 = 1.0 + 0.5 * np.cos(2 * np.pi * np.arange(1, n + 1) / n)
     return ProblemData("volterra-lattice" if n == 5 else f"volterra-lattice:{n}",
-                       _log_text(L), " + ".join(f"x{k}" for k in range(1, n + 1)),
+                       None, " + ".join(f"x{k}" for k in range(1, n + 1)),
                        tuple(casimirs), tuple(names), tuple(float(v) for v in x0), 10.0,
                        f"periodic Volterra lattice, log-canonical, n = {n}", LOG_CANONICAL, L)
-
-
-def _log_text(L) -> tuple:
-    return _matrix_text(log_canonical_matrix(L))
 
 
 def lotka_volterra_4d() -> ProblemData:
@@ -237,7 +248,7 @@ def lotka_volterra_4d() -> ProblemData:
     """
     L = np.array([[0.0 if i == j else (1.0 if j > i else -1.0) for j in range(4)]
                   for i in range(4)])
-    return ProblemData("lotka-volterra-4d", _log_text(L),
+    return ProblemData("lotka-volterra-4d", None,
                        "x1 + x2 + x3 + x4 - log(x1) - 2*log(x2) - log(x3) - log(x4)", (), (),
                        (2.0, 1.0, 1.0, 1.0), 10.0,
                        "4-d Lotka-Volterra, log-canonical (GeometricProblems.jl)",
@@ -263,7 +274,7 @@ def lotka_volterra_5d() -> ProblemData:
     for i in range(n):
         L[i, (i + 1) % n], L[(i + 1) % n, i] = 1.0, -1.0
     x0 = 1.0 + 0.5 * np.cos(2 * np.pi * np.arange(1, n + 1) / n)
-    return ProblemData("lv5-integrable", _log_text(L),
+    return ProblemData("lv5-integrable", None,
                        " + ".join(f"x{k} - log(x{k})" for k in range(1, n + 1)),
                        (" + ".join(f"log(x{k})" for k in range(1, n + 1)),),
                        ("log x1 + ... + log x5",), tuple(float(v) for v in x0), 10.0,
@@ -288,7 +299,7 @@ def lotka_volterra_5d_nonintegrable() -> ProblemData:
     """
     n = 5
     L = np.array([[0.0 if i == j else (1.0 if j > i else -1.0) for j in range(n)] for i in range(n)])
-    return ProblemData("lv5-nonintegrable", _log_text(L),
+    return ProblemData("lv5-nonintegrable", None,
                        " + ".join(f"x{k} - log(x{k})" for k in range(1, n + 1)),
                        ("log(x1) - log(x2) + log(x3) - log(x4) + log(x5)",),
                        ("sum (-1)^(i+1) log x_i",), (3.0, 0.5, 1.0, 2.0, 0.5), 10.0,
@@ -329,14 +340,15 @@ def problem_data(name: str) -> ProblemData | None:
 
 def build(data: ProblemData, realisation: str = "symmetric", general: bool = False
           ) -> PoissonSystem:
-    """The system of a problem in its family (or in the general family)."""
-    entries, H, casimirs = expressions(data)
+    """The system of a problem in its family (or in the general family; pi is read from its
+    expressions only there)."""
+    H, casimirs = _functions(data)
     symbols = symbols_of(data.dim)
     common = dict(name=data.name, x0=data.x0, t_final=data.t_final, realisation=realisation,
                   description=data.description, hamiltonian_expression=lambda: H)
     hamiltonian = to_program(H, symbols)
     if general or data.family == GENERAL:
-        return general_family(PoissonMatrix(entries), hamiltonian, casimirs=casimirs,
+        return general_family(PoissonMatrix(_poisson_entries(data)), hamiltonian, casimirs=casimirs,
                               casimir_names=data.casimir_names, where=f"{data.name}: poisson",
                               **common)
     numeric = tuple(numeric_function(c, symbols) for c in casimirs)

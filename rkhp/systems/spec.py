@@ -34,7 +34,7 @@ import numpy as np
 
 from ..base import documents
 from ..base.bounds import MAX_DIMENSION
-from ..base.documents import load_document
+from ..base.documents import parse_document, read_text
 from ..base.errors import InputError
 from ..base.expressions import parse_expression as read
 from ..base.expressions import variable_names
@@ -61,11 +61,19 @@ def spec_keys() -> tuple[str, ...]:
     return COMMON_KEYS + tuple(dict.fromkeys(f.spec_key for f in FAMILIES.values()))
 
 
-def _read(path: Path) -> dict:
-    """The keys of a spec file, read safely (`rkhp.base.documents`: size, encoding, nesting, repeated keys)."""
+def spec_text(path) -> str:
+    """The text of a spec file, read safely (`rkhp.base.documents.read_text`: a regular file,
+    its size bounded, UTF-8)."""
+    path = Path(path)
     if not path.exists() and not path.is_symlink():
         raise InputError(f"spec file {path} not found")
-    data = load_document(path, "spec file")
+    return read_text(path, "spec file")
+
+
+def _keys(text: str, path: Path) -> dict:
+    """The keys of a spec file's text, parsed safely (`rkhp.base.documents`: nesting, repeated
+    keys; JSON for a .json file, TOML otherwise) and checked against `spec_keys`."""
+    data = parse_document(text, str(path), "json" if path.suffix.lower() == ".json" else "toml")
     keys = spec_keys()
     unknown = sorted(set(data) - set(keys))
     if unknown:
@@ -120,8 +128,13 @@ def load_spec(path, realisation: str = "symmetric") -> PoissonSystem:
     their gradients finite at x0, the structure (antisymmetry, Jacobi identity) and that every
     declared Casimir Poisson-commutes with every x_i (`rkhp.systems.structure`).
     """
+    return spec_system(spec_text(path), path, realisation)
+
+
+def spec_system(text: str, path, realisation: str = "symmetric") -> PoissonSystem:
+    """:func:`load_spec` of a spec file whose text is `text` (read by :func:`spec_text`)."""
     path = Path(path)
-    return system_from_keys(_read(path), str(path), path.stem, path.name, realisation)
+    return system_from_keys(_keys(text, path), str(path), path.stem, path.name, realisation)
 
 
 #: where the errors of :func:`system` say they come from
