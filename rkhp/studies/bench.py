@@ -81,15 +81,12 @@ class BenchPoint:
     status: str
     cpu_seconds: float | None = None
 
+    json_keys = ("steps", "tolerance", "error", "seconds", "cpu_seconds", "evaluations", "status")
+
     @property
     def cost(self) -> float:
         """What the cheapest point is chosen by: CPU seconds where measured, else wall seconds."""
         return self.seconds if self.cpu_seconds is None else self.cpu_seconds
-
-    def to_json(self) -> dict:
-        return {"steps": self.steps, "tolerance": self.tolerance, "error": self.error,
-                "seconds": self.seconds, "cpu_seconds": self.cpu_seconds, "evaluations": self.evaluations,
-                "status": self.status}
 
 
 @dataclass(frozen=True)
@@ -102,10 +99,6 @@ class BenchCurve:
     compile_seconds: float
     trajectories: int
     points: tuple[BenchPoint, ...]
-
-    def to_json(self) -> dict:
-        return {"method": self.method, "kind": self.kind, "compile_seconds": self.compile_seconds,
-                "trajectories": self.trajectories, "points": [p.to_json() for p in self.points]}
 
 
 @dataclass(frozen=True)
@@ -120,9 +113,14 @@ class Cheapest:
     error: float | None
     cpu_seconds: float | None = None
 
-    def to_json(self) -> dict:
-        return {"target": self.target, "method": self.method, "setting": self.setting,
-                "seconds": self.seconds, "cpu_seconds": self.cpu_seconds, "error": self.error}
+    json_keys = ("target", "method", "setting", "seconds", "cpu_seconds", "error")
+
+
+class AbsentPeer(NamedTuple):
+    """A peer asked for whose package is not installed, and the line that says so."""
+
+    peer: str
+    reason: str
 
 
 @dataclass(frozen=True)
@@ -142,14 +140,16 @@ class BenchStudy:
     interrupted: bool = False
     absent_peers: tuple[tuple[str, str], ...] = ()
 
-    def to_json(self) -> dict:
-        return {"system": self.system, "realisation": self.realisation, "x0": list(self.x0),
-                "t_final": self.t_final, "interrupted": self.interrupted,
-                "reference": {"kind": self.reference.kind, "error_estimate": self.reference.error_estimate},
-                "repeats": self.repeats, "ensemble": self.ensemble,
-                "curves": [c.to_json() for c in self.curves],
-                "cheapest": [c.to_json() for c in self.cheapest],
-                "absent_peers": [{"peer": name, "reason": reason} for name, reason in self.absent_peers]}
+    json_keys = ("system", "realisation", "x0", "t_final", "interrupted", ("reference", "reference_summary"),
+                 "repeats", "ensemble", "curves", "cheapest", ("absent_peers", "absent_peer_reasons"))
+
+    @property
+    def reference_summary(self) -> dict:
+        return {"kind": self.reference.kind, "error_estimate": self.reference.error_estimate}
+
+    @property
+    def absent_peer_reasons(self) -> tuple[AbsentPeer, ...]:
+        return tuple(AbsentPeer(name, reason) for name, reason in self.absent_peers)
 
 
 def resolve_peer(name) -> Method:
