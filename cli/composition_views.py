@@ -18,7 +18,7 @@ def verify_composition(spec: str, fmt: str) -> None:
 
     result = verify_composition(load_composition(spec))
     if fmt == "json":
-        emit_json(result.to_json())
+        emit_json(result)
     elif fmt in ("csv", "latex"):
         _emit_verification(result, fmt)
     else:

@@ -263,10 +263,13 @@ def with_provenance(document: dict) -> dict:
     return {**document, "provenance": run_provenance()}
 
 
-def emit_json(document: dict) -> None:
-    """Write a JSON document to stdout (stable key order as given, then ``provenance``; non-finite
-    values as NON_FINITE)."""
-    click.echo(json_text(with_provenance(document)))
+def emit_json(document) -> None:
+    """Write a JSON document to stdout: a result or a dict of results in its JSON form
+    (`rkhp.base.json_form`; stable key order as given), then ``provenance``; non-finite values as
+    NON_FINITE."""
+    from rkhp.base.json_form import json_form
+
+    click.echo(json_text(with_provenance(json_form(document))))
 
 
 def console():

@@ -87,7 +87,7 @@ def poincare(system, expression, direction, t_final, method, tol, steps, x0, rea
 
         plot_section(found, chosen_axes, plot, run_provenance(), force)
     if fmt == "json":
-        emit_json(found.to_json())
+        emit_json(found)
     elif fmt == "csv":
         header = (*SECTION_CSV, *(f"x{i + 1}" for i in range(poisson.dim)))
         rows = [(k + 1, t, *p) for k, (t, p) in enumerate(zip(found.times.tolist(), found.points.tolist(),

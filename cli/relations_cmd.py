@@ -49,18 +49,19 @@ def relations(order, regenerate, seed, output, force, workers, scheduler, fmt):
         task = bar.add_task("deriving relations", total=None)
         data = relations_for(order, regenerate=regenerate, seed=seed, executor=executor,
                              progress=(lambda step: bar.update(task, description=step)) if regenerate else None)
-    doc = data.to_json()
-    doc["source"] = "regenerated" if regenerate else "shipped"
+    from rkhp.base.json_form import json_form
+
+    document = json_form(data)
+    source = "regenerated" if regenerate else "shipped"
     if output:
         from rkhp.base.provenance import write_output
 
-        document = data.to_json()
         document["method"]["regenerate"] += f" --output {output}"
         write_output(output, json_text(with_provenance(document), indent=1) + "\n", "--output", force)
     if fmt == "json":
-        emit_json(doc)
+        emit_json({**document, "source": source})
         return
-    _render(data, doc["source"])
+    _render(data, source)
 
 
 def _render(data, source: str) -> None:

@@ -102,7 +102,7 @@ def search(stages, order, degenerate, symmetric, implicit, restarts, time_limit,
 
         save_certificate(result.proof.certificate, certificate, force)
     if fmt == "json":
-        emit_json(result.to_json())
+        emit_json(result)
     else:
         _render(result, save, certificate)
     if result.interrupted:
@@ -142,8 +142,10 @@ def _count(n: int, one: str, many: str | None = None) -> str:
 def _render(result, save, certificate=None) -> None:
     from rich.table import Table
 
+    from rkhp.base.json_form import json_form
+
     con = console()
-    data = result.to_json()
+    data = json_form(result)
     kind = "implicit" if result.implicit else "explicit"
     head = f"{result.stages} stages, {kind}, class {result.cls}"
     if result.found is None:

@@ -144,7 +144,7 @@ def converge(system, methods, x0, realisation, t_final, steps, refinements, refe
 
         plot_convergence(study, plot, run_provenance(), force)
     if fmt == "json":
-        emit_json(study.to_json())
+        emit_json(study)
     elif fmt in ("csv", "latex"):
         _emit_converge(study, fmt)
     else:
@@ -311,7 +311,7 @@ def bench(system, methods, x0, realisation, peers, t_final, steps, tolerances, r
 
         plot_work_precision(study, plot, run_provenance(), force)
     if fmt == "json":
-        emit_json(study.to_json())
+        emit_json(study)
     elif fmt in ("csv", "latex"):
         _emit_bench(study, fmt)
     else:
@@ -432,7 +432,7 @@ def stress(system, methods, x0, realisation, t_final, long_steps, long_h, sweep_
 
         plot_stress(study, plot, run_provenance(), force)
     if fmt == "json":
-        emit_json(study.to_json())
+        emit_json(study)
     elif fmt in ("csv", "latex"):
         _emit_stress(study, fmt)
     else:
@@ -645,7 +645,7 @@ def long_time(system, methods, x0, realisation, h, steps, tolerance, plot, force
 
         plot_long_time(sys_.name, runs, plot, run_provenance(), force)
     doc = {"system": sys_.name, "realisation": sys_.realisation, "h": h, "steps": steps,
-           "t_final": h * steps, "runs": [r.to_json() for r in runs]}
+           "t_final": h * steps, "runs": runs}
     if fmt == "json":
         emit_json(doc)
         return

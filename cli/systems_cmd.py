@@ -88,7 +88,7 @@ def check(system, realisation, samples, seed, fmt):
     compile_notice((), fmt != "json", poisson)
     result = check_birealisation(poisson, samples=samples, seed=seed)
     if fmt == "json":
-        emit_json(result.to_json())
+        emit_json(result)
     else:
         from rich.table import Table
 
@@ -339,11 +339,13 @@ def _ran(trajectory):
 
 def tolerance_report(planned, choice, estimate) -> dict:
     """The `tolerance` object of `rkhp integrate --tol` (docs/json.md)."""
-    return {"tol": choice.tolerance, "order": choice.order, "pilot": choice.pilot.to_json(),
+    from rkhp.base.json_form import json_form
+
+    return {"tol": choice.tolerance, "order": choice.order, "pilot": json_form(choice.pilot),
             "planned_steps": planned.steps, "steps": choice.steps, "h": choice.h,
             "predicted_error": choice.predicted_error, "estimated_error": estimate,
             "met": estimate is not None and estimate <= choice.tolerance,
-            "candidates": [c.to_json() for c in planned.candidates]}
+            "candidates": json_form(planned.candidates)}
 
 
 def _output_times(t_eval, count, end: float):

@@ -42,7 +42,7 @@ def verify(tableau, max_order, precision, show, fmt):
         result = run_verify(tab, max_order=max_order, precision=precision,
                             on_order=lambda n, N: bar.update(task, completed=n, total=N))
     if fmt == "json":
-        emit_json(result.to_json())
+        emit_json(result)
     elif fmt in ("csv", "latex"):
         _emit_orders(result, fmt)
     else:
@@ -190,7 +190,7 @@ def tables(precision, fmt, name):
     compositions = composition_rows()
     if fmt == "json":
         emit_json({"tables": [tables_row(tab, r) for tab, r in rows],
-                   "compositions": [c.to_json() for c in compositions]})
+                   "compositions": compositions})
     else:
         _render_tables(rows, precision)
         render_composition_table(compositions)
@@ -208,9 +208,8 @@ _CLASSES = ("general", "degenerate", "symmetric")
 def tables_row(tab, r) -> dict:
     """One element of `rkhp tables --format json` (docs/json.md)."""
     return {"name": tab.name, "aliases": list(tab.aliases), "stages": tab.stages, "kind": tab.kind,
-            "order": r.order_json("general"), "degenerate_order": r.order_json("degenerate"),
-            "symmetric_order": r.order_json("symmetric"),
-            "orders": {cls: r.order_json(cls) for cls in r.orders}, "precision": r.precision,
+            "order": r.general_bound, "degenerate_order": r.degenerate_bound, "symmetric_order": r.symmetric_bound,
+            "orders": r.order_bounds, "precision": r.precision,
             "claimed": {"order": tab.claimed_order, "degenerate_order": tab.claimed_degenerate_order,
                         "symmetric_order": tab.claimed_symmetric_order},
             "claim_ok": r.claim_ok, "claims": dict(r.claims), "reference": tab.reference}

@@ -30,6 +30,7 @@ _LAZY = {
     "solve": "rkhp.ivp.solve",
     "event": "rkhp.ivp.events",
     "poincare_section": "rkhp.ivp.poincare",
+    "json_form": "rkhp.base.json_form",
 }
 
 __all__ = sorted(_LAZY)

@@ -19,6 +19,7 @@ import pytest
 
 from rkhp.base.errors import InputError
 from rkhp.base.executors import loopback_cluster, open_executor, scheduler_address
+from rkhp.base.json_form import json_form
 
 pytest.importorskip("distributed", reason="the distributed tests need rkhp[distributed] (make test installs it)")
 
@@ -100,9 +101,9 @@ def test_search_on_the_cluster_equals_the_single_process_run(cluster):
     from rkhp.search.driver import SearchOptions, search
 
     options = SearchOptions(seed=1, restarts=12)
-    alone = search(3, 4, "degenerate", options=options).to_json()
+    alone = json_form(search(3, 4, "degenerate", options=options))
     with open_executor(scheduler=cluster.address) as dask:
-        on_cluster = search(3, 4, "degenerate", options=options, executor=dask).to_json()
+        on_cluster = json_form(search(3, 4, "degenerate", options=options, executor=dask))
     # the command line, with the scheduler from the environment (Dask's convention)
     rc, by_env, err = _rkhp("search", "--stages", "3", "--order", "4", "--degenerate", "--seed", "1",
                             "--restarts", "12", "--format", "json", env={"DASK_SCHEDULER_ADDRESS": cluster.address})
@@ -120,7 +121,7 @@ def test_converge_on_the_cluster_equals_the_single_process_run(cluster):
     rc, on_cluster, err = _rkhp("converge", "rigid-body", "--method", "paper-three-stage", "--steps", "20",
                                 "--refinements", "3", "--format", "json", "--scheduler", cluster.address)
     assert rc == 0, err
-    alone = json.loads(json.dumps(alone.to_json()))  # as the command writes it
+    alone = json.loads(json.dumps(json_form(alone)))  # as the command writes it
     assert [m["expected_order"] for m in alone["methods"]] == [4]
     assert _without(json.loads(on_cluster)) == _without(alone)
 
@@ -158,7 +159,7 @@ def test_stress_bench_and_relations_on_the_cluster_equal_the_single_process_runs
                    executor=executor)
         b = bench(system, methods, peers=("scipy:dop853",), steps=(20, 40), tolerances=(1e-6, 1e-8), repeats=1,
                   executor=executor)
-        return _without(s.to_json()), _without(b.to_json(), ("seconds", "cpu_seconds", "compile_seconds", "cheapest"))
+        return _without(json_form(s)), _without(json_form(b), ("seconds", "cpu_seconds", "compile_seconds", "cheapest"))
 
     alone = studies()
     with open_executor(scheduler=cluster.address) as dask:

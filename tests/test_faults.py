@@ -31,6 +31,7 @@ import pytest
 
 import rkhp
 from rkhp.base.errors import NumericalFailure, WriteFailed
+from rkhp.base.json_form import json_form
 from rkhp.taylor.compiler import PACKAGE, cache_dir
 
 LINUX = sys.platform.startswith("linux")
@@ -63,7 +64,7 @@ def _reference_check() -> dict:
     from rkhp.systems import get_system
     from rkhp.systems.check import check_birealisation
 
-    return check_birealisation(get_system("rigid-body"), samples=3, seed=0).to_json()["deviations"]
+    return json_form(check_birealisation(get_system("rigid-body"), samples=3, seed=0))["deviations"]
 
 
 CHECK = ("check", "rigid-body", "--samples", "3", "--format", "json")
@@ -788,7 +789,7 @@ def test_check_does_not_call_a_correct_system_wrong(tmp_path):
     result = check_birealisation(system, samples=100, seed=7)
     assert result.ok and max(result.deviations.values()) < 1e-13, result.deviations
     assert result.scale > 100  # the brackets' size: round-off of size 1e-16 x scale would have failed
-    document = result.to_json()
+    document = json_form(result)
     assert document["tolerance"] == 1e-12 and document["tolerance_rule"] == TOLERANCE_RULE
     assert document["scale"] == result.scale
 

@@ -15,6 +15,7 @@ import pytest
 import sympy
 
 from rkhp.base.errors import InputError
+from rkhp.base.json_form import json_form
 from rkhp.studies import bench as B
 from rkhp.studies import peers as P
 from rkhp.systems import get_system
@@ -178,7 +179,7 @@ def test_bench_names_an_absent_peer_and_runs_the_others(monkeypatch):
                     tolerances=(1e-5, 1e-8), repeats=1)
     assert study.absent_peers == (("numbalsoda:dop853", "numbalsoda:dop853 is absent: numbalsoda not installed"),)
     assert [c.method for c in study.curves] == ["kahan-li6", "scipy:dop853"]
-    assert study.to_json()["absent_peers"][0]["peer"] == "numbalsoda:dop853"
+    assert json_form(study)["absent_peers"][0]["peer"] == "numbalsoda:dop853"
 
 
 def test_bench_races_the_compiled_peers():

@@ -26,6 +26,7 @@ import pytest
 
 import rkhp
 from rkhp.base.errors import InputError, NumericalFailure
+from rkhp.base.json_form import json_form
 
 OSCILLATOR = ('name = "oscillator"\nfamily = "constant"\npoisson = [[0, 1], [-1, 0]]\n'
               'hamiltonian = "(x1^2 + x2^2)/2"\nx0 = [1, 0]\n')
@@ -97,7 +98,7 @@ def test_converge_interrupted_keeps_the_rows_finished():
 
     method = _interrupting(resolve_method("rk4"), 160)
     study = converge("rigid-body", [method], steps=[20, 40, 80, 160, 320])
-    assert study.interrupted and study.to_json()["interrupted"] is True
+    assert study.interrupted and json_form(study)["interrupted"] is True
     assert [r.steps for r in study.methods[0].rows] == [20, 40, 80]
     assert study.methods[0].rows[2].local_order == pytest.approx(4.0, abs=0.2)  # RK4's order
 
@@ -120,7 +121,7 @@ def test_stress_interrupted_keeps_the_parts_finished():
     study = stress("rigid-body", [method], long_steps=1000, sweep_coarsest=8, round_off_steps=(32, 64, 128))
     assert study.interrupted and len(study.sweep) == 1
     assert study.long_run is None and study.round_off is None
-    assert study.verdicts()["b"] == NOT_RUN and study.to_json()["long_run"] is None
+    assert study.verdicts()["b"] == NOT_RUN and json_form(study)["long_run"] is None
 
 
 def _handles_sigint(pid: int) -> bool:
@@ -273,7 +274,7 @@ def test_no_casimir_is_a_dash_not_zero():
 
     study = converge("pendulum", ["rk4"], steps=[20, 40, 80], t_final=1.0)
     assert all(r.casimir_error is None for r in study.methods[0].rows)
-    assert all(r["casimir_error_max"] is None for r in study.to_json()["methods"][0]["rows"])
+    assert all(r["casimir_error_max"] is None for r in json_form(study)["methods"][0]["rows"])
 
 
 def test_stress_counts_the_peer_once_and_not_as_rkhp():

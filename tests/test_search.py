@@ -17,6 +17,7 @@ import pytest
 from cli_run import rkhp
 
 from rkhp.base.executors import open_executor
+from rkhp.base.json_form import json_form
 from rkhp.search.driver import SearchOptions, search
 from rkhp.search.multistart import Problem, run_restarts
 from rkhp.search.polish import polish
@@ -75,7 +76,7 @@ def test_two_stages_degenerate_reach_order_3_only():
     assert result.order == 3 and result.found is not None
     assert result.found.verification.orders["degenerate"] == 3
     assert result.found.exact  # a closed form, verified exactly
-    ev = result.to_json()["evidence_next_order"]
+    ev = json_form(result)["evidence_next_order"]
     # with 2 explicit stages the weight of b[b[b,b]] vanishes: residual exactly 1
     assert ev["order"] == 4 and ev["restarts"] == 6 and ev["best_residual"] == pytest.approx(1)
 
@@ -84,7 +85,7 @@ def test_three_stages_degenerate_reach_order_4():
     result = search(3, cls="degenerate", options=SearchOptions(restarts=6, seed=0))
     assert result.order == 4
     assert result.found.verification.orders["degenerate"] == 4
-    assert result.to_json()["evidence_next_order"]["order"] == 5
+    assert json_form(result)["evidence_next_order"]["order"] == 5
 
 
 def test_four_stages_general_reach_order_4():
@@ -121,7 +122,7 @@ def test_groebner_does_not_claim_a_possible_case():
 def test_prove_flag_attaches_the_certificate_to_the_failed_order():
     result = search(2, 3, "general", options=SearchOptions(restarts=3, prove=True))
     assert result.found is None and result.proof.proved and result.proof_order == 3
-    assert result.to_json()["proof"]["result"].startswith("proved impossible")
+    assert json_form(result)["proof"]["result"].startswith("proved impossible")
 
 
 # ----------------------------------------------------------------------------- restarts, polish

@@ -11,6 +11,7 @@ from click.testing import CliRunner
 from rkhp_cli.main import rkhp
 
 from rkhp.base.errors import InputError
+from rkhp.base.json_form import json_form
 from rkhp.studies.fit import fit_order, local_order, verdict
 from rkhp.systems import get_system
 
@@ -425,7 +426,7 @@ def test_round_off_floor_of_the_energy_error():
     result = round_off([resolve_method("paper-three-stage")], rigid, 10.0, steps=(100, 316, 1000, 3162, 10000, 31623))
     (study,), (energy,) = result.studies, result.energy_fits
     assert energy.slope == pytest.approx(4, abs=0.15)
-    data = result.to_json()["methods"][0]
+    data = json_form(result)["methods"][0]
     assert data["energy_floor_h"] is not None
     floor_row = next(r for r in study.rows if r.h == data["energy_floor_h"])
     assert floor_row.energy_error < 1e-13  # round-off level for |H| ~ 0.65 after ~10^4 steps
@@ -578,7 +579,7 @@ def test_a_tenth_order_composition_on_a_spec_file_gets_mpmath_and_measurable_row
     rows = [r for r in study.methods[0].rows if r.status == "ok"]
     assert len(rows) >= 5 and all(r.error is not None for r in rows)
     assert abs(rows[-1].local_order - 10) < 1
-    doc = study.to_json()
+    doc = json_form(study)
     assert doc["reference"]["choice"] == study.reference_choice
     assert doc["methods"][0]["steps_chosen"] == study.methods[0].steps_chosen
 

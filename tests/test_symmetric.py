@@ -17,6 +17,7 @@ import json
 import numpy as np
 import pytest
 
+from rkhp.base.json_form import json_form
 from rkhp.integrators.methods import resolve_methods
 from rkhp.search.driver import SearchOptions, search
 from rkhp.studies.converge import converge
@@ -39,7 +40,7 @@ def test_check_reports_degenerate_and_symmetric_separately(name, realisation, de
     assert result.ok  # the axioms of a birealisation hold in every realisation
     assert (result.degenerate, result.symmetric) == (degenerate, symmetric)
     assert (system.degenerate, system.symmetric) == (degenerate, symmetric)
-    assert result.to_json()["symmetric"] is symmetric
+    assert json_form(result)["symmetric"] is symmetric
     if not symmetric:
         assert result.symmetry > 1e-3
 
@@ -135,7 +136,7 @@ O6 = "search-symmetric-o6-s5"
 
 def test_symmetric_order_6_observed_and_dropping_on_quartic_rigid_body():
     sym, study = _orders("rigid-body", "symmetric", [O6], [20, 40, 80, 160])
-    assert study.symmetric and study.to_json()["symmetric"] is True
+    assert study.symmetric and json_form(study)["symmetric"] is True
     assert sym[O6].expected_order == 6 and sym[O6].verdict == "confirmed"
     assert sym[O6].observed_order == pytest.approx(6, abs=0.2)
     quartic, study = _orders("rigid-body", "quartic", [O6, "paper-three-stage"],

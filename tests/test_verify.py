@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from rkhp.base.errors import InputError
+from rkhp.base.json_form import json_form
 from rkhp.tableaux.files import load_tableau
 from rkhp.tableaux.tableau import Tableau
 from rkhp.tableaux.verification import verify
@@ -176,7 +177,7 @@ def test_precision_modes_and_tolerances():
 
 
 def test_json_keys():
-    doc = verify("paper-two-stage").to_json()
+    doc = json_form(verify("paper-two-stage"))
     for key in ("name", "stages", "kind", "order", "degenerate_order", "checked_up_to",
                 "precision", "tolerance", "principal_error", "failing", "claimed", "claim_ok"):
         assert key in doc

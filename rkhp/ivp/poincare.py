@@ -35,14 +35,17 @@ class Section:
     points: np.ndarray
     result: SolveResult
 
-    def to_json(self) -> dict:
-        r = self.result
-        return {"system": r.system, "section": self.expression, "direction": self.direction,
-                "method": r.method, "steps": r.steps, "h": r.h, "tolerance": r.tolerance,
-                "estimated_error": r.estimated_error, "count": len(self.times), "times": self.times.tolist(),
-                "points": self.points.tolist(), "casimir_error_max": r.casimir_error_max,
-                "energy_error_max": r.energy_error_max, "invariant_errors_max": list(r.invariant_errors_max),
-                "status": r.status, "message": r.message}
+    json_keys = (("system", "result.system"), ("section", "expression"), "direction", ("method", "result.method"),
+                 ("steps", "result.steps"), ("h", "result.h"), ("tolerance", "result.tolerance"),
+                 ("estimated_error", "result.estimated_error"), "count", "times", "points",
+                 ("casimir_error_max", "result.casimir_error_max"), ("energy_error_max", "result.energy_error_max"),
+                 ("invariant_errors_max", "result.invariant_errors_max"), ("status", "result.status"),
+                 ("message", "result.message"))
+
+    @property
+    def count(self) -> int:
+        """The number of crossings."""
+        return len(self.times)
 
 
 def poincare_section(system, expression: str, t_final: float | None = None, method=DEFAULT_METHOD, tol=None, *,

@@ -47,12 +47,24 @@ class Candidate:
     choice: tolerances.ToleranceStep | None
     reason: str = ""
 
-    def to_json(self) -> dict:
-        c = self.choice
-        return {"method": self.method, "order": None if c is None else c.order,
-                "steps": None if c is None else c.steps,
-                "predicted_seconds": None if c is None else c.predicted_seconds,
-                "left_out": self.reason or None}
+    json_keys = ("method", "order", "steps", "predicted_seconds", "left_out")
+
+    @property
+    def order(self) -> int | None:
+        return None if self.choice is None else self.choice.order
+
+    @property
+    def steps(self) -> int | None:
+        return None if self.choice is None else self.choice.steps
+
+    @property
+    def predicted_seconds(self) -> float | None:
+        return None if self.choice is None else self.choice.predicted_seconds
+
+    @property
+    def left_out(self) -> str | None:
+        """Why the candidate was left out (None when it was not)."""
+        return self.reason or None
 
 
 @dataclass(frozen=True)
@@ -68,10 +80,7 @@ class Plan:
     choice: tolerances.ToleranceStep | None = None
     candidates: tuple[Candidate, ...] = ()
 
-    def to_json(self) -> dict:
-        return {"method": self.method, "steps": self.steps, "h": self.h,
-                "choice": None if self.choice is None else self.choice.to_json(),
-                "candidates": [c.to_json() for c in self.candidates]}
+    json_keys = ("method", "steps", "h", "choice", "candidates")
 
 
 @dataclass
@@ -117,25 +126,21 @@ class SolveResult:
     run_seconds: float = 0.0
     provenance: dict = field(default_factory=dict)
 
+    #: docs/json.md "rkhp.solve": scipy's fields and rkhp's, the states one per row
+    json_keys = ("system", "method", "order", "steps", "h", "steps_taken", "tolerance", "estimated_error", "status",
+                 "message", "success", "t", ("y", "states"), "t_events", "y_events", "casimir_error_max",
+                 "energy_error_max", "invariant_errors_max", "invariant_error_max", "newton_mean", "newton_max",
+                 "run_seconds", "plan")
+
+    @property
+    def states(self) -> np.ndarray:
+        """The states one per row, shape (m, n): ``y`` transposed."""
+        return self.y.T
+
     @property
     def invariant_error_max(self) -> float | None:
         """The largest drift of the declared invariants (None without any)."""
         return max(self.invariant_errors_max) if self.invariant_errors_max else None
-
-    def to_json(self) -> dict:
-        """The JSON document of the result (docs/json.md "rkhp.solve")."""
-        return {
-            "system": self.system, "method": self.method, "order": self.order, "steps": self.steps,
-            "h": self.h, "steps_taken": self.steps_taken, "tolerance": self.tolerance,
-            "estimated_error": self.estimated_error, "status": self.status, "message": self.message,
-            "success": self.success, "t": self.t.tolist(), "y": self.y.T.tolist(),
-            "t_events": None if self.t_events is None else [t.tolist() for t in self.t_events],
-            "y_events": None if self.y_events is None else [y.tolist() for y in self.y_events],
-            "casimir_error_max": self.casimir_error_max, "energy_error_max": self.energy_error_max,
-            "invariant_errors_max": list(self.invariant_errors_max), "invariant_error_max": self.invariant_error_max,
-            "newton_mean": self.newton_mean, "newton_max": self.newton_max, "run_seconds": self.run_seconds,
-            "plan": None if self.plan is None else self.plan.to_json(),
-        }
 
 
 def choose_method(system, span: Span, tol: float, x0=None, candidates=AUTO_CANDIDATES,

@@ -69,14 +69,11 @@ class Pilot:
     seconds_per_step: float
     finest: np.ndarray = field(repr=False, compare=False)
 
+    json_keys = ("steps", "differences", "observed_order", "estimate", "round_off", "seconds_per_step")
+
     @property
     def finest_steps(self) -> int:
         return self.steps[-1]
-
-    def to_json(self) -> dict:
-        return {"steps": list(self.steps), "differences": list(self.differences),
-                "observed_order": self.observed_order, "estimate": self.estimate,
-                "round_off": self.round_off, "seconds_per_step": self.seconds_per_step}
 
 
 @dataclass(frozen=True)
@@ -94,15 +91,12 @@ class ToleranceStep:
     predicted_error: float
     pilot: Pilot
 
+    json_keys = ("method", "order", "tolerance", "scale", "steps", "h", "predicted_error", "predicted_seconds",
+                 "pilot")
+
     @property
     def predicted_seconds(self) -> float:
         return self.steps * self.pilot.seconds_per_step
-
-    def to_json(self) -> dict:
-        return {"method": self.method, "order": self.order, "tolerance": self.tolerance,
-                "scale": self.scale, "steps": self.steps, "h": self.h,
-                "predicted_error": self.predicted_error, "predicted_seconds": self.predicted_seconds,
-                "pilot": self.pilot.to_json()}
 
 
 def norm(x) -> float:

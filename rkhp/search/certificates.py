@@ -23,6 +23,7 @@ from importlib import resources
 from pathlib import Path
 
 from ..base.errors import InputError
+from ..base.json_form import json_form
 from ..base.provenance import write_output
 from .ideal import condition_ideal, parse_polynomial
 from .system import ResidualSystem, check_problem
@@ -56,21 +57,22 @@ class Certificate:
     produced_by: str
     eliminated: tuple[str, ...] = ()
 
+    format = CERTIFICATE_FORMAT
+    identity = "sum_i cofactors[i] * generators[i] = 1"
+    #: the certificate file (docs/search.md)
+    json_keys = ("format", "statement", "problem", "variables", "substitution", "eliminated", "identity",
+                 "generators", "cofactors", "produced_by")
+
+    @property
+    def problem(self) -> dict:
+        """The problem the certificate is about, as its file names it."""
+        return {"stages": self.stages, "order": self.order, "class": self.cls, "implicit": self.implicit}
+
     @property
     def statement(self) -> str:
         kind = "implicit" if self.implicit else "explicit"
         return (f"no {kind} tableau with {self.stages} stages, real or complex, meets the "
                 f"{self.cls} order conditions up to order {self.order}")
-
-    def to_json(self) -> dict:
-        return {"format": CERTIFICATE_FORMAT, "statement": self.statement,
-                "problem": {"stages": self.stages, "order": self.order, "class": self.cls,
-                            "implicit": self.implicit},
-                "variables": list(self.variables), "substitution": self.substitution,
-                "eliminated": list(self.eliminated),
-                "identity": "sum_i cofactors[i] * generators[i] = 1",
-                "generators": list(self.generators), "cofactors": list(self.cofactors),
-                "produced_by": self.produced_by}
 
     @classmethod
     def from_json(cls_, data) -> Certificate:
@@ -108,6 +110,13 @@ class CertificateCheck:
     reason: str
     terms: int
     seconds: float
+
+    identity = "sum_i g_i f_i = 1"
+    json_keys = ("identity", ("cofactor_terms", "terms"), ("checked", "valid"), ("check_seconds", "rounded_seconds"))
+
+    @property
+    def rounded_seconds(self) -> float:
+        return round(self.seconds, 3)
 
 
 def check_certificate(cert: Certificate) -> CertificateCheck:
@@ -159,7 +168,7 @@ def load_certificate(path) -> Certificate:
 def save_certificate(cert: Certificate, path, force: bool = False) -> None:
     """Write ``cert`` as JSON (one polynomial per list entry), atomically; an existing file only
     with ``force`` (`rkhp.base.files`)."""
-    write_output(path, json.dumps(cert.to_json(), indent=1) + "\n", "--certificate", force)
+    write_output(path, json.dumps(json_form(cert), indent=1) + "\n", "--certificate", force)
 
 
 def shipped_certificates() -> list[Path]:

@@ -14,11 +14,13 @@ import dataclasses
 import hashlib
 import time
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
 from ..base import bounds
 from ..base.errors import InputError
+from ..base.json_form import json_form
 from ..trees.conditions import check_class
 from .multistart import Problem, Restarts, run_restarts
 from .optimise import KnownMethod, known_methods, minimise_error, minimise_phase, polish_phase, refine_optimum
@@ -105,10 +107,28 @@ class Optimisation:
     phase_order: int | None = None
     phase_constant: float | None = None
 
+    json_keys = ("error_norm", "starts", "kkt_residual", "objective", "phase_order", "phase_constant", "known")
+
+
+class ProofSummary(NamedTuple):
+    """A proof attempt in brief: how (``method``) and what it decided (``result``, a sentence)."""
+
+    method: str
+    result: str
+
+
+class NextOrderEvidence(NamedTuple):
+    """The restarts of the first order not reached: the order, their number and the best residual
+    they met (None without restarts)."""
+
+    order: int
+    restarts: int
+    best_residual: float | None
+
 
 @dataclass(frozen=True)
 class SearchResult:
-    """Everything a search found, with the evidence (its JSON via :meth:`to_json`, docs/json.md)."""
+    """Everything a search found, with the evidence (its JSON form: ``json_keys``, docs/json.md)."""
 
     stages: int
     cls: str
@@ -123,6 +143,95 @@ class SearchResult:
     optimisation: Optimisation | None = None
     interrupted: bool = False
     seconds_to_first: dict[int, float] = field(default_factory=dict)
+
+    #: docs/json.md "rkhp search": the result, then the evidence
+    json_keys = ("stages", "degenerate", "implicit", "order", ("found", "reached"), ("tableau", "tableau_entries"),
+                 "residual", ("restarts", "restart_count"), ("successes", "success_count"),
+                 ("seconds", "rounded_seconds"), "principal_error", ("proof", "proof_summary"),
+                 ("evidence_next_order", "next_order_evidence"), ("class", "cls"), "order_restarts",
+                 "order_successes", "decided_by", "verified_orders", ("seed", "options.seed"), "interrupted",
+                 ("optimization", "optimisation"), "proof_detail")
+
+    @property
+    def degenerate(self) -> bool:
+        """Whether the class is over T_0 (degenerate or symmetric)."""
+        return self.cls != "general"
+
+    @property
+    def reached(self) -> bool:
+        """Whether a tableau was found."""
+        return self.found is not None
+
+    @property
+    def tableau_entries(self) -> dict | None:
+        """The entries of the tableau found as text, ``{"A", "b", "c"}`` (c of a D-digit tableau
+        to D digits); None when none was found."""
+        import mpmath
+
+        from ..tableaux.tableau import entry_text
+
+        if self.found is None:
+            return None
+        t = self.found.tableau
+        with mpmath.workdps(self.options.digits):
+            return {"A": [[entry_text(x) for x in row] for row in t.A],
+                    "b": [entry_text(x) for x in t.b], "c": [entry_text(x) for x in t.c]}
+
+    @property
+    def residual(self) -> float | None:
+        """The largest polished residual of the tableau found (None when none was)."""
+        return None if self.found is None else self.found.residual
+
+    @property
+    def restart_count(self) -> int:
+        return sum(len(r.attempts) for r in self.runs)
+
+    @property
+    def success_count(self) -> int:
+        return sum(len(r.successes) for r in self.runs)
+
+    @property
+    def rounded_seconds(self) -> float:
+        return round(self.seconds, 3)
+
+    @property
+    def proof_summary(self) -> ProofSummary | None:
+        if self.proof is None:
+            return None
+        return ProofSummary(self.proof.method, self.proof.result_text(self.stages, self.proof_order, self.cls))
+
+    @property
+    def next_order_evidence(self) -> NextOrderEvidence | None:
+        failed = self.failed_run
+        if failed is None:
+            return None
+        return NextOrderEvidence(failed.problem.order, len(failed.attempts),
+                                 failed.best_residual if failed.attempts else None)
+
+    @property
+    def order_restarts(self) -> int | None:
+        """The restarts of the order reported (None when nothing was found)."""
+        run = self.found_run
+        return None if run is None else len(run.attempts)
+
+    @property
+    def order_successes(self) -> int | None:
+        run = self.found_run
+        return None if run is None else len(run.successes)
+
+    @property
+    def decided_by(self) -> str | None:
+        """The verify tolerance rule that decided the tableau found."""
+        return None if self.found is None else self.found.verification.tolerance_rule
+
+    @property
+    def verified_orders(self) -> dict | None:
+        return None if self.found is None else self.found.verification.order_bounds
+
+    @property
+    def proof_detail(self) -> dict | None:
+        """The proof attempt in full, after the order it was about (None without one)."""
+        return None if self.proof is None else {"order": self.proof_order, **json_form(self.proof)}
 
     @property
     def order(self) -> int | None:
@@ -176,76 +285,6 @@ class SearchResult:
             claimed_order=orders.get("general"), claimed_degenerate_order=orders.get("degenerate"),
             claimed_symmetric_order=orders.get("symmetric"), reference=self.command_line(),
             notes=f"verified: {found.verification.tolerance_rule}")
-
-    def to_json(self) -> dict:
-        """The issue's keys, then extras (decided_by, verified orders, optimisation, proof text)."""
-        import mpmath
-
-        from ..tableaux.tableau import entry_text
-
-        tab = None
-        if self.found is not None:
-            t = self.found.tableau
-            with mpmath.workdps(self.options.digits):  # c of a D-digit tableau: D digits
-                tab = {"A": [[entry_text(x) for x in row] for row in t.A],
-                       "b": [entry_text(x) for x in t.b], "c": [entry_text(x) for x in t.c]}
-        failed = self.failed_run
-        evidence = None
-        if failed is not None:
-            evidence = {"order": failed.problem.order, "restarts": len(failed.attempts),
-                        "best_residual": failed.best_residual if failed.attempts else None}
-        proof = None
-        if self.proof is not None:
-            proof = {"method": self.proof.method,
-                     "result": self.proof.result_text(self.stages, self.proof_order, self.cls)}
-        restarts = sum(len(r.attempts) for r in self.runs)
-        successes = sum(len(r.successes) for r in self.runs)
-        run = self.found_run
-        out = {
-            "stages": self.stages,
-            "degenerate": self.cls != "general",
-            "implicit": self.implicit,
-            "order": self.order,
-            "found": self.found is not None,
-            "tableau": tab,
-            "residual": None if self.found is None else self.found.residual,
-            "restarts": restarts,
-            "successes": successes,
-            "seconds": round(self.seconds, 3),
-            "principal_error": self.principal_error,
-            "proof": proof,
-            "evidence_next_order": evidence,
-            # extras
-            "class": self.cls,
-            "order_restarts": None if run is None else len(run.attempts),
-            "order_successes": None if run is None else len(run.successes),
-            "decided_by": None if self.found is None else self.found.verification.tolerance_rule,
-            "verified_orders": None if self.found is None else {
-                cls: self.found.verification.order_json(cls) for cls in self.found.verification.orders},
-            "seed": self.options.seed,
-            "interrupted": self.interrupted,
-            "optimization": None if self.optimisation is None else {
-                "error_norm": self.optimisation.error_norm, "starts": self.optimisation.starts,
-                "kkt_residual": self.optimisation.kkt_residual,
-                "objective": self.optimisation.objective,
-                "phase_order": self.optimisation.phase_order,
-                "phase_constant": self.optimisation.phase_constant,
-                "known": [{"name": k.name, "principal_error": k.error_norm}
-                          for k in self.optimisation.known]},
-            "proof_detail": None if self.proof is None else {
-                "order": self.proof_order, "status": self.proof.status,
-                "seconds": round(self.proof.seconds, 3), "time_limit": self.proof.time_limit,
-                "polynomials": list(self.proof.polynomials), "basis": list(self.proof.basis),
-                "engine": self.proof.engine, "variables": list(self.proof.variables),
-                "dimension": self.proof.dimension,
-                "complex_solutions": self.proof.complex_solutions,
-                "modular": [{"prime": p, "unit": unit} for p, unit in self.proof.modular],
-                "certificate": None if self.proof.check is None else {
-                    "identity": "sum_i g_i f_i = 1", "cofactor_terms": self.proof.check.terms,
-                    "checked": self.proof.check.valid,
-                    "check_seconds": round(self.proof.check.seconds, 3)}},
-        }
-        return out
 
 
 def make_tableau(problem: Problem, entries, name: str):

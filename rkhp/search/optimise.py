@@ -237,6 +237,8 @@ class KnownMethod:
     name: str
     error_norm: float
 
+    json_keys = ("name", ("principal_error", "error_norm"))
+
 
 def known_methods(system: ResidualSystem) -> list[KnownMethod]:
     """Built-in tableaux with the same stages (and kind) meeting every condition up to order N."""

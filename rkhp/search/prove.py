@@ -26,6 +26,7 @@ from __future__ import annotations
 import multiprocessing
 import time
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from ..base.errors import CheckFailed, InputError
 from .certificates import Certificate, CertificateCheck, check_certificate
@@ -46,6 +47,13 @@ ENGINES = ("auto", "singular", "sympy")
 EVIDENCE_PRIMES = (32003, 31991, 32749)
 #: Share of the time limit given to the modular evidence.
 EVIDENCE_SHARE = 0.25
+
+
+class ModularBasis(NamedTuple):
+    """Whether the Groebner basis modulo ``prime`` is [1] (``unit``): evidence, not a proof."""
+
+    prime: int
+    unit: bool
 
 
 @dataclass(frozen=True)
@@ -84,6 +92,18 @@ class Proof:
     check: CertificateCheck | None = None
     modular: tuple[tuple[int, bool], ...] = ()
     eliminated: tuple[str, ...] = ()
+
+    #: docs/json.md "rkhp search" ``proof_detail`` (after the order, which the search gives)
+    json_keys = ("status", ("seconds", "rounded_seconds"), "time_limit", "polynomials", "basis", "engine", "variables",
+                 "dimension", "complex_solutions", ("modular", "modular_bases"), ("certificate", "check"))
+
+    @property
+    def rounded_seconds(self) -> float:
+        return round(self.seconds, 3)
+
+    @property
+    def modular_bases(self) -> tuple[ModularBasis, ...]:
+        return tuple(ModularBasis(p, unit) for p, unit in self.modular)
 
     def modular_text(self) -> str:
         """The modular evidence in words (empty when none)."""

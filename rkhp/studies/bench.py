@@ -85,15 +85,12 @@ class BenchPoint:
     status: str
     cpu_seconds: float | None = None
 
+    json_keys = ("steps", "tolerance", "error", "seconds", "cpu_seconds", "evaluations", "status")
+
     @property
     def cost(self) -> float:
         """What the cheapest point is chosen by: CPU seconds where measured, else wall seconds."""
         return self.seconds if self.cpu_seconds is None else self.cpu_seconds
-
-    def to_json(self) -> dict:
-        return {"steps": self.steps, "tolerance": self.tolerance, "error": self.error,
-                "seconds": self.seconds, "cpu_seconds": self.cpu_seconds, "evaluations": self.evaluations,
-                "status": self.status}
 
 
 @dataclass(frozen=True)
@@ -106,10 +103,6 @@ class BenchCurve:
     compile_seconds: float
     trajectories: int
     points: tuple[BenchPoint, ...]
-
-    def to_json(self) -> dict:
-        return {"method": self.method, "kind": self.kind, "compile_seconds": self.compile_seconds,
-                "trajectories": self.trajectories, "points": [p.to_json() for p in self.points]}
 
 
 @dataclass(frozen=True)
@@ -124,9 +117,21 @@ class Cheapest:
     error: float | None
     cpu_seconds: float | None = None
 
-    def to_json(self) -> dict:
-        return {"target": self.target, "method": self.method, "setting": self.setting,
-                "seconds": self.seconds, "cpu_seconds": self.cpu_seconds, "error": self.error}
+    json_keys = ("target", "method", "setting", "seconds", "cpu_seconds", "error")
+
+
+class AbsentPeer(NamedTuple):
+    """A peer asked for whose package is not installed, and the line that says so."""
+
+    peer: str
+    reason: str
+
+
+class LeftOutMethod(NamedTuple):
+    """A method of the default list left out of a race for its estimated CPU time."""
+
+    method: str
+    estimated_seconds: float
 
 
 @dataclass(frozen=True)
@@ -145,17 +150,18 @@ class BenchStudy:
     x0: tuple[float, ...] = ()
     interrupted: bool = False
     absent_peers: tuple[tuple[str, str], ...] = ()
-    left_out: tuple[tuple[str, float], ...] = ()
+    left_out: tuple[LeftOutMethod, ...] = ()
 
-    def to_json(self) -> dict:
-        return {"system": self.system, "realisation": self.realisation, "x0": list(self.x0),
-                "t_final": self.t_final, "interrupted": self.interrupted,
-                "reference": {"kind": self.reference.kind, "error_estimate": self.reference.error_estimate},
-                "repeats": self.repeats, "ensemble": self.ensemble,
-                "curves": [c.to_json() for c in self.curves],
-                "cheapest": [c.to_json() for c in self.cheapest],
-                "absent_peers": [{"peer": name, "reason": reason} for name, reason in self.absent_peers],
-                "left_out": [{"method": name, "estimated_seconds": seconds} for name, seconds in self.left_out]}
+    json_keys = ("system", "realisation", "x0", "t_final", "interrupted", ("reference", "reference_summary"),
+                 "repeats", "ensemble", "curves", "cheapest", ("absent_peers", "absent_peer_reasons"), "left_out")
+
+    @property
+    def reference_summary(self) -> dict:
+        return {"kind": self.reference.kind, "error_estimate": self.reference.error_estimate}
+
+    @property
+    def absent_peer_reasons(self) -> tuple[AbsentPeer, ...]:
+        return tuple(AbsentPeer(name, reason) for name, reason in self.absent_peers)
 
 
 def resolve_peer(name) -> Method:
@@ -432,16 +438,16 @@ def bench_steps(steps, repeats: int) -> int:
     return min(steps) + repeats * sum(steps)
 
 
-def default_methods(system, steps, repeats: int) -> tuple[tuple[Method, ...], tuple[tuple[str, float], ...]]:
+def default_methods(system, steps, repeats: int) -> tuple[tuple[Method, ...], tuple[LeftOutMethod, ...]]:
     """The methods of BENCH_METHODS whose estimated cost on `system` (`Method.cost`: the Taylor
-    tower's jets) for the bench's steps is at most BENCH_DEFAULT_SECONDS, and (name, estimated
-    CPU seconds) of those left out."""
+    tower's jets) for the bench's steps is at most BENCH_DEFAULT_SECONDS, and those left out with
+    their estimated CPU seconds."""
     kept, left_out = [], []
     for method in map(resolve_method, BENCH_METHODS):
         cost = method.cost(system)
         seconds = None if cost is None else cost.seconds(bench_steps(steps, repeats))
         if seconds is not None and seconds > BENCH_DEFAULT_SECONDS:
-            left_out.append((method.name, seconds))
+            left_out.append(LeftOutMethod(method.name, seconds))
         else:
             kept.append(method)
     return tuple(kept), tuple(left_out)

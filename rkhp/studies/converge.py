@@ -49,6 +49,10 @@ class ConvergenceRow:
     measured_error: float | None
     invariant_error: float | None = None
 
+    json_keys = ("h", "steps", "error", "local_order", ("casimir_error_max", "casimir_error"),
+                 ("energy_error_max", "energy_error"), "newton_mean", "newton_max", "seconds",
+                 ("invariant_error_max", "invariant_error"))
+
     @property
     def note(self) -> str:
         if self.status != "ok":
@@ -56,12 +60,6 @@ class ConvergenceRow:
         if self.error is None:
             return "below reference accuracy"
         return ""
-
-    def to_json(self) -> dict:
-        return {"h": self.h, "steps": self.steps, "error": self.error, "local_order": self.local_order,
-                "casimir_error_max": self.casimir_error, "energy_error_max": self.energy_error,
-                "newton_mean": self.newton_mean, "newton_max": self.newton_max, "seconds": self.seconds,
-                "invariant_error_max": self.invariant_error}
 
 
 @dataclass(frozen=True)
@@ -77,16 +75,12 @@ class MethodConvergence:
     realisation_bound: int | None = None
     steps_chosen: str | None = None
 
+    json_keys = ("method", "expected_order", "realisation_bound", "observed_order", "verdict",
+                 ("fit_rows", "fit.fit_rows"), "steps_chosen", "rows")
+
     @property
     def observed_order(self) -> float | None:
         return self.fit.slope
-
-    def to_json(self) -> dict:
-        return {"method": self.method, "expected_order": self.expected_order,
-                "realisation_bound": self.realisation_bound,
-                "observed_order": self.observed_order, "verdict": self.verdict,
-                "fit_rows": list(self.fit.fit_rows), "steps_chosen": self.steps_chosen,
-                "rows": [r.to_json() for r in self.rows]}
 
 
 @dataclass(frozen=True)
@@ -104,17 +98,18 @@ class ConvergenceStudy:
     interrupted: bool = False
     reference_choice: str | None = None
 
+    json_keys = ("system", "realisation", "degenerate", "symmetric", "x0", "t_final", "interrupted",
+                 ("reference", "reference_summary"), "methods")
+
     @property
     def symmetric(self) -> bool:
         return self.condition_class == "symmetric"
 
-    def to_json(self) -> dict:
-        return {"system": self.system, "realisation": self.realisation, "degenerate": self.degenerate,
-                "symmetric": self.symmetric, "x0": list(self.x0),
-                "t_final": self.t_final, "interrupted": self.interrupted,
-                "reference": {"kind": self.reference.kind, "error_estimate": self.reference.error_estimate,
-                              "choice": self.reference_choice},
-                "methods": [m.to_json() for m in self.methods]}
+    @property
+    def reference_summary(self) -> dict:
+        """The reference's kind and error estimate, and why an automatic reference is mpmath."""
+        return {"kind": self.reference.kind, "error_estimate": self.reference.error_estimate,
+                "choice": self.reference_choice}
 
 
 def step_counts(steps=None, refinements: int | None = None) -> tuple[int, ...]:

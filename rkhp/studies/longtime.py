@@ -42,10 +42,8 @@ class Growth:
     status: str
     invariant_errors: tuple[float, ...] = ()
 
-    def to_json(self) -> dict:
-        return {"method": self.method, "h": self.h, "steps": self.steps, "tolerance": self.tolerance,
-                "times": list(self.times), "energy_errors": list(self.errors), "exponent": self.exponent,
-                "status": self.status, "invariant_errors_max": list(self.invariant_errors)}
+    json_keys = ("method", "h", "steps", "tolerance", "times", ("energy_errors", "errors"), "exponent", "status",
+                 ("invariant_errors_max", "invariant_errors"))
 
 
 def log_sample_times(t_final: float, h: float) -> np.ndarray:

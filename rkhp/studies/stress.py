@@ -27,6 +27,7 @@ from ..base import bounds
 from ..base.errors import InputError
 from ..base.executors import InProcess, run_all, run_until_interrupted
 from ..base.interrupts import is_interrupt
+from ..base.json_form import json_form
 from ..integrators.failure import Failure
 from ..integrators.methods import condition_class, require_steps, resolve_method, resolve_methods, resolve_system
 from ..integrators.modified_energy import ModifiedEnergy, method_series
@@ -71,6 +72,9 @@ class SweepRow:
     relative_energy_error: float | None
     failure: Failure = Failure.OK
 
+    json_keys = ("h", "steps", "ok", "status", "cause", "newton_max", "relative_error",
+                 ("relative_energy_error_max", "relative_energy_error"))
+
     @property
     def ok(self) -> bool:
         return (self.failure == Failure.OK and self.relative_error is not None and self.relative_error <= 1.0
@@ -83,12 +87,6 @@ class SweepRow:
             return self.failure.text
         return "" if self.ok else "error not bounded (relative error or energy error above 1)"
 
-    def to_json(self) -> dict:
-        return {"h": self.h, "steps": self.steps, "ok": self.ok, "status": self.status,
-                "cause": self.cause,
-                "newton_max": self.newton_max, "relative_error": self.relative_error,
-                "relative_energy_error_max": self.relative_energy_error}
-
 
 @dataclass(frozen=True)
 class SweepResult:
@@ -96,6 +94,9 @@ class SweepResult:
 
     method: str
     rows: tuple[SweepRow, ...]
+
+    json_keys = ("method", "largest_ok_h", "first_failure_h", ("first_failure", "first_failure_status"), "rows",
+                 "verdict")
 
     @property
     def largest_ok_h(self) -> float | None:
@@ -111,6 +112,16 @@ class SweepResult:
     def first_failure(self) -> SweepRow | None:
         return next((r for r in self.rows if not r.ok), None)
 
+    @property
+    def first_failure_h(self) -> float | None:
+        bad = self.first_failure
+        return None if bad is None else bad.h
+
+    @property
+    def first_failure_status(self) -> str | None:
+        bad = self.first_failure
+        return None if bad is None else bad.status
+
     def verdict(self) -> str:
         bad = self.first_failure
         if bad is None:
@@ -124,13 +135,6 @@ class SweepResult:
         return (f"{self.method}: Newton converges and the error stays bounded up to h = {_fmt(self.largest_ok_h)}; "
                 f"fails from h = {bad.h:.3g} ({len(failing)} of {len(self.rows)} step sizes, in "
                 f"[{min(failing):.3g}, {max(failing):.3g}]; first cause: {bad.cause})")
-
-    def to_json(self) -> dict:
-        bad = self.first_failure
-        return {"method": self.method, "largest_ok_h": self.largest_ok_h,
-                "first_failure_h": None if bad is None else bad.h,
-                "first_failure": None if bad is None else bad.status,
-                "rows": [r.to_json() for r in self.rows], "verdict": self.verdict()}
 
 
 def sweep(method, system, t_final: float, coarsest: int = SWEEP_COARSEST, factor: float = SWEEP_FACTOR) -> SweepResult:
@@ -169,6 +173,10 @@ class LongRun:
     kind: str = "rkhp"
     invariant_errors: tuple[float, ...] = ()
 
+    #: RUN of docs/json.md "rkhp stress"
+    json_keys = ("method", "status", "casimir_windows", "energy_windows", "casimir_max", "energy_growth", "seconds",
+                 ("invariant_errors_max", "invariant_errors"), "invariant_max", ("modified_energy", "modified"))
+
     @property
     def invariant_max(self) -> float | None:
         """The largest drift of the declared invariants; None for a system without any."""
@@ -186,13 +194,6 @@ class LongRun:
         first = self.energy_windows[0]
         return self.energy_windows[-1] / first if first > 0 else None
 
-    def to_json(self) -> dict:
-        return {"method": self.method, "status": self.status, "casimir_windows": list(self.casimir_windows),
-                "energy_windows": list(self.energy_windows), "casimir_max": self.casimir_max,
-                "energy_growth": self.energy_growth, "seconds": self.seconds,
-                "invariant_errors_max": list(self.invariant_errors), "invariant_max": self.invariant_max,
-                "modified_energy": None if self.modified is None else self.modified.to_json()}
-
 
 @dataclass(frozen=True)
 class ModifiedWindows:
@@ -203,13 +204,11 @@ class ModifiedWindows:
     stride: int
     windows: tuple[float, ...]
 
+    json_keys = ("order", ("class", "condition_class"), "stride", "windows", "max")
+
     @property
     def max(self) -> float:
         return max(self.windows)
-
-    def to_json(self) -> dict:
-        return {"order": self.order, "class": self.condition_class, "stride": self.stride,
-                "windows": list(self.windows), "max": self.max}
 
 
 @dataclass(frozen=True)
@@ -221,6 +220,8 @@ class LongRunResult:
     windows: int
     runs: tuple[LongRun, ...]
     peer: LongRun
+
+    json_keys = ("h", "steps", "windows", "runs", "peer", "verdict")
 
     def verdict(self) -> str:
         rkhp = [r for r in self.runs if r.kind == "rkhp"]
@@ -235,10 +236,6 @@ class LongRunResult:
                     f"(<= {CASIMIR_KEPT:g})")
         return (f"{head}: {'; '.join([*parts, ''])}{peer.method} (the peer) drifts to Casimir "
                 f"{_fmt(peer.casimir_max)}, energy growth x{_fmt(peer.energy_growth)}")
-
-    def to_json(self) -> dict:
-        return {"h": self.h, "steps": self.steps, "windows": self.windows, "runs": [r.to_json() for r in self.runs],
-                "peer": self.peer.to_json(), "verdict": self.verdict()}
 
 
 def _long_run(method, system, h: float, steps: int, windows: int) -> LongRun:
@@ -290,14 +287,12 @@ class NearSingularRun:
     casimir_error: float | None
     failure: Failure = Failure.OK
 
+    json_keys = ("method", "first_species", "status", "min_component", ("casimir_error_max", "casimir_error"), "kept")
+
     @property
     def kept(self) -> bool:
         return (self.failure == Failure.OK and self.min_component > 0
                 and (self.casimir_error is None or self.casimir_error <= CASIMIR_KEPT))
-
-    def to_json(self) -> dict:
-        return {"method": self.method, "first_species": self.first_species, "status": self.status,
-                "min_component": self.min_component, "casimir_error_max": self.casimir_error, "kept": self.kept}
 
 
 @dataclass(frozen=True)
@@ -307,6 +302,8 @@ class SingularResult:
     applicable: bool
     runs: tuple[NearSingularRun, ...]
     reason: str = ""
+
+    json_keys = ("applicable", "runs", "verdict")
 
     def verdict(self) -> str:
         if not self.applicable:
@@ -319,9 +316,6 @@ class SingularResult:
                          + (r.status if r.failure != Failure.OK else
                             f"min component {r.min_component:.3g}, Casimir error {_fmt(r.casimir_error)}")
                          for r in bad) + " (not kept)"
-
-    def to_json(self) -> dict:
-        return {"applicable": self.applicable, "runs": [r.to_json() for r in self.runs], "verdict": self.verdict()}
 
 
 def near_singular(methods, system, t_final: float, steps: int = SINGULAR_STEPS,
@@ -363,6 +357,24 @@ class RoundOffResult:
     studies: tuple
     energy_fits: tuple
 
+    json_keys = ("t_final", ("reference", "reference_summary"), ("methods", "method_rows"), "verdict")
+
+    @property
+    def reference_summary(self) -> dict:
+        return {"kind": self.reference_kind, "floor": self.reference_floor}
+
+    @property
+    def method_rows(self) -> list[dict]:
+        """Each method's convergence table (as ``rkhp converge`` gives it) with the round-off
+        floors of its error at T and of its energy error, and the energy error's observed order."""
+        out = []
+        for m, energy in zip(self.studies, self.energy_fits, strict=True):
+            floor, e_floor = _floor_row(m.fit), _floor_row(energy)
+            out.append({**json_form(m), "floor_h": None if floor is None else m.rows[floor].h,
+                        "energy_observed_order": energy.slope,
+                        "energy_floor_h": None if e_floor is None else m.rows[e_floor].h})
+        return out
+
     @staticmethod
     def _line(m, energy) -> str:
         floor = _floor_row(m.fit)
@@ -384,18 +396,6 @@ class RoundOffResult:
 
     def verdict(self) -> str:
         return "; ".join(self._line(m, e) for m, e in zip(self.studies, self.energy_fits, strict=True))
-
-    def to_json(self) -> dict:
-        out = []
-        for m, energy in zip(self.studies, self.energy_fits, strict=True):
-            data = m.to_json()
-            floor, e_floor = _floor_row(m.fit), _floor_row(energy)
-            data["floor_h"] = None if floor is None else m.rows[floor].h
-            data["energy_observed_order"] = energy.slope
-            data["energy_floor_h"] = None if e_floor is None else m.rows[e_floor].h
-            out.append(data)
-        return {"t_final": self.t_final, "reference": {"kind": self.reference_kind, "floor": self.reference_floor},
-                "methods": out, "verdict": self.verdict()}
 
 
 def round_off(methods, system, t_final: float, steps=ROUND_OFF_STEPS, executor=None) -> RoundOffResult:
@@ -425,6 +425,14 @@ class StressStudy:
     x0: tuple[float, ...] = ()
     interrupted: bool = False
 
+    json_keys = ("system", "realisation", "x0", "t_final", "interrupted", ("sweep", "sweep_part"), "long_run",
+                 "near_singular", "round_off")
+
+    @property
+    def sweep_part(self) -> dict:
+        """Part (a): every method's sweep and their verdict."""
+        return {"methods": self.sweep, "verdict": self.verdicts()["a"]}
+
     def verdicts(self) -> dict[str, str]:
         """Each part's verdict ("not run (interrupted)" for a part an interrupt left out)."""
         def verdict_of(part):
@@ -432,16 +440,6 @@ class StressStudy:
 
         return {"a": " | ".join(s.verdict() for s in self.sweep) if self.sweep or not self.interrupted else NOT_RUN,
                 "b": verdict_of(self.long_run), "c": verdict_of(self.near_singular), "d": verdict_of(self.round_off)}
-
-    def to_json(self) -> dict:
-        def of(part):
-            return None if part is None else part.to_json()
-
-        return {"system": self.system, "realisation": self.realisation, "x0": list(self.x0),
-                "t_final": self.t_final, "interrupted": self.interrupted,
-                "sweep": {"methods": [s.to_json() for s in self.sweep], "verdict": self.verdicts()["a"]},
-                "long_run": of(self.long_run), "near_singular": of(self.near_singular),
-                "round_off": of(self.round_off)}
 
 
 def stress(system, methods, t_final=None, long_steps: int = LONG_STEPS, long_h: float | None = None,

@@ -54,6 +54,11 @@ class BirealisationCheck:
     symmetry: float = 0.0
     scale: float = 1.0
 
+    tolerance_rule = TOLERANCE_RULE
+    #: docs/json.md "rkhp check": the axioms' deviations, then those of degeneracy and symmetry
+    json_keys = ("system", "realisation", "degenerate", "symmetric", "samples", "seed", "tolerance", "tolerance_rule",
+                 "scale", "deviations", "degeneracy", "symmetry", "ok")
+
     @property
     def deviations(self) -> dict[str, float]:
         return {"identity": self.identity, "poisson": self.poisson,
@@ -62,15 +67,6 @@ class BirealisationCheck:
     @property
     def ok(self) -> bool:
         return all(v <= self.tolerance for v in self.deviations.values())
-
-    def to_json(self) -> dict:
-        """docs/json.md: the axioms' deviations, then those of degeneracy and symmetry."""
-        return {"system": self.system, "realisation": self.realisation,
-                "degenerate": self.degenerate, "symmetric": self.symmetric,
-                "samples": self.samples, "seed": self.seed, "tolerance": self.tolerance,
-                "tolerance_rule": TOLERANCE_RULE, "scale": self.scale,
-                "deviations": self.deviations, "degeneracy": self.degeneracy,
-                "symmetry": self.symmetry, "ok": self.ok}
 
 
 def sample_points(system, samples: int, seed: int) -> tuple[np.ndarray, np.ndarray]:

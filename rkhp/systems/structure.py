@@ -79,18 +79,14 @@ class StructureCheck:
     points: int
     seed: int
 
+    json_keys = ("dim", "method", "jacobi_triples", "jacobi_symbolic", "casimir_identities", "casimir_symbolic",
+                 "residual", "tolerance", "points", "seed")
+
     @property
     def method(self) -> str:
         """"symbolic" when every identity was proved symbolically, else "numeric"."""
         proved = self.jacobi_symbolic + self.casimir_symbolic
         return "symbolic" if proved == self.jacobi_triples + self.casimir_identities else "numeric"
-
-    def to_json(self) -> dict:
-        return {"dim": self.dim, "method": self.method, "jacobi_triples": self.jacobi_triples,
-                "jacobi_symbolic": self.jacobi_symbolic,
-                "casimir_identities": self.casimir_identities,
-                "casimir_symbolic": self.casimir_symbolic, "residual": self.residual,
-                "tolerance": self.tolerance, "points": self.points, "seed": self.seed}
 
 
 class _Budget:

@@ -370,21 +370,14 @@ class CompositionVerification:
     by_class: dict
     claim: str | None
 
-    def to_json(self) -> dict:
-        c = self.composition
-
-        def order_json(o: CompositionOrder) -> dict:
-            return {"order": o.order, "checked_up_to": o.checked_up_to, "base_order": o.base_order,
-                    "base_symmetric": o.base_symmetric, "conditions": o.conditions,
-                    "largest_failing": o.largest_failing, "precision": o.precision}
-
-        return {"name": c.name, "kind": KIND, "base": c.base, "substeps": c.substeps,
-                "gamma": c.gamma_text(), "gamma_float": list(c.gamma_float), "reference": c.reference,
-                "symmetric": c.symmetric, "base_symmetric": self.base_symmetric,
-                "base_symmetry_checked_up_to": self.base_symmetry_checked,
-                "order": self.own.order, "own": order_json(self.own),
-                "orders": {cls: order_json(o) for cls, o in self.by_class.items()},
-                "claimed_order": c.claimed_order, "claim": self.claim}
+    kind = KIND
+    #: docs/compositions.md "JSON keys"
+    json_keys = (("name", "composition.name"), "kind", ("base", "composition.base"),
+                 ("substeps", "composition.substeps"), ("gamma", "composition.gamma_text"),
+                 ("gamma_float", "composition.gamma_float"), ("reference", "composition.reference"),
+                 ("symmetric", "composition.symmetric"), "base_symmetric",
+                 ("base_symmetry_checked_up_to", "base_symmetry_checked"), ("order", "own.order"), "own",
+                 ("orders", "by_class"), ("claimed_order", "composition.claimed_order"), "claim")
 
 
 def class_composition_orders(comp: Composition, base) -> dict[str, CompositionOrder]:

@@ -77,6 +77,29 @@ class FailingCondition(NamedTuple):
         return combination_label(self.item)
 
 
+class OrderBound(NamedTuple):
+    """An order as a document gives it: ``order`` n, and ``lower_bound`` true when the check ended
+    at n, so that the order is only known to be at least n (the table's ``>= n``)."""
+
+    order: int
+    lower_bound: bool
+
+
+class ClaimedOrders(NamedTuple):
+    """The orders a tableau file claims, by the keys of the verified ones (None: no claim)."""
+
+    order: int | None
+    degenerate_order: int | None
+    symmetric_order: int | None
+
+
+class StageDifference(NamedTuple):
+    """A stage (from 1) whose given c_i differs from the row sum of A, and by how much."""
+
+    stage: int
+    difference: float
+
+
 class FailureList(Sequence):
     """The failures of one class, largest residual first; FailingCondition values built on access."""
 
@@ -119,6 +142,14 @@ class Verification:
     conditions_checked: dict[str, int] = field(default_factory=dict)
     approximate: Verification | None = None
 
+    #: docs/json.md "rkhp verify": the orders with their bounds, then the evidence
+    json_keys = ("name", "stages", "kind", ("order", "general_bound"), ("degenerate_order", "degenerate_bound"),
+                 ("symmetric_order", "symmetric_bound"), "checked_up_to", "precision", "tolerance", "principal_error",
+                 ("failing", "failing_rows"), ("claimed", "claimed_orders"), "claim_ok", ("orders", "order_bounds"),
+                 "claims", "tolerance_rule", "principal_error_max", "class_checked_up_to", "conditions_checked",
+                 ("c_mismatch", "stage_differences"), ("approximate_orders", "approximate_bounds"),
+                 "approximate_precision")
+
     @property
     def order(self) -> int | None:
         """General order (over T); None when that class was not checked."""
@@ -143,12 +174,28 @@ class Verification:
         """Whether the order in ``cls`` reached the end of the check (so is only a lower bound)."""
         return self.orders[cls] >= self.class_checked_up_to.get(cls, self.checked_up_to)
 
-    def order_json(self, cls: str) -> dict | None:
-        """``{"order": n, "lower_bound": b}``: b is true when the check ended at order n, so that
-        the order is only known to be at least n (the table's ``>= n``); None if not checked."""
+    def order_bound(self, cls: str) -> OrderBound | None:
+        """The order in ``cls`` with whether it is only a lower bound; None if not checked."""
         if cls not in self.orders:
             return None
-        return {"order": self.orders[cls], "lower_bound": self.is_lower_bound(cls)}
+        return OrderBound(self.orders[cls], self.is_lower_bound(cls))
+
+    @property
+    def order_bounds(self) -> dict[str, OrderBound]:
+        """:meth:`order_bound` of every class checked."""
+        return {cls: self.order_bound(cls) for cls in self.orders}
+
+    @property
+    def general_bound(self) -> OrderBound | None:
+        return self.order_bound("general")
+
+    @property
+    def degenerate_bound(self) -> OrderBound | None:
+        return self.order_bound("degenerate")
+
+    @property
+    def symmetric_bound(self) -> OrderBound | None:
+        return self.order_bound("symmetric")
 
     @property
     def approximate_orders(self) -> dict[str, int] | None:
@@ -156,43 +203,37 @@ class Verification:
         entries look like rational approximations whose exact residuals fall below them)."""
         return None if self.approximate is None else self.approximate.orders
 
-    def _failing_json(self, cls: str) -> list[dict]:
+    @property
+    def approximate_bounds(self) -> dict[str, OrderBound] | None:
+        """:attr:`approximate_orders` with their bounds."""
+        return None if self.approximate is None else self.approximate.order_bounds
+
+    @property
+    def approximate_precision(self) -> str | None:
+        return None if self.approximate is None else self.approximate.precision
+
+    @property
+    def claimed_orders(self) -> ClaimedOrders:
+        return ClaimedOrders(self.claimed.get("general"), self.claimed.get("degenerate"),
+                             self.claimed.get("symmetric"))
+
+    @property
+    def stage_differences(self) -> tuple[StageDifference, ...]:
+        return tuple(StageDifference(i + 1, d) for i, d in self.c_mismatch)
+
+    @property
+    def failing_rows(self) -> dict[str, list[dict]]:
+        """Per class, each failing condition's ``tree`` (or combination) and ``residual``, and in
+        exact precision its ``exact`` value."""
+        return {cls: self._failing_rows(cls) for cls in self.failing}
+
+    def _failing_rows(self, cls: str) -> list[dict]:
         exact = self.failing_exact.get(cls)
         out = [{"tree": f.label, "residual": f.residual} for f in self.failing[cls]]
         if exact:
             for item, text in zip(out, exact, strict=True):
                 item["exact"] = text
         return out
-
-    def to_json(self) -> dict:
-        """The issue's JSON keys (plus the extras after ``claim_ok``)."""
-        return {
-            "name": self.name,
-            "stages": self.stages,
-            "kind": self.kind,
-            "order": self.order_json("general"),
-            "degenerate_order": self.order_json("degenerate"),
-            "symmetric_order": self.order_json("symmetric"),
-            "checked_up_to": self.checked_up_to,
-            "precision": self.precision,
-            "tolerance": self.tolerance,
-            "principal_error": dict(self.principal_error),
-            "failing": {cls: self._failing_json(cls) for cls in self.failing},
-            "claimed": {"order": self.claimed.get("general"),
-                        "degenerate_order": self.claimed.get("degenerate"),
-                        "symmetric_order": self.claimed.get("symmetric")},
-            "claim_ok": self.claim_ok,
-            "orders": {cls: self.order_json(cls) for cls in self.orders},
-            "claims": dict(self.claims),
-            "tolerance_rule": self.tolerance_rule,
-            "principal_error_max": dict(self.principal_error_max),
-            "class_checked_up_to": dict(self.class_checked_up_to),
-            "conditions_checked": dict(self.conditions_checked),
-            "c_mismatch": [{"stage": i + 1, "difference": d} for i, d in self.c_mismatch],
-            "approximate_orders": None if self.approximate is None else {
-                cls: self.approximate.order_json(cls) for cls in self.approximate.orders},
-            "approximate_precision": None if self.approximate is None else self.approximate.precision,
-        }
 
 
 

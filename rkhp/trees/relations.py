@@ -29,9 +29,10 @@ from fractions import Fraction
 from functools import lru_cache
 from math import gcd, lcm
 from pathlib import Path
+from typing import NamedTuple
 
 from ..base.errors import InputError
-from ..base.exact_text import combination_text, fraction_text
+from ..base.exact_text import combination_text
 from .rooted import Tree, check_order, format_tree, parse_tree, trees_of_order
 
 #: Orders whose relations ship in ``rkhp/data/symmetric_relations.json``.
@@ -39,6 +40,22 @@ MAX_SHIPPED_ORDER = 8
 #: Largest order :func:`derive_relations` accepts (order 9, 79 trees: about 4 minutes, 0.7 GB).
 MAX_REGENERATE_ORDER = 9
 DATA_FILE = "symmetric_relations.json"
+
+
+class RelationRow(NamedTuple):
+    """One relation sum_t c_t F(t) = 0 as a relations document holds it: the coefficients over
+    the order's trees, and the equation as text."""
+
+    coefficients: tuple[Fraction, ...]
+    text: str
+
+
+class ConditionRow(NamedTuple):
+    """One symmetric order condition sum_k w_k r(t_k) = 0 as a relations document holds it."""
+
+    trees: tuple[Tree, ...]
+    weights: tuple[Fraction, ...]
+    text: str
 
 
 @dataclass(frozen=True)
@@ -60,6 +77,30 @@ class OrderRelations:
     conditions: tuple[tuple[tuple[Tree, ...], tuple[Fraction, ...]], ...]
     checks: dict = field(default_factory=dict, compare=False)
 
+    #: docs/json.md "rkhp relations": the counts beside the rows, each row with its text
+    json_keys = ("order", "trees", "t0_count", "relations_count", "conditions_count",
+                 ("relations", "relation_rows"), ("conditions", "condition_rows"), "checks")
+
+    @property
+    def t0_count(self) -> int:
+        return len(self.trees)
+
+    @property
+    def relations_count(self) -> int:
+        return len(self.relations)
+
+    @property
+    def conditions_count(self) -> int:
+        return len(self.conditions)
+
+    @property
+    def relation_rows(self) -> tuple[RelationRow, ...]:
+        return tuple(RelationRow(r, relation_equation(self.trees, r)) for r in self.relations)
+
+    @property
+    def condition_rows(self) -> tuple[ConditionRow, ...]:
+        return tuple(ConditionRow(ts, ws, condition_text(ts, ws)) for ts, ws in self.conditions)
+
 
 @dataclass(frozen=True)
 class RelationData:
@@ -69,12 +110,12 @@ class RelationData:
     orders: tuple[OrderRelations, ...]
     method: dict = field(default_factory=dict, compare=False)
 
+    format = "rkhp-symmetric-relations"
+    version = 1
+    json_keys = ("format", "version", "max_order", "method", "orders")
+
     def of_order(self, n: int) -> OrderRelations:
         return self.orders[n - 1]
-
-    def to_json(self) -> dict:
-        return {"format": "rkhp-symmetric-relations", "version": 1, "max_order": self.max_order,
-                "method": self.method, "orders": [_order_json(o) for o in self.orders]}
 
 
 # ----------------------------------------------------------------------------- public API
@@ -111,7 +152,7 @@ def shipped_relations() -> RelationData:
 
 
 def relations_from_json(doc: dict, where: str = "relations document") -> RelationData:
-    """Read and validate a relations document (the format of :meth:`RelationData.to_json`)."""
+    """Read and validate a relations document (the JSON form of :class:`RelationData`)."""
     try:
         orders = []
         for k, item in enumerate(doc["orders"], start=1):
@@ -205,18 +246,3 @@ def condition_text(trees, weights) -> str:
 
 def relation_text(order: OrderRelations, k: int) -> str:
     return relation_equation(order.trees, order.relations[k])
-
-
-def _order_json(o: OrderRelations) -> dict:
-    return {
-        "order": o.order,
-        "trees": [str(t) for t in o.trees],
-        "t0_count": len(o.trees),
-        "relations_count": len(o.relations),
-        "conditions_count": len(o.conditions),
-        "relations": [{"coefficients": [fraction_text(c) for c in r], "text": relation_equation(o.trees, r)}
-                      for r in o.relations],
-        "conditions": [{"trees": [str(t) for t in ts], "weights": [fraction_text(w) for w in ws],
-                        "text": condition_text(ts, ws)} for ts, ws in o.conditions],
-        "checks": o.checks,
-    }

@@ -24,6 +24,7 @@ from operator import itemgetter
 
 from ..base.bounds import BYTES_PER_TREE, check_memory
 from ..base.errors import InputError
+from ..base.json_form import register
 
 #: Largest order that enumeration accepts (order 18 has 1,721,159 trees, about 1 GB).
 MAX_ENUMERATION_ORDER = 18
@@ -169,6 +170,9 @@ def format_tree(t: Tree) -> str:
     if not t.children:
         return "b"
     return "b[" + ",".join(format_tree(c) for c in reversed(t.children)) + "]"
+
+
+register(Tree, format_tree)  # a tree's JSON form is its bracket notation
 
 
 def parse_tree(text: str) -> Tree:
