@@ -13,6 +13,11 @@ error is estimated again, by Richardson against the finest pilot when it has at 
 steps, and a run whose estimate misses the tolerance is replaced by a finer one (at most
 RETRIES times), estimated against the run before.
 
+Each step rounds the state: over N steps the round-off can add up like N eps |y| (a rounding
+bias of each step, not only the random walk eps |y| sqrt(N)), which no finer step removes. The
+predicted and estimated errors add that bound, and a tolerance whose chosen N steps would have a
+bound above it is refused before the run: a method of higher order reaches it in fewer steps.
+
 The tolerance is on the 2-norm of the error at the end, relative to max(1, |y(T)|): absolute for
 states of norm up to 1, relative beyond.
 """
@@ -46,6 +51,11 @@ RETRIES = 2
 #: the smallest tolerance (a run's round-off grows like eps sqrt(N))
 MIN_TOLERANCE = 1e-13
 EPS = float(np.finfo(float).eps)
+
+
+def round_off(steps: int) -> float:
+    """The bound N eps of the round-off of a run of N steps, relative to the scale max(1, |y|)."""
+    return steps * EPS
 
 
 def check_tolerance(tol) -> float:
@@ -187,6 +197,15 @@ def too_many(method, system, tol: float, n: int) -> InputError:
                       f"{bounds.MAX_STEPS}); choose a looser tolerance or a method of higher order")
 
 
+def check_reachable(method, system, tol: float, n: int, truncation: float) -> None:
+    """InputError when a run of ``n`` steps whose modelled error is ``truncation`` cannot promise
+    ``tol``: the round-off bound of its steps (:func:`round_off`) takes it past the tolerance."""
+    if truncation + round_off(n) > tol:
+        raise InputError(f"{method} on {system}: tol {tol:g} needs {n} steps, whose round-off (up to "
+                         f"{n} eps = {round_off(n):.1e}) may exceed it; choose a looser tolerance or a "
+                         f"method of higher order")
+
+
 def choose_tolerance_step(system, method, span: Span, tol: float, x0=None,
                           pilot_run: Pilot | None = None) -> ToleranceStep:
     """The step of ``method`` (a Method) on ``system`` over ``span`` for the tolerance ``tol``
@@ -203,20 +222,22 @@ def choose_tolerance_step(system, method, span: Span, tol: float, x0=None,
     if n > bounds.MAX_STEPS:
         raise too_many(method.name, system.name, tol, n)
     predicted = modelled(found.estimate, found.finest_steps, n, order, observed) / scale
-    return ToleranceStep(method.name, order, tol, scale, n, span.step(n), predicted, found)
+    check_reachable(method.name, system.name, tol, n, predicted)
+    return ToleranceStep(method.name, order, tol, scale, n, span.step(n), predicted + round_off(n), found)
 
 
 def estimated_error(choice: ToleranceStep, final: np.ndarray, steps: int | None = None,
                     reference: np.ndarray | None = None) -> float:
     """The error estimate of the chosen run's end state ``final``, relative to the scale: by
     Richardson against a coarser run (``reference`` of ``steps`` steps; default the finest pilot)
-    when the chosen run has at least twice its steps, else the model's prediction."""
+    when the chosen run has at least twice its steps, else the model's prediction; each with the
+    round-off bound of its steps (:func:`round_off`)."""
     if reference is None:
         steps, reference = choice.pilot.finest_steps, choice.pilot.finest
     ratio = choice.steps / steps
     if ratio >= 2 and not choice.pilot.round_off:
         finer, _ = exponents(choice.order, choice.pilot.observed_order)
-        return norm(final - reference) / (ratio**finer - 1) / choice.scale
+        return norm(final - reference) / (ratio**finer - 1) / choice.scale + round_off(choice.steps)
     return choice.predicted_error
 
 
@@ -227,6 +248,8 @@ def refine(choice: ToleranceStep, error: float, span: Span, system) -> Tolerance
     if n > bounds.MAX_STEPS:
         raise too_many(choice.method, system.name, choice.tolerance, n)
     predicted = modelled(error, choice.steps, n, choice.order, observed)
+    check_reachable(choice.method, system.name, choice.tolerance, n, predicted)
+    predicted += round_off(n)
     return ToleranceStep(choice.method, choice.order, choice.tolerance, choice.scale, n, span.step(n), predicted,
                       choice.pilot)
 
