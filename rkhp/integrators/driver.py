@@ -3,7 +3,9 @@ base method, whatever provider computes them (docs/engine.md "One driver, many s
 docs/theory.md §12).
 
 A step of size h is the substeps gamma_1 h, ..., gamma_s h in turn (a tableau alone: s = 1,
-gamma = (1)), each computed by the substep provider that `rkhp.integrators.substeps.choose` picks
+gamma = (1)); a processed composition P^-1 o K^n o P (docs/theory.md §12) has its processor's
+substeps first in the coefficients and its inverse's last: those run once before the first step
+and once at each state the run keeps (its output), not at every step. Each substep is computed by the substep provider that `rkhp.integrators.substeps.choose` picks
 for the system and the base method. `drive` is the compiled loop, written once: numba compiles it
 once per provider (the class of the provider's data); it records the states, the Newton (or chord)
 iterations and the stage sweeps of each step, summed over its substeps, and checks the state after
@@ -46,32 +48,78 @@ class Record(NamedTuple):
 
 
 @nb.njit(**NJIT_NORC)
-def drive(y0, gammas, h, n_steps, data, solver, record):
-    """n_steps steps of size h from y0, each the substeps gammas[0] h, gammas[1] h, ... of the
-    provider whose data is `data` (`rkhp.integrators.substeps`), substep i of a step warm-started
-    from substep i of the steps before (the provider's memory, emptied by its ``begin``); the
-    state is checked after every substep. Returns (completed steps, Failure of the step after them
-    or Failure.OK)."""
+def drive(y0, gammas, processor, h, n_steps, data, solver, record):
+    """n_steps steps of size h from y0 of the provider whose data is `data`
+    (`rkhp.integrators.substeps`), substep i of a step warm-started from substep i of the steps
+    before (the provider's memory, emptied by its ``begin``); the state is checked after every
+    substep. Without a processor (`processor` = 0) a step is the substeps gammas[0] h,
+    gammas[1] h, ...; with one, gammas holds the processor's `processor` coefficients, the
+    kernel's and the inverse processor's (`rkhp.tableaux.compositions.one_step`): the processor's
+    substeps (of size gammas[i] |h|) run once from y0, each step is the kernel's, and the inverse
+    processor's run from each state kept (every state with `record.keep_all`, else the last).
+    Returns (completed steps, Failure of the step after them or Failure.OK)."""
     context = begin(data, y0)
-    y = data.y
     n = y0.shape[0]
     for k in range(n):
         record.states[0, k] = y0[k]
+    end = gammas.shape[0]
+    cause, it, done = _substeps(data, context, gammas, 0, processor, abs(h), solver)
+    if cause != Failure.OK:
+        record.iterations[0] = it
+        record.sweeps[0] = done
+        return 0, cause
+    steps, cause = _steps(data, context, gammas, processor, end - processor, h, n_steps, solver, record)
+    record.iterations[0] += it
+    record.sweeps[0] += done
+    if processor == 0:
+        return steps, cause
+    first = 0 if not record.keep_all and steps > 0 else 1
+    rows = steps + 1 if record.keep_all else 1
+    for row in range(first, rows):
+        context = begin(data, record.states[row])
+        failed, it, done = _substeps(data, context, gammas, end - processor, end, abs(h), solver)
+        if failed != Failure.OK:  # the output of this row failed: the run ends before it
+            if not record.keep_all:
+                for k in range(n):
+                    record.states[0, k] = y0[k]
+            return (row - 1 if record.keep_all else 0), failed
+        at = row - 1 if record.keep_all else steps - 1
+        record.iterations[at] += it
+        record.sweeps[at] += done
+        for k in range(n):
+            record.states[row, k] = data.y[k]
+    return steps, cause
+
+
+@nb.njit(**NJIT_NORC)
+def _substeps(data, context, gammas, lo, hi, h, solver):
+    """Substeps lo .. hi - 1 of sizes gammas[i] h, the state checked after each; returns (Failure,
+    iterations, stage sweeps)."""
+    iterations = 0
+    sweeps = 0
+    for i in range(lo, hi):
+        cause, it, done = substep(data, context, i, gammas[i] * h, solver)
+        iterations += it
+        sweeps += done
+        if cause == Failure.OK:
+            cause = state_failure(data.y, solver.domain)
+        if cause != Failure.OK:
+            return cause, iterations, sweeps
+    return Failure.OK, iterations, sweeps
+
+
+@nb.njit(**NJIT_NORC)
+def _steps(data, context, gammas, lo, hi, h, n_steps, solver, record):
+    """n_steps steps, each the substeps lo .. hi - 1 of sizes gammas[i] h, the states recorded;
+    returns (completed steps, Failure of the step after them or Failure.OK)."""
+    y = data.y
+    n = y.shape[0]
     for step in range(n_steps):
-        iterations = 0
-        sweeps = 0
-        for i in range(gammas.shape[0]):
-            cause, it, done = substep(data, context, i, gammas[i] * h, solver)
-            iterations += it
-            sweeps += done
-            if cause == Failure.OK:
-                cause = state_failure(y, solver.domain)
-            if cause != Failure.OK:
-                record.iterations[step] = iterations
-                record.sweeps[step] = sweeps
-                return step, cause
+        cause, iterations, sweeps = _substeps(data, context, gammas, lo, hi, h, solver)
         record.iterations[step] = iterations
         record.sweeps[step] = sweeps
+        if cause != Failure.OK:
+            return step, cause
         row = step + 1 if record.keep_all else 0
         for k in range(n):
             record.states[row, k] = y[k]
@@ -118,12 +166,22 @@ def setup(system, tableau, gammas=(1.0,), *, provider=None, tol: float | None = 
                  Solver(tol, max_iter, system.domain_code))
 
 
-def run(system, tableau, h, n_steps, x0=None, *, gammas=(1.0,), span: float | None = None,
+def check_processor(processor, gammas: np.ndarray) -> int:
+    """The processor's number of substeps if the coefficients hold it twice and a kernel besides
+    (InputError otherwise)."""
+    if isinstance(processor, bool) or not isinstance(processor, (int, np.integer)) \
+            or not (0 <= processor and 2 * processor < gammas.size):
+        raise InputError(f"processor must be a number of substeps from 0 to {(gammas.size - 1) // 2}")
+    return int(processor)
+
+
+def run(system, tableau, h, n_steps, x0=None, *, gammas=(1.0,), processor: int = 0, span: float | None = None,
         provider=None, keep_all: bool = True, tol: float | None = None, max_iter: int | None = None,
         options: dict | None = None, name: str | None = None, extra: dict | None = None) -> Trajectory:
     """Integrate `system` by n_steps steps of size h (negative: backwards) of the composition of
     substeps gammas[0] h, gammas[1] h, ... of the RKHP method of `tableau` (gammas = (1,): the
-    method itself), from x0 (default: the system's start), by `provider` (default: `choose`'s,
+    method itself; with `processor` > 0, gammas holds a processed composition's processor, kernel
+    and inverse processor, `drive`), from x0 (default: the system's start), by `provider` (default: `choose`'s,
     its data built with `options`).
 
     A step advances the time by h span (default span: the sum of the gammas; a consistent
@@ -138,7 +196,7 @@ def run(system, tableau, h, n_steps, x0=None, *, gammas=(1.0,), span: float | No
     ready = setup(system, tableau, gammas, provider=provider, tol=tol, max_iter=max_iter, options=options)
     y0 = system.start(x0)
     n = system.dim
-    args = (ready.gammas, h)
+    args = (ready.gammas, check_processor(processor, ready.gammas), h)
     t0 = time.perf_counter()
     drive(y0, *args, 0, ready.data, ready.solver, record(0, n, True))
     compile_seconds = time.perf_counter() - t0
@@ -166,7 +224,7 @@ def run(system, tableau, h, n_steps, x0=None, *, gammas=(1.0,), span: float | No
     return checked(trajectory, system) if keep_all else trajectory
 
 
-def run_ensemble(system, tableau, h, n_steps, x0s, *, gammas=(1.0,), provider=None,
+def run_ensemble(system, tableau, h, n_steps, x0s, *, gammas=(1.0,), processor: int = 0, provider=None,
                  tol: float | None = None, max_iter: int | None = None, options: dict | None = None,
                  threads: int | None = None, executor=None) -> np.ndarray:
     """Final states of many trajectories at once (shape (m, n)), the arguments as `run`'s, in
@@ -181,7 +239,8 @@ def run_ensemble(system, tableau, h, n_steps, x0s, *, gammas=(1.0,), provider=No
     for i, x in enumerate(x0s):
         if not system.in_domain(x):
             raise InputError(f"initial condition {i} = {x.tolist()} is outside the domain")
-    settings = (gammas, None if provider is None else provider.name, tol, max_iter, options, threads)
+    check_processor(processor, check_gammas(gammas))
+    settings = (gammas, processor, None if provider is None else provider.name, tol, max_iter, options, threads)
     if executor is None:
         finals, done, causes = _ensemble_chunk(system, tableau, h, n_steps, x0s, *settings)
     else:
@@ -196,7 +255,7 @@ def run_ensemble(system, tableau, h, n_steps, x0s, *, gammas=(1.0,), provider=No
     return finals
 
 
-def _ensemble_chunk(system, tableau, h, n_steps, x0s, gammas, provider, tol, max_iter, options, threads):
+def _ensemble_chunk(system, tableau, h, n_steps, x0s, gammas, processor, provider, tol, max_iter, options, threads):
     """(final states, steps done, Failure codes) of the trajectories from ``x0s``, in threads, each
     thread with data of its own; `provider` by name (a task of a pool: its arguments are sent)."""
     provider = None if provider is None else PROVIDERS[provider]
@@ -211,7 +270,7 @@ def _ensemble_chunk(system, tableau, h, n_steps, x0s, gammas, provider, tol, max
         ready = setup(system, tableau, gammas, provider=provider, tol=tol, max_iter=max_iter, options=options)
         out = record(n_steps, system.dim, False)
         for t in range(lo, hi):
-            done[t], codes[t] = drive(x0s[t], ready.gammas, h, n_steps, ready.data, ready.solver, out)
+            done[t], codes[t] = drive(x0s[t], ready.gammas, processor, h, n_steps, ready.data, ready.solver, out)
             finals[t] = out.states[0]
 
     with ThreadPoolExecutor(max_workers=len(bounds) - 1) as pool:

@@ -72,20 +72,28 @@ class Method:
     solver: str | None = None
     composition: object = None
 
-    def integrate(self, system, h: float, n_steps: int, x0=None):
+    def integrate(self, system, h: float, n_steps: int, x0=None, *, keep_all: bool = True):
         """Run the method; returns a :class:`~rkhp.integrators.trajectory.Trajectory`. RKHP methods
         and compositions run on the driver (`rkhp.integrators.driver`), by the substep provider
-        that `rkhp.integrators.substeps.choose` picks for the system and the base method."""
+        that `rkhp.integrators.substeps.choose` picks for the system and the base method; with
+        ``keep_all=False`` they keep the first and the last state only (a processed composition
+        then applies its inverse processor once, to the last state: docs/compositions.md). The
+        other kinds keep every state."""
         if self.kind in ("rkhp", "composition"):
             from .driver import run
 
             if self.kind == "rkhp":
-                return run(system, self.tableau, h, n_steps, x0, name=self.name)
+                return run(system, self.tableau, h, n_steps, x0, name=self.name, keep_all=keep_all)
+            from ..tableaux.compositions import one_step
             from .tower_substep import check_composable
 
             check_composable(self.tableau, self.name)
-            return run(system, self.tableau, h, n_steps, x0, gammas=self.composition.gamma_float, span=1.0,
-                       name=self.name, extra={"base": self.tableau.name, "substeps": self.composition.substeps})
+            comp = self.composition
+            extra = {"base": self.tableau.name, "substeps": comp.substeps}
+            if comp.processed:
+                extra["processor_substeps"] = len(comp.processor)
+            return run(system, self.tableau, h, n_steps, x0, gammas=one_step(comp, float), processor=len(comp.processor),
+                       span=1.0, keep_all=keep_all, name=self.name, extra=extra)
         if self.kind == "taylor":
             from .taylor import integrate_taylor
 
@@ -266,7 +274,7 @@ def resolve_system(system, realisation: str = "symmetric", x0=None):
 
 
 def integrate(system, method, h, n_steps, x0=None, *, realisation: str = "symmetric",
-              allow_failure: bool = False):
+              allow_failure: bool = False, keep_all: bool = True):
     """Integrate ``system`` (a name, a spec file or a PoissonSystem) with ``method`` (any name of
     the grammar above, a Tableau or a Method): ``n_steps`` steps of size ``h`` from ``x0`` (default:
     the system's start). Returns a :class:`~rkhp.integrators.trajectory.Trajectory`.
@@ -275,13 +283,14 @@ def integrate(system, method, h, n_steps, x0=None, *, realisation: str = "symmet
     docs/exit-status.md) raises :class:`~rkhp.base.errors.NumericalFailure` naming the step, as
     `rkhp integrate` exits with status 1; the failed trajectory is the exception's
     ``trajectory``. With ``allow_failure=True`` it is returned instead: ``ok`` False, ``cause``,
-    ``failed_step``, and the states before the failure.
+    ``failed_step``, and the states before the failure. With ``keep_all=False`` an RKHP method or
+    a composition keeps the first and the last state only (:meth:`Method.integrate`).
 
     ``rkhp.integrate("rigid-body", "rk4", 0.1, 100)`` integrates the rigid body (symmetric
     realisation) with RK4 used as an RKHP method.
     """
     chosen, resolved = resolve_method(method), resolve_system(system, realisation)
-    trajectory = chosen.integrate(resolved, h, n_steps, x0)
+    trajectory = chosen.integrate(resolved, h, n_steps, x0, keep_all=keep_all)
     if not trajectory.ok and not allow_failure:
         raise NumericalFailure(f"{resolved.name}, {chosen.name}, h = {h:g}: {trajectory.status}",
                                trajectory=trajectory)

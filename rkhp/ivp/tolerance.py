@@ -118,7 +118,7 @@ def pilot_runs(system, method, span: Span, order: int, x0=None, start: int = PIL
     def end(n: int):
         if n not in ends:
             started = time.thread_time()
-            trajectory = method.integrate(system, span.step(n), n, system.start(x0))
+            trajectory = method.integrate(system, span.step(n), n, system.start(x0), keep_all=False)
             seconds[n] = time.thread_time() - started
             ends[n] = trajectory.final_state if trajectory.ok else None
         return ends[n]
