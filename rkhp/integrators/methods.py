@@ -241,7 +241,7 @@ def check_distinct(methods) -> tuple[Method, ...]:
     """The methods, if no two are the same method under two names (an alias, a file: ``rk4`` and
     ``classical``); InputError naming both otherwise (docs/input.md)."""
     keys = [(m.kind, getattr(m.tableau, "name", None), m.order, m.degenerate, m.solver,
-             getattr(m.composition, "gamma", None)) for m in methods]
+             getattr(m.composition, "gamma", None), getattr(m.composition, "processor", None)) for m in methods]
     for i, key in enumerate(keys):
         if key in keys[:i]:
             raise InputError(f"{methods[keys.index(key)].name} and {methods[i].name} are the same method")
