@@ -142,11 +142,13 @@ def composition_rows():
 
 
 def render_composition_table(results) -> None:
-    table = compact_table("Built-in compositions (orders with the base on a symmetric realisation)")
+    table = compact_table("Built-in compositions (orders with the base on a symmetric realisation; "
+                          "processed: kernel + processor substeps, effective order)")
     for col in ("name", "substeps", "base", "order", "symmetric", "claimed"):
         table.add_column(col, justify="left" if col in ("name", "base") else "right")
     for r in results:
         c = r.composition
         claimed = "-" if c.claimed_order is None else f"{c.claimed_order} ({r.claim})"
-        table.add_row(c.name, str(c.substeps), c.base, str(r.own.order), "yes" if c.symmetric else "no", claimed)
+        substeps = f"{c.substeps} + {len(c.processor)}" if c.processed else str(c.substeps)
+        table.add_row(c.name, substeps, c.base, str(r.own.order), "yes" if c.symmetric else "no", claimed)
     print_table(console(), table)
