@@ -52,7 +52,7 @@ def calls(system_name: str, method_name: str, h: float, steps: int) -> dict:
         return method.integrate(system, h, steps).final_state
 
     def loop():
-        driver.drive(y0, ready.gammas, h, steps, ready.data, ready.solver, out)
+        driver.drive(y0, ready.gammas, 0, h, steps, ready.data, ready.solver, out)
         return out.states[-1]
 
     return {"by name": by_name, "resolved": resolved, "loop": loop}

@@ -56,7 +56,7 @@ def loop(system, provider, gammas, h: float, steps: int):
     """A call of the driver's compiled loop over `provider`'s substeps, its arguments built once."""
     ready = setup(system, load_tableau("euler"), gammas, provider=provider)  # None: the table's
     y0, out = np.array(system.x0), record(steps, system.dim, True)
-    return lambda: drive(y0, ready.gammas, h, steps, ready.data, ready.solver, out)
+    return lambda: drive(y0, ready.gammas, 0, h, steps, ready.data, ready.solver, out)
 
 
 def seconds(call) -> float:

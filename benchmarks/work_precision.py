@@ -17,7 +17,9 @@ within its timing and the mean taken), ROUNDS rounds; the minimum over the round
 of the calling thread (time.thread_time) is reported, and of the wall time beside it.
 
 Contenders (rkhp.studies.peers; every field is generated from the system, so spec files race too):
-- rkhp: the compositions of METHODS, the best of them per target;
+- rkhp: the compositions of METHODS, the best of them per target (the processed compositions
+  bcm6-s11, bcm6-s13 and bcm8-s13 among them, their inverse processor applied once, at the end:
+  every rkhp run keeps its last state only);
 - numbalsoda:dop853: Hairer's DOP853 (Fortran) on a numba cfunc field, the whole loop compiled;
 - diffrax:dopri8, diffrax:tsit5: under jax.jit on the CPU, float64;
 - scipy:dop853: solve_ivp on the field a user writes with plain arithmetic.
@@ -44,7 +46,7 @@ from rkhp.studies import peers as P
 ROOT = Path(__file__).resolve().parent.parent
 SYSTEMS = ("rigid-body", "lotka-volterra", "charged-particle", "nambu", "toda:12",
            str(Path("benchmarks") / "data" / "vortices-8.toml"))
-METHODS = ("suzuki4", "kahan-li6", "kahan-li8", "sofroniou-spaletta10")
+METHODS = ("suzuki4", "kahan-li6", "kahan-li8", "sofroniou-spaletta10", "bcm6-s11", "bcm6-s13", "bcm8-s13")
 PEERS = ("numbalsoda:dop853", "diffrax:dopri8", "diffrax:tsit5", "scipy:dop853")
 TARGETS = (1e-8, 1e-10, 1e-12)
 T_FINAL = 10.0
@@ -64,7 +66,7 @@ def cheapest_steps(method, system, ref, targets) -> dict:
     for n in STEPS:
         if not pending:
             break
-        traj = method.integrate(system, T_FINAL / n, n)
+        traj = method.integrate(system, T_FINAL / n, n, keep_all=False)
         if not traj.ok:
             continue
         err = float(np.linalg.norm(traj.final_state - ref.state))
@@ -135,7 +137,7 @@ def race(name: str, targets, rounds: int, absent: dict) -> list[Row]:
         for m, method in methods.items():
             if target in settings[m]:
                 n = settings[m][target][0]
-                runners[m] = lambda method=method, n=n: method.integrate(system, T_FINAL / n, n)
+                runners[m] = lambda method=method, n=n: method.integrate(system, T_FINAL / n, n, keep_all=False)
         for p, prep in prepared.items():
             if target in settings[p]:
                 runners[p] = lambda prep=prep, rtol=settings[p][target][0]: prep.solve(x0, rtol)
@@ -150,9 +152,26 @@ def race(name: str, targets, rounds: int, absent: dict) -> list[Row]:
     return rows
 
 
-def best_rkhp(row: Row):
-    ours = [m for m in METHODS if m in row.cells]
+def processed(method: str) -> bool:
+    """Whether a method of METHODS is a processed composition."""
+    return resolve_method(method).composition.processed
+
+
+def best_rkhp(row: Row, among=None):
+    """The rkhp method of the row with the least CPU time (among those of `among`, default
+    METHODS)."""
+    ours = [m for m in (METHODS if among is None else among) if m in row.cells]
     return min(ours, key=lambda m: row.cells[m][1]) if ours else None
+
+
+def gain(row: Row) -> str:
+    """The best plain composition's CPU time over the best processed one's (> 1: processing
+    wins), with their names."""
+    plain = best_rkhp(row, [m for m in METHODS if not processed(m)])
+    proc = best_rkhp(row, [m for m in METHODS if processed(m)])
+    if plain is None or proc is None:
+        return "-"
+    return f"{row.cells[plain][1] / row.cells[proc][1]:.2f} ({plain} / {proc})"
 
 
 def _ms(cell, index: int = 1) -> str:
@@ -171,13 +190,14 @@ def line(row: Row, absent: dict) -> str:
         parts.append(f"{p} absent" if p in absent else f"{p} {_ms(row.cells.get(p))} ms")
     parts.append(f"rkhp/dop853-compiled {_ratio(ours, row.cells.get('numbalsoda:dop853'))}")
     parts.append(f"scipy/rkhp {_ratio(row.cells.get('scipy:dop853'), ours)}")
+    parts.append(f"plain/processed {gain(row)}")
     return "  ".join(parts)
 
 
 def table(rows: list[Row], absent: dict, index: int) -> list[str]:
     """The markdown table of the rows: times in ms (CPU: index 1, wall: index 2) and the ratios."""
     head = ["system", "error", "rkhp best (setting)", "rkhp", *PEERS, "rkhp / compiled DOP853",
-            "scipy DOP853 / rkhp"]
+            "scipy DOP853 / rkhp", "best plain / best processed composition (CPU)"]
     out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for row in rows:
         best = best_rkhp(row)
@@ -186,7 +206,7 @@ def table(rows: list[Row], absent: dict, index: int) -> list[str]:
         cells += ["absent" if p in absent else _ms(row.cells.get(p), index) for p in PEERS]
         dop, plain = row.cells.get("numbalsoda:dop853"), row.cells.get("scipy:dop853")
         cells += ["-" if ours is None or dop is None else f"{ours[index] / dop[index]:.1f}",
-                  "-" if ours is None or plain is None else f"{plain[index] / ours[index]:.2f}"]
+                  "-" if ours is None or plain is None else f"{plain[index] / ours[index]:.2f}", gain(row)]
         out.append("| " + " | ".join(cells) + " |")
     return out
 

@@ -73,6 +73,9 @@ def _render_verification(result) -> None:
               f"{'equals' if c.symmetric else 'differs from'} gamma); precision: {result.own.precision}")
     out.print(f"base {escape(c.base)}: {'symmetric' if result.base_symmetric else 'not symmetric'} as an RKHP "
               f"method under a symmetric birealisation (checked to order {result.base_symmetry_checked})")
+    if c.processed:
+        out.print(f"processed: a processor of {len(c.processor)} substeps before the first step, its inverse at "
+                  f"each output; the orders are effective orders, the kernel alone has order {result.kernel_order}")
     table = compact_table(None)
     for col in ORDER_COLUMNS:
         table.add_column(col, justify="left" if col == "base" else "right")
@@ -92,6 +95,7 @@ def composition_json(spec: str) -> dict:
     order = class_composition_orders(c, load_tableau(c.base))["symmetric"].order
     return {"name": c.name, "kind": "composition", "aliases": list(c.aliases), "base": c.base,
             "substeps": c.substeps, "gamma": c.gamma_text(), "gamma_float": list(c.gamma_float),
+            "processor": c.processor_text(), "processor_float": list(c.processor_float),
             "symmetric": c.symmetric, "order": order,
             "claimed_order": c.claimed_order, "reference": c.reference}
 
@@ -105,7 +109,8 @@ def show_composition(spec: str, fmt: str) -> None:
     if fmt == "latex":
         from rkhp.base.latex import standalone
 
-        rows = " \\\\\n".join(f"\\gamma_{{{k + 1}}} & {g:.17g}" for k, g in enumerate(doc["gamma_float"]))
+        rows = " \\\\\n".join([*(f"\\gamma_{{{k + 1}}} & {g:.17g}" for k, g in enumerate(doc["gamma_float"])),
+                            *(f"c_{{{k + 1}}} & {c:.17g}" for k, c in enumerate(doc["processor_float"]))])
         click.echo(standalone(f"\\[\n\\begin{{array}}{{lr}}\n{rows}\n\\end{{array}}\n\\]",
                               title=f"{doc['name']}: composition of {doc['base']}"))
         return
@@ -114,7 +119,9 @@ def show_composition(spec: str, fmt: str) -> None:
     out = console()
     out.print(f"[bold]{escape(doc['name'])}[/bold]: composition of {doc['substeps']} substeps of "
               f"{escape(doc['base'])}, order {doc['order']} with its base on a symmetric realisation"
-              + (", symmetric" if doc["symmetric"] else ""))
+              + (", symmetric" if doc["symmetric"] else "")
+              + (f"; processed: processor c of {len(doc['processor'])} substeps (effective order)"
+                 if doc["processor"] else ""))
     if doc["reference"]:
         out.print(f"source: {escape(doc['reference'])}")
     table = compact_table(None)
@@ -122,6 +129,8 @@ def show_composition(spec: str, fmt: str) -> None:
         table.add_column(col, justify="right" if col != "gamma_i (as given)" else "left")
     for k, (g, x) in enumerate(zip(doc["gamma"], doc["gamma_float"], strict=True)):
         table.add_row(str(k + 1), escape(g), f"{x:.17g}")
+    for k, (c, x) in enumerate(zip(doc["processor"], doc["processor_float"], strict=True)):
+        table.add_row(f"c{k + 1}", escape(c), f"{x:.17g}")
     print_table(out, table)
 
 
@@ -133,11 +142,13 @@ def composition_rows():
 
 
 def render_composition_table(results) -> None:
-    table = compact_table("Built-in compositions (orders with the base on a symmetric realisation)")
+    table = compact_table("Built-in compositions (orders with the base on a symmetric realisation; "
+                          "processed: kernel + processor substeps, effective order)")
     for col in ("name", "substeps", "base", "order", "symmetric", "claimed"):
         table.add_column(col, justify="left" if col in ("name", "base") else "right")
     for r in results:
         c = r.composition
         claimed = "-" if c.claimed_order is None else f"{c.claimed_order} ({r.claim})"
-        table.add_row(c.name, str(c.substeps), c.base, str(r.own.order), "yes" if c.symmetric else "no", claimed)
+        substeps = f"{c.substeps} + {len(c.processor)}" if c.processed else str(c.substeps)
+        table.add_row(c.name, substeps, c.base, str(r.own.order), "yes" if c.symmetric else "no", claimed)
     print_table(console(), table)

@@ -18,6 +18,7 @@ from rkhp.tableaux.compositions import (
     composition_order,
     letters,
     load_composition,
+    verify_composition,
     words_of_weight,
 )
 from rkhp.tableaux.files import load_tableau
@@ -28,10 +29,13 @@ YOSHIDA6 = "tests/data/yoshida6.toml"
 #: published orders (Yoshida 1990; Suzuki 1990; Kahan & Li 1997; Sofroniou & Spaletta 2005)
 PUBLISHED = {"tj4": (4, 3), "suzuki4": (4, 5), "tj6": (6, 9), "kahan-li6": (6, 9), "tj8": (8, 27),
              "kahan-li8": (8, 17), "sofroniou-spaletta10": (10, 35)}
+#: processed compositions (Blanes, Casas & Murua 2006): effective order, kernel substeps, processor
+#: substeps; their kernels alone are of order 4
+PROCESSED = {"bcm6-s11": (6, 11, 12), "bcm6-s13": (6, 13, 12), "bcm8-s13": (8, 13, 20)}
 
 
 def test_the_built_in_compositions_are_the_published_ones():
-    assert sorted(builtin_compositions()) == sorted(PUBLISHED)
+    assert sorted(builtin_compositions()) == sorted([*PUBLISHED, *PROCESSED])
     for name, (order, substeps) in PUBLISHED.items():
         comp = load_composition(name)
         result = composition_order(comp)
@@ -308,3 +312,130 @@ def test_verify_checks_a_claim_against_the_base_s_own_symmetric_order(run_cli, t
             assert "hold to order 6 with symmetric-nodes-o4-s3 of symmetric order 4" in err
     status, out, _ = run_cli("show", str(tmp_path / "jump6.toml"), "--format", "json")
     assert status == 0 and json.loads(out)["order"] == 6
+
+
+# ----------------------------------------------------------------------------- processed compositions
+
+
+@pytest.mark.parametrize("name", sorted(PROCESSED))
+def test_a_processed_composition_has_its_published_effective_order(name):
+    """The substeps of one processed step, P, K, P^-1, meet the conditions of the published
+    effective order and fail the next by far more than the coefficients' digits allow; the kernel
+    alone is of order 4 and symmetric, the processor's coefficients sum to 0."""
+    order, kernel, processor = PROCESSED[name]
+    comp = load_composition(name)
+    result = composition_order(comp)
+    assert (result.order, comp.substeps, len(comp.processor), comp.symmetric) == (order, kernel, processor, True)
+    assert result.largest_failing > 1e-5
+    alone = composition_order(Composition(name, "euler", comp.gamma))
+    assert alone.order == 4 and alone.largest_failing > 1e-5
+    assert sum(comp.gamma_float) == pytest.approx(1.0, abs=1e-15)
+    assert sum(comp.processor_float) == pytest.approx(0.0, abs=1e-15)
+    assert verify_composition(comp).kernel_order == 4
+
+
+@pytest.mark.parametrize("name,steps", [("bcm6-s11", (40, 80)), ("bcm6-s13", (40, 80)), ("bcm8-s13", (20, 40))])
+def test_a_processed_composition_converges_at_its_effective_order(name, steps):
+    """The end-point error on the rigid body at T = 10 against its closed form (Jacobi elliptic
+    functions) falls as h^p, p the published effective order; the kernel alone, without the
+    processor, falls as h^4."""
+    from rkhp.integrators.methods import resolve_method
+    from rkhp.studies.reference import reference
+    from rkhp.systems import get_system
+
+    system = get_system("rigid-body")
+    exact = reference(system, 10.0)
+    assert exact.kind == "exact"
+    method = resolve_method(name)
+    errors = [np.linalg.norm(method.integrate(system, 10.0 / n, n, keep_all=False).final_state - exact.state)
+              for n in steps]
+    assert np.log2(errors[0] / errors[1]) == pytest.approx(PROCESSED[name][0], abs=0.5)
+    kernel = Composition(name, "euler", method.composition.gamma)
+    plain = [np.linalg.norm(integrate(system, resolve_method_of(kernel), 10.0 / n, n).final_state - exact.state)
+             for n in steps]
+    assert np.log2(plain[0] / plain[1]) == pytest.approx(4.0, abs=0.5)
+
+
+def resolve_method_of(comp):
+    from rkhp.integrators.methods import Method
+
+    return Method(comp.name, "composition", load_tableau("euler"), composition=comp)
+
+
+def test_the_processor_runs_once_and_its_inverse_at_the_output_only():
+    """A processed run of n steps is the Euler substeps c_i |h| of the processor, n times the
+    kernel's gamma_i h, and the inverse processor's -c_(m+1-i) |h|, in that order: the same state
+    whether every state is kept (the inverse processor applied to each) or the last only."""
+    from rkhp.tableaux.compositions import one_step
+
+    comp = load_composition("bcm8-s13")
+    h, n = 0.25, 6
+    y = np.array(integrate("rigid-body", "euler", 1.0, 1).states[0], dtype=float)
+    m = len(comp.processor)
+    substeps = one_step(comp, float)
+    for g in substeps[:m]:
+        y = integrate("rigid-body", "euler", g * h, 1, x0=y).final_state
+    for _ in range(n):
+        for g in substeps[m:-m]:
+            y = integrate("rigid-body", "euler", g * h, 1, x0=y).final_state
+    for g in substeps[-m:]:
+        y = integrate("rigid-body", "euler", g * h, 1, x0=y).final_state
+    last = integrate("rigid-body", "bcm8-s13", h, n, keep_all=False)
+    every = integrate("rigid-body", "bcm8-s13", h, n)
+    assert np.abs(last.final_state - y).max() < 1e-14
+    assert np.abs(every.final_state - last.final_state).max() < 1e-15
+    assert len(every.states) == n + 1 and np.array_equal(every.states[0], last.states[0])
+    # every kept state is the output of the run of that many steps
+    third = integrate("rigid-body", "bcm8-s13", h, 3, keep_all=False)
+    assert np.abs(every.states[3] - third.final_state).max() < 1e-15
+
+
+@pytest.mark.parametrize("system", ["charged-particle", "rigid-body"])
+def test_a_processed_composition_retraces_itself(system):
+    """The processor is taken at |h|: a run back with -h is the inverse of the run forward (the
+    kernel is symmetric), 100 steps of h = 0.1 each way come back to x0 to round-off."""
+    for method in sorted(PROCESSED):
+        forward = integrate(system, method, 0.1, 100).raise_if_failed()
+        back = integrate(system, method, -0.1, 100, x0=forward.final_state).raise_if_failed()
+        assert np.abs(back.final_state - forward.states[0]).max() < 1e-13, method
+
+
+def test_a_processed_composition_keeps_the_casimirs_on_nambu():
+    """Processor, kernel and inverse processor are RKHP Euler substeps, each a Poisson map: the
+    Casimir stays at round-off over the run, at every kept state."""
+    assert _casimir_drift("bcm8-s13", 200) < 1e-13
+    assert _casimir_drift("bcm6-s11", 200) < 1e-13
+
+
+def test_a_processor_must_sum_to_zero_and_fit(run_cli, tmp_path):
+    good = load_composition("bcm6-s11")
+    base = {"gamma": good.gamma_text()}
+    bad_sum = tmp_path / "bad.toml"
+    bad_sum.write_text(_toml({**base, "processor": ["0.5", "-0.25"]}))
+    with pytest.raises(InputError, match="processor's coefficients sum to 0.25"):
+        load_composition(str(bad_sum))
+    code, _, err = run_cli("verify", str(bad_sum))
+    assert code == 2 and "not 0" in err and "Traceback" not in err
+    long = tmp_path / "long.toml"
+    long.write_text(_toml({**base, "processor": ["0.5", "-0.5"] * 25}))
+    with pytest.raises(InputError, match="more than 100"):
+        load_composition(str(long))
+    word = tmp_path / "word.toml"
+    word.write_text('gamma = ["1"]\nprocessor = "0.5"\n')
+    with pytest.raises(InputError, match="processor must be a list"):
+        load_composition(str(word))
+
+
+def _toml(data: dict) -> str:
+    return "".join(f"{k} = [{', '.join(repr(v) for v in vs)}]\n" for k, vs in data.items())
+
+
+def test_verify_reports_the_processor_and_the_kernel_s_order(run_cli):
+    code, out, _ = run_cli("verify", "bcm8-s13", "--format", "json")
+    assert code == 0
+    doc = json.loads(out)
+    assert (doc["order"], doc["kernel_order"], doc["claim"], doc["substeps"]) == (8, 4, "confirmed", 13)
+    assert len(doc["processor"]) == len(doc["processor_float"]) == 20
+    code, out, _ = run_cli("verify", "kahan-li8", "--format", "json")
+    doc = json.loads(out)
+    assert (doc["processor"], doc["kernel_order"]) == ([], 8)

@@ -84,10 +84,10 @@ def _interrupting(method, stop_steps: int):
 
     @dataclass(frozen=True)
     class Interrupting(Method):
-        def integrate(self, system, h, n_steps, x0=None):
+        def integrate(self, system, h, n_steps, x0=None, *, keep_all=True):
             if n_steps == stop_steps:
                 raise KeyboardInterrupt
-            return super().integrate(system, h, n_steps, x0)
+            return super().integrate(system, h, n_steps, x0, keep_all=keep_all)
 
     return Interrupting(method.name, method.kind, method.tableau)
 

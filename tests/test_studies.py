@@ -325,7 +325,7 @@ def test_bench_interleaves_the_curves_in_rounds():
     calls = []
 
     def method(name):
-        def integrate(sys_, h, n):
+        def integrate(sys_, h, n, keep_all=True):
             calls.append((name, n))
             return SimpleNamespace(final_state=ref.state + 1e-3 / n, ok=True, status="ok", compile_seconds=0.0)
 

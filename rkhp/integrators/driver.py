@@ -3,8 +3,11 @@ base method, whatever provider computes them (docs/engine.md "One driver, many s
 docs/theory.md §12).
 
 A step of size h is the substeps gamma_1 h, ..., gamma_s h in turn (a tableau alone: s = 1,
-gamma = (1)), each computed by the substep provider that `rkhp.integrators.substeps.choose` picks
-for the system and the base method. `drive` is the compiled loop, written once: numba compiles it
+gamma = (1)); a processed composition P^-1 o K^n o P (docs/theory.md §12) has its processor's
+substeps first in the coefficients and its inverse's last: those run once before the first step
+and once at each state the run keeps (its output), not at every step. Each substep is computed by
+the substep provider that `rkhp.integrators.substeps.choose` picks for the system and the base
+method. `drive` is the compiled loop, written once: numba compiles it
 once per provider (the class of the provider's data); it records the states, the Newton (or chord)
 iterations and the stage sweeps of each step, summed over its substeps, and checks the state after
 every substep (`rkhp.integrators.engine.state_failure`: finite, in the system's domain). `run`
@@ -49,14 +52,17 @@ class Record(NamedTuple):
 
 
 @nb.njit(**NJIT_NORC)
-def drive(y0, gammas, h, n_steps, data, solver, record):
-    """n_steps steps of size h from y0, each the substeps gammas[0] h, gammas[1] h, ... of the
-    provider whose data is `data` (`rkhp.integrators.substeps`), substep i of a step warm-started
-    from substep i of the steps before (the provider's memory, emptied by its ``begin``); the
-    state is checked after every substep. Returns (completed steps, Failure of the step after them
-    or Failure.OK)."""
+def drive(y0, gammas, processor, h, n_steps, data, solver, record):
+    """n_steps steps of size h from y0 of the provider whose data is `data`
+    (`rkhp.integrators.substeps`), substep i of a step warm-started from substep i of the steps
+    before (the provider's memory, emptied by its ``begin``); the state is checked after every
+    substep. Without a processor (`processor` = 0) a step is the substeps gammas[0] h,
+    gammas[1] h, ...; with one, gammas holds the processor's `processor` coefficients, the
+    kernel's and the inverse processor's (`rkhp.tableaux.compositions.one_step`): the processor's
+    substeps (of size gammas[i] |h|) run once from y0, each step is the kernel's, and the inverse
+    processor's run from each state kept (every state with `record.keep_all`, else the last).
+    Returns (completed steps, Failure of the step after them or Failure.OK)."""
     context = begin(data, y0)
-    y = data.y
     n = y0.shape[0]
     peak = 0.0
     for k in range(n):
@@ -64,21 +70,67 @@ def drive(y0, gammas, h, n_steps, data, solver, record):
         peak = max(peak, abs(y0[k]))
     record.peak[0] = peak
     record.peak[1] = peak
+    end = gammas.shape[0]
+    cause, it, done = _substeps(data, context, gammas, 0, processor, abs(h), solver)
+    if cause != Failure.OK:
+        record.iterations[0] = it
+        record.sweeps[0] = done
+        return 0, cause
+    steps, cause = _steps(data, context, gammas, processor, end - processor, h, n_steps, solver, record)
+    record.iterations[0] += it
+    record.sweeps[0] += done
+    if processor == 0:
+        return steps, cause
+    first = 0 if not record.keep_all and steps > 0 else 1
+    rows = steps + 1 if record.keep_all else 1
+    for row in range(first, rows):
+        context = begin(data, record.states[row])
+        failed, it, done = _substeps(data, context, gammas, end - processor, end, abs(h), solver)
+        if failed != Failure.OK:  # the output of this row failed: the run ends before it
+            if not record.keep_all:
+                for k in range(n):
+                    record.states[0, k] = y0[k]
+            return (row - 1 if record.keep_all else 0), failed
+        at = row - 1 if record.keep_all else steps - 1
+        record.iterations[at] += it
+        record.sweeps[at] += done
+        for k in range(n):
+            record.states[row, k] = data.y[k]
+            record.peak[1] = max(record.peak[1], abs(data.y[k]))
+    return steps, cause
+
+
+@nb.njit(**NJIT_NORC)
+def _substeps(data, context, gammas, lo, hi, h, solver):
+    """Substeps lo .. hi - 1 of sizes gammas[i] h, the state checked after each; returns (Failure,
+    iterations, stage sweeps)."""
+    iterations = 0
+    sweeps = 0
+    for i in range(lo, hi):
+        cause, it, done = substep(data, context, i, gammas[i] * h, solver)
+        iterations += it
+        sweeps += done
+        if cause == Failure.OK:
+            cause = state_failure(data.y, solver.domain)
+        if cause != Failure.OK:
+            return cause, iterations, sweeps
+    return Failure.OK, iterations, sweeps
+
+
+@nb.njit(**NJIT_NORC)
+def _steps(data, context, gammas, lo, hi, h, n_steps, solver, record):
+    """n_steps steps, each the substeps lo .. hi - 1 of sizes gammas[i] h, the states recorded
+    (and the largest |component| in `record.peak`); returns (completed steps, Failure of the step
+    after them or Failure.OK)."""
+    y = data.y
+    n = y.shape[0]
+    peak = record.peak[1]
     for step in range(n_steps):
-        iterations = 0
-        sweeps = 0
-        for i in range(gammas.shape[0]):
-            cause, it, done = substep(data, context, i, gammas[i] * h, solver)
-            iterations += it
-            sweeps += done
-            if cause == Failure.OK:
-                cause = state_failure(y, solver.domain)
-            if cause != Failure.OK:
-                record.iterations[step] = iterations
-                record.sweeps[step] = sweeps
-                return step, cause
+        cause, iterations, sweeps = _substeps(data, context, gammas, lo, hi, h, solver)
         record.iterations[step] = iterations
         record.sweeps[step] = sweeps
+        if cause != Failure.OK:
+            return step, cause
         row = step + 1 if record.keep_all else 0
         for k in range(n):
             record.states[row, k] = y[k]
@@ -163,26 +215,37 @@ def _take(system, tableau, g, provider, tol, max_iter, options) -> Lent:
                                                                    max_iter=max_iter, options=options), drive))
 
 
-def _warm(lent: Lent, y0, gammas, h) -> tuple[Lent, float]:
+def _warm(lent: Lent, y0, gammas, processor: int, h) -> tuple[Lent, float]:
     """A lent Ready whose loop is compiled (a run of 0 steps, on data built for this run: the
     first compiles or loads numba's cache) and its compile seconds (0 for data run before)."""
     if not lent.built:
         return lent, 0.0
     ready = lent.item.setup
-    args = (y0, gammas, h, 0, ready.data, ready.solver, record(0, y0.shape[0], True))
+    args = (y0, gammas, processor, h, 0, ready.data, ready.solver, record(0, y0.shape[0], True))
     t0 = time.perf_counter()
     drive(*args)
     seconds = time.perf_counter() - t0
     return lent._replace(item=Ready(ready, compiled_loop(args))), seconds
 
 
-def run(system, tableau, h, n_steps, x0=None, *, gammas=(1.0,), span: float | None = None,
+def check_processor(processor, gammas: np.ndarray) -> int:
+    """The processor's number of substeps if the coefficients hold it twice and a kernel besides
+    (InputError otherwise)."""
+    if isinstance(processor, bool) or not isinstance(processor, (int, np.integer)) \
+            or not (0 <= processor and 2 * processor < gammas.size):
+        raise InputError(f"processor must be a number of substeps from 0 to {(gammas.size - 1) // 2}")
+    return int(processor)
+
+
+def run(system, tableau, h, n_steps, x0=None, *, gammas=(1.0,), processor: int = 0, span: float | None = None,
         provider=None, keep_all: bool = True, tol: float | None = None, max_iter: int | None = None,
         options: dict | None = None, name: str | None = None, extra: dict | None = None) -> Trajectory:
     """Integrate `system` by n_steps steps of size h (negative: backwards) of the composition of
     substeps gammas[0] h, gammas[1] h, ... of the RKHP method of `tableau` (gammas = (1,): the
-    method itself), from x0 (default: the system's start), by `provider` (default: `choose`'s,
-    its data built with `options`; built once and lent to this run, `PREPARED`).
+    method itself; with `processor` > 0, gammas holds a processed composition's processor, kernel
+    and inverse processor, `drive`), from x0 (default: the system's start), by `provider`
+    (default: `choose`'s, its data built with `options`; built once and lent to this run,
+    `PREPARED`).
 
     A step advances the time by h span (default span: the sum of the gammas; a consistent
     composition passes 1, so that t_n = n h). Returns a Trajectory: states y_0..y_k with
@@ -195,25 +258,26 @@ def run(system, tableau, h, n_steps, x0=None, *, gammas=(1.0,), span: float | No
     """
     g = check_gammas(gammas)
     return run_checked(system, tableau, h, n_steps, x0, g, math.fsum(g) if span is None else float(span),
-                       provider=provider, keep_all=keep_all, tol=tol, max_iter=max_iter, options=options,
-                       name=name, extra=extra)
+                       processor=check_processor(processor, g), provider=provider, keep_all=keep_all, tol=tol,
+                       max_iter=max_iter, options=options, name=name, extra=extra)
 
 
-def run_checked(system, tableau, h, n_steps, x0, gammas: np.ndarray, span: float, *, provider=None,
-                keep_all: bool = True, tol: float | None = None, max_iter: int | None = None,
+def run_checked(system, tableau, h, n_steps, x0, gammas: np.ndarray, span: float, *, processor: int = 0,
+                provider=None, keep_all: bool = True, tol: float | None = None, max_iter: int | None = None,
                 options: dict | None = None, name: str | None = None, extra: dict | None = None) -> Trajectory:
-    """`run` with the substeps' coefficients already checked (an array from `check_gammas`, never
-    changed) and the span given: what a resolved method calls (`rkhp.integrators.methods`)."""
+    """`run` with the substeps' coefficients and the processor's length already checked (an array
+    from `check_gammas`, never changed; `check_processor`) and the span given: what a resolved
+    method calls (`rkhp.integrators.methods`)."""
     h, n_steps = check_step(h, n_steps, system.dim)
     y0 = system.start(x0)
     n = system.dim
     lent = _take(system, tableau, gammas, provider, tol, max_iter, options)
     try:
-        lent, compile_seconds = _warm(lent, y0, gammas, h)
+        lent, compile_seconds = _warm(lent, y0, gammas, processor, h)
         ready, loop = lent.item
         out = record(n_steps, n, keep_all)
         t0 = time.perf_counter()
-        done, cause = loop(y0, gammas, h, n_steps, ready.data, ready.solver, out)
+        done, cause = loop(y0, gammas, processor, h, n_steps, ready.data, ready.solver, out)
         run_seconds = time.perf_counter() - t0
         details = {"substep": ready.provider.name, "newton_tolerance": ready.solver.tol,
                    "newton_max_iterations": ready.solver.max_iter, "realisation": system.realisation,
@@ -270,7 +334,7 @@ def ensemble_plan(system, h, n_steps, x0s) -> tuple[np.ndarray, np.ndarray, np.n
             np.array([s[1] for s in steps], dtype=np.int64).reshape(m))
 
 
-def run_ensemble(system, tableau, h, n_steps, x0s, *, gammas=(1.0,), provider=None,
+def run_ensemble(system, tableau, h, n_steps, x0s, *, gammas=(1.0,), processor: int = 0, provider=None,
                  tol: float | None = None, max_iter: int | None = None, options: dict | None = None,
                  threads: int | None = None, executor=None) -> np.ndarray:
     """Final states of many trajectories at once (shape (m, n)), the arguments as `run`'s, h and
@@ -280,8 +344,8 @@ def run_ensemble(system, tableau, h, n_steps, x0s, *, gammas=(1.0,), provider=No
     each chunk runs so on a worker. Each trajectory is computed on its own, as `run` computes it:
     the final states are those of one run at a time, bit for bit. NumericalFailure naming the
     first failing trajectory if any fails."""
-    result = ensemble_runs(system, tableau, h, n_steps, x0s, gammas=gammas, provider=provider, tol=tol,
-                           max_iter=max_iter, options=options, threads=threads, executor=executor)
+    result = ensemble_runs(system, tableau, h, n_steps, x0s, gammas=gammas, processor=processor, provider=provider,
+                           tol=tol, max_iter=max_iter, options=options, threads=threads, executor=executor)
     bad = np.flatnonzero(result.causes)
     if bad.size:
         i = int(bad[0])
@@ -292,13 +356,14 @@ def run_ensemble(system, tableau, h, n_steps, x0s, *, gammas=(1.0,), provider=No
     return result.finals
 
 
-def ensemble_runs(system, tableau, h, n_steps, x0s, *, gammas=(1.0,), provider=None,
+def ensemble_runs(system, tableau, h, n_steps, x0s, *, gammas=(1.0,), processor: int = 0, provider=None,
                   tol: float | None = None, max_iter: int | None = None, options: dict | None = None,
                   threads: int | None = None, executor=None) -> Ensemble:
     """`run_ensemble`'s runs, failed ones included (an `Ensemble`)."""
     x0s, hs, counts = ensemble_plan(system, h, n_steps, x0s)
     g = check_gammas(gammas)
-    settings = (g, None if provider is None else provider.name, tol, max_iter, options, threads)
+    settings = (g, check_processor(processor, g), None if provider is None else provider.name, tol, max_iter,
+                options, threads)
     if executor is None:
         return Ensemble(*_ensemble_chunk(system, tableau, hs, counts, x0s, *settings))
     cuts = np.array_split(np.arange(len(x0s)), max(1, min(len(x0s), executor.slots)))
@@ -307,7 +372,7 @@ def ensemble_runs(system, tableau, h, n_steps, x0s, *, gammas=(1.0,), provider=N
     return Ensemble(*(np.concatenate([p[k] for p in parts]) for k in range(3)))
 
 
-def _ensemble_chunk(system, tableau, hs, counts, x0s, g, provider, tol, max_iter, options, threads):
+def _ensemble_chunk(system, tableau, hs, counts, x0s, g, processor, provider, tol, max_iter, options, threads):
     """(final states, steps done, Failure codes) of the trajectories from ``x0s`` (step sizes
     ``hs``, numbers of steps ``counts``), in threads, each thread with prepared data of its own;
     `provider` by name (a task of a pool: its arguments are sent)."""
@@ -324,11 +389,12 @@ def _ensemble_chunk(system, tableau, hs, counts, x0s, g, provider, tol, max_iter
             return
         lent = _take(system, tableau, g, provider, tol, max_iter, options)
         try:
-            lent, _ = _warm(lent, x0s[lo], g, float(hs[lo]))
+            lent, _ = _warm(lent, x0s[lo], g, processor, float(hs[lo]))
             ready, loop = lent.item
             out = record(int(counts[lo:hi].max(initial=0)), system.dim, False)
             for t in range(lo, hi):
-                done[t], codes[t] = loop(x0s[t], g, float(hs[t]), int(counts[t]), ready.data, ready.solver, out)
+                done[t], codes[t] = loop(x0s[t], g, processor, float(hs[t]), int(counts[t]), ready.data, ready.solver,
+                                         out)
                 finals[t] = out.states[0]
         finally:
             PREPARED.give(lent)

@@ -82,17 +82,25 @@ class Method:
     solver: str | None = None
     composition: object = None
 
-    def integrate(self, system, h: float, n_steps: int, x0=None):
+    def integrate(self, system, h: float, n_steps: int, x0=None, *, keep_all: bool = True):
         """Run the method; returns a :class:`~rkhp.integrators.trajectory.Trajectory`. RKHP methods
         and compositions run on the driver (`rkhp.integrators.driver`), by the substep provider
-        that `rkhp.integrators.substeps.choose` picks for the system and the base method."""
+        that `rkhp.integrators.substeps.choose` picks for the system and the base method; with
+        ``keep_all=False`` they keep the first and the last state only (a processed composition
+        then applies its inverse processor once, to the last state: docs/compositions.md). The
+        other kinds keep every state."""
         if self.kind in ("rkhp", "composition"):
             from .driver import ONE, run_checked
 
             if self.kind == "rkhp":
-                return run_checked(system, self.tableau, h, n_steps, x0, ONE, 1.0, name=self.name)
-            return run_checked(system, self.tableau, h, n_steps, x0, self._gammas, 1.0, name=self.name,
-                               extra={"base": self.tableau.name, "substeps": self.composition.substeps})
+                return run_checked(system, self.tableau, h, n_steps, x0, ONE, 1.0, keep_all=keep_all,
+                                   name=self.name)
+            comp = self.composition
+            extra = {"base": self.tableau.name, "substeps": comp.substeps}
+            if comp.processed:
+                extra["processor_substeps"] = len(comp.processor)
+            return run_checked(system, self.tableau, h, n_steps, x0, self._gammas, 1.0,
+                               processor=len(comp.processor), keep_all=keep_all, name=self.name, extra=extra)
         if self.kind == "taylor":
             from .taylor import integrate_taylor
 
@@ -118,9 +126,10 @@ class Method:
         if self.kind in ("rkhp", "composition"):
             from .driver import run_ensemble
 
-            gammas = (1.0,) if self.kind == "rkhp" else self._gammas
-            return run_ensemble(system, self.tableau, h, n_steps, x0s, gammas=gammas, threads=threads,
-                                executor=executor)
+            if self.kind == "rkhp":
+                return run_ensemble(system, self.tableau, h, n_steps, x0s, threads=threads, executor=executor)
+            return run_ensemble(system, self.tableau, h, n_steps, x0s, gammas=self._gammas,
+                                processor=len(self.composition.processor), threads=threads, executor=executor)
         import numpy as np
 
         from .driver import ensemble_plan
@@ -131,13 +140,15 @@ class Method:
 
     @cached_property
     def _gammas(self):
-        """A composition's coefficients as a float64 array, once its base is known to be
-        explicit."""
+        """A composition's substeps of one step as a float64 array (its processor's, its kernel's
+        and its inverse processor's: `rkhp.tableaux.compositions.one_step`), once its base is
+        known to be explicit."""
+        from ..tableaux.compositions import one_step
         from .driver import check_gammas
         from .tower_substep import check_composable
 
         check_composable(self.tableau, self.name)
-        return check_gammas(self.composition.gamma_float)
+        return check_gammas(one_step(self.composition, float))
 
     def cost(self, system):
         """The estimated cost of the method's steps on `system` when the Taylor tower runs them
@@ -322,7 +333,7 @@ def check_distinct(methods) -> tuple[Method, ...]:
     """The methods, if no two are the same method under two names (an alias, a file: ``rk4`` and
     ``classical``); InputError naming both otherwise (docs/input.md)."""
     keys = [(m.kind, getattr(m.tableau, "name", None), m.order, m.degenerate, m.solver,
-             getattr(m.composition, "gamma", None)) for m in methods]
+             getattr(m.composition, "gamma", None), getattr(m.composition, "processor", None)) for m in methods]
     for i, key in enumerate(keys):
         if key in keys[:i]:
             raise InputError(f"{methods[keys.index(key)].name} and {methods[i].name} are the same method")
@@ -355,7 +366,7 @@ def resolve_system(system, realisation: str = "symmetric", x0=None):
 
 
 def integrate(system, method, h, n_steps, x0=None, *, realisation: str = "symmetric",
-              allow_failure: bool = False):
+              allow_failure: bool = False, keep_all: bool = True):
     """Integrate ``system`` (a name, a spec file or a PoissonSystem) with ``method`` (any name of
     the grammar above, a Tableau or a Method): ``n_steps`` steps of size ``h`` from ``x0`` (default:
     the system's start). Returns a :class:`~rkhp.integrators.trajectory.Trajectory`.
@@ -364,13 +375,14 @@ def integrate(system, method, h, n_steps, x0=None, *, realisation: str = "symmet
     docs/exit-status.md) raises :class:`~rkhp.base.errors.NumericalFailure` naming the step, as
     `rkhp integrate` exits with status 1; the failed trajectory is the exception's
     ``trajectory``. With ``allow_failure=True`` it is returned instead: ``ok`` False, ``cause``,
-    ``failed_step``, and the states before the failure.
+    ``failed_step``, and the states before the failure. With ``keep_all=False`` an RKHP method or
+    a composition keeps the first and the last state only (:meth:`Method.integrate`).
 
     ``rkhp.integrate("rigid-body", "rk4", 0.1, 100)`` integrates the rigid body (symmetric
     realisation) with RK4 used as an RKHP method.
     """
     chosen, resolved = resolve_method(method), resolve_system(system, realisation)
-    trajectory = chosen.integrate(resolved, h, n_steps, x0)
+    trajectory = chosen.integrate(resolved, h, n_steps, x0, keep_all=keep_all)
     if not trajectory.ok and not allow_failure:
         raise NumericalFailure(f"{resolved.name}, {chosen.name}, h = {h:g}: {trajectory.status}",
                                trajectory=trajectory)

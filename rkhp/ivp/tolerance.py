@@ -53,7 +53,7 @@ MIN_TOLERANCE = 1e-13
 EPS = float(np.finfo(float).eps)
 
 
-def round_off(steps: int) -> float:
+def round_off_bound(steps: int) -> float:
     """The bound N eps of the round-off of a run of N steps, relative to the scale max(1, |y|)."""
     return steps * EPS
 
@@ -122,7 +122,7 @@ def pilot_runs(system, method, span: Span, order: int, x0=None, start: int = PIL
     def end(n: int):
         if n not in ends:
             started = time.thread_time()
-            trajectory = method.integrate(system, span.step(n), n, system.start(x0))
+            trajectory = method.integrate(system, span.step(n), n, system.start(x0), keep_all=False)
             seconds[n] = time.thread_time() - started
             ends[n] = trajectory.final_state if trajectory.ok else None
         return ends[n]
@@ -199,10 +199,10 @@ def too_many(method, system, tol: float, n: int) -> InputError:
 
 def check_reachable(method, system, tol: float, n: int, truncation: float) -> None:
     """InputError when a run of ``n`` steps whose modelled error is ``truncation`` cannot promise
-    ``tol``: the round-off bound of its steps (:func:`round_off`) takes it past the tolerance."""
-    if truncation + round_off(n) > tol:
+    ``tol``: the round-off bound of its steps (:func:`round_off_bound`) takes it past the tolerance."""
+    if truncation + round_off_bound(n) > tol:
         raise InputError(f"{method} on {system}: tol {tol:g} needs {n} steps, whose round-off (up to "
-                         f"{n} eps = {round_off(n):.1e}) may exceed it; choose a looser tolerance or a "
+                         f"{n} eps = {round_off_bound(n):.1e}) may exceed it; choose a looser tolerance or a "
                          f"method of higher order")
 
 
@@ -223,7 +223,7 @@ def choose_tolerance_step(system, method, span: Span, tol: float, x0=None,
         raise too_many(method.name, system.name, tol, n)
     predicted = modelled(found.estimate, found.finest_steps, n, order, observed) / scale
     check_reachable(method.name, system.name, tol, n, predicted)
-    return ToleranceStep(method.name, order, tol, scale, n, span.step(n), predicted + round_off(n), found)
+    return ToleranceStep(method.name, order, tol, scale, n, span.step(n), predicted + round_off_bound(n), found)
 
 
 def estimated_error(choice: ToleranceStep, final: np.ndarray, steps: int | None = None,
@@ -231,13 +231,13 @@ def estimated_error(choice: ToleranceStep, final: np.ndarray, steps: int | None 
     """The error estimate of the chosen run's end state ``final``, relative to the scale: by
     Richardson against a coarser run (``reference`` of ``steps`` steps; default the finest pilot)
     when the chosen run has at least twice its steps, else the model's prediction; each with the
-    round-off bound of its steps (:func:`round_off`)."""
+    round-off bound of its steps (:func:`round_off_bound`)."""
     if reference is None:
         steps, reference = choice.pilot.finest_steps, choice.pilot.finest
     ratio = choice.steps / steps
     if ratio >= 2 and not choice.pilot.round_off:
         finer, _ = exponents(choice.order, choice.pilot.observed_order)
-        return norm(final - reference) / (ratio**finer - 1) / choice.scale + round_off(choice.steps)
+        return norm(final - reference) / (ratio**finer - 1) / choice.scale + round_off_bound(choice.steps)
     return choice.predicted_error
 
 
@@ -249,7 +249,7 @@ def refine(choice: ToleranceStep, error: float, span: Span, system) -> Tolerance
         raise too_many(choice.method, system.name, choice.tolerance, n)
     predicted = modelled(error, choice.steps, n, choice.order, observed)
     check_reachable(choice.method, system.name, choice.tolerance, n, predicted)
-    predicted += round_off(n)
+    predicted += round_off_bound(n)
     return ToleranceStep(choice.method, choice.order, choice.tolerance, choice.scale, n, span.step(n), predicted,
                       choice.pilot)
 

@@ -220,7 +220,7 @@ class Setting(NamedTuple):
 
 def _method_call(method: Method, system, ref: Reference, n: int, t_final: float) -> Callable[[], Outcome]:
     def call_method() -> Outcome:
-        traj = method.integrate(system, t_final / n, n)
+        traj = method.integrate(system, t_final / n, n, keep_all=False)
         measured = float(np.linalg.norm(traj.final_state - ref.state)) if traj.ok else None
         return Outcome(measured, None, traj.status, float(traj.compile_seconds))
 
@@ -389,8 +389,8 @@ def _ensemble_method_curve(method: Method, system, refs, floor, starts, steps, t
         count = min(len(starts), ENSEMBLE_TIMED)
 
         def run_each(n):
-            return np.array([method.integrate(system, t_final / n, n, x0=x).raise_if_failed().final_state
-                             for x in starts[:count]])
+            return np.array([method.integrate(system, t_final / n, n, x0=x, keep_all=False)
+                             .raise_if_failed().final_state for x in starts[:count]])
 
         run = run_each
     warm_start = time.perf_counter()

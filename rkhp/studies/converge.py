@@ -193,7 +193,7 @@ def pilot(method, system, t_final: float):
 
     def final_state(n: int):
         if n not in runs:
-            traj = method.integrate(system, t_final / n, n)
+            traj = method.integrate(system, t_final / n, n, keep_all=False)
             ok = traj.ok and bool(np.all(np.isfinite(traj.final_state)))
             runs[n] = np.array(traj.final_state) if ok else None
         return runs[n]

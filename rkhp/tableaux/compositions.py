@@ -26,6 +26,14 @@ Built-in compositions ship as ``tables/compositions/*.toml``; user files have th
     order = 6                            # optional: the claimed order with the base on a symmetric
                                          # realisation (Euler's: symmetric, order 2)
     aliases = [...]                      # optional
+    processor = ["...", ...]             # optional: a processed composition (below)
+
+A processed composition (Blanes, Casas & Ros 1999; Blanes, Casas & Murua 2006; docs/theory.md
+§12) is P^-1 o K^n o P: its kernel K is the composition gamma, its processor P the substeps
+c_1 |h|, ..., c_m |h| (coefficients summing to 0), applied once before the first step, and P^-1
+(the substeps -c_m |h|, ..., -c_1 |h|: the base is symmetric) once at each output. Its order is
+its effective order: that of the substeps of one processed step, P, K, P^-1, as a composition
+(:func:`one_step`); the kernel alone has a lower order.
 """
 
 from __future__ import annotations
@@ -55,7 +63,7 @@ MAX_SUBSTEPS = MAX_STAGES
 MAX_COMPOSITION_ORDER = 12
 #: Decimal digits of the evaluation of the conditions when every coefficient is exact.
 EXACT_DIGITS = 60
-_KEYS = ("name", "kind", "base", "gamma", "reference", "order", "aliases", "notes")
+_KEYS = ("name", "kind", "base", "gamma", "reference", "order", "aliases", "notes", "processor")
 DEFAULT_BASE = "euler"
 
 
@@ -71,6 +79,8 @@ class Composition:
         reference: where the coefficients come from.
         claimed_order: the order claimed by the file (with the base on a symmetric realisation), or None.
         aliases: other names.
+        processor: the processor's coefficients c_1 .. c_m (empty: not processed; module
+            docstring).
     """
 
     name: str
@@ -80,11 +90,21 @@ class Composition:
     claimed_order: int | None = None
     aliases: tuple[str, ...] = ()
     notes: str = field(default="", compare=False)
+    processor: tuple = ()
 
     @cached_property
     def gamma_float(self) -> tuple[float, ...]:
         """The coefficients in float64."""
         return tuple(to_float(g) for g in self.gamma)
+
+    @cached_property
+    def processor_float(self) -> tuple[float, ...]:
+        """The processor's coefficients in float64 (empty when not processed)."""
+        return tuple(to_float(c) for c in self.processor)
+
+    @property
+    def processed(self) -> bool:
+        return bool(self.processor)
 
     @property
     def substeps(self) -> int:
@@ -93,13 +113,18 @@ class Composition:
     @cached_property
     def digits(self) -> int | None:
         """Decimal digits the coefficients are known to (None: all exact)."""
-        given = [g.digits for g in self.gamma if isinstance(g, GivenDecimal)]
+        given = [g.digits for g in (*self.gamma, *self.processor) if isinstance(g, GivenDecimal)]
         return min(given) if given else None
 
     @cached_property
     def consistent(self) -> bool:
         """Whether the coefficients sum to 1 (to the digits given)."""
         return abs(_residual_sum(self.gamma, self.digits)) <= _residual_tolerance(self.digits)
+
+    @cached_property
+    def processor_sum(self):
+        """The sum of the processor's coefficients (0 for a processor; 0 when not processed)."""
+        return _residual_sum(self.processor, self.digits, 0) if self.processor else 0
 
     @cached_property
     def symmetric(self) -> bool:
@@ -112,6 +137,17 @@ class Composition:
 
     def gamma_text(self) -> list[str]:
         return [entry_text(g) for g in self.gamma]
+
+    def processor_text(self) -> list[str]:
+        return [entry_text(c) for c in self.processor]
+
+
+def one_step(comp: Composition, convert=lambda g: g) -> list:
+    """The substeps of one step as a composition of the base: gamma, or for a processed composition
+    the processor, the kernel and the processor's inverse (c_1 .. c_m, gamma, -c_m .. -c_1; module
+    docstring), each coefficient through `convert`."""
+    processor = [convert(c) for c in comp.processor]
+    return [*processor, *(convert(g) for g in comp.gamma), *(-c for c in reversed(processor))]
 
 
 # ----------------------------------------------------------------------------- order
@@ -175,11 +211,11 @@ def _mp(g):
     return mpmath.mpf(g.evalf(mpmath.mp.dps + 5))
 
 
-def _residual_sum(gamma, digits):
+def _residual_sum(gamma, digits, total: int = 1):
     if all(isinstance(g, Fraction) for g in gamma):
-        return float(sum(gamma, Fraction(0)) - 1)
+        return float(sum(gamma, Fraction(0)) - total)
     with mpmath.workdps(_dps(digits)):
-        return sum((_mp(g) for g in gamma), mpmath.mpf(0)) - 1
+        return sum((_mp(g) for g in gamma), mpmath.mpf(0)) - total
 
 
 def product_coefficients(gamma, weights: tuple[int, ...], max_weight: int):
@@ -216,15 +252,16 @@ def _exp_coefficient(w: tuple[int, ...], exact: bool):
 def composition_order(comp: Composition, base_order: int = 2, base_symmetric: bool = True,
                       max_order: int = MAX_COMPOSITION_ORDER) -> CompositionOrder:
     """The order of `comp` with a base of order `base_order` (HLW §III.3, §V.3): the largest p such
-    that prod_i exp(sum_k gamma_i^k F_k) = exp(F_1) on every word of weight <= p."""
+    that prod_i exp(sum_k gamma_i^k F_k) = exp(F_1) on every word of weight <= p, over the substeps
+    of one step (:func:`one_step`: a processed composition's effective order)."""
     if base_order < 1:
         raise InputError(f"the base method has order {base_order}: a composition needs order >= 1")
-    exact = all(isinstance(g, Fraction) for g in comp.gamma)
+    exact = all(isinstance(g, Fraction) for g in (*comp.gamma, *comp.processor))
     digits = comp.digits
     top = min(max_order, MAX_COMPOSITION_ORDER)
     weights = letters(base_order, base_symmetric, top)
     with mpmath.workdps(_dps(digits)):
-        gamma = list(comp.gamma) if exact else [_mp(g) for g in comp.gamma]
+        gamma = one_step(comp) if exact else one_step(comp, _mp)
         tol = 0 if exact else _residual_tolerance(digits)
         order, count, failing = 0, 0, None
         for p, coeff in product_coefficients(gamma, weights, top):
@@ -314,7 +351,14 @@ def composition_from_dict(data: dict, default_name: str, where: str) -> Composit
         raise InputError(f"{where}: gamma must be a non-empty list of coefficients")
     if len(gamma) > MAX_SUBSTEPS:
         raise InputError(f"{where}: {len(gamma)} substeps, more than {MAX_SUBSTEPS}")
+    processor = data.get("processor", [])
+    if not isinstance(processor, list):
+        raise InputError(f"{where}: processor must be a list of coefficients")
+    if len(gamma) + 2 * len(processor) > MAX_SUBSTEPS:
+        raise InputError(f"{where}: {len(gamma)} substeps and twice {len(processor)} of the processor, "
+                         f"more than {MAX_SUBSTEPS}")
     values = tuple(parse_entry(g, f"{where}: gamma[{k}]") for k, g in enumerate(gamma))
+    processor = tuple(parse_entry(c, f"{where}: processor[{k}]") for k, c in enumerate(processor))
     name = _text(data.get("name", default_name), where, "name")
     base = _text(data.get("base", DEFAULT_BASE), where, "base")
     order = data.get("order")
@@ -326,10 +370,12 @@ def composition_from_dict(data: dict, default_name: str, where: str) -> Composit
         raise InputError(f"{where}: aliases must be a list of names")
     comp = Composition(name, base, values, _text(data.get("reference", ""), where, "reference"), order,
                        tuple(_text(a, where, "aliases") for a in aliases),
-                       _text(data.get("notes", ""), where, "notes"))
+                       _text(data.get("notes", ""), where, "notes"), processor)
     if not comp.consistent:
         raise InputError(f"{where}: the coefficients sum to {1 + float(_residual_sum(values, comp.digits)):.17g}, "
                          "not 1: not a consistent composition")
+    if abs(comp.processor_sum) > _residual_tolerance(comp.digits):
+        raise InputError(f"{where}: the processor's coefficients sum to {float(comp.processor_sum):.17g}, not 0")
     return comp
 
 
@@ -341,7 +387,7 @@ def _text(value, where: str, key: str) -> str:
 
 def exact_entries(comp: Composition) -> bool:
     """Whether every coefficient is exact (rational or algebraic)."""
-    return all(is_exact(g) for g in comp.gamma)
+    return all(is_exact(g) for g in (*comp.gamma, *comp.processor))
 
 
 # ----------------------------------------------------------------------------- verification
@@ -361,6 +407,8 @@ class CompositionVerification:
         by_class: its order with its base on each realisation class (general, degenerate,
             symmetric), the base's order in that class counted as q.
         claim: "confirmed", "overstated" or None (no claimed order).
+        kernel_order: the order of the kernel alone in the case of `own` (a processed
+            composition's kernel; else `own`'s order).
     """
 
     composition: Composition
@@ -369,12 +417,15 @@ class CompositionVerification:
     base_symmetry_checked: int
     by_class: dict
     claim: str | None
+    kernel_order: int
 
     kind = KIND
     #: docs/compositions.md "JSON keys"
     json_keys = (("name", "composition.name"), "kind", ("base", "composition.base"),
                  ("substeps", "composition.substeps"), ("gamma", "composition.gamma_text"),
-                 ("gamma_float", "composition.gamma_float"), ("reference", "composition.reference"),
+                 ("gamma_float", "composition.gamma_float"), ("processor", "composition.processor_text"),
+                 ("processor_float", "composition.processor_float"), "kernel_order",
+                 ("reference", "composition.reference"),
                  ("symmetric", "composition.symmetric"), "base_symmetric",
                  ("base_symmetry_checked_up_to", "base_symmetry_checked"), ("order", "own.order"), "own",
                  ("orders", "by_class"), ("claimed_order", "composition.claimed_order"), "claim")
@@ -413,4 +464,6 @@ def verify_composition(comp: Composition) -> CompositionVerification:
     claim = None
     if comp.claimed_order is not None:
         claim = "confirmed" if own.order >= comp.claimed_order else "overstated"
-    return CompositionVerification(comp, own, symmetry.symmetric, symmetry.checked_up_to, by_class, claim)
+    kernel = (composition_order(Composition(comp.name, comp.base, comp.gamma), own.base_order, own.base_symmetric).order
+              if comp.processed else own.order)
+    return CompositionVerification(comp, own, symmetry.symmetric, symmetry.checked_up_to, by_class, claim, kernel)
