@@ -28,7 +28,7 @@ def compile_(jobs, prune, fmt):
         task = bar.add_task("compiling the integrator kernels", total=None)
         run = compile_ahead(jobs,
                             on_part=lambda done, total: bar.update(task, completed=done, total=total))
-    report = {"cache_dir": str(compiler.numba.config.CACHE_DIR), "jobs": run.jobs,
+    report = {"cache_dir": str(compiler.RKHP_CACHE_DIR or compiler.numba.config.CACHE_DIR), "jobs": run.jobs,
               "classes": [item._asdict() for item in run.classes],
               "seconds": run.seconds, "cpu_seconds": sum(item.cpu_seconds for item in run.classes),
               "pruned": None if pruned is None else pruned._asdict()}

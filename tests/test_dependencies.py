@@ -1,5 +1,5 @@
 """The dependencies: the ranges of pyproject.toml, the pins of constraints.txt, and the form of
-numba's inliner that rkhp.taylor.compiler patches (docs/development.md)."""
+each piece of numba that rkhp.taylor.numba_patches replaces (docs/development.md)."""
 
 from __future__ import annotations
 
@@ -58,16 +58,155 @@ def test_installed_numba_is_within_its_range():
         f"numba {metadata.version('numba')} installed, pyproject.toml asks {req}"
 
 
+def _patched_numba():
+    """numba as rkhp's compiled modules take it: every patch applied (`rkhp.taylor.compiler`)."""
+    from rkhp.taylor.compiler import numba
+
+    return numba
+
+
+#: what each patch of rkhp.taylor.numba_patches replaces or calls of numba, and the first 16 hex
+#: digits of the sha256 of its source in numba 0.68.1, the pin of constraints.txt, read from
+#: numba's files: a numba whose source of one of them differs fails here, and that patch must be
+#: read against the new source (then its digests written here) before the pin moves
+NUMBA_FORMS = {
+    "cheap_inlining": {
+        "numba.core.inline_closurecall:InlineWorker.inline_ir": "cb5d4f1d4f7ffab0",
+        "numba.core.inline_closurecall:InlineWorker.inline_function": "4bb626a769afcf0c",
+    },
+    "locked_saves": {
+        "numba.core.caching:IndexDataCacheFile.save": "926b10d2188c9c41",
+        "numba.core.caching:IndexDataCacheFile._save_index": "3bf8060007868d82",
+        "numba.core.caching:IndexDataCacheFile._save_data": "b8c875732364b2ac",
+        "numba.core.caching:IndexDataCacheFile._data_name": "851ff952f5913a5f",
+    },
+    "robust_cache": {
+        "numba.core.caching:IndexDataCacheFile._load_index": "27048a88ba1d8308",
+        "numba.core.caching:Cache._load_overload": "fa926a535976c5c8",
+        "numba.core.caching:Cache.save_overload": "bc8571ddb40a85f7",
+        "numba.core.compiler:CompileResult._reduce": "9afa7275887ba500",
+    },
+    "sources_locator": {
+        "numba.core.caching:UserProvidedCacheLocator": "a429549705e39f67",
+        "numba.core.caching:_SourceFileBackedLocatorMixin": "5751bf9e11237ffd",
+        "numba.core.caching:CacheImpl.__init__": "df6754da619b0899",
+    },
+}
+
+
+def numba_form(name: str) -> str:
+    """The first 16 hex digits of the sha256 of the source of ``module:Class.function`` as the
+    installed numba's file holds it (read with ast, nothing of it imported but its path)."""
+    import ast
+    import hashlib
+    from importlib.util import find_spec
+
+    module, _, qualname = name.partition(":")
+    text = Path(find_spec(module).origin).read_text(encoding="utf-8")
+    node = ast.parse(text)
+    for part in qualname.split("."):
+        node = next(n for n in node.body if isinstance(n, ast.ClassDef | ast.FunctionDef) and n.name == part)
+    return hashlib.sha256(ast.get_source_segment(text, node).encode()).hexdigest()[:16]
+
+
+def test_every_patch_has_the_forms_it_was_checked_on():
+    from rkhp.taylor.numba_patches import PATCHES
+
+    assert sorted(NUMBA_FORMS) == sorted(PATCHES)
+
+
+@pytest.mark.parametrize("patch", sorted(NUMBA_FORMS))
+def test_the_pinned_numba_has_the_form_each_patch_was_checked_on(patch):
+    """Each patch against the numba of constraints.txt: the source of every piece of numba it
+    replaces or calls is the one it was written for (`NUMBA_FORMS`), and it is applied."""
+    from rkhp.taylor import numba_patches
+
+    installed, pinned = metadata.version("numba"), pins()["numba"]
+    if installed != pinned:
+        pytest.skip(f"numba {installed} installed; the forms are those of the pin {pinned}")
+    forms = {name: numba_form(name) for name in NUMBA_FORMS[patch]}
+    changed = sorted(name for name, digest in forms.items() if digest != NUMBA_FORMS[patch][name])
+    assert not changed, f"numba {installed} changed what rkhp.taylor.numba_patches.{patch} relies on: {changed}"
+    _patched_numba()
+    assert patch in numba_patches.apply(None, ()).applied
+
+
+LAZY_PATCHES = r"""
+import json, sys
+from pathlib import Path
+
+import rkhp
+import rkhp.integrators.methods
+import rkhp.taylor.compiler as compiler
+
+loaded = "numba" in sys.modules
+from numba.core import caching, inline_closurecall
+
+def state():
+    return {"inliner": getattr(inline_closurecall.InlineWorker, "rkhp_cheap_inlining", False),
+            "save": caching.IndexDataCacheFile.save.__module__,
+            "load": caching.Cache._load_overload.__module__,
+            "locators": [c.__name__ for c in caching.CacheImpl._locator_classes],
+            "cache_dir": caching.config.CACHE_DIR}
+
+before = state()
+from rkhp.taylor.compiler import numba
+from rkhp.taylor import numba_patches
+from rkhp.taylor.linalg import lu_factor
+
+first = numba_patches._APPLIED[0]
+again = numba_patches.apply("elsewhere", ())
+other = Path(sys.argv[1])
+other.write_text("import numba\n\n\n@numba.njit(cache=True)\ndef twice(x):\n    return x + x\n")
+sys.path.insert(0, str(other.parent))
+import other_kernels
+
+print(json.dumps({"loaded": loaded, "before": before, "after": state(), "same": again is first,
+                  "folder": compiler.RKHP_CACHE_DIR, "rkhp": lu_factor._cache.cache_path,
+                  "other": other_kernels.twice._cache.cache_path}))
+"""
+
+
+def test_numba_is_patched_once_at_the_first_compiled_module_and_its_cache_folder_left(tmp_path):
+    """Importing rkhp, its integrators' names and rkhp.taylor.compiler imports no numba and patches
+    nothing; the first compiled module applies every patch once (a second `apply` changes
+    nothing), and numba's own cache folder setting stays unset: rkhp's kernels go to rkhp's
+    folder, a function of another file to numba's own place (beside its source)."""
+    import json
+    import os
+    import subprocess
+
+    environ = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    environ["XDG_CACHE_HOME"] = str(tmp_path / "xdg")
+    out = subprocess.run([sys.executable, "-c", LAZY_PATCHES, str(tmp_path / "other_kernels.py")],
+                         capture_output=True, text=True, timeout=300, env=environ)
+    assert out.returncode == 0, out.stderr[-3000:]
+    report = json.loads(out.stdout)
+    assert report["loaded"] is False
+    assert report["before"] == {"inliner": False, "save": "numba.core.caching", "load": "numba.core.caching",
+                                "locators": report["before"]["locators"], "cache_dir": ""}
+    assert "SourcesLocator" not in report["before"]["locators"]
+    after = report["after"]
+    assert after["inliner"] is True and after["cache_dir"] == ""
+    assert after["save"] == after["load"] == "rkhp.taylor.numba_patches"
+    assert after["locators"].count("SourcesLocator") == 1 and after["locators"][0] == "SourcesLocator"
+    assert report["same"] is True
+    assert report["folder"].startswith(str(tmp_path / "xdg" / "rkhp" / "numba"))
+    assert report["rkhp"] == str(Path(report["folder"]) / "taylor")
+    assert report["other"] == str(tmp_path / "__pycache__")
+
+
 def test_numba_inliner_has_the_form_the_patch_expects():
-    """Fails loudly when a numba release changes the inliner that rkhp.taylor.compiler patches:
-    the patch is then skipped (correct, slower compiles) and must be reviewed before numba's upper
-    bound moves."""
+    """Fails loudly when a numba release changes the inliner that rkhp.taylor.numba_patches
+    patches: the patch is then skipped (correct, slower compiles) and must be reviewed before
+    numba's upper bound moves."""
     from numba.core import inline_closurecall
 
-    from rkhp.taylor.compiler import inlining_precondition
+    from rkhp.taylor.numba_patches import inlining_precondition
 
+    _patched_numba()
     missing = inlining_precondition()
-    assert not missing, (f"numba {metadata.version('numba')}'s inliner changed; rkhp.taylor.compiler's "
+    assert not missing, (f"numba {metadata.version('numba')}'s inliner changed; rkhp.taylor.numba_patches' "
                          f"cheap inlining is not applied: {'; '.join(missing)}")
     worker = inline_closurecall.InlineWorker
     assert worker.rkhp_cheap_inlining
@@ -79,7 +218,7 @@ def test_precondition_sees_a_changed_inliner():
     """The check fails on an inliner of another form: deepcopy elsewhere, inline_function doing more."""
     import copy
 
-    from rkhp.taylor.compiler import inlining_precondition
+    from rkhp.taylor.numba_patches import inlining_precondition
 
     source = '''
 import copy
@@ -107,7 +246,7 @@ class InlineWorker:
 def test_inlined_function_gives_the_same_values():
     """A function inlined at two sites (`inline="always"`) under the patched inliner: same values
     as the plain Python function."""
-    from rkhp.taylor.compiler import numba
+    numba = _patched_numba()
 
     def poly(x, k):
         y = 0.0
@@ -126,21 +265,22 @@ def test_inlined_function_gives_the_same_values():
 
 
 def test_numba_cache_save_has_the_form_the_lock_expects():
-    """Fails loudly when a numba release changes the cache save that rkhp.taylor.compiler locks:
-    the lock is then not applied and `rkhp compile` runs in one process."""
+    """Fails loudly when a numba release changes the cache save that rkhp.taylor.numba_patches
+    locks: the lock is then not applied and `rkhp compile` runs in one process."""
     from numba.core import caching
 
-    from rkhp.taylor.compiler import _save_locked, cache_save_precondition, parallel_compiles_safe
+    from rkhp.taylor.numba_patches import _save_locked, cache_save_precondition, parallel_compiles_safe
 
+    _patched_numba()
     missing = cache_save_precondition()
-    assert not missing, (f"numba {metadata.version('numba')}'s cache save changed; rkhp.taylor.compiler's "
+    assert not missing, (f"numba {metadata.version('numba')}'s cache save changed; rkhp.taylor.numba_patches' "
                          f"lock is not applied: {'; '.join(missing)}")
     assert caching.IndexDataCacheFile.save is _save_locked
     assert parallel_compiles_safe()
 
 
 def test_cache_save_precondition_sees_a_changed_save():
-    from rkhp.taylor.compiler import cache_save_precondition
+    from rkhp.taylor.numba_patches import cache_save_precondition
 
     class IndexDataCacheFile:
         def save(self, key, data):
@@ -155,12 +295,12 @@ def test_cache_save_precondition_sees_a_changed_save():
 
 def test_numba_cache_has_the_form_the_healing_expects():
     """Fails loudly when a numba release changes the cache loads and saves that
-    rkhp.taylor.kernel_cache replaces: a damaged cache file would then be a traceback again."""
+    rkhp.taylor.numba_patches replaces: a damaged cache file would then be a traceback again."""
     from numba.core import caching
 
-    import rkhp.taylor.compiler  # noqa: F401 - applies the healing
-    from rkhp.taylor.kernel_cache import heal_precondition
+    from rkhp.taylor.numba_patches import heal_precondition
 
+    _patched_numba()
     missing = heal_precondition(caching)
     assert not missing, (f"numba {metadata.version('numba')}'s cache changed; damaged cache files are not "
                          f"healed: {'; '.join(missing)}")
@@ -168,7 +308,7 @@ def test_numba_cache_has_the_form_the_healing_expects():
 
 
 def test_heal_precondition_sees_a_changed_cache_module():
-    from rkhp.taylor.kernel_cache import heal_precondition
+    from rkhp.taylor.numba_patches import heal_precondition
 
     class Cache:
         def _load_overload(self, sig, target_context):
@@ -192,7 +332,7 @@ def _save_entries(folder: str, first: int, count: int) -> None:
     index of one function in ``folder`` (a process of the race test below)."""
     from numba.core.caching import IndexDataCacheFile
 
-    import rkhp.taylor.compiler  # noqa: F401 - the locked save
+    from rkhp.taylor.compiler import numba  # noqa: F401 - numba with rkhp's patches: the locked save
 
     cache_file = IndexDataCacheFile(folder, "kernel", ("stamp", 1))
     for key in range(first, first + count):
@@ -227,8 +367,9 @@ def test_numba_cache_locator_has_the_form_rkhp_refines():
     its source: rkhp's locator is then not used, and each checkout compiles for itself."""
     from numba.core import caching
 
-    from rkhp.taylor.compiler import SourcesLocator, locator_precondition
+    from rkhp.taylor.numba_patches import SourcesLocator, locator_precondition
 
+    _patched_numba()
     missing = locator_precondition()
     assert not missing, (f"numba {metadata.version('numba')}'s cache locators changed; rkhp's SourcesLocator "
                          f"is not used: {'; '.join(missing)}")
@@ -238,7 +379,7 @@ def test_numba_cache_locator_has_the_form_rkhp_refines():
 def test_locator_precondition_sees_a_changed_cache_module():
     from numba.core import caching
 
-    from rkhp.taylor.compiler import locator_precondition
+    from rkhp.taylor.numba_patches import locator_precondition
 
     class TimeStamped(caching.UserProvidedCacheLocator):
         def get_source_stamp(self):

@@ -1,7 +1,7 @@
 """The engine's state is named (docs/engine.md "The state of the step loop"): read from the sources
 (nothing is imported or compiled), every compiled function of rkhp takes at most MAX_PARAMETERS
 parameters (more go in small NamedTuples), the step loop's memo is indexed by its named slots
-(`rkhp.integrators.engine.MEMO_HISTORY` ...) and StepBuffers is built with keywords."""
+(`rkhp.integrators.engine_state.MEMO_HISTORY` ...) and StepBuffers is built with keywords."""
 
 from __future__ import annotations
 
@@ -81,11 +81,11 @@ def test_step_buffers_are_built_with_keywords():
 
 
 def test_memo_slots_are_distinct_and_fill_the_memo():
-    from rkhp.integrators import engine
+    from rkhp.integrators import engine_state
 
-    slots = {name: value for name, value in vars(engine).items()
+    slots = {name: value for name, value in vars(engine_state).items()
              if name.startswith("MEMO_") and name != "MEMO_SIZE"}
-    assert sorted(slots.values()) == list(range(engine.MEMO_SIZE))
+    assert sorted(slots.values()) == list(range(engine_state.MEMO_SIZE))
 
 
 @pytest.mark.slow

@@ -85,7 +85,7 @@ import json, random, shutil, sys
 import importlib.util
 from pathlib import Path
 
-import rkhp.taylor.compiler  # noqa: F401 - rkhp's cache, made robust (rkhp.taylor.kernel_cache)
+from rkhp.taylor.compiler import numba  # noqa: F401 - numba with rkhp's patches: a robust cache
 
 module_file, cache, pristine = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3])
 
@@ -266,7 +266,7 @@ def test_no_usable_folder_is_said_and_never_the_sources(tmp_path):
     env.update(XDG_CACHE_HOME=str(blocker), TMPDIR=str(temporary))
     script = ("import json, warnings\nwith warnings.catch_warnings(record=True) as said:\n"
               "    warnings.simplefilter('always')\n    import rkhp.taylor.compiler as c\n"
-              "from rkhp.taylor.interpreter import run_tape\n"
+              "    from rkhp.taylor.interpreter import run_tape\n"
               "print(json.dumps({'folder': c.RKHP_CACHE_DIR, 'said': [str(w.message) for w in said],"
               " 'kernels': run_tape._cache.cache_path}))")
     proc = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)

@@ -26,6 +26,9 @@ PROTOCOLS = {
     "begin": {"integrators/substeps.py", "integrators/tower_substep.py", "integrators/closed_euler.py",
               "integrators/spray_euler.py"},
     "substep": {"integrators/substeps.py", "integrators/closed_euler.py", "integrators/spray_euler.py"},
+    # a module's attribute hook (PEP 562): the lazy names of a package (rkhp._lazy), numba served
+    # with rkhp's patches applied at the first request (rkhp.taylor.compiler)
+    "__getattr__": {"_lazy.py", "taylor/compiler.py"},
 }
 
 

@@ -10,7 +10,7 @@ one system per class stands for its whole family: one step of each kind of metho
 compiled Hamiltonian of the studies compile every kernel a run of that family needs.
 
 Each of those runs on one system is a part (`AHEAD_PARTS`); the parts run in ``jobs`` processes
-side by side when numba's cache saves are locked (`rkhp.taylor.compiler.parallel_compiles_safe`),
+side by side when numba's cache saves are locked (`rkhp.taylor.numba_patches.parallel_compiles_safe`),
 else one after the other in this process, in two phases (`ahead_phases`): the parts that compile
 (every class's Hamiltonian and direct forms, the first class's other parts: the shared kernels),
 then the other classes' other parts, which load them (two processes compiling one kernel side by
@@ -167,7 +167,7 @@ def compile_ahead(jobs: int | None = None, on_part=None) -> AheadRun:
     then only load, and a cold specialisation is rare). ``on_part(done, total)`` is called after
     each part (progress). Each class runs also when nothing is cold: a specialisation may be
     missing."""
-    from ..taylor.compiler import parallel_compiles_safe
+    from ..taylor.numba_patches import parallel_compiles_safe
 
     classes = tape_classes()
     cold = {cls: cold_start(tuple(KERNELS), cls) for cls in classes}

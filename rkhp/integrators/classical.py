@@ -36,7 +36,7 @@ from ..taylor.interpreter import TapeWork, address_of, as_plain, interpreter, ru
 from ..taylor.jets import JetSpace, jet_space
 from ..taylor.linalg import lu_factor, lu_solve
 from ..taylor.tape import Tape
-from .engine import state_failure
+from .engine_state import state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_TOLERANCE
 from .trajectory import Trajectory, checked

@@ -10,7 +10,7 @@ the substep provider that `rkhp.integrators.substeps.choose` picks for the syste
 method. `drive` is the compiled loop, written once: numba compiles it
 once per provider (the class of the provider's data); it records the states, the Newton (or chord)
 iterations and the stage sweeps of each step, summed over its substeps, and checks the state after
-every substep (`rkhp.integrators.engine.state_failure`: finite, in the system's domain). `run`
+every substep (`rkhp.integrators.engine_state.state_failure`: finite, in the system's domain). `run`
 is its Python entry (a :class:`~rkhp.integrators.trajectory.Trajectory`), `run_ensemble` runs many
 initial values (threads over the compiled loop, which releases the GIL); `integrate_closed_euler`
 and `integrate_spray_euler` run RKHP Euler and its compositions by a direct form.
@@ -30,7 +30,7 @@ from ..base.errors import InputError, NumericalFailure
 from ..base.executors import available_cores, run_all
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
-from .engine import Solver, state_failure
+from .engine_state import Solver, state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS
 from .prepared import Lender, Lent

@@ -18,6 +18,7 @@ from __future__ import annotations
 import importlib
 from typing import NamedTuple
 
+from ..taylor.compiler import is_cached
 from ..taylor.ops import BY_CODE
 
 
@@ -88,7 +89,6 @@ def cold_start(kinds, tape_class=None) -> ColdStart:
     a cold interpreter adds the :data:`COMPOSITE_SECONDS` of the class's composite operations;
     the other entry kernels take plain tapes whatever the class
     (`rkhp.taylor.interpreter.Interpreter`), so one compiled version serves every class."""
-    from ..taylor.compiler import is_cached
     from ..taylor.tape import Tape
 
     wanted = [TAPE]

@@ -53,7 +53,7 @@ from ..taylor.collocation import TABLE_A, TABLE_B, TABLE_E, TABLE_W
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
 from ..taylor.composites import _norm_bound
-from ..taylor.linalg import lu_factor
+from ..taylor.linalg import lu_factor, max_abs
 from ..taylor.ops import SCRATCH_BASE, SPRAY
 from ..taylor.rows import subprogram_at
 from ..taylor.scalar import SCALAR_CODES, gradients, shared, values
@@ -68,7 +68,6 @@ from .direct_form import (
     hessian,
     weight,
 )
-from .engine import max_abs
 from .failure import Failure
 
 MAX_NODES = 12

@@ -26,7 +26,7 @@ from ..base.errors import InputError
 from ..taylor.interpreter import interpreter, tape_work
 from ..taylor.jets import jet_space, monomials
 from ..trees.rooted import trees_up_to
-from .engine import state_failure
+from .engine_state import state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS, NEWTON_TOLERANCE
 from .trajectory import Trajectory, checked

@@ -25,14 +25,14 @@ from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
 from ..taylor.interpreter import as_plain, interpreter
 from ..taylor.jets import jet_space
-from .engine import (
+from .engine import rkhp_step
+from .engine_state import (
     MEMO_HISTORY,
     EngineData,
     StageSolve,
     StepTableau,
     SystemTapes,
     interpreted,
-    rkhp_step,
     step_buffers,
 )
 from .failure import Failure
@@ -139,7 +139,7 @@ def tower_cost(system, tableau, substeps: int = 1) -> TowerCost:
 
 
 def engine_data(system, stages: int, stage):
-    """`rkhp.integrators.engine.EngineData`: the tapes, interpreter and jet space for the
+    """`rkhp.integrators.engine_state.EngineData`: the tapes, interpreter and jet space for the
     compiled engine, jets in n variables of degree s + 1 (explicit) or the stage degree
     (implicit)."""
     degree = stage.degree if stage.degree > 0 else stages + 1
@@ -162,10 +162,10 @@ class PsiHistory(NamedTuple):
 class TowerSubstep(NamedTuple):
     """What the tower's substeps of one run use: the tableau's A (s, s) and b (s,); the system's
     plain tapes, the address of their class's interpreter and the jet space
-    (`engine_data`); the step buffers (`engine.step_buffers`: the
+    (`engine_data`); the step buffers (`engine_state.step_buffers`: the
     state is buf.y); the memory of the composition's substeps; the stage solve (None for an
     explicit tableau, so that numba compiles its substep without the implicit tower: docs/engine.md
-    "Compile time"; a `rkhp.integrators.engine.StageSolve` for an implicit one); the state the
+    "Compile time"; a `rkhp.integrators.engine_state.StageSolve` for an implicit one); the state the
     substeps advance, y (buf.y)."""
 
     A: np.ndarray
@@ -199,8 +199,8 @@ def begin(data, y0):
     """Start a run at y0 (the state buf.y), every substep without history and every scalar the
     steps keep (buf.memo: history, Lipschitz estimate, factorisation, stage solve) as in new
     buffers, so that a run on data prepared before computes what it computes on new data;
-    returns the tapes evaluated at their interpreter's address (`engine.interpreted`: copies on
-    the stack of the loop this is inlined into)."""
+    returns the tapes evaluated at their interpreter's address (`engine_state.interpreted`:
+    copies on the stack of the loop this is inlined into)."""
     buf = data.buf
     for k in range(y0.shape[0]):
         buf.y[k] = y0[k]

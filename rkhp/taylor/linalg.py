@@ -1,6 +1,7 @@
 """Small dense linear algebra in compiled code, without allocation: the LU factorisation with
 partial pivoting of the spray kernel's Newton matrices (`rkhp.taylor.composites`) and of the
-engine's Newton solve (`rkhp.integrators.engine.newton_solve`)."""
+engine's Newton solve (`rkhp.integrators.engine.newton_solve`), and the max-norm of the
+integrators' stopping tests (`max_abs`)."""
 
 from __future__ import annotations
 
@@ -49,3 +50,14 @@ def lu_solve(LU, perm, b, tmp):
         tmp[i] = acc / LU[i, i]
     for i in range(n):
         b[i] = tmp[i]
+
+
+@nb.njit(**NJIT_NORC)
+def max_abs(v):
+    """The largest |v_k| (NaN if any component is NaN)."""
+    r = 0.0
+    for q in range(v.shape[0]):
+        a = abs(v[q])
+        if not a <= r:  # also catches NaN
+            r = a
+    return r

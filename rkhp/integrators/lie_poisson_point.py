@@ -1,0 +1,169 @@
+"""The points of a Lie–Poisson substep in direct form (`rkhp.integrators.closed_euler`): from z,
+with K = K(z) (K(p) x = -pi(x) p, docs/theory.md §4), y1 - y0 = e^-K y0 - y0 and x = psi(K) y0,
+psi(z) = (1 - e^-z) / z.
+
+e^-K y0 and psi(K) y0 are the power series sum_m (-K)^m y0 / m! and sum_m (-K)^m y0 / (m + 1)!
+by products with K stored by its non-zero entries (O(nnz(C)) a product, `exp_series`), under the
+guard of the family's phi (|K|_F < 0.9 * 2 pi, `rkhp.taylor.composites.phimv`): a substep beyond
+it fails as the engine's Newton iteration does on the NaN that phi gives there
+(NEWTON_NON_FINITE). On so(3)* they are Rodrigues' closed forms (`rotation_point`), with the
+Jacobian of x in z (`rotation_jacobian`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..taylor.compiler import NJIT_NORC
+from ..taylor.compiler import numba as nb
+from ..taylor.elementary import TWO_PI
+from .failure import Failure
+
+PHI_GUARD = 0.9 * TWO_PI
+"""The bound on |K|_F of the family's phi (`rkhp.taylor.composites.phimv`), kept here so that
+the direct form fails where the engine does."""
+SERIES_TERMS = 64
+"""Terms of the series of e^-K at most (|K|_F < PHI_GUARD needs about 40 for round-off)."""
+ROTATION_SERIES = 1.0
+"""Below this angle theta the coefficients of the rotation (`_rotation_coefficients`) are summed
+as their power series (ROTATION_TERMS terms: the next is below 2^-56 of the first), above it
+taken from sin and cos (whose differences lose at most a few units of round-off there)."""
+ROTATION_TERMS = 9
+
+
+def _rotation_series_table() -> np.ndarray:
+    """The coefficients in t = theta^2 of `_rotation_coefficients`' five series: (-1)^m / (2 m +
+    k)! for k = 1, 2, 3 (sin theta / theta, (1 - cos theta) / theta^2, (theta - sin theta) /
+    theta^3), then (-1)^(m + 1) 2 (m + 1) / (2 m + k + 2)! for k = 2, 3 (their derivatives in
+    theta, divided by theta)."""
+    table = np.zeros((5, ROTATION_TERMS))
+    for m in range(ROTATION_TERMS):
+        for row, k in enumerate((1, 2, 3)):
+            table[row, m] = (-1) ** m / math.factorial(2 * m + k)
+        for row, k in ((3, 2), (4, 3)):
+            table[row, m] = (-1) ** (m + 1) * 2 * (m + 1) / math.factorial(2 * m + k + 2)
+    return table
+
+
+ROTATION_SERIES_TABLE = _rotation_series_table()
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def exp_series(y0, form, work, n):
+    """Lie-poisson: K(work.z) into work.kval, then work.dy := e^-K y0 - y0 and work.xbar :=
+    psi(K) y0 by their power series (see the module), summed until the next terms' bound is
+    below round-off. Returns Failure.OK, or NEWTON_NON_FINITE when |K|_F is not below PHI_GUARD
+    (or not finite)."""
+    norm = 0.0
+    for e in range(form.pairs.shape[0]):
+        acc = 0.0
+        for r in range(form.starts[e], form.starts[e + 1]):
+            acc += form.coefs[r] * work.z[form.cols[r]]
+        work.kval[e] = acc
+        norm += acc * acc
+    norm = math.sqrt(norm)
+    if not norm < PHI_GUARD:
+        return Failure.NEWTON_NON_FINITE
+    size0 = 0.0
+    for k in range(n):
+        work.v[k] = y0[k]
+        work.dy[k] = 0.0
+        work.xbar[k] = y0[k]
+        size0 += y0[k] * y0[k]
+    bound = 2.0**-106 * size0  # (2^-53 |y0|_2)^2
+    for m in range(1, SERIES_TERMS + 1):
+        for k in range(n):
+            work.kv[k] = 0.0
+        for e in range(form.pairs.shape[0]):
+            work.kv[form.pairs[e, 0]] -= work.kval[e] * work.v[form.pairs[e, 1]]
+        size = 0.0
+        for k in range(n):
+            t = work.kv[k] / m
+            work.v[k] = t
+            work.dy[k] += t
+            work.xbar[k] += t / (m + 1)
+            size += t * t
+        # the tail after term m is at most |v_m|_2 q / (1 - q) <= |v_m|_2, q = |K|_2 / (m + 1)
+        if 2.0 * norm <= m + 1 and size <= bound:
+            return Failure.OK
+    return Failure.NEWTON_NON_FINITE
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _series(t, row):
+    """sum_m ROTATION_SERIES_TABLE[row, m] t^m by Horner's rule."""
+    acc = 0.0
+    for m in range(ROTATION_TERMS - 1, -1, -1):
+        acc = acc * t + ROTATION_SERIES_TABLE[row, m]
+    return acc
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _rotation_coefficients(theta):
+    """(sin(theta) / theta, (1 - cos theta) / theta^2, (theta - sin theta) / theta^3, a'/theta,
+    b'/theta), a and b the second and third (their derivatives in theta divided by theta, for the
+    Jacobian `rotation_jacobian`): power series below ROTATION_SERIES (the singularities at 0 are
+    removable), sin and cos above."""
+    if theta < ROTATION_SERIES:
+        t = theta * theta
+        return _series(t, 0), _series(t, 1), _series(t, 2), _series(t, 3), _series(t, 4)
+    s = math.sin(theta)
+    t2 = theta * theta
+    half = math.sin(0.5 * theta)
+    one_minus_cos = 2.0 * half * half
+    return (s / theta, one_minus_cos / t2, (theta - s) / (t2 * theta),
+            (theta * s - 2.0 * one_minus_cos) / (t2 * t2),
+            (theta * one_minus_cos - 3.0 * (theta - s)) / (t2 * t2 * theta))
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _cross(a, b, out):
+    """out := a x b (3-vectors)."""
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def rotation_point(y0, form, work):
+    """so(3)*: with q = s z (K = hat(q), K y = q x y, theta = |q|), Rodrigues' closed forms
+    e^-K y0 = y0 - (sin theta / theta) q x y0 + ((1 - cos theta) / theta^2) q x (q x y0) and
+    psi(K) y0 = y0 - ((1 - cos theta) / theta^2) q x y0 + ((theta - sin theta) / theta^3) q x (q x y0)
+    (the series of the module summed by K^3 = -theta^2 K: docs/theory.md §12). work.v := q,
+    work.kv := q x y0, work.tmp := q x (q x y0); Failure as `exp_series` (|K|_F = sqrt(2) theta)."""
+    q, c1, c2 = work.v, work.kv, work.tmp
+    for k in range(3):
+        q[k] = form.rotation * work.z[k]
+    theta = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2])
+    if not math.sqrt(2.0) * theta < PHI_GUARD:
+        return Failure.NEWTON_NON_FINITE
+    sinc, a, b, _, _ = _rotation_coefficients(theta)
+    _cross(q, y0, c1)
+    _cross(q, c1, c2)
+    for k in range(3):
+        work.dy[k] = -sinc * c1[k] + a * c2[k]
+        work.xbar[k] = y0[k] - a * c1[k] + b * c2[k]
+    return Failure.OK
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def rotation_jacobian(y0, form, work, D):
+    """D := x'(z) on so(3)*, x = y0 - a c1 + b c2 (`rotation_point`, c1 = q x y0, c2 = q x c1,
+    q = s z): d c1 / dq = -hat(y0), d c2 / dq = (q . y0) I + q y0^T - 2 y0 q^T, d a / dq =
+    (a'/theta) q^T, d b / dq = (b'/theta) q^T; then times s. Reads what `rotation_point` left in
+    work.v, work.kv, work.tmp."""
+    q, c1, c2 = work.v, work.kv, work.tmp
+    theta = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2])
+    _, a, b, da, db = _rotation_coefficients(theta)
+    qy = q[0] * y0[0] + q[1] * y0[1] + q[2] * y0[2]
+    for i in range(3):
+        for j in range(3):
+            hat = 0.0  # hat(y0)_ij = -epsilon_ijk y0_k: hat(y0) w = y0 x w
+            if (i + 1) % 3 == j:
+                hat = -y0[3 - i - j]
+            elif (j + 1) % 3 == i:
+                hat = y0[3 - i - j]
+            d2 = (qy if i == j else 0.0) + q[i] * y0[j] - 2.0 * y0[i] * q[j]
+            D[i, j] = form.rotation * ((-c1[i] * da + c2[i] * db) * q[j] + a * hat + b * d2)
