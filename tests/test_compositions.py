@@ -190,16 +190,22 @@ CONFIRMING = [
     ("rigid-body", "tj4,suzuki4,tj6,kahan-li6,tj8", ["--steps", "20", "--refinements", "3"]),
     ("rigid-body", "kahan-li8", ["--steps", "10", "--refinements", "3"]),
     ("rigid-body", "sofroniou-spaletta10", ["--steps", "8,10,12,14,16,19,23,27,32"]),
-    ("charged-particle", "tj4,suzuki4,tj6,kahan-li6,tj8", ["--steps", "30", "--refinements", "3"]),
+    ("charged-particle", "tj4,suzuki4,tj6,kahan-li6", ["--steps", "30", "--refinements", "3"]),
+    # tj8's substeps reach 2.56 h forwards and 2.83 h backwards: at h = 1/3 their Newton fails here
+    ("charged-particle", "tj8", ["--steps", "125,150,180,216,260"]),
     ("nambu", "tj4,suzuki4,tj6,kahan-li6", ["--steps", "20", "--refinements", "3"]),
     ("nambu", "kahan-li8", ["--steps", "12,15,18,21,25,30"]),
     ("nambu", "tj8", ["--steps", "80,100,125,160"]),
-    # order 10 and kahan-li8's 8 below DOP853's accuracy: the mpmath reference (docs/compositions.md)
-    ("nambu", "sofroniou-spaletta10", ["--reference", "mpmath", "--steps", "16,19,23,27,32"]),
-    ("charged-particle", "sofroniou-spaletta10", ["--reference", "mpmath", "--t-final", "3",
-                                                  "--steps", "6,7,8,9,10,11,12"]),
+    # kahan-li8's 8 below DOP853's accuracy: the mpmath reference (docs/compositions.md)
     ("charged-particle", "kahan-li8", ["--reference", "mpmath", "--t-final", "3",
                                        "--steps", "16,19,23,27,32,38"]),
+]
+
+#: order 10 on the general pi, where double precision leaves no asymptotic range for the fit: the
+#: local orders between the pre-asymptotic rows and the round-off floor (docs/compositions.md)
+ORDER_TEN = [
+    ("nambu", ["--reference", "mpmath", "--steps", "12,14,16,19,23"]),
+    ("charged-particle", ["--reference", "mpmath", "--t-final", "3", "--steps", "8,9,10,11,12"]),
 ]
 
 
@@ -210,6 +216,20 @@ def test_converge_confirms_the_published_orders(run_cli, system, methods, steps)
     assert code == 0, err
     verdicts = {m["method"]: (m["expected_order"], m["verdict"]) for m in json.loads(out)["methods"]}
     assert verdicts == {m: (PUBLISHED[m][0], "confirmed") for m in methods.split(",")}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("system,steps", ORDER_TEN)
+def test_order_ten_shows_in_the_local_orders(run_cli, system, steps):
+    """sofroniou-spaletta10's published order 10 on a general pi: four successive local orders
+    within 0.6 of 10 (an order-8 method shows 8); the fit's verdict is not asserted, the window
+    above the round-off floor being too short for its asymptotic test."""
+    code, out, err = run_cli("converge", system, "--method", "sofroniou-spaletta10", *steps, "--format", "json")
+    assert code == 0, err
+    (method,) = json.loads(out)["methods"]
+    local = [row["local_order"] for row in method["rows"][1:]]
+    assert method["expected_order"] == PUBLISHED["sofroniou-spaletta10"][0]
+    assert len(local) == 4 and all(abs(p - 10) <= 0.6 for p in local), local
 
 
 def test_converge_confirms_order_8_on_a_non_affine_pi(run_cli):
