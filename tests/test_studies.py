@@ -282,7 +282,7 @@ def test_unwritable_plot_path(tmp_path):
 def _bench_json(args):
     result = _run(["bench", "rigid-body", *args, "--format", "json"])
     assert result.exit_code == 0, result.output
-    return json.loads(result.output)
+    return json.loads(result.stdout)  # stderr may hold the cost note (docs/methods.md)
 
 
 def test_bench_error_falls_as_cost_rises(tmp_path):
@@ -412,7 +412,7 @@ def test_full_stress_rigid_body():
 def test_full_default_converge_and_bench():
     result = _run(["converge", "rigid-body", "--format", "json"])
     assert result.exit_code == 0
-    assert all(m["verdict"] == "confirmed" for m in json.loads(result.output)["methods"])
+    assert all(m["verdict"] == "confirmed" for m in json.loads(result.stdout)["methods"])
     data = _bench_json([])
     assert any(c["method"] is not None for c in data["cheapest"])
 
