@@ -475,14 +475,21 @@ def _gone_within(pids, seconds: float) -> bool:
 BENCH_ON_WORKERS = ("bench", "pendulum", "--method", "rk4", "--repeats", "200", "--workers", "2")
 
 
+def _running_with_workers(args, **kwargs):
+    """`rkhp ARGS` started in a session of its own, once its two workers run and a second has
+    passed: (the process, the workers' pids)."""
+    proc = _start(args, signal.SIGTERM, start_new_session=True, **kwargs)
+    workers = _wait_for_children(proc, 2)
+    assert len(workers) >= 2, workers
+    time.sleep(1.0)
+    return proc, workers
+
+
 @pytest.mark.skipif(not LINUX, reason="reads /proc")
 def test_killing_the_parent_kills_its_workers():
     """`kill -9` of `rkhp bench --workers 2`: its two workers end within seconds (they would
     compute for minutes, orphaned)."""
-    proc = _start(BENCH_ON_WORKERS, signal.SIGTERM, start_new_session=True)
-    workers = _wait_for_children(proc, 2)
-    assert len(workers) >= 2, workers
-    time.sleep(1.0)
+    proc, workers = _running_with_workers(BENCH_ON_WORKERS)
     proc.kill()
     proc.communicate(timeout=60)
     assert _gone_within(workers, 10), [pid for pid in workers if _alive(pid)]
@@ -492,10 +499,7 @@ def test_killing_the_parent_kills_its_workers():
 def test_sigterm_of_the_parent_stops_its_workers_at_once():
     """SIGTERM of `rkhp bench --workers 2`: status 143 and one line within seconds, not after the
     workers' running tasks; no worker left."""
-    proc = _start(BENCH_ON_WORKERS, signal.SIGTERM, start_new_session=True)
-    workers = _wait_for_children(proc, 2)
-    assert len(workers) >= 2, workers
-    time.sleep(1.0)
+    proc, workers = _running_with_workers(BENCH_ON_WORKERS)
     proc.send_signal(signal.SIGTERM)
     start = time.monotonic()
     out, err = proc.communicate(timeout=60)
@@ -512,10 +516,7 @@ def test_killing_rkhp_compile_kills_its_compile_workers(tmp_path):
     """`kill -9` of `rkhp compile --jobs 2` on an empty cache, both workers compiling: they end
     within seconds."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"))
-    proc = _start(("compile", "--jobs", "2"), signal.SIGTERM, env=env, start_new_session=True)
-    workers = _wait_for_children(proc, 2)
-    assert len(workers) >= 2, workers
-    time.sleep(1.0)
+    proc, workers = _running_with_workers(("compile", "--jobs", "2"), env=env)
     proc.kill()
     proc.communicate(timeout=60)
     assert _gone_within(workers, 10), [pid for pid in workers if _alive(pid)]
