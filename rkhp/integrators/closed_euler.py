@@ -51,6 +51,7 @@ from ..base.errors import InputError
 from ..systems import families
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
+from ..taylor.generated import call_at
 from ..taylor.linalg import lu_factor, lu_solve, max_abs
 from ..taylor.scalar import SCALAR_CODES, polynomial_degree, shared
 from ..taylor.tape import Tape
@@ -65,6 +66,7 @@ from .direct_form import (
     weight,
 )
 from .failure import Failure
+from .derivatives import derivatives_at
 from .lie_poisson_point import exp_series, rotation_jacobian, rotation_point
 
 CONSTANT, LIE_POISSON, LOG_CANONICAL = 0, 1, 2
@@ -81,11 +83,14 @@ BROYDEN_FLOOR = 2.0**-30
 """Broyden's update uses a correction only above this (relative to max(1, |y0|)): below, the
 change of the residual is dominated by its rounding."""
 EXACT_DIMENSION = 12
-"""Systems with a quadratic H (a constant Hessian) solve each substep by Newton's method
-(`newton_substep`) on so(3)*, and on the constant and log-canonical families up to this
-dimension; the others keep a chord matrix across steps with Broyden's updates (`closed_substep`):
-where Hess H must be evaluated at every Newton step, more but cheaper chord iterations take less
-time (`benchmarks/substeps.py`), and on other Lie–Poisson algebras x'(z) has no closed form."""
+"""Systems whose Hess H is constant (a quadratic H) or compiled (`ClosedForm.derivatives_at`)
+solve each substep by Newton's method (`newton_substep`) on so(3)*, and on the constant and
+log-canonical families up to this dimension; the others keep a chord matrix across steps with
+Broyden's updates (`closed_substep`): where Hess H is interpreted (central differences of the
+gradient, 2 n gradients), more but cheaper chord iterations take less time
+(`benchmarks/substeps.py`); on other Lie–Poisson algebras x'(z) has no closed form; and in more
+dimensions the Hessian's n^2 entries and its factorisation cost more than the iterations they
+save."""
 NEWTON_REFRESH = 1e-7
 """`newton_substep` takes the exact Jacobian again after a correction above this (relative to
 max(1, |y0|)); below it the last one serves (its chord step contracts by about L 1e-7)."""
@@ -103,7 +108,10 @@ class ClosedForm(NamedTuple):
     then Rodrigues' closed forms, `rotation_point`), else 0; exact: whether each substep's
     matrix is the exact Jacobian at its iterates (`EXACT_DIMENSION`, `newton_substep`);
     hessian_constant: whether H is a polynomial of degree at most 2 (`rkhp.taylor.scalar.
-    polynomial_degree`), and then hessian (n, n) its Hessian (else zeros)."""
+    polynomial_degree`), and then hessian (n, n) its Hessian (else zeros); derivatives_at: the
+    address of H's gradient and Hessian compiled for this system (`rkhp.integrators.derivatives`;
+    the Hessian where the substeps take Newton's method on a non-quadratic H), 0 where the tape is
+    interpreted."""
 
     kind: int
     matrix: np.ndarray
@@ -116,6 +124,7 @@ class ClosedForm(NamedTuple):
     exact: bool
     hessian_constant: bool
     hessian: np.ndarray
+    derivatives_at: int
 
 
 class ClosedWork(NamedTuple):
@@ -130,7 +139,7 @@ class ClosedWork(NamedTuple):
     (then the correction) and lu_solve's work vector; last, step, by (n): the previous residual,
     the previous correction and a product, for Broyden's update; perm (n) int64: the row order
     of the chord matrix's factors; y, y_low (n): the state as the double-double y + y_low
-    (`begin`)."""
+    (`begin`); derivs (n + n^2): grad H and Hess H by the compiled derivatives."""
 
     W: np.ndarray
     z: np.ndarray
@@ -151,6 +160,7 @@ class ClosedWork(NamedTuple):
     perm: np.ndarray
     y: np.ndarray
     y_low: np.ndarray
+    derivs: np.ndarray
 
 
 class ChordMemory(NamedTuple):
@@ -178,7 +188,7 @@ def closed_work(form: ClosedForm, n: int) -> ClosedWork:
     return ClosedWork(np.zeros((form.hamiltonian.n_slots, n + 1)), vector(), vector(), vector(), vector(), vector(),
                       vector(), np.zeros(form.pairs.shape[0]), np.zeros((n, n)), np.zeros((n, n)),
                       vector(), vector(), vector(), vector(), vector(), vector(),
-                      np.zeros(n, np.int64), vector(), vector())
+                      np.zeros(n, np.int64), vector(), vector(), np.zeros(n + n * n))
 
 
 def chord_memory(s: int, n: int) -> ChordMemory:
@@ -216,7 +226,10 @@ def _point(y0, form, work, n):
 @nb.njit(inline="always", **NJIT_NORC)
 def _target(hs, form, work, n):
     """work.res := G(work.xbar) (see the module) with step hs."""
-    gradient(form, work, work.xbar, n)
+    if form.derivatives_at != 0:
+        call_at(form.derivatives_at, work.xbar, work.g, 0)
+    else:
+        gradient(form, work, work.xbar, n)
     for k in range(n):
         gk = hs * work.g[k]
         work.res[k] = work.xbar[k] * gk if form.kind == LOG_CANONICAL else gk
@@ -275,17 +288,26 @@ def _exact_factors(i, y0, hs, form, work, memory, n):
 def _jacobian_matrix(i, hs, form, work, memory, n):
     """memory.inverse[i] := I - hs G'(x) D with G'(x) = Hess H(x) (constant, lie-poisson) or
     diag(grad H(x)) + diag(x) Hess H(x) (log-canonical), x = work.xz, D = work.jac (x'). Hess H is
-    the constant one of the form for a quadratic H, else by differences of the gradient
+    the constant one of the form for a quadratic H, else the compiled one (`ClosedForm.
+    derivatives_at`) or, without it, by differences of the gradient
     (`rkhp.integrators.direct_form.hessian`)."""
     D, H, x = work.jac, work.hess, work.xz
     if form.hessian_constant:
         for a in range(n):
             for b in range(n):
                 H[a, b] = form.hessian[a, b]
+        if form.kind == LOG_CANONICAL:
+            gradient(form, work, x, n)
+    elif form.derivatives_at != 0 and form.exact:
+        call_at(form.derivatives_at, x, work.derivs, 1)
+        for a in range(n):
+            work.g[a] = work.derivs[a]
+            for b in range(n):
+                H[a, b] = work.derivs[n + n * a + b]
     else:
         hessian(form, work, x, n)
-    if form.kind == LOG_CANONICAL:
-        gradient(form, work, x, n)
+        if form.kind == LOG_CANONICAL:
+            gradient(form, work, x, n)
     if form.kind == LOG_CANONICAL:
         # G'(x) = h (diag(grad H) + diag(x) Hess H)
         for a in range(n):
@@ -621,9 +643,11 @@ def _read_form(system) -> ClosedForm:
     rotation = _rotation_scale(C) if kind == LIE_POISSON else 0.0
     tape = shared(Tape(*h))
     quadratic = polynomial_degree(tape) <= 2
-    exact = quadratic and (rotation != 0.0 or (kind != LIE_POISSON and n <= EXACT_DIMENSION))
+    newton = rotation != 0.0 or (kind != LIE_POISSON and n <= EXACT_DIMENSION)
+    address = derivatives_at(system, hessian=newton and not quadratic)
+    exact = newton and (quadratic or address != 0)
     form = ClosedForm(kind, np.ascontiguousarray(matrix), *_lie_entries(C), tape, rotation, exact, quadratic,
-                      np.zeros((n, n)))
+                      np.zeros((n, n)), address)
     if quadratic:
         _quadratic_hessian(form, closed_work(form, n), n)
     return form

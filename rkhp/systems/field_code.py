@@ -21,6 +21,9 @@ no text of a spec file reaches ``exec``. Three forms (:data:`FORMS`):
 - ``cfunc``: ``f(t, u, du, p)`` writing du in place, the signature of a numba ``cfunc`` right-hand
   side (numbalsoda's ``lsoda_sig``);
 - ``jax``: ``f(t, y, args) -> array`` for diffrax, the functions of ``jax.numpy``.
+
+The direct forms of the RKHP Euler step take H's gradient and Hessian written out the same way
+(:func:`derivatives_code`, compiled per system by `rkhp.taylor.generated`).
 """
 
 from __future__ import annotations
@@ -172,6 +175,37 @@ def code_of(symbols, exprs, form: str) -> FieldCode:
         stacked = ", ".join(f"jnp.asarray({text}, dtype=y.dtype)" for text in components)
         tail = [f"    return jnp.stack([{stacked}])"]
     return FieldCode(form, "\n".join(head + body + tail) + "\n", n, count)
+
+
+def derivatives_code(system, hessian: bool) -> FieldCode:
+    """The source of ``derivatives(u, out, what)``, the body of a numba ``cfunc`` over pointers to
+    float64 (`rkhp.taylor.generated.SIGNATURE`): at x = (u[0], ..., u[n-1]), ``what`` = 0 writes
+    grad H(x) into out[0:n]; ``what`` = 1 writes grad H(x) and, with ``hessian``, Hess H(x) row by
+    row into out[n:n + n^2] (each entry of the upper triangle computed once). H is read off the
+    system's tape (:func:`hamiltonian_expression`; InputError where it holds a composite
+    operation), differentiated by sympy, its common subexpressions named once per branch.
+    ``operations`` counts those of the branch ``what`` = 1."""
+    import sympy
+
+    n = system.dim
+    x = symbols_of(n)
+    H = hamiltonian_expression(system)
+    grad = [sympy.diff(H, v) for v in x]
+    pairs = [(a, b) for a in range(n) for b in range(a, n)] if hessian else []
+    second = [sympy.diff(grad[a], x[b]) for a, b in pairs]
+    names = [str(v) for v in x]
+    lines = ["def derivatives(u, out, what):", *[f"    {name} = u[{i}]" for i, name in enumerate(names)]]
+    first_lines, first, _ = _printed(x, grad)
+    both_lines, both, count = _printed(x, grad + second)
+    lines += ["    if what == 0:", *[f"        {a} = {b}" for a, b in first_lines],
+              *[f"        out[{k}] = {text}" for k, text in enumerate(first)],
+              "    else:", *[f"        {a} = {b}" for a, b in both_lines],
+              *[f"        out[{k}] = {text}" for k, text in enumerate(both[:n])]]
+    for (a, b), text in zip(pairs, both[n:], strict=True):
+        lines.append(f"        out[{n + n * a + b}] = {text}")
+        if a != b:
+            lines.append(f"        out[{n + n * b + a}] = out[{n + n * a + b}]")
+    return FieldCode("derivatives", "\n".join(lines) + "\n", n, count)
 
 
 def _namespace(form: str) -> dict:
