@@ -17,8 +17,8 @@ The commits that records compare are listed once, by what each version is (`[ver
   with the date (UTC) and this machine's CPU model, cores and load average at the start, then
   writes the page again. A command that fails adds nothing (exit 1).
 
-docs/results/work-precision.md is a generated page of its own (benchmarks/work_precision.py
---write), linked from this one.
+docs/results/work-precision.md and docs/results/long-runs.md are generated pages of their own
+(benchmarks/work_precision.py --write, benchmarks/long_runs.py --write), linked from this one.
 """
 
 from __future__ import annotations
@@ -135,8 +135,8 @@ def render(entries: list[Record], named: dict[str, str]) -> str:
         "one run, interleaved), not figures of different records. Commit hashes name the versions "
         "a run compared, as the run named them; the last section says what each version is.",
         "",
-        "Work-precision against compiled peers is its own generated page: "
-        "[work-precision](work-precision.md).",
+        "Work-precision against compiled peers, and long runs against them at equal CPU time, are "
+        "generated pages of their own: [work-precision](work-precision.md), [long runs](long-runs.md).",
         "",
     ]
     pages = list(dict.fromkeys(r.page for r in entries))

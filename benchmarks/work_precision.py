@@ -25,8 +25,7 @@ Contenders (rkhp.studies.peers; every field is generated from the system, so spe
 - scipy:dop853: solve_ivp on the field a user writes with plain arithmetic.
 A compiled peer whose package is not installed is printed as absent (pip install 'rkhp[peers]').
 
-Part 2 (not with --quick): over T = 10^4 on nambu, energy and Casimir errors of kahan-li8 (h = 0.1)
-and of the compiled DOP853 (scipy's where it is absent) at rtol 1e-8 ... 1e-15, with CPU times.
+Long runs (T = 10^5, at equal CPU time) are benchmarks/long_runs.py.
 """
 
 from __future__ import annotations
@@ -249,8 +248,7 @@ def versions() -> str:
     return ", ".join(out)
 
 
-def page(command: str, started: str, where: str, rows: list[Row], absent: dict, targets, rounds: int,
-         long_rows: list[str]) -> str:
+def page(command: str, started: str, where: str, rows: list[Row], absent: dict, targets, rounds: int) -> str:
     """The generated results page (docs/results/work-precision.md)."""
     text = [
         "# Work-precision against compiled peers (generated)",
@@ -275,47 +273,10 @@ def page(command: str, started: str, where: str, rows: list[Row], absent: dict, 
     text += ["", "## CPU time of the calling thread (ms)", "", *table(rows, absent, 1), "",
              "## Wall time (ms)", "", *table(rows, absent, 2), "",
              "## Settings (rkhp: steps; peers: rtol) and end-point errors", "", *settings_table(rows, absent), ""]
-    if long_rows:
-        text += ["## Long run: nambu, T = 10^4", "",
-                 "Largest energy and Casimir errors over the run (DOP853 sampled at 2001 equally spaced times, "
-                 "kahan-li8 at every 5th step); CPU time of one run, compiled beforehand.", "",
-                 "| method | CPU s | energy error | Casimir error |", "|---|---|---|---|", *long_rows, ""]
     return "\n".join(text)
 
 
-def long_run(system_name: str = "nambu", method: str = "kahan-li8", t_final: float = 1e4, h: float = 0.1,
-             absent: dict | None = None) -> list[str]:
-    """Energy and Casimir errors over T = t_final of ``method`` and of a DOP853 over rtol (the
-    compiled one where installed): markdown table rows, printed as they come."""
-    system = resolve_system(system_name)
-    n = int(round(t_final / h))
-    cpu = time.thread_time()
-    traj = resolve_method(method).integrate(system, h, n).raise_if_failed()
-    ours = time.thread_time() - cpu
-
-    def drift(states):
-        e0, c0 = system.hamiltonian(states[0]), system.casimir_values(states[0])
-        energy = max(abs(system.hamiltonian(x) - e0) for x in states)
-        casimir = max(float(np.abs(system.casimir_values(x) - c0).max()) for x in states) if len(c0) else 0.0
-        return energy, casimir
-
-    e, c = drift(traj.states[:: max(1, n // 2000)])
-    rows = [f"| {method}, h = {h} | {ours:.2e} | {e:.1e} | {c:.1e} |"]
-    print(f"# {system_name}, T = {t_final:g}: method | CPU s | energy error | Casimir error\n{rows[-1]}", flush=True)
-    name = "scipy:dop853" if "numbalsoda:dop853" in (absent or {}) else "numbalsoda:dop853"
-    prepared = P.prepare(peer_of(name), system, t_final, samples=2000)
-    x0 = np.asarray(system.x0, dtype=float)
-    for rtol in (1e-8, 1e-10, 1e-12, 1e-14, 1e-15):
-        cpu = time.thread_time()
-        sol = prepared.solve(x0, rtol)
-        spent = time.thread_time() - cpu
-        e, c = drift(sol.states)
-        rows.append(f"| {name}, rtol {rtol:g} | {spent:.2e} | {e:.1e} | {c:.1e} |")
-        print(rows[-1], flush=True)
-    return rows
-
-
-def _option(argv, flag, default):
+def option(argv, flag, default):
     if flag in argv:
         i = argv.index(flag)
         value = argv[i + 1]
@@ -330,9 +291,9 @@ def main(argv) -> None:
     quick = "--quick" in argv
     if quick:
         argv.remove("--quick")
-    targets = tuple(float(t) for t in _option(argv, "--targets", ",".join(map(str, TARGETS))).split(","))
-    rounds = int(_option(argv, "--rounds", str(3 if quick else ROUNDS)))
-    write = _option(argv, "--write", None)
+    targets = tuple(float(t) for t in option(argv, "--targets", ",".join(map(str, TARGETS))).split(","))
+    rounds = int(option(argv, "--rounds", str(3 if quick else ROUNDS)))
+    write = option(argv, "--write", None)
     systems = tuple(argv) or (SYSTEMS[:1] if quick else SYSTEMS)
     started = time.strftime("%Y-%m-%d %H:%M")
     where = machine()
@@ -345,9 +306,8 @@ def main(argv) -> None:
     rows = []
     for name in systems:
         rows += race(name, targets, rounds, absent)
-    long_rows = [] if quick else long_run(absent=absent)
     if write:
-        Path(write).write_text(page(command, started, where, rows, absent, targets, rounds, long_rows))
+        Path(write).write_text(page(command, started, where, rows, absent, targets, rounds))
         print(f"# written: {write}")
 
 
