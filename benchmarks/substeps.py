@@ -16,7 +16,8 @@ tower's steps, relative to the largest |y|.
 Second table, the race's settings (the step sizes at which the compositions reach 1e-10 at T = 10
 in docs/results/work-precision.md): per substep, microseconds, iterations, Jacobians (chord
 matrices or Newton's), and an estimate of the floating-point operations the substep ran
-(`flops`: per iteration the point x(z) and y1, H's gradient by forward mode and the linear solve;
+(`flops`: per iteration the point x(z) and y1, H's gradient (its compiled code's operations, or
+forward mode on the tape) and the linear solve;
 per Jacobian its assembly and factorisation) and of those the mathematics needs (`limit`: two
 Newton iterations with one Jacobian and the closing point), with the rate the run achieved
 (flops / time).
@@ -98,12 +99,18 @@ RACE = (("rigid-body", "sofroniou-spaletta10", 11), ("lotka-volterra", "sofronio
 """(system, composition, steps over T = 10) of the second table: closed direct forms."""
 
 
-def closed_flops(form, n: int) -> dict:
-    """Flop estimates of the closed direct form's parts on `form` (see the module)."""
+def closed_flops(system, form, n: int) -> dict:
+    """Flop estimates of the closed direct form's parts on `form` (see the module): H's gradient
+    and Hessian by the operations of their compiled code (`rkhp.systems.field_code.
+    derivatives_code`) where the form has them, else by forward mode on the tape and differences
+    of the gradient (the chord matrix's Hessian)."""
     from rkhp.integrators import closed_euler
+    from rkhp.systems.field_code import derivatives_code
 
     ops = form.hamiltonian.ops.shape[0]
-    gradient = 2 * ops * (n + 1) + 2 * n
+    forward = 2 * ops * (n + 1) + 2 * n  # a gradient by forward mode on the tape
+    gradient = derivatives_code(system, False).operations if form.derivatives_at else forward
+    hessian = derivatives_code(system, True).operations if form.derivatives_at and form.exact else 2 * n * forward
     if form.kind == closed_euler.LIE_POISSON and form.rotation:
         point = 70
     elif form.kind == closed_euler.LIE_POISSON:
@@ -111,7 +118,7 @@ def closed_flops(form, n: int) -> dict:
     else:
         point = 2 * n * n + (40 * n if form.kind == closed_euler.LOG_CANONICAL else 2 * n)
     solve = 2 * n * n + (6 * n * n if not form.exact else 0)  # the chord path's Broyden update
-    jacobian = 2 * n**3 + (2 * n**3 // 3) + 2 * n**3 + (0 if form.hessian_constant else 2 * n * gradient)
+    jacobian = 2 * n**3 + (2 * n**3 // 3) + 2 * n**3 + (0 if form.hessian_constant else hessian)
     return {"iteration": point + gradient + solve, "jacobian": jacobian, "point": point}
 
 
@@ -127,7 +134,7 @@ def race(name: str, composition: str, steps: int) -> dict:
     substeps = steps * s
     iterations = float(np.sum(trajectory.newton_iterations)) / substeps
     jacobians = float(np.sum(trajectory.extra["refreshes"])) / substeps
-    parts = closed_flops(setup(system, load_tableau("euler"), gammas).data.form, system.dim)
+    parts = closed_flops(system, setup(system, load_tableau("euler"), gammas).data.form, system.dim)
     flops = iterations * parts["iteration"] + jacobians * parts["jacobian"] + parts["point"]
     limit = 2 * parts["iteration"] + parts["jacobian"] + parts["point"]
     us = 1e6 * best / substeps

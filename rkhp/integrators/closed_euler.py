@@ -55,6 +55,7 @@ from ..taylor.generated import call_at
 from ..taylor.linalg import lu_factor, lu_solve, max_abs
 from ..taylor.scalar import SCALAR_CODES, polynomial_degree, shared
 from ..taylor.tape import Tape
+from .derivatives import derivatives_at
 from .direct_form import (
     HISTORY,
     RATE_MARGIN,
@@ -66,7 +67,6 @@ from .direct_form import (
     weight,
 )
 from .failure import Failure
-from .derivatives import derivatives_at
 from .lie_poisson_point import exp_series, rotation_jacobian, rotation_point
 
 CONSTANT, LIE_POISSON, LOG_CANONICAL = 0, 1, 2
