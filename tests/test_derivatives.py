@@ -42,7 +42,8 @@ def constant_hessian(x):
 
 
 def evaluate(address: int, x, n: int, what: int) -> np.ndarray:
-    """The compiled derivatives at x: grad H (what = 0) or grad H then Hess H by rows (what = 1)."""
+    """The generated function at `address` on x (n + n^2 outputs at most): for H's derivatives,
+    grad H (what = 0) or grad H then Hess H by rows (what = 1)."""
     pointer = ctypes.POINTER(ctypes.c_double)
     function = ctypes.CFUNCTYPE(None, pointer, pointer, ctypes.c_int64)(address)
     x = np.ascontiguousarray(x, dtype=np.float64)
@@ -155,3 +156,25 @@ def test_newton_takes_at_most_three_iterations_a_substep_at_the_race_steps(name,
     trajectory = resolved.integrate(get_system(name), h, 100).raise_if_failed()
     substeps = len(resolved.composition.gamma_float)
     assert trajectory.newton_iterations.mean() / substeps <= 3.0
+
+
+@pytest.mark.parametrize("name", ["charged-particle", "nambu", "benchmarks/data/vortices-8.toml"])
+def test_the_compiled_spray_field_is_the_interpreted_one(name):
+    from rkhp.integrators.methods import resolve_system
+    from rkhp.integrators.spray_euler import _field_derivatives, euler_work, spray_tapes
+
+    system = resolve_system(name)
+    tapes, n = spray_tapes(system), system.dim
+    address = derivatives.spray_at(system, tapes.field)
+    assert address != 0
+    work = euler_work(tapes, n)
+    outputs = tapes.field.outputs
+    rng = np.random.default_rng(3)
+    for y in points(system):
+        work.p[:] = 0.2 * rng.standard_normal(n)
+        out = evaluate(address, np.concatenate([y, work.p]), 2 * n, 2)[: n + 2 * n * n]
+        _field_derivatives(y, np.int64(-1), tapes, work, n, np.int64(0), np.int64(2 * n))
+        rows = work.W[outputs]
+        np.testing.assert_allclose(out[:n], rows[:, 0], rtol=1e-14, atol=1e-16)
+        np.testing.assert_allclose(out[n: n + n * n].reshape(n, n), rows[:, 1: 1 + n], rtol=1e-13, atol=1e-15)
+        np.testing.assert_allclose(out[n + n * n:].reshape(n, n), rows[:, 1 + n: 1 + 2 * n], rtol=1e-14, atol=0)

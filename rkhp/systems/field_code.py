@@ -23,7 +23,8 @@ no text of a spec file reaches ``exec``. Three forms (:data:`FORMS`):
 - ``jax``: ``f(t, y, args) -> array`` for diffrax, the functions of ``jax.numpy``.
 
 The direct forms of the RKHP Euler step take H's gradient and Hessian written out the same way
-(:func:`derivatives_code`, compiled per system by `rkhp.taylor.generated`).
+(:func:`derivatives_code`), and the spray realisation's frozen field with its derivatives
+(:func:`spray_code`), compiled per system by `rkhp.taylor.generated`.
 """
 
 from __future__ import annotations
@@ -206,6 +207,36 @@ def derivatives_code(system, hessian: bool) -> FieldCode:
         if a != b:
             lines.append(f"        out[{n + n * b + a}] = out[{n + n * a + b}]")
     return FieldCode("derivatives", "\n".join(lines) + "\n", n, count)
+
+
+def spray_code(system) -> FieldCode:
+    """The source of ``spray(u, out, what)``, the body of a numba ``cfunc`` over pointers to
+    float64 (`rkhp.taylor.generated.SIGNATURE`): the frozen field of the Poisson spray X(y, p) =
+    pi(y) p (docs/theory.md §9) at y = u[0:n], p = u[n:2n]. ``what`` = 0 writes X into out[0:n];
+    ``what`` = 1 also d_y X (n x n, by rows) into out[n:n + n^2]; ``what`` = 2 also pi(y) (= d_p X,
+    by rows) into out[n + n^2:n + 2 n^2]. pi from the system's family
+    (:func:`poisson_expressions`; InputError where it has no symbolic form); each branch's common
+    subexpressions named once. ``operations`` counts those of the branch ``what`` = 0."""
+    import sympy
+
+    n = system.dim
+    y = symbols_of(n)
+    p = tuple(sympy.Symbol(f"p{k + 1}", real=True) for k in range(n))
+    pi = poisson_expressions(system)
+    field = [sympy.Add(*[pi[a][b] * p[b] for b in range(n) if pi[a][b] != 0]) for a in range(n)]
+    jacobian = [sympy.diff(field[a], y[b]) for a in range(n) for b in range(n)]
+    matrix = [sympy.sympify(pi[a][b]) for a in range(n) for b in range(n)]
+    names = [str(v) for v in y + p]
+    lines = ["def spray(u, out, what):", *[f"    {name} = u[{k}]" for k, name in enumerate(names)]]
+    count = 0
+    for what, exprs in enumerate((field, field + jacobian, field + jacobian + matrix)):
+        named, values, operations = _printed(y + p, exprs)
+        count = count or operations
+        lines.append(f"    {'if' if what == 0 else 'elif' if what == 1 else 'else'}"
+                     f"{f' what == {what}' if what < 2 else ''}:")
+        lines += [f"        {a} = {b}" for a, b in named]
+        lines += [f"        out[{k}] = {text}" for k, text in enumerate(values)]
+    return FieldCode("spray", "\n".join(lines) + "\n", n, count)
 
 
 def _namespace(form: str) -> dict:
