@@ -226,10 +226,7 @@ def _point(y0, form, work, n):
 @nb.njit(inline="always", **NJIT_NORC)
 def _target(hs, form, work, n):
     """work.res := G(work.xbar) (see the module) with step hs."""
-    if form.derivatives_at != 0:
-        call_at(form.derivatives_at, work.xbar, work.g, 0)
-    else:
-        gradient(form, work, work.xbar, n)
+    gradient(form, work, work.xbar, n)
     for k in range(n):
         gk = hs * work.g[k]
         work.res[k] = work.xbar[k] * gk if form.kind == LOG_CANONICAL else gk

@@ -4,13 +4,16 @@ gradient and Hessian at a point, the extrapolated start from a substep's previou
 the state kept as a double-double.
 
 `gradient` and `hessian` take the provider's tapes (a NamedTuple whose field ``hamiltonian`` is
-H's plain tape over (x, p)) and work arrays (fields W, g, hess, xbar).
+H's plain tape over (x, p), and ``derivatives_at`` the address of H's derivatives compiled for
+the system, 0 for none: `rkhp.integrators.derivatives`) and work arrays (fields W, g, hess,
+xbar).
 """
 
 from __future__ import annotations
 
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
+from ..taylor.generated import call_at
 from ..taylor.scalar import gradients
 
 RATE_MARGIN = 2.0
@@ -45,7 +48,11 @@ quadratic: one chord iteration fewer)."""
 
 @nb.njit(inline="always", **NJIT_NORC)
 def gradient(tapes, work, x, n):
-    """grad H(x) into work.g, by forward mode (`rkhp.taylor.scalar.gradients`)."""
+    """grad H(x) into work.g: compiled for the system where it is (x C-contiguous), else by forward
+    mode on the tape (`rkhp.taylor.scalar.gradients`)."""
+    if tapes.derivatives_at != 0:
+        call_at(tapes.derivatives_at, x, work.g, 0)
+        return
     W = work.W
     for k in range(n):
         for m in range(1, n + 1):

@@ -53,11 +53,13 @@ from ..taylor.collocation import TABLE_A, TABLE_B, TABLE_E, TABLE_W
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
 from ..taylor.composites import _norm_bound
+from ..taylor.generated import call_at
 from ..taylor.linalg import lu_factor, max_abs
 from ..taylor.ops import SCRATCH_BASE, SPRAY
 from ..taylor.rows import subprogram_at
 from ..taylor.scalar import SCALAR_CODES, gradients, shared, values
 from ..taylor.tape import Tape
+from .derivatives import derivatives_at, spray_at
 from .direct_form import (
     HISTORY,
     RATE_MARGIN,
@@ -85,10 +87,14 @@ a substep)."""
 
 class SprayTapes(NamedTuple):
     """The plain tapes of the direct form, each over the 2n inputs (y, p): `field` X(y, p) =
-    pi(y) p (the spray operation's sub-program, outputs X), `hamiltonian` H(y) (p unused)."""
+    pi(y) p (the spray operation's sub-program, outputs X), `hamiltonian` H(y) (p unused); and the
+    addresses of their functions compiled for the system (`rkhp.integrators.derivatives`; 0: the
+    tape is interpreted): `derivatives_at` H's gradient, `field_at` X with d_y X and pi."""
 
     field: Tape
     hamiltonian: Tape
+    derivatives_at: int
+    field_at: int
 
 
 class EulerWork(NamedTuple):
@@ -98,7 +104,8 @@ class EulerWork(NamedTuple):
     Z, X (MAX_NODES, n): stage increments and their field values; p, g, xbar, y, y_low, dy (n):
     the momentum, grad H(xbar), the average, the state as the double-double y + y_low (`begin`), a
     substep's increment; hess (n, n): Hess H at the refresh point; res, tmp (m): the residual (then
-    the correction) and lu_solve's work vector."""
+    the correction) and lu_solve's work vector; u (2 n), out (n + 2 n^2): the arguments (y, p) and
+    the results (X, d_y X, pi) of the compiled field."""
 
     W: np.ndarray
     Z: np.ndarray
@@ -112,6 +119,8 @@ class EulerWork(NamedTuple):
     hess: np.ndarray
     res: np.ndarray
     tmp: np.ndarray
+    u: np.ndarray
+    out: np.ndarray
 
 
 class SubstepMemory(NamedTuple):
@@ -148,7 +157,7 @@ def euler_work(tapes: SprayTapes, n: int) -> EulerWork:
     slots = max(tapes.field.n_slots, tapes.hamiltonian.n_slots)
     return EulerWork(np.zeros((slots, 2 * n + 1)), np.zeros((MAX_NODES, n)), np.zeros((MAX_NODES, n)),
                      euler_vector(), euler_vector(), euler_vector(), euler_vector(), euler_vector(), euler_vector(),
-                     np.zeros((n, n)), np.zeros(m), np.zeros(m))
+                     np.zeros((n, n)), np.zeros(m), np.zeros(m), np.zeros(2 * n), np.zeros(n + 2 * n * n))
 
 
 def substep_memory(s: int, n: int) -> SubstepMemory:
@@ -179,6 +188,14 @@ def nodes_for(theta):
 @nb.njit(inline="always", **NJIT_NORC)
 def _field_at(tapes, work, y0, j, n):
     """work.X[j] := X(y0 + work.Z[j], work.p) (values)."""
+    if tapes.field_at != 0:
+        for k in range(n):
+            work.u[k] = y0[k] + work.Z[j, k]
+            work.u[n + k] = work.p[k]
+        call_at(tapes.field_at, work.u, work.out, 0)
+        for k in range(n):
+            work.X[j, k] = work.out[k]
+        return
     W = work.W
     for k in range(n):
         W[k, 0] = y0[k] + work.Z[j, k]
@@ -197,13 +214,7 @@ def _refresh_chord_p(i, y0, hs, tapes, work, memory, n, current):
     or SINGULAR."""
     memory.refreshes[i] += 1
     J, P = memory.J[i], memory.P[i]
-    W = work.W
-    _field_derivatives(y0, np.int64(-1), tapes, work, n, np.int64(0), np.int64(2 * n))
-    for a in range(n):
-        o = tapes.field.outputs[a]
-        for b in range(n):
-            J[a, b] = W[o, 1 + b]
-            P[a, b] = W[o, 1 + n + b]
+    _field_jacobians(y0, tapes, work, n, J, P, True)
     q = nodes_for(_norm_bound(J))
     if q > MAX_NODES:
         return Failure.STAGES_NO_CONVERGENCE
@@ -259,15 +270,35 @@ def _field_derivatives(y0, j, tapes, work, n, first, nd):
 
 
 @nb.njit(**NJIT_NORC)
-def _theta(y0, tapes, work, n):
-    """`_norm_bound` of J = d_y X(y0, work.p) (>= |J|_2): what sets the number of nodes."""
-    _field_derivatives(y0, np.int64(-1), tapes, work, n, np.int64(0), np.int64(n))
-    W, J = work.W, work.hess
+def _field_jacobians(y0, tapes, work, n, J, P, both):
+    """J := d_y X(y0, work.p) and, with `both`, P := pi(y0) = d_p X: compiled for the system where
+    it is, else by forward mode on the field's tape (`_field_derivatives`)."""
+    if tapes.field_at != 0:
+        for k in range(n):
+            work.u[k] = y0[k]
+            work.u[n + k] = work.p[k]
+        call_at(tapes.field_at, work.u, work.out, np.int64(2) if both else np.int64(1))
+        for a in range(n):
+            for b in range(n):
+                J[a, b] = work.out[n + n * a + b]
+                if both:
+                    P[a, b] = work.out[n + n * n + n * a + b]
+        return
+    W = work.W
+    _field_derivatives(y0, np.int64(-1), tapes, work, n, np.int64(0), np.int64(2 * n if both else n))
     for a in range(n):
         o = tapes.field.outputs[a]
         for b in range(n):
             J[a, b] = W[o, 1 + b]
-    return _norm_bound(J)
+            if both:
+                P[a, b] = W[o, 1 + n + b]
+
+
+@nb.njit(**NJIT_NORC)
+def _theta(y0, tapes, work, n):
+    """`_norm_bound` of J = d_y X(y0, work.p) (>= |J|_2): what sets the number of nodes."""
+    _field_jacobians(y0, tapes, work, n, work.hess, work.hess, False)
+    return _norm_bound(work.hess)
 
 
 @nb.njit(inline="always", **NJIT_NORC)
@@ -535,9 +566,9 @@ def field_tape(alpha_tape: Tape, n: int) -> Tape:
                 outputs, 2 * n, n_slots, 0, SCRATCH_BASE)
 
 
-def spray_tapes(system) -> SprayTapes:
-    """The tapes of the direct form for a system of the general family with the symmetric
-    (full spray) realisation; InputError otherwise."""
+def plain_tapes(system) -> tuple[Tape, Tape]:
+    """The field's and H's plain tapes of the direct form (`SprayTapes`) for a system of the
+    general family with the symmetric (full spray) realisation; InputError otherwise."""
     if system.family != GENERAL or system.realisation != "symmetric":
         raise InputError(f"{system.name}: the direct Euler step is that of the Poisson-spray "
                          f"realisation (family general, realisation symmetric); this system is "
@@ -548,14 +579,21 @@ def spray_tapes(system) -> SprayTapes:
             raise InputError(f"{system.name}: the direct Euler step evaluates + - * / and the "
                              f"functions of mathematical text; the {what}'s tape holds another "
                              f"operation")
-    return SprayTapes(shared(field), shared(Tape(*h)))
+    return shared(field), shared(Tape(*h))
+
+
+def spray_tapes(system) -> SprayTapes:
+    """The tapes of the direct form (`plain_tapes`; InputError where it refuses the system), with
+    the addresses of the field and of H's gradient compiled for the system."""
+    field, h = plain_tapes(system)
+    return SprayTapes(field, h, derivatives_at(system, hessian=False), spray_at(system, field))
 
 
 def direct_form_available(system) -> bool:
-    """Whether `spray_tapes` accepts `system` (the full spray realisation, tapes of plain
+    """Whether `plain_tapes` accepts `system` (the full spray realisation, tapes of plain
     operations)."""
     try:
-        spray_tapes(system)
+        plain_tapes(system)
     except InputError:
         return False
     return True
