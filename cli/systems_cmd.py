@@ -287,6 +287,10 @@ def _explain(poisson, chosen, fmt: str) -> None:
         out.print(f"{plain(e.method)} is a {chosen.kind} method: its own loop runs it, not the driver's "
                   "substeps", markup=False)
         return
+    if e.key is None:
+        out.print(f"{plain(e.system)} ({poisson.family} family, {poisson.realisation} realisation), "
+                  f"{plain(e.method)}: steps by {e.provider} (not a tableau: no row of the table)", markup=False)
+        return
     out.print(f"{plain(e.system)} ({poisson.family} family, {poisson.realisation} realisation), "
               f"{plain(e.method)} (base method: {e.key[1]}): substeps by {e.provider}", markup=False)
     out.print(f"row of the table: {', '.join(e.row)}"

@@ -53,7 +53,8 @@ KERNELS: dict[str, tuple[Kernel, ...]] = {
     "tape": (TAPE,),
     "invariants": (Kernel("rkhp.integrators.energy", "_hamiltonian_loop", 0.3),),
     "rkhp": (Kernel("rkhp.integrators.driver", "drive", 5.5),),
-    "taylor": (),  # THP runs the tape interpreter from Python
+    # THP: the same loop over its own substeps (`rkhp.integrators.taylor`)
+    "taylor": (Kernel("rkhp.integrators.driver", "drive", 5.5),),
     "classical": (Kernel("rkhp.integrators.classical", "_rk_loop", 1.3),),
     "implicit-midpoint": (Kernel("rkhp.integrators.classical", "_midpoint_loop", 3.0),),
     # the bench's peers compile nothing of rkhp's (scipy calls a field in plain arithmetic,
