@@ -233,7 +233,8 @@ def integrate(system, method, steps, tol, h, t_final, x0, modified_order, realis
         from .modified_views import modified_series
 
         series = modified_series(poisson, chosen, modified_order, fmt != "json")
-    compile_notice((chosen.kind,) if chosen is not None else ("rkhp", "composition"), fmt != "json", poisson)
+    kinds = (chosen.kind,) if chosen is not None else ("rkhp", "composition")
+    compile_notice((*kinds, "modified") if series is not None else kinds, fmt != "json", poisson)
     if tol is None:
         cost_notice((chosen,), poisson, n)
         trajectory = _run(poisson, chosen, end, n, fmt)
