@@ -422,7 +422,8 @@ def stress(system, methods, x0, realisation, t_final, long_steps, long_h, sweep_
     if len(ro) < 3:
         raise click.BadParameter("a fit needs at least 3 step sizes", param_hint="--round-off-steps")
     sys_, resolved = _setup(system, realisation, x0, methods, t_final, plot)
-    compile_notice((*_kinds(resolved), "classical"), fmt != "json", sys_)  # part (b)'s peer: classical RK4
+    # part (b)'s peer: classical RK4; its modified Hamiltonians
+    compile_notice((*_kinds(resolved), "classical", "modified"), fmt != "json", sys_)
     with open_executor(workers, scheduler) as executor, progress(fmt != "json") as bar:
         task = bar.add_task("stress", total=4)
         study = S.stress(sys_, resolved, t_final, long_steps, long_h, sweep_coarsest, ro,

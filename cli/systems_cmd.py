@@ -233,7 +233,8 @@ def integrate(system, method, steps, tol, h, t_final, x0, modified_order, realis
         from .modified_views import modified_series
 
         series = modified_series(poisson, chosen, modified_order, fmt != "json")
-    compile_notice((chosen.kind,) if chosen is not None else ("rkhp", "composition"), fmt != "json", poisson)
+    kinds = (chosen.kind,) if chosen is not None else ("rkhp", "composition")
+    compile_notice((*kinds, "modified") if series is not None else kinds, fmt != "json", poisson)
     if tol is None:
         cost_notice((chosen,), poisson, n)
         trajectory = _run(poisson, chosen, end, n, fmt)
@@ -286,6 +287,10 @@ def _explain(poisson, chosen, fmt: str) -> None:
     if e.provider is None:
         out.print(f"{plain(e.method)} is a {chosen.kind} method: its own loop runs it, not the driver's "
                   "substeps", markup=False)
+        return
+    if e.key is None:
+        out.print(f"{plain(e.system)} ({poisson.family} family, {poisson.realisation} realisation), "
+                  f"{plain(e.method)}: steps by {e.provider} (not a tableau: no row of the table)", markup=False)
         return
     out.print(f"{plain(e.system)} ({poisson.family} family, {poisson.realisation} realisation), "
               f"{plain(e.method)} (base method: {e.key[1]}): substeps by {e.provider}", markup=False)

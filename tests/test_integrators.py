@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +18,7 @@ from rkhp.tableaux.tableau import Tableau
 
 T_ORDERS = 2.0
 STEPS = (20, 40, 80, 160)
+THP_REFERENCE = json.loads((Path(__file__).parent / "data" / "thp_reference.json").read_text())
 
 
 def observed_order(system, method, steps=STEPS, t_final=T_ORDERS) -> float:
@@ -190,6 +192,48 @@ def test_thp_orders_on_shifted_rigid_body(order, degenerate, expected):
         errors.append(np.abs(tr.final_state - system.exact_solution(T_ORDERS)).max())
     slope = np.polyfit(np.log(hs), np.log(errors), 1)[0]
     assert abs(slope - expected) <= 0.15, slope
+
+
+@pytest.mark.parametrize("key", list(THP_REFERENCE["runs"]))
+def test_thp_runs_as_its_own_loop_did(key):
+    """THP on the driver (provider thp) against THP's final states and Newton iterations as its
+    own Python loop computed them (tests/data/thp_reference.json): final state to 1e-13
+    (relative to max(1, |y|)), the same iterations."""
+    from rkhp.integrators.methods import resolve_method, resolve_system
+
+    name, realisation, method = key.split("/")
+    tr = resolve_method(method).integrate(resolve_system(name, realisation), 0.1, 20)
+    expected = THP_REFERENCE["runs"][key]
+    final = np.array(expected["final"])
+    assert tr.status == expected["status"] and tr.extra["substep"] == "thp"
+    assert np.abs(tr.states[-1] - final).max() <= 1e-13 * max(1.0, np.abs(final).max())
+    assert int(tr.newton_iterations.sum()) == expected["newton_iterations"]
+
+
+@pytest.mark.parametrize("key", list(THP_REFERENCE["failures"]))
+def test_thp_names_the_step_where_newton_fails(key):
+    """A step h too large: the same failing step, cause and Newton iterations per step as THP's
+    own loop had (tests/data/thp_reference.json), the states before the failing step kept."""
+    from rkhp.integrators.methods import resolve_method, resolve_system
+
+    name, method, h = key.split("/")
+    tr = resolve_method(method).integrate(resolve_system(name), float(h), 20)
+    expected = THP_REFERENCE["failures"][key]
+    assert tr.status == expected["status"] and tr.failed_step == expected["failed_step"]
+    assert tr.newton_iterations.tolist() == expected["newton_iterations"]
+    assert len(tr.states) == expected["failed_step"] + 1
+    with pytest.raises(NumericalFailure, match=f"failed at step {expected['failed_step']} "):
+        tr.raise_if_failed()
+
+
+def test_thp_ensemble_runs_each_start_as_one_run():
+    from rkhp.integrators.methods import resolve_method
+
+    system, m = get_system("rigid-body", "shifted"), resolve_method("thp3")
+    x0s = np.array([system.x0, [0.3, 0.4, 0.8], [0.1, 0.9, 0.2]])
+    finals = m.integrate_ensemble(system, 0.1, 10, x0s, threads=2)
+    for x0, final in zip(x0s, finals, strict=True):
+        assert np.array_equal(final, m.integrate(system, 0.1, 10, x0=x0).final_state)
 
 
 def test_taylor_arithmetic_against_sympy():

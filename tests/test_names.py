@@ -24,8 +24,9 @@ PROTOCOLS = {
     # rkhp.integrators.substeps to each provider's compiled functions of the same names
     # (docs/engine.md "One driver, many substeps")
     "begin": {"integrators/substeps.py", "integrators/tower_substep.py", "integrators/closed_euler.py",
-              "integrators/spray_euler.py"},
-    "substep": {"integrators/substeps.py", "integrators/closed_euler.py", "integrators/spray_euler.py"},
+              "integrators/spray_euler.py", "integrators/taylor.py"},
+    "substep": {"integrators/substeps.py", "integrators/closed_euler.py", "integrators/spray_euler.py",
+                "integrators/taylor.py"},
     # a module's attribute hook (PEP 562): the lazy names of a package (rkhp._lazy), numba served
     # with rkhp's patches applied at the first request (rkhp.taylor.compiler)
     "__getattr__": {"_lazy.py", "taylor/compiler.py"},

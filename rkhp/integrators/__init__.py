@@ -15,7 +15,7 @@ from .._lazy import lazy_getattr
 _LAZY = {
     "integrate_rkhp": "rkhp.integrators.rkhp_method",
     "integrate_ensemble": "rkhp.integrators.rkhp_method",
-    "integrate_taylor": "rkhp.integrators.taylor",
+    "integrate_taylor": "rkhp.integrators.driver",
     "integrate_classical": "rkhp.integrators.classical",
     "integrate_midpoint": "rkhp.integrators.classical",
     "integrate_spray_euler": "rkhp.integrators.driver",

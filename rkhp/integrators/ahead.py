@@ -23,10 +23,12 @@ import time
 from typing import NamedTuple
 
 from ..base.executors import InProcess, LocalProcesses, available_cores, run_all
+from ..trees.rooted import trees_up_to
 from .kernels import KERNELS, cold_start
 from .methods import resolve_method
 
-#: the parts of a class's compile: the Hamiltonian (it compiles the class's tape interpreter), one
+#: the parts of a class's compile: the Hamiltonian (it compiles the class's tape interpreter), the
+#: loop of a modified Hamiltonian over states (`rkhp.integrators.tree_jets.tree_values`), one
 #: step of each kind of method (explicit and implicit RKHP being two specialisations of the
 #: driver's loop over the tower's substeps; tj4, a composition of Euler steps: the loop over the
 #: direct Euler form where the family has one, `rkhp.integrators.substeps`).
@@ -35,7 +37,8 @@ from .methods import resolve_method
 #: processes take the parts in this order, so that the long ones start early and the processes
 #: finish together.
 HAMILTONIAN = "hamiltonian"
-AHEAD_PARTS = (HAMILTONIAN, "gauss2", "tj4", "rk4", "implicit-midpoint", "classical:rk4", "thp2")
+MODIFIED = "modified"
+AHEAD_PARTS = (HAMILTONIAN, "gauss2", "tj4", "rk4", "implicit-midpoint", "classical:rk4", "thp2", MODIFIED)
 #: the parts that compile kernels of a class's or family's own (tj4: the driver's loop over the
 #: direct Euler forms of the spray realisation and of closed-form families); the others' kernels
 #: are shared by every class
@@ -89,6 +92,11 @@ def prepare_part(system, part: str) -> None:
         from .energy import hamiltonian_values
 
         hamiltonian_values(system, np.array([system.x0]))
+    elif part == MODIFIED:
+        from .tree_jets import tree_jets, tree_values
+
+        jets = tree_jets(system, trees_up_to(2), 2, 0)
+        tree_values(jets, np.zeros(1, np.int64), np.ones(1), np.array([system.x0], dtype=np.float64), np.zeros(1))
     else:
         resolve_method(part).integrate(system, h, 1)
 
@@ -194,5 +202,5 @@ def compile_ahead(jobs: int | None = None, on_part=None) -> AheadRun:
     return AheadRun(done, jobs, time.perf_counter() - start)
 
 
-__all__ = ["AHEAD_PARTS", "FAMILY_PARTS", "Compiled", "PartTime", "AheadRun", "AheadTask",
+__all__ = ["AHEAD_PARTS", "FAMILY_PARTS", "MODIFIED", "Compiled", "PartTime", "AheadRun", "AheadTask",
            "tape_classes", "prepare_part", "timed_part", "ahead_phases", "compile_ahead"]

@@ -13,7 +13,8 @@ iterations and the stage sweeps of each step, summed over its substeps, and chec
 every substep (`rkhp.integrators.engine_state.state_failure`: finite, in the system's domain). `run`
 is its Python entry (a :class:`~rkhp.integrators.trajectory.Trajectory`), `run_ensemble` runs many
 initial values (threads over the compiled loop, which releases the GIL); `integrate_closed_euler`
-and `integrate_spray_euler` run RKHP Euler and its compositions by a direct form.
+and `integrate_spray_euler` run RKHP Euler and its compositions by a direct form,
+`integrate_taylor` the Taylor Hamiltonian Poisson integrators (`rkhp.integrators.taylor`).
 """
 
 from __future__ import annotations
@@ -34,7 +35,8 @@ from .engine_state import Solver, state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS
 from .prepared import Lender, Lent
-from .substeps import CLOSED, PROVIDERS, SPRAY, begin, choose, substep
+from .substeps import CLOSED, PROVIDERS, SPRAY, THP, begin, choose, substep
+from .taylor import thp_method
 from .trajectory import GROWTH, Trajectory, checked
 
 
@@ -432,3 +434,13 @@ def integrate_spray_euler(system, gammas, h, n_steps, x0=None, keep_all: bool = 
     """`integrate_closed_euler` on the full Poisson-spray realisation (family general, realisation
     symmetric) by its direct form (`rkhp.integrators.spray_euler`)."""
     return _direct(SPRAY, system, gammas, h, n_steps, x0, keep_all, tol, max_iter, "spray-euler")
+
+
+def integrate_taylor(system, order: int, degenerate: bool, h, n_steps, x0=None, keep_all: bool = True, *,
+                     tol: float | None = None, max_iter: int | None = None) -> Trajectory:
+    """Integrate `system` by n_steps steps of the THP of order `order` (1 to 8) over T_0
+    (`degenerate`) or T (paper Thm 5.1), its steps by the provider ``thp``
+    (`rkhp.integrators.taylor`). Returns `run`'s Trajectory; InputError for bad arguments."""
+    method = thp_method(order, degenerate)
+    return run(system, method, h, n_steps, x0, provider=THP, keep_all=keep_all, tol=tol, max_iter=max_iter,
+               name=method.name)

@@ -9,8 +9,9 @@ line on a terminal; docs/methods.md). Nothing is compiled here.
 
 A kernel named below is an entry point called from Python; the kernels it calls are compiled
 with it (and cached with it). Kinds are those of :mod:`rkhp.integrators.methods` plus ``tape`` (the tape
-interpreter, which every run uses to evaluate H) and ``invariants`` (the compiled loop of H over a
-trajectory used by the studies).
+interpreter, which every run uses to evaluate H), ``invariants`` (the compiled loop of H over a
+trajectory used by the studies) and ``modified`` (the compiled loop of a modified Hamiltonian over
+states, `rkhp.integrators.tree_jets`).
 """
 
 from __future__ import annotations
@@ -52,8 +53,12 @@ empty cache per system, 2026-11-28); the entry kernels call the interpreter at i
 KERNELS: dict[str, tuple[Kernel, ...]] = {
     "tape": (TAPE,),
     "invariants": (Kernel("rkhp.integrators.energy", "_hamiltonian_loop", 0.3),),
+    # a modified Hamiltonian along a run (`rkhp integrate --modified`, the stress study's long
+    # run): 1.8 s on a loaded machine where the tower's `drive` took 47.4 s (2026-12-06), scaled
+    "modified": (Kernel("rkhp.integrators.tree_jets", "tree_values", 0.2),),
     "rkhp": (Kernel("rkhp.integrators.driver", "drive", 5.5),),
-    "taylor": (),  # THP runs the tape interpreter from Python
+    # THP: the same loop over its own substeps (`rkhp.integrators.taylor`)
+    "taylor": (Kernel("rkhp.integrators.driver", "drive", 5.5),),
     "classical": (Kernel("rkhp.integrators.classical", "_rk_loop", 1.3),),
     "implicit-midpoint": (Kernel("rkhp.integrators.classical", "_midpoint_loop", 3.0),),
     # the bench's peers compile nothing of rkhp's (scipy calls a field in plain arithmetic,

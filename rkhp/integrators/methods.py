@@ -85,10 +85,10 @@ class Method:
     def integrate(self, system, h: float, n_steps: int, x0=None, *, keep_all: bool = True):
         """Run the method; returns a :class:`~rkhp.integrators.trajectory.Trajectory`. RKHP methods
         and compositions run on the driver (`rkhp.integrators.driver`), by the substep provider
-        that `rkhp.integrators.substeps.choose` picks for the system and the base method; with
-        ``keep_all=False`` they keep the first and the last state only (a processed composition
-        then applies its inverse processor once, to the last state: docs/compositions.md). The
-        other kinds keep every state."""
+        that `rkhp.integrators.substeps.choose` picks for the system and the base method, THP by
+        its provider ``thp``; with ``keep_all=False`` they keep the first and the last state only
+        (a processed composition then applies its inverse processor once, to the last state:
+        docs/compositions.md). The other kinds keep every state."""
         if self.kind in ("rkhp", "composition"):
             from .driver import ONE, run_checked
 
@@ -102,9 +102,9 @@ class Method:
             return run_checked(system, self.tableau, h, n_steps, x0, self._gammas, 1.0,
                                processor=len(comp.processor), keep_all=keep_all, name=self.name, extra=extra)
         if self.kind == "taylor":
-            from .taylor import integrate_taylor
+            from .driver import integrate_taylor
 
-            return integrate_taylor(system, self.order, self.degenerate, h, n_steps, x0)
+            return integrate_taylor(system, self.order, self.degenerate, h, n_steps, x0, keep_all=keep_all)
         if self.kind == "classical":
             from .classical import integrate_classical
 
@@ -119,10 +119,17 @@ class Method:
     def integrate_ensemble(self, system, h, n_steps, x0s, *, threads: int | None = None,
                            executor=None):
         """Final states (m, n) of the runs of :meth:`integrate` from the starts ``x0s`` (m, n),
-        h and n_steps one value or one per start. RKHP methods and compositions run them at once
+        h and n_steps one value or one per start. RKHP methods, compositions and THP run them at once
         (`rkhp.integrators.driver.run_ensemble`: threads over the compiled loop, or chunks on an
         ``executor``), bit for bit the final states of one run at a time; other methods run one
         after another. NumericalFailure naming the first failing run if any fails."""
+        if self.kind == "taylor":
+            from .driver import run_ensemble
+            from .substeps import THP
+            from .taylor import thp_method
+
+            return run_ensemble(system, thp_method(self.order, self.degenerate), h, n_steps, x0s, provider=THP,
+                                threads=threads, executor=executor)
         if self.kind in ("rkhp", "composition"):
             from .driver import run_ensemble
 

@@ -1,9 +1,10 @@
 """A modified Hamiltonian evaluated on a system: H~_N(x) = sum_(|t|<=N) h^(|t|-1) c(t) F(t)(x)
 (docs/theory.md §11, docs/modified.md).
 
-The series comes exact from :mod:`rkhp.series.modified`; the F(t)(x) of the system are the THP tower's
-(:mod:`rkhp.integrators.taylor`: the compiled tape interpreter on Taylor jets), evaluated with
-values only (jet margin 0) on the series' trees and their subtrees. Its class must be the one of
+The series comes exact from :mod:`rkhp.series.modified`; the F(t)(x) of the system are those of the
+THP step (:mod:`rkhp.integrators.tree_jets`: the compiled tape interpreter on Taylor jets), evaluated
+with values only (jet margin 0) on the series' trees and their subtrees, by its compiled loop over
+the states (`tree_values`). Its class must be the one of
 the system's realisation (``rkhp.studies.methods.condition_class``).
 """
 
@@ -15,6 +16,9 @@ import numpy as np
 
 from ..series.modified import NotATreeSeries, modified_hamiltonian
 
+ALONG_BLOCK = 256
+"""States evaluated by one call of the compiled loop between progress reports."""
+
 
 @dataclass
 class ModifiedEnergy:
@@ -25,24 +29,31 @@ class ModifiedEnergy:
     h: float
 
     def __post_init__(self):
-        from .taylor import _Tower
+        from .tree_jets import tree_jets
 
         terms = self.series.float_terms()
-        self._weights = [(t, self.h ** (t.order - 1) * c) for t, c in terms]
         trees = _subtree_closure([t for t, _ in terms])
-        self._tower = _Tower(self.system, self.series.order, self.series.cls != "general", trees, margin=0)
+        position = {t: i for i, t in enumerate(trees)}
+        self._terms = np.array([position[t] for t, _ in terms], dtype=np.int64)
+        self._weights = np.array([self.h ** (t.order - 1) * c for t, c in terms], dtype=np.float64)
+        self._jets = tree_jets(self.system, trees, self.series.order, 0)
 
     def __call__(self, x) -> float:
-        F = self._tower.elementary(np.asarray(x, dtype=np.float64))
-        return float(sum(w * F[t][0] for t, w in self._weights))
+        return float(self.along(np.asarray(x, dtype=np.float64).reshape(1, -1))[0])
 
     def along(self, states, advance=None) -> np.ndarray:
-        """H~_N at every state of a trajectory (``advance()`` called after each, for progress)."""
+        """H~_N at every state of a trajectory (``advance()`` called once per state, after each
+        block of ALONG_BLOCK states, for progress)."""
+        from .tree_jets import tree_values
+
+        states = np.ascontiguousarray(states, dtype=np.float64).reshape(-1, self.system.dim)
         out = np.empty(len(states))
-        for k, x in enumerate(states):
-            out[k] = self(x)
+        for lo in range(0, len(states), ALONG_BLOCK):
+            hi = min(lo + ALONG_BLOCK, len(states))
+            tree_values(self._jets, self._terms, self._weights, states[lo:hi], out[lo:hi])
             if advance:
-                advance()
+                for _ in range(hi - lo):
+                    advance()
         return out
 
 

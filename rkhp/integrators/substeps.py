@@ -11,7 +11,10 @@ provider computes one such substep of its base method on a system; the driver
 - ``closed``: RKHP Euler in direct form on a family whose symmetric birealisation is in closed form
   (constant, lie-poisson, log-canonical; `rkhp.integrators.closed_euler`, docs/theory.md §12);
 - ``spray``: RKHP Euler in direct form on the full Poisson-spray realisation of the general family
-  (`rkhp.integrators.spray_euler`, docs/theory.md §9).
+  (`rkhp.integrators.spray_euler`, docs/theory.md §9);
+- ``thp``: the Taylor Hamiltonian Poisson integrator of order N on any system
+  (`rkhp.integrators.taylor`, paper Thm 5.1, docs/theory.md §5): not a tableau, so in no row of
+  the table; `rkhp.integrators.driver.integrate_taylor` names it.
 
 `SUBSTEPS` is the table, keyed by the system's family and the kind of base method (`EULER`: the
 RKHP Euler tableau, alone or as a composition's base; `TABLEAU`: any other); each row lists the
@@ -35,7 +38,7 @@ from typing import NamedTuple
 from ..systems import families
 from ..taylor.compiler import NJIT_NORC, overload
 from ..taylor.compiler import numba as nb
-from . import closed_euler, spray_euler, tower_substep
+from . import closed_euler, spray_euler, taylor, tower_substep
 from .direct_form import CLOSED_TOLERANCE, DIRECT_TOLERANCE
 
 EULER, TABLEAU = "euler", "tableau"
@@ -46,10 +49,10 @@ class Provider(NamedTuple):
     """A substep provider: its name; the class of its compiled data (what the driver's stubs
     dispatch on); whether it accepts a system (`accepts(system) -> bool`; the tower accepts every
     system); how it builds its data for a run (`prepare(system, tableau, substeps, **options) ->
-    data`; the tower's option: ``stage_degree``, `tower_substep.tower_substep`); what a run
-    reports of it (`extra(data) -> dict`); its default tolerance (relative to max(1, |y|)); its
-    compiled ``begin``, and ``substep_for(data type)``, its compiled ``substep`` for data of that
-    numba type (see the module)."""
+    data`; the tower's option: ``stage_degree``, `tower_substep.tower_substep`; THP's tableau is
+    its `taylor.ThpMethod`); what a run reports of it (`extra(data) -> dict`); its default
+    tolerance (relative to max(1, |y|)); its compiled ``begin``, and ``substep_for(data type)``,
+    its compiled ``substep`` for data of that numba type (see the module)."""
 
     name: str
     data_class: type
@@ -80,7 +83,10 @@ SPRAY = Provider("spray", spray_euler.SpraySubstep, spray_euler.direct_form_avai
                  lambda system, tableau, s, **options: spray_euler.spray_substep_data(system, s),
                  spray_euler.spray_extra, DIRECT_TOLERANCE,
                  spray_euler.begin, lambda data: spray_euler.substep)
-PROVIDERS = {p.name: p for p in (TOWER, CLOSED, SPRAY)}
+THP = Provider("thp", taylor.ThpSubstep, lambda system: True,
+              lambda system, method, s, **options: taylor.thp_substep(system, method, s),
+              taylor.thp_extra, taylor.TOLERANCE, taylor.begin, lambda data: taylor.substep)
+PROVIDERS = {p.name: p for p in (TOWER, CLOSED, SPRAY, THP)}
 
 SUBSTEPS: dict[tuple[str, str], tuple[Provider, ...]] = {
     (families.CONSTANT, EULER): (CLOSED, TOWER),
@@ -126,8 +132,8 @@ def choose(system, tableau) -> Choice:
 class Explained(NamedTuple):
     """What runs a method's steps on a system (`rkhp integrate --explain`, docs/json.md): the
     table's key (family, kind of base method; None for a method that is not RKHP), the row's
-    providers in order, those that refused the system, and the one that runs (None: the method's
-    own loop, a classical peer or THP)."""
+    providers in order, those that refused the system, and the one that runs (``thp`` for THP,
+    which is not a tableau and has no row; None: the method's own loop, a classical peer)."""
 
     system: str
     method: str
@@ -139,7 +145,9 @@ class Explained(NamedTuple):
 
 def explain(system, method) -> Explained:
     """The provider `choose` picks for a resolved method (`rkhp.integrators.methods.Method`) on
-    `system`, with the row of `SUBSTEPS` it read."""
+    `system`, with the row of `SUBSTEPS` it read (THP: its provider, no row)."""
+    if method.kind == "taylor":
+        return Explained(system.name, method.name, None, (), (), THP.name)
     if method.kind not in ("rkhp", "composition"):
         return Explained(system.name, method.name, None, (), (), None)
     choice = choose(system, method.tableau)
