@@ -51,11 +51,9 @@ def derivatives_key(system, hessian: bool) -> str:
 def derivatives_at(system, hessian: bool) -> int:
     """The address of `system`'s compiled derivatives (with the Hessian when `hessian`), or 0
     (see the module)."""
-    def body() -> str:
-        return field_code.derivatives_code(system, hessian).source
-
     try:
-        return generated.compiled_address(derivatives_key(system, hessian), NAME, body)
+        return generated.compiled_address(derivatives_key(system, hessian), NAME,
+                                          lambda: field_code.derivatives_code(system, hessian).source)
     except InputError:
         return 0
 
@@ -63,11 +61,8 @@ def derivatives_at(system, hessian: bool) -> int:
 def spray_at(system, field) -> int:
     """The address of `system`'s compiled spray field (`field`: its plain tape, `rkhp.integrators.
     spray_euler.field_tape`), or 0 (see the module)."""
-    def body() -> str:
-        return field_code.spray_code(system).source
-
     key = generated.key_of(b"spray", *_tape_bytes(field), f"{system.dim}".encode(), GENERATOR.read_bytes())
     try:
-        return generated.compiled_address(key, SPRAY, body)
+        return generated.compiled_address(key, SPRAY, lambda: field_code.spray_code(system).source)
     except InputError:
         return 0
