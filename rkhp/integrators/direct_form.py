@@ -95,7 +95,7 @@ def hessian(tapes, work, x, n):
 
 
 
-def _weights(most: int) -> np.ndarray:
+def _extrapolation_weights(most: int) -> np.ndarray:
     """WEIGHTS for counts up to `most`."""
     table = np.zeros((most + 1, most))
     for count in range(most + 1):
@@ -104,7 +104,7 @@ def _weights(most: int) -> np.ndarray:
     return table
 
 
-WEIGHTS = _weights(8)
+WEIGHTS = _extrapolation_weights(8)
 """WEIGHTS[count, r]: the weight of the r-th newest of `count` equally spaced values in their
 polynomial extrapolation one step ahead, (-1)^r binom(count, r + 1) (exact integers), for
 counts up to 8."""
