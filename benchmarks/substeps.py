@@ -22,6 +22,11 @@ per Jacobian its assembly and factorisation) and of those the mathematics needs 
 Newton iterations with one Jacobian and the closing point), with the rate the run achieved
 (flops / time).
 
+Third table, the spray's direct form at the race's settings of the general family: the spec file
+benchmarks/data/vortices-8.toml (four point vortices, n = 8, a non-affine pi) with the kernel of
+bcm6-s13 at h = 10/512, and the charged particle with kahan-li8 at h = 0.1: per substep,
+microseconds, chord iterations, refreshes of the chord matrix, and the collocation nodes Q.
+
 Timed: `rkhp.integrators.driver.drive` called directly with its arguments built once (no Python
 in the timed call), in CPU seconds of the calling thread (`time.thread_time`: on a shared machine
 the time the other work takes from it is not counted; the minimum is then the fairer figure).
@@ -142,6 +147,29 @@ def race(name: str, composition: str, steps: int) -> dict:
             "rate": flops / us / 1e3, "h": h}
 
 
+SPRAY_RACE = (("benchmarks/data/vortices-8.toml", "bcm6-s13", 512, 10.0),
+              ("charged-particle", "kahan-li8", 100, 10.0))
+"""(system, composition, steps, T) of the third table: the spray's direct form."""
+
+
+def spray_race(name: str, composition: str, steps: int, t_final: float) -> dict:
+    """Time, iterations and refreshes per substep of a composition's kernel by the spray's direct
+    form."""
+    system = get_system(name)
+    gammas = load_composition(composition).gamma_float
+    h, s = t_final / steps, len(gammas)
+    call = loop(system, None, gammas, h, steps)
+    call()
+    best = min(seconds(call) for _ in range(REPEATS))
+    trajectory = run(system, load_tableau("euler"), h, steps, gammas=gammas)
+    substeps = steps * s
+    extra = trajectory.extra
+    return {"us": 1e6 * best / substeps, "h": h,
+            "iterations": float(np.sum(trajectory.newton_iterations)) / substeps,
+            "refreshes": sum(extra["refreshes"]) / substeps,
+            "nodes": "/".join(str(q) for q in sorted(set(extra["nodes"])))}
+
+
 def main() -> None:
     print("$ python benchmarks/substeps.py")
     print(f"microseconds per Euler substep (min of {REPEATS}, thread CPU time)")
@@ -162,6 +190,15 @@ def main() -> None:
         m = race(name, composition, steps)
         print(f"{name:<18} {composition:<22} {m['h']:>6.3f} {m['us']:>6.2f} {m['iterations']:>5.2f} "
               f"{m['jacobians']:>5.2f} {m['flops']:>7.0f} {m['limit']:>6.0f} {m['rate']:>8.2f}")
+        sys.stdout.flush()
+    print()
+    print(f"the spray's direct form at the race's settings: per substep (min of {REPEATS}, thread CPU time)")
+    print(f"{'system':<18} {'method':<10} {'h':>7} {'us':>6} {'iter':>5} {'refresh':>8} {'Q':>5}")
+    for name, composition, steps, t_final in SPRAY_RACE:
+        m = spray_race(name, composition, steps, t_final)
+        label = name.rsplit("/", 1)[-1].removesuffix(".toml")
+        print(f"{label:<18} {composition:<10} {m['h']:>7.4f} {m['us']:>6.2f} {m['iterations']:>5.2f} "
+              f"{m['refreshes']:>8.3f} {m['nodes']:>5}")
         sys.stdout.flush()
 
 

@@ -11,6 +11,10 @@ xbar).
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
+
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
 from ..taylor.generated import call_at
@@ -91,14 +95,26 @@ def hessian(tapes, work, x, n):
 
 
 
-@nb.njit(**NJIT_NORC)
+def _extrapolation_weights(most: int) -> np.ndarray:
+    """WEIGHTS for counts up to `most`."""
+    table = np.zeros((most + 1, most))
+    for count in range(most + 1):
+        for r in range(count):
+            table[count, r] = (-1) ** r * math.comb(count, r + 1)
+    return table
+
+
+WEIGHTS = _extrapolation_weights(8)
+"""WEIGHTS[count, r]: the weight of the r-th newest of `count` equally spaced values in their
+polynomial extrapolation one step ahead, (-1)^r binom(count, r + 1) (exact integers), for
+counts up to 8."""
+
+
+@nb.njit(inline="always", **NJIT_NORC)
 def weight(count, r):
-    """The weight of the r-th newest of `count` equally spaced values in their polynomial
-    extrapolation one step ahead: (-1)^r binom(count, r + 1)."""
-    c = 1.0
-    for j in range(r + 1):
-        c = c * (count - j) / (j + 1)
-    return -c if r % 2 else c
+    """WEIGHTS[count, r] (a table: computing the binomial at each use cost divisions in the
+    innermost loop of the extrapolated start)."""
+    return WEIGHTS[count, r]
 
 
 
