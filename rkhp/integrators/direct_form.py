@@ -38,12 +38,6 @@ DIRECT_TOLERANCE = 2.0**-60
 the corrections stagnate (`STAGNATION`). Stopping at 1e-15 left the stages off the collocation
 solution by that much, which moves a non-quadratic Casimir systematically (docs/general-poisson.md
 "The Euler step in direct form")."""
-CLOSED_TOLERANCE = 2.0**-56
-"""The closed forms' default tolerance (relative), a sixteenth of a unit of round-off at 1: their
-update keeps the Casimirs whatever z is, so a substep needs z only to round-off. A stop predicts
-the next correction below it: the z kept is within that of the solution, and a symmetric
-composition still retraces itself to round-off (tests/test_closed_euler.py); the iteration of
-`DIRECT_TOLERANCE` that only confirms this is saved."""
 HISTORY = 4
 """Previous solutions of a substep kept for the extrapolated start (cubic: measured on the
 charged particle at h = 0.1, step 11, the start's error is 8.3e-7 against 7.4e-6 with three,

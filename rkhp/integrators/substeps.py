@@ -39,7 +39,7 @@ from ..systems import families
 from ..taylor.compiler import NJIT_NORC, overload
 from ..taylor.compiler import numba as nb
 from . import closed_euler, spray_euler, taylor, tower_substep
-from .direct_form import CLOSED_TOLERANCE, DIRECT_TOLERANCE
+from .direct_form import DIRECT_TOLERANCE
 
 EULER, TABLEAU = "euler", "tableau"
 """The kinds of base method of the table: the RKHP Euler tableau (b = (1), A = (0)), any other."""
@@ -77,7 +77,7 @@ TOWER = Provider("tower", tower_substep.TowerSubstep, lambda system: True,
                  tower_substep.begin, _tower_substep_for)
 CLOSED = Provider("closed", closed_euler.ClosedSubstep, closed_euler.closed_form_available,
                   lambda system, tableau, s, **options: closed_euler.closed_substep_data(system, s),
-                  closed_euler.closed_extra, CLOSED_TOLERANCE,
+                  closed_euler.closed_extra, DIRECT_TOLERANCE,
                   closed_euler.begin, lambda data: closed_euler.substep)
 SPRAY = Provider("spray", spray_euler.SpraySubstep, spray_euler.direct_form_available,
                  lambda system, tableau, s, **options: spray_euler.spray_substep_data(system, s),
