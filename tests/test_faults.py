@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from child_signals import default_signals
 
 import rkhp
 from rkhp.base.errors import NumericalFailure, WriteFailed
@@ -308,18 +309,11 @@ def _handles(pid: int, signum: int) -> bool:
     return True
 
 
-def _default_signals() -> None:
-    """In a child before it starts: SIGTERM and SIGHUP back to their default action (a test run
-    under ``nohup`` ignores SIGHUP, and a child inherits that), as a shell starts a command."""
-    for signum in (signal.SIGTERM, signal.SIGHUP):
-        signal.signal(signum, signal.SIG_DFL)
-
-
 def _start(args, signum: int, cwd=None, **kwargs) -> subprocess.Popen:
     """`python -m rkhp ARGS`, returned once it handles ``signum`` (the command's handler, installed
     when the command starts: before it, the default action ends a process still starting)."""
     proc = subprocess.Popen([sys.executable, "-m", "rkhp", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, cwd=cwd, preexec_fn=_default_signals, **kwargs)
+                            text=True, cwd=cwd, preexec_fn=default_signals, **kwargs)
     deadline = time.monotonic() + 60
     while proc.poll() is None and not _handles(proc.pid, signum) and time.monotonic() < deadline:
         time.sleep(0.005)
@@ -357,7 +351,7 @@ def test_sigterm_and_sighup_end_a_study_as_ctrl_c_does(signum, status):
     of a study: the three rows finished are printed, one line on stderr naming the signal, status
     128 + signal."""
     proc = subprocess.run([sys.executable, "-c", SIGNAL_DURING_A_ROW, str(int(signum))], capture_output=True,
-                          text=True, timeout=300, preexec_fn=_default_signals)
+                          text=True, timeout=300, preexec_fn=default_signals)
     assert proc.returncode == status, (proc.returncode, proc.stderr[-3000:])
     name = signal.Signals(signum).name
     assert proc.stderr == f"rkhp: interrupted by {name}: the rows finished so far are shown\n"

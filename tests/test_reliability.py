@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from child_signals import default_signals
 
 import rkhp
 from rkhp.base.errors import InputError, NumericalFailure
@@ -142,7 +143,7 @@ def _start_interruptible(args):
     the default action of a process that is still starting (killed, status -2, no Python code
     run), which no program can answer. On a loaded machine that start alone can take 0.5 s."""
     proc = subprocess.Popen([sys.executable, "-m", "rkhp", *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_signals)
     deadline = time.monotonic() + 60
     while proc.poll() is None and not _handles_sigint(proc.pid) and time.monotonic() < deadline:
         time.sleep(0.005)
@@ -510,7 +511,8 @@ def test_ctrl_c_stops_a_compile_in_several_processes_at_once(tmp_path):
     no process of the group left."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"))
     proc = subprocess.Popen([sys.executable, "-m", "rkhp", "compile", "--jobs", "2"], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=default_signals)
     deadline = time.monotonic() + 60
     while proc.poll() is None and len(_children(proc.pid)) < 2 and time.monotonic() < deadline:
         time.sleep(0.05)
