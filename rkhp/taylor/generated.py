@@ -1,5 +1,5 @@
-"""Functions generated per system and compiled as numba ``cfunc``s, called by compiled kernels at
-their addresses (docs/engine.md "Derivatives compiled per system").
+"""Functions generated per system and compiled as numba ``cfunc`` functions, called by compiled
+kernels at their addresses (docs/engine.md "Derivatives compiled per system").
 
 A tape is interpreted: each row costs a branch on its opcode and a loop over its derivative
 coefficients, which on the few rows of a Hamiltonian is most of the time of its gradient. Where a
