@@ -225,7 +225,7 @@ def spray_code(system) -> FieldCode:
     pi = poisson_expressions(system)
     field = [sympy.Add(*[pi[a][b] * p[b] for b in range(n) if pi[a][b] != 0]) for a in range(n)]
     jacobian = [sympy.diff(field[a], y[b]) for a in range(n) for b in range(n)]
-    matrix = [sympy.sympify(pi[a][b]) for a in range(n) for b in range(n)]
+    matrix = [sympy.Integer(0) + pi[a][b] for a in range(n) for b in range(n)]  # entries 0 as sympy numbers
     names = [str(v) for v in y + p]
     lines = ["def spray(u, out, what):", *[f"    {name} = u[{k}]" for k, name in enumerate(names)]]
     count = 0
