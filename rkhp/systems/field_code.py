@@ -48,12 +48,14 @@ FUNCTION_NAMES = ("exp", "log", "sin", "cos", "sqrt", "atan", "tan", "sinh", "co
 class FieldCode(NamedTuple):
     """A system's field as source: ``source`` defines ``field`` in the form ``form``; ``dim``
     components; ``operations``: the arithmetic operations and function calls of one evaluation
-    (sympy's ``count_ops`` of the printed expressions)."""
+    (sympy's ``count_ops`` of the printed expressions); ``branches``: those of each branch
+    ``what`` = 0, 1, ... of a function with branches (:func:`spray_code`), else empty."""
 
     form: str
     source: str
     dim: int
     operations: int
+    branches: tuple[int, ...] = ()
 
 
 def hamiltonian_expression(system):
@@ -216,7 +218,8 @@ def spray_code(system) -> FieldCode:
     ``what`` = 1 also d_y X (n x n, by rows) into out[n:n + n^2]; ``what`` = 2 also pi(y) (= d_p X,
     by rows) into out[n + n^2:n + 2 n^2]. pi from the system's family
     (:func:`poisson_expressions`; InputError where it has no symbolic form); each branch's common
-    subexpressions named once. ``operations`` counts those of the branch ``what`` = 0."""
+    subexpressions named once. ``operations`` counts those of the branch ``what`` = 0, ``branches``
+    those of each."""
     import sympy
 
     n = system.dim
@@ -228,15 +231,15 @@ def spray_code(system) -> FieldCode:
     matrix = [sympy.Integer(0) + pi[a][b] for a in range(n) for b in range(n)]  # entries 0 as sympy numbers
     names = [str(v) for v in y + p]
     lines = ["def spray(u, out, what):", *[f"    {name} = u[{k}]" for k, name in enumerate(names)]]
-    count = 0
+    counts = []
     for what, exprs in enumerate((field, field + jacobian, field + jacobian + matrix)):
         named, values, operations = _printed(y + p, exprs)
-        count = count or operations
+        counts.append(operations)
         lines.append(f"    {'if' if what == 0 else 'elif' if what == 1 else 'else'}"
                      f"{f' what == {what}' if what < 2 else ''}:")
         lines += [f"        {a} = {b}" for a, b in named]
         lines += [f"        out[{k}] = {text}" for k, text in enumerate(values)]
-    return FieldCode("spray", "\n".join(lines) + "\n", n, count)
+    return FieldCode("spray", "\n".join(lines) + "\n", n, counts[0], tuple(counts))
 
 
 def _namespace(form: str) -> dict:
