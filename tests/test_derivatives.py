@@ -84,6 +84,20 @@ def test_the_compiled_hessian_is_the_closed_form(name):
         np.testing.assert_allclose(out[n:].reshape(n, n), expected, rtol=1e-15, atol=1e-16)
 
 
+def test_a_pole_of_the_hessian_gives_inf_not_stale_values(capfd):
+    """Lotka–Volterra's Hess H = diag(1 / x_i^2) at x1 = 0: IEEE division gives +inf (the closed
+    form's limit), written into the output, with nothing on stderr (a cfunc cannot raise: an
+    exception there would leave the output as it was)."""
+    form = closed_form(get_system("lotka-volterra"))
+    pointer = ctypes.POINTER(ctypes.c_double)
+    function = ctypes.CFUNCTYPE(None, pointer, pointer, ctypes.c_int64)(form.derivatives_at)
+    x = np.array([0.0, 2.0, 0.5])
+    out = np.full(12, 7.0)
+    function(x.ctypes.data_as(pointer), out.ctypes.data_as(pointer), 1)
+    assert out[3] == np.inf and out[7] == 0.25 and out[11] == 4.0
+    assert capfd.readouterr().err == ""
+
+
 def forget_modules():
     """This process forgets every generated module it imported (another process would not know them)."""
     for key in list(generated._LOADED):

@@ -137,16 +137,33 @@ def check_tree(expr) -> None:
         raise InputError(f"the vector field holds {type(node).__name__}, which has no plain-arithmetic form")
 
 
+def _printer():
+    """sympy's Python printer, with a negative integer power written as a division, 1.0/(x**k):
+    numba raises ZeroDivisionError for 0.0 to a negative integer power whatever the error model,
+    and a ``cfunc`` cannot pass an exception on (it says so on stderr and leaves its outputs
+    unwritten), where the division gives inf, as the tapes do, and the substep fails with its
+    cause."""
+    import sympy
+    from sympy.printing.pycode import PythonCodePrinter
+
+    class Printer(PythonCodePrinter):
+        def _print_Pow(self, expr, rational=False):
+            if expr.exp.is_Integer and expr.exp < 0:
+                return f"1.0/({self._print(sympy.Pow(expr.base, -expr.exp))})"
+            return super()._print_Pow(expr, rational=rational)
+
+    return Printer({"fully_qualified_modules": True, "standard": "python3"})
+
+
 def _printed(symbols, exprs) -> tuple[list[tuple[str, str]], list[str], int]:
     """(named subexpressions, the components, operation count) as Python text; x_i is named xi."""
     import sympy
-    from sympy.printing.pycode import PythonCodePrinter
 
     for e in exprs:
         check_tree(e)
     names = sympy.numbered_symbols("c")
     common, reduced = sympy.cse(exprs, symbols=names, order="none")
-    printer = PythonCodePrinter({"fully_qualified_modules": True, "standard": "python3"})
+    printer = _printer()
     lines = [(str(s), printer.doprint(e)) for s, e in common]
     components = [printer.doprint(sympy.Float(0.0) if e == 0 else e) for e in reduced]
     count = int(sum(sympy.count_ops(e) for _, e in common) + sum(sympy.count_ops(e) for e in reduced))
