@@ -17,12 +17,15 @@ import pytest
 
 from rkhp.base.errors import InputError
 from rkhp.integrators import integrate_midpoint, integrate_rkhp
-from rkhp.integrators.driver import integrate_spray_euler
+from rkhp.integrators.driver import integrate_spray_euler, run
 from rkhp.integrators.failure import Failure
 from rkhp.integrators.spray_euler import spray_tapes
+from rkhp.integrators.substeps import TOWER
 from rkhp.studies.reference import reference
 from rkhp.systems import get_system
 from rkhp.systems.problems import ProblemData, build
+from rkhp.tableaux.compositions import load_composition
+from rkhp.tableaux.files import load_tableau
 from rkhp.taylor.interpreter import evaluate
 from rkhp.taylor.ops import CRB, FUNCTION, OPS
 from rkhp.taylor.scalar import SCALAR_CODES, gradients, shared, values
@@ -133,6 +136,20 @@ def test_a_step_too_large_fails_with_a_cause():
     assert not run.ok and run.cause != Failure.OK
     assert run.failed_step is not None and len(run.states) == run.failed_step + 1
     assert run.status.startswith(f"failed at step {run.failed_step}")
+
+
+def test_substeps_near_the_largest_that_converge_take_newtons_method():
+    """tj8 (the triple jump of triple jumps, Yoshida 1990: 27 substeps of up to 2.83 h) on the
+    charged particle at h = 1/3: substeps of |h| up to 0.94, where a chord matrix built at y0
+    contracts by 0.1 to 0.25 and 20 chord iterations do not reach the tolerance; with Newton's
+    method the run ends, on the states of the same substeps solved by the engine's Taylor tower
+    (Newton on the jets, an independent solver). Measured: 2.2e-11 over the 30 steps."""
+    system = get_system("charged-particle")
+    gammas = load_composition("tj8").gamma_float
+    direct = integrate_spray_euler(system, tuple(gammas), 1.0 / 3.0, 30)
+    tower = run(system, load_tableau("euler"), 1.0 / 3.0, 30, gammas=gammas, provider=TOWER)
+    assert direct.ok and tower.ok
+    assert np.abs(direct.states - tower.states).max() < 1e-9
 
 
 # ----------------------------------------------------------------------------------------------

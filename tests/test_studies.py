@@ -564,14 +564,25 @@ def test_chosen_steps_keep_every_row_above_the_floor_and_confirm_a_sixth_order()
     assert study.reference.kind == "exact" and study.reference_choice is None
 
 
+#: the built-in nambu system (rkhp.systems.problems.nambu: C = (x1^2 + x2^2)/2 + x3^4/4, the rigid
+#: body's H) as a spec file
+NAMBU_SPEC = """name = "nambu-spec"
+family = "general"
+poisson = [["0", "-x3^3", "x2"], ["x3^3", "0", "-x1"], ["-x2", "x1", "0"]]
+hamiltonian = "x1^2/4 + x2^2/2 + 3*x3^2/4"
+casimirs = ["(x1^2 + x2^2)/2 + x3^4/4"]
+x0 = [0.45359612142557731, 0.0, 0.89120736006143542]
+"""
+
+
 def test_a_tenth_order_composition_on_a_spec_file_gets_mpmath_and_measurable_rows(tmp_path):
-    """sofroniou-spaletta10 (order 10, Sofroniou & Spaletta 2005) on the Nambu spec file, T = 10: with
+    """sofroniou-spaletta10 (order 10, Sofroniou & Spaletta 2005) on a Nambu spec file, T = 10: with
     the doublings 20..1280 every row but the first is below DOP853's accuracy; chosen, the study takes the mpmath
     reference, every successful row is measurable, and the local order of the finest rows nears 10."""
     from rkhp.studies.converge import converge
 
-    path = tmp_path / "my-nambu.toml"
-    path.write_text(MY_NAMBU)
+    path = tmp_path / "nambu-spec.toml"
+    path.write_text(NAMBU_SPEC)
     given = converge(str(path), ["sofroniou-spaletta10"], steps=[20])
     assert given.reference.kind == "dop853" and all(r.error is None for r in given.methods[0].rows[1:])
     study = converge(str(path), ["sofroniou-spaletta10"])

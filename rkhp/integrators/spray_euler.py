@@ -22,7 +22,12 @@ numbers, solve by chord iterations with the frozen Jacobian
 
 which contracts the error by O(h^2) an iteration (by O(h) the first iteration of a step, when the
 matrix was built at an earlier step: `SLOW_CONTRACTION`), factorised once and kept across steps for each substep of a
-composition (refreshed when the iterations contract slowly or the number of nodes changes). Each
+composition (refreshed when the iterations contract slowly or the number of nodes changes).
+Where even a fresh matrix contracts slowly, and in any substep past half its iterations, the
+matrix is the exact Jacobian at the current iterate (`_newton_matrix_p`: d_y X and pi at each
+stage, Hess H at xbar; Newton's method), taken again at each iteration until the correction nears
+the tolerance: the substeps near the largest steps the iterations converge at (|h| about 0.6 to
+0.9 on the charged particle), where a matrix built at y0 contracts by 0.1 to 0.25. Each
 substep starts from its own previous solutions, (p, Z) extrapolated (cubic) from the same
 substep of the four previous steps. On a constant pi, J = 0 and the step is the implicit
 midpoint rule.
@@ -247,6 +252,57 @@ def _refresh_chord_p(i, y0, hs, tapes, work, memory, n, current):
             for b in range(q):
                 LU[q * n + k, b * n + l] = -hs * TABLE_W[q, b] * hj
             LU[q * n + k, q * n + l] -= 0.5 * hs * hp
+    return _factorise(i, m, memory)
+
+
+@nb.njit(**NJIT_NORC)
+def _newton_matrix_p(i, q, y0, hs, tapes, work, memory, n):
+    """Substep i's matrix as the exact Jacobian of its equations at the current (Z, p): the chord
+    matrix of the module with d_y X and pi taken at each stage, J_b = d_y X(Y_b, p), P_b =
+    pi(Y_b), and Hess H at xbar, not all at y0: blocks I - A_ab J_b, -sum_b A_ab P_b,
+    -h w_b H J_b and I - h H sum_b w_b P_b (Newton's method; `euler_substep` says when). Q
+    kept; memory.J[i], memory.P[i] and work.tmp[:n] (xbar, then the stage) serve as work space.
+    Returns Failure.OK or SINGULAR."""
+    memory.refreshes[i] += 1
+    for j in range(q):
+        _field_at(tapes, work, y0, j, n)
+    LU, H, J, P, Y = memory.LU[i], work.hess, memory.J[i], memory.P[i], work.tmp
+    for k in range(n):
+        acc = y0[k]
+        for j in range(q):
+            acc += TABLE_W[q, j] * work.X[j, k]
+        Y[k] = acc
+    hessian(tapes, work, Y[:n], n)
+    m = (q + 1) * n
+    for r in range(m):
+        for col in range(m):
+            LU[r, col] = 1.0 if r == col else 0.0
+    for b in range(q):
+        for k in range(n):
+            Y[k] = y0[k] + work.Z[b, k]
+        _field_jacobians(Y[:n], tapes, work, n, J, P, True)
+        for a in range(q):
+            for k in range(n):
+                for l in range(n):
+                    LU[a * n + k, b * n + l] -= TABLE_A[q, a, b] * J[k, l]
+                    LU[a * n + k, q * n + l] -= TABLE_A[q, a, b] * P[k, l]
+        for k in range(n):
+            for l in range(n):
+                hj = 0.0
+                hp = 0.0
+                for r in range(n):
+                    hj += H[k, r] * J[r, l]
+                    hp += H[k, r] * P[r, l]
+                LU[q * n + k, b * n + l] = -hs * TABLE_W[q, b] * hj
+                LU[q * n + k, q * n + l] -= hs * TABLE_W[q, b] * hp
+    return _factorise(i, m, memory)
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _factorise(i, m, memory):
+    """memory.LU[i, :m, :m] replaced by its LU factors, stored transposed (`_solve`), row order
+    memory.perm[i]; Failure.OK or SINGULAR."""
+    LU = memory.LU[i]
     if not lu_factor(LU[:m, :m], memory.perm[i, :m]):
         return Failure.SINGULAR
     for r in range(m):
@@ -433,15 +489,18 @@ def _sweep(i, q, y0, hs, tapes, work, memory, n):
 @nb.njit(inline="always", **NJIT_NORC)
 def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     """One Euler substep of step hs in direct form (see the module) from y0: its increment
-    y1 - y0 into work.dy,
-    substep i of the composition (its memory); returns (Failure, chord iterations).
+    y1 - y0 into work.dy, substep i of the composition (its memory); returns (Failure, chord
+    iterations).
 
     Starts from the extrapolated (p, Z); refreshes the chord matrix at the first substep, when
-    the number of nodes that theta asks for changes (`nodes_for`), and when an iteration contracts by more than
-    SLOW_CONTRACTION (once per substep). Stops when the correction, or its predicted successor
-    theta / (1 - theta) |d| (theta the measured contraction; after the first iteration, twice
-    the substep's last measured first contraction), is at most tol max(1, |y0|); then X is
-    evaluated at the final (Z, p) and y1 = y0 + sum_j b_j X_j."""
+    the number of nodes that theta asks for changes (`nodes_for`), and when an iteration
+    contracts by more than SLOW_CONTRACTION (once per substep); takes the exact Jacobian at the
+    current iterate (`_newton_matrix_p`) when a fresh matrix contracts by more than that, and at
+    each iteration from the (max_iter // 2)-th while the correction exceeds 1e3 tol max(1, |y0|).
+    Stops when the correction, or its predicted successor theta / (1 - theta) |d| (theta the
+    measured contraction; after the first iteration, twice the substep's last measured first
+    contraction), is at most tol max(1, |y0|); then X is evaluated at the final (Z, p) and
+    y1 = y0 + sum_j b_j X_j."""
     n = y0.shape[0]
     scale = max(1.0, max_abs(y0))
     _predict_p(i, y0, hs, tapes, work, memory, n)
@@ -485,9 +544,13 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
         if since >= 2 and size >= 0.5 * previous and size <= STAGNATION * scale:
             converged = True  # the corrections stagnate at round-off
             break
-        if since >= 2 and not fresh and theta > SLOW_CONTRACTION and size > 1e3 * tol * scale:
-            fresh = True
-            cause = _refresh_chord_p(i, y0, hs, tapes, work, memory, n, q)
+        rescue = it >= max_iter // 2
+        if size > 1e3 * tol * scale and ((since >= 2 and theta > SLOW_CONTRACTION) or rescue):
+            if fresh or rescue:
+                cause = _newton_matrix_p(i, q, y0, hs, tapes, work, memory, n)
+            else:
+                fresh = True
+                cause = _refresh_chord_p(i, y0, hs, tapes, work, memory, n, q)
             if cause != Failure.OK:
                 return cause, it
             q = memory.nodes[i]
