@@ -28,8 +28,8 @@ matrix is the exact Jacobian at the current iterate (`_newton_matrix_p`: d_y X a
 stage, Hess H at xbar; Newton's method), taken again at each iteration until the correction nears
 the tolerance: the substeps near the largest steps the iterations converge at (|h| about 0.6 to
 0.9 on the charged particle), where a matrix built at y0 contracts by 0.1 to 0.25. Each
-substep starts from its own previous solutions, (p, Z) extrapolated (cubic) from the same
-substep of the four previous steps. On a constant pi, J = 0 and the step is the implicit
+substep starts from its own previous solutions, (p, Z) extrapolated (a quintic in the step index)
+from the same substep of the six previous steps (`HISTORY`). On a constant pi, J = 0 and the step is the implicit
 midpoint rule.
 
 Number of nodes: Q is the smallest (at least 2) with E_Q theta^(2Q) <= NODE_BOUND, E_Q the
@@ -66,7 +66,6 @@ from ..taylor.scalar import SCALAR_CODES, gradients, shared, values
 from ..taylor.tape import Tape
 from .derivatives import derivatives_at, spray_at
 from .direct_form import (
-    HISTORY,
     RATE_MARGIN,
     SLOW_CONTRACTION,
     STAGNATION,
@@ -77,6 +76,12 @@ from .direct_form import (
 )
 from .failure import Failure
 
+HISTORY = 6
+"""Previous solutions of a substep kept for its extrapolated start (a quintic in the step index;
+the closed form keeps `rkhp.integrators.direct_form.HISTORY`): the start's error falls as
+(h omega)^HISTORY along an orbit of frequency omega, and at the contraction of a matrix kept
+across steps each decade less saves about one chord iteration (at the race's settings 4.3 against
+5.3 iterations a substep with four, `benchmarks/substeps.py`)."""
 MAX_NODES = 12
 """Collocation nodes of the direct form at most (E_12 theta^24 <= NODE_BOUND for theta up to
 about 3.1, beyond the steps at which the chord iterations converge); a substep needing more
