@@ -234,9 +234,7 @@ def _refresh_chord_p(i, y0, hs, tapes, work, memory, n, current):
     hessian(tapes, work, y0, n)
     LU, H = memory.LU[i], work.hess
     m = (q + 1) * n
-    for r in range(m):
-        for col in range(m):
-            LU[r, col] = 1.0 if r == col else 0.0
+    _identity(LU, m)
     for a in range(q):
         c = 0.0
         for b in range(q):
@@ -249,11 +247,7 @@ def _refresh_chord_p(i, y0, hs, tapes, work, memory, n, current):
                 LU[a * n + k, q * n + l] = -c * P[k, l]
     for k in range(n):
         for l in range(n):
-            hj = 0.0
-            hp = 0.0
-            for r in range(n):
-                hj += H[k, r] * J[r, l]
-                hp += H[k, r] * P[r, l]
+            hj, hp = _hessian_times(H, J, P, k, l, n)
             for b in range(q):
                 LU[q * n + k, b * n + l] = -hs * TABLE_W[q, b] * hj
             LU[q * n + k, q * n + l] -= 0.5 * hs * hp
@@ -279,9 +273,7 @@ def _newton_matrix_p(i, q, y0, hs, tapes, work, memory, n):
         Y[k] = acc
     hessian(tapes, work, Y[:n], n)
     m = (q + 1) * n
-    for r in range(m):
-        for col in range(m):
-            LU[r, col] = 1.0 if r == col else 0.0
+    _identity(LU, m)
     for b in range(q):
         for k in range(n):
             Y[k] = y0[k] + work.Z[b, k]
@@ -293,14 +285,29 @@ def _newton_matrix_p(i, q, y0, hs, tapes, work, memory, n):
                     LU[a * n + k, q * n + l] -= TABLE_A[q, a, b] * P[k, l]
         for k in range(n):
             for l in range(n):
-                hj = 0.0
-                hp = 0.0
-                for r in range(n):
-                    hj += H[k, r] * J[r, l]
-                    hp += H[k, r] * P[r, l]
+                hj, hp = _hessian_times(H, J, P, k, l, n)
                 LU[q * n + k, b * n + l] = -hs * TABLE_W[q, b] * hj
                 LU[q * n + k, q * n + l] -= hs * TABLE_W[q, b] * hp
     return _factorise(i, m, memory)
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _identity(LU, m):
+    """LU[:m, :m] := the identity (the chord and Newton matrices are I minus their blocks)."""
+    for r in range(m):
+        for col in range(m):
+            LU[r, col] = 1.0 if r == col else 0.0
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _hessian_times(H, J, P, k, l, n):
+    """((H J)_kl, (H P)_kl), the products of the matrices' last block row."""
+    hj = 0.0
+    hp = 0.0
+    for r in range(n):
+        hj += H[k, r] * J[r, l]
+        hp += H[k, r] * P[r, l]
+    return hj, hp
 
 
 @nb.njit(inline="always", **NJIT_NORC)
