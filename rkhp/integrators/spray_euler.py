@@ -234,7 +234,7 @@ def _refresh_chord_p(i, y0, hs, tapes, work, memory, n, current):
     hessian(tapes, work, y0, n)
     LU, H = memory.LU[i], work.hess
     m = (q + 1) * n
-    _identity(LU, m)
+    _set_identity(LU, m)
     for a in range(q):
         c = 0.0
         for b in range(q):
@@ -273,7 +273,7 @@ def _newton_matrix_p(i, q, y0, hs, tapes, work, memory, n):
         Y[k] = acc
     hessian(tapes, work, Y[:n], n)
     m = (q + 1) * n
-    _identity(LU, m)
+    _set_identity(LU, m)
     for b in range(q):
         for k in range(n):
             Y[k] = y0[k] + work.Z[b, k]
@@ -292,7 +292,7 @@ def _newton_matrix_p(i, q, y0, hs, tapes, work, memory, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _identity(LU, m):
+def _set_identity(LU, m):
     """LU[:m, :m] := the identity (the chord and Newton matrices are I minus their blocks)."""
     for r in range(m):
         for col in range(m):
