@@ -26,7 +26,8 @@ Third table, the spray's direct form at the race's settings of the general famil
 benchmarks/data/vortices-8.toml (four point vortices, n = 8, a non-affine pi) with the kernel of
 bcm6-s13 at h = 10/512, and the charged particle with kahan-li8 at h = 0.1: per substep,
 microseconds, chord iterations, refreshes of the chord matrix, the collocation nodes Q, and
-estimates of the operations run and of those the mathematics needs (`spray_flops`: per iteration
+estimates of the operations run and of those the mathematics needs (`compiled_spray_flops`, the
+model of `rkhp.integrators.spray_euler.spray_flops`: per iteration
 the stages' field, the gradient and the solve; per matrix its derivatives, assembly and
 factorisation; `limit`: two iterations a substep, the matrices as the run built them (a matrix
 built at every substep costs more than the iterations it saves: Newton's method is no limit
@@ -157,31 +158,20 @@ SPRAY_RACE = (("benchmarks/data/vortices-8.toml", "bcm6-s13", 512, 10.0),
 """(system, composition, steps, T) of the third table: the spray's direct form."""
 
 
-def spray_flops(system, tapes, n: int, q: float) -> dict:
-    """Flop estimates of the spray's direct form's parts (rkhp.integrators.spray_euler) with q
-    nodes, m = (q + 1) n unknowns: X, X with d_y X, and with pi too, by the operations of their
-    compiled code (`rkhp.systems.field_code.spray_code`'s branches) where the tapes have it, else
-    by forward mode on the tape; H's gradient likewise (`derivatives_code`), its Hessian by central
-    differences of the gradient (2 n gradients). `iteration`: X at the stages, xbar, the gradient,
-    the residual, the solve and the corrections; `substep`: the start extrapolated from HISTORY
-    steps, J for the node count, X at the final stages and y1; `matrix`: a chord matrix built at
-    y0 (X with its derivatives, the Hessian, the assembly, the factorisation)."""
-    from rkhp.integrators.spray_euler import HISTORY
+def compiled_spray_flops(system, tapes, n: int, q: float):
+    """Flop estimates of the spray's direct form's parts with q nodes
+    (`rkhp.integrators.spray_euler.spray_flops`): X, X with d_y X, and with pi too, by the
+    operations of their compiled code (`rkhp.systems.field_code.spray_code`'s branches) where the
+    tapes have it, else by forward mode on the tape; H's gradient likewise (`derivatives_code`)."""
+    from rkhp.integrators import spray_euler
     from rkhp.systems.field_code import derivatives_code, spray_code
 
-    field_ops = tapes.field.ops.shape[0]
-    h_ops = tapes.hamiltonian.ops.shape[0]
+    counts = spray_euler.tape_counts(tapes.field, tapes.hamiltonian, n)
     if tapes.field_at:
-        x, xj, xjp = spray_code(system).branches
-    else:
-        x, xj, xjp = 2 * field_ops, 2 * field_ops * (n + 1), 2 * field_ops * (2 * n + 1)
-    gradient = derivatives_code(system, False).operations if tapes.derivatives_at else 2 * h_ops * (n + 1) + 2 * n
-    m = (q + 1) * n
-    iteration = q * x + 2 * q * n + gradient + 2 * q * q * n + 2 * m * m + 2 * m
-    substep = 2 * HISTORY * (q + 1) * n + xj + 2 * n * n + q * x + 2 * q * n
-    assembly = 2 * q * q * n * n + 4 * n**3 + 2 * q * n * n
-    matrix = xjp + 2 * n * gradient + assembly + 2 * m**3 / 3
-    return {"iteration": iteration, "substep": substep, "matrix": matrix}
+        counts = counts._replace(**dict(zip(("field", "jacobian", "both"), spray_code(system).branches, strict=True)))
+    if tapes.derivatives_at:
+        counts = counts._replace(gradient=derivatives_code(system, False).operations)
+    return spray_euler.spray_flops(n, q, counts)
 
 
 def spray_race(name: str, composition: str, steps: int, t_final: float) -> dict:
@@ -199,9 +189,9 @@ def spray_race(name: str, composition: str, steps: int, t_final: float) -> dict:
     iterations = float(np.sum(trajectory.newton_iterations)) / substeps
     refreshes = sum(extra["refreshes"]) / substeps
     tapes = setup(system, load_tableau("euler"), gammas).data.tapes
-    parts = spray_flops(system, tapes, system.dim, float(np.mean(extra["nodes"])))
-    flops = iterations * parts["iteration"] + refreshes * parts["matrix"] + parts["substep"]
-    limit = 2 * parts["iteration"] + refreshes * parts["matrix"] + parts["substep"]
+    parts = compiled_spray_flops(system, tapes, system.dim, float(np.mean(extra["nodes"])))
+    flops = iterations * parts.iteration + refreshes * parts.matrix + parts.substep
+    limit = 2 * parts.iteration + refreshes * parts.matrix + parts.substep
     us = 1e6 * best / substeps
     return {"us": us, "h": h, "iterations": iterations, "refreshes": refreshes, "flops": flops,
             "limit": limit, "rate": flops / us / 1e3,

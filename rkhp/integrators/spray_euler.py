@@ -22,15 +22,18 @@ numbers, solve by chord iterations with the frozen Jacobian
 
 which contracts the error by O(h^2) an iteration (by O(h) the first iteration of a step, when the
 matrix was built at an earlier step: `SLOW_CONTRACTION`), factorised once and kept across steps for each substep of a
-composition (refreshed when the iterations contract slowly or the number of nodes changes).
+composition (refreshed when the iterations contract slowly, when the number of nodes changes, and
+before iterating when the iterations a fresh matrix would save pay for it, `_worth_rebuilding`:
+the contraction of a kept matrix grows from 1e-3 just after its build to 0.02 to 0.2 as the
+state moves).
 Where even a fresh matrix contracts slowly, and in any substep past half its iterations, the
 matrix is the exact Jacobian at the current iterate (`_newton_matrix_p`: d_y X and pi at each
 stage, Hess H at xbar; Newton's method), taken again at each iteration until the correction nears
 the tolerance: the substeps near the largest steps the iterations converge at (|h| about 0.6 to
 0.9 on the charged particle), where a matrix built at y0 contracts by 0.1 to 0.25. Each
-substep starts from its own previous solutions, (p, Z) extrapolated (a quintic in the step index)
-from the same substep of the six previous steps (`HISTORY`). On a constant pi, J = 0 and the step is the implicit
-midpoint rule.
+substep starts from its own previous solutions, (p, Z) extrapolated (a polynomial in the step
+index) from the same substep of up to eight previous steps (`HISTORY`, as many as predicted the
+last solution best). On a constant pi, J = 0 and the step is the implicit midpoint rule.
 
 Number of nodes: Q is the smallest (at least 2) with E_Q theta^(2Q) <= NODE_BOUND, E_Q the
 average's error constant for y' = lambda y (`rkhp.taylor.collocation.average_error_constant`) and
@@ -76,12 +79,17 @@ from .direct_form import (
 )
 from .failure import Failure
 
-HISTORY = 6
-"""Previous solutions of a substep kept for its extrapolated start (a quintic in the step index;
-the closed form keeps `rkhp.integrators.direct_form.HISTORY`): the start's error falls as
-(h omega)^HISTORY along an orbit of frequency omega, and at the contraction of a matrix kept
-across steps each decade less saves about one chord iteration (at the race's settings 4.3 against
-5.3 iterations a substep with four, `benchmarks/substeps.py`)."""
+HISTORY = 8
+"""Previous solutions of a substep kept for its extrapolated start (a polynomial in the step
+index of degree at most 7; the closed form keeps `rkhp.integrators.direct_form.HISTORY`): the
+start's error falls as (h omega)^k with k solutions along an orbit of frequency omega, and at the
+contraction of a matrix kept across steps each decade less saves about one chord iteration. Where
+h omega is not small the higher differences grow instead: each substep extrapolates from as many
+as would have predicted its last solution best (`_remember_p`)."""
+AMORTISE = 2.0
+"""A substep rebuilds its chord matrix before iterating when AMORTISE times the iterations that
+would save at this step exceeds the matrix's cost in iterations (`_worth_rebuilding`): a fresh
+matrix serves the steps that follow too."""
 MAX_NODES = 12
 """Collocation nodes of the direct form at most (E_12 theta^24 <= NODE_BOUND for theta up to
 about 3.1, beyond the steps at which the chord iterations converge); a substep needing more
@@ -99,12 +107,15 @@ class SprayTapes(NamedTuple):
     """The plain tapes of the direct form, each over the 2n inputs (y, p): `field` X(y, p) =
     pi(y) p (the spray operation's sub-program, outputs X), `hamiltonian` H(y) (p unused); and the
     addresses of their functions compiled for the system (`rkhp.integrators.derivatives`; 0: the
-    tape is interpreted): `derivatives_at` H's gradient, `field_at` X with d_y X and pi."""
+    tape is interpreted): `derivatives_at` H's gradient, `field_at` X with d_y X and pi;
+    rebuild_cost (MAX_NODES + 1,): a chord matrix's flops over a chord iteration's with Q nodes
+    (`spray_flops`), what a rebuild must save."""
 
     field: Tape
     hamiltonian: Tape
     derivatives_at: int
     field_at: int
+    rebuild_cost: np.ndarray
 
 
 class EulerWork(NamedTuple):
@@ -142,7 +153,10 @@ class SubstepMemory(NamedTuple):
     yet); LU (s, m, m), perm (s, m): its factors (transposed, `_solve`), m = (Q + 1) n used; J, P (s, n, n): d_y X and
     pi at the refresh point; rate (s,): the contraction of the first two iterations, last
     measured (1: none yet); refreshes (s,) int64: how many times the matrix was built in this
-    run."""
+    run; order (s,) int64: how many previous solutions the next start extrapolates from at most
+    (`_remember_p`); built_rate (s,): the contraction measured at the first substep of the
+    matrix's last build (1: none yet); iterations (s,) int64: the chord iterations of the last
+    substep."""
 
     p_hist: np.ndarray
     z_hist: np.ndarray
@@ -155,6 +169,9 @@ class SubstepMemory(NamedTuple):
     P: np.ndarray
     rate: np.ndarray
     refreshes: np.ndarray
+    order: np.ndarray
+    built_rate: np.ndarray
+    iterations: np.ndarray
 
 
 def euler_work(tapes: SprayTapes, n: int) -> EulerWork:
@@ -176,7 +193,8 @@ def substep_memory(s: int, n: int) -> SubstepMemory:
     return SubstepMemory(np.zeros((s, HISTORY, n)), np.zeros((s, HISTORY, MAX_NODES, n)),
                          np.zeros((s, 2), np.int64), np.zeros(s, np.int64), np.zeros(s, np.int64),
                          np.zeros((s, m, m)), np.zeros((s, m), np.int64), np.zeros((s, n, n)),
-                         np.zeros((s, n, n)), np.ones(s), np.zeros(s, np.int64))
+                         np.zeros((s, n, n)), np.ones(s), np.zeros(s, np.int64), np.full(s, HISTORY, np.int64),
+                         np.ones(s), np.zeros(s, np.int64))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -376,7 +394,7 @@ def _theta(y0, tapes, work, n):
 def _predict_p(i, y0, hs, tapes, work, memory, n):
     """work.p from substep i's previous solutions (their polynomial extrapolation in the step
     index, `weight`), or hs grad H(y0) without any."""
-    count = memory.counts[i, 0]
+    count = min(memory.counts[i, 0], memory.order[i])
     hist = memory.p_hist[i]
     if count == 0:
         gradient(tapes, work, y0, n)
@@ -394,7 +412,7 @@ def _predict_p(i, y0, hs, tapes, work, memory, n):
 def _start_stages(i, q, memory, work, n):
     """work.Z for q nodes: extrapolated from substep i's previous stages when they had q nodes,
     else the flow's Taylor polynomial Z(c) = c X0 + (c^2 / 2) J X0, X0 = P p (memory's J, P)."""
-    count = memory.counts[i, 1] if memory.z_nodes[i] == q else 0
+    count = min(memory.counts[i, 1], memory.order[i]) if memory.z_nodes[i] == q else 0
     hist = memory.z_hist[i]
     J, P = memory.J[i], memory.P[i]
     for j in range(q):
@@ -423,8 +441,46 @@ def _start_stages(i, q, memory, work, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
+def _best_order(i, memory, work, n):
+    """The number of substep i's previous solutions whose extrapolation comes closest to its
+    converged p (largest component of the difference); HISTORY, to let the order grow, when that
+    is all there were."""
+    count = memory.counts[i, 0]
+    best = np.inf
+    chosen = count
+    for c in range(1, count + 1):
+        err = 0.0
+        for k in range(n):
+            acc = 0.0
+            for r in range(c):
+                acc += weight(c, r) * memory.p_hist[i, r, k]
+            err = max(err, abs(acc - work.p[k]))
+        if err < best:
+            best = err
+            chosen = c
+    return HISTORY if chosen == count else chosen
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _worth_rebuilding(i, q, tapes, memory):
+    """Whether substep i rebuilds its chord matrix before iterating: its last two contractions
+    measured, stale (memory.rate, at its last step) and fresh (memory.built_rate, at the first
+    substep after the last build), put the iterations it needs at about
+    memory.iterations log(fresh) / log(stale) with a fresh matrix; a rebuild when AMORTISE times
+    the saving exceeds the matrix's cost in iterations (tapes.rebuild_cost[q])."""
+    stale, fresh = memory.rate[i], memory.built_rate[i]
+    if not (0.0 < fresh < stale < 1.0):
+        return False
+    saved = memory.iterations[i] * (1.0 - np.log(stale) / np.log(fresh))
+    return AMORTISE * saved > tapes.rebuild_cost[q]
+
+
+@nb.njit(inline="always", **NJIT_NORC)
 def _remember_p(i, q, memory, work, n):
-    """Push the converged (p, Z) of substep i into its history."""
+    """Push the converged (p, Z) of substep i into its history, after choosing how many previous
+    solutions its next start extrapolates from: as many as would have predicted this p best
+    (`_best_order`)."""
+    memory.order[i] = _best_order(i, memory, work, n)
     for r in range(HISTORY - 1, 0, -1):
         for k in range(n):
             memory.p_hist[i, r, k] = memory.p_hist[i, r - 1, k]
@@ -505,7 +561,8 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     iterations).
 
     Starts from the extrapolated (p, Z); refreshes the chord matrix at the first substep, when
-    the number of nodes that theta asks for changes (`nodes_for`), and when an iteration
+    the number of nodes that theta asks for changes (`nodes_for`), when a fresh matrix is worth
+    its cost (`_worth_rebuilding`), and when an iteration
     contracts by more than SLOW_CONTRACTION (once per substep); takes the exact Jacobian at the
     current iterate (`_newton_matrix_p`) when a fresh matrix contracts by more than that, and at
     each iteration from the (max_iter // 2)-th while the correction exceeds 1e3 tol max(1, |y0|).
@@ -520,7 +577,7 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     q = memory.nodes[i]
     if q > 0:
         needed = nodes_for(_theta(y0, tapes, work, n))
-        if needed > q or needed < q - 1:
+        if needed > q or needed < q - 1 or _worth_rebuilding(i, q, tapes, memory):
             q = 0
     if q == 0:
         cause = _refresh_chord_p(i, y0, hs, tapes, work, memory, n, np.int64(0))
@@ -549,6 +606,8 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
             theta = size / previous
             if since == 2:
                 memory.rate[i] = theta
+                if fresh:
+                    memory.built_rate[i] = theta
         predicted = theta / (1.0 - theta) * size if theta < 0.5 else np.inf
         if size <= tol * scale or predicted <= tol * scale:
             converged = True
@@ -578,6 +637,7 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
             acc += TABLE_B[q, j] * work.X[j, k]
         work.dy[k] = acc
     _remember_p(i, q, memory, work, n)
+    memory.iterations[i] = it
     return Failure.OK, it
 
 
@@ -598,6 +658,9 @@ def begin(data, y0):
         memory.nodes[i] = 0
         memory.rate[i] = 1.0
         memory.refreshes[i] = 0
+        memory.order[i] = HISTORY
+        memory.built_rate[i] = 1.0
+        memory.iterations[i] = 0
     return 0
 
 
@@ -663,11 +726,61 @@ def plain_tapes(system) -> tuple[Tape, Tape]:
     return shared(field), shared(Tape(*h))
 
 
+class SprayFlops(NamedTuple):
+    """Floating-point operations of the direct form's parts with Q nodes (`spray_flops`).
+    iteration: X at the stages, xbar, the gradient, the residual, the solve and the corrections;
+    substep: the start extrapolated from HISTORY steps, J for the node count, X at the final
+    stages and y1; matrix: a chord matrix built at y0 (X with its derivatives, the Hessian by
+    central differences of the gradient, the assembly, the factorisation)."""
+
+    iteration: float
+    substep: float
+    matrix: float
+
+
+class OperationCounts(NamedTuple):
+    """Operations of one evaluation: X (`field`), X with d_y X (`jacobian`), X with d_y X and pi
+    (`both`), and H's gradient (`gradient`)."""
+
+    field: float
+    jacobian: float
+    both: float
+    gradient: float
+
+
+def spray_flops(n: int, q: float, counts: OperationCounts) -> SprayFlops:
+    """The operations of `SprayFlops` in dimension n with q nodes (m = (q + 1) n unknowns), from
+    those of one evaluation of each function (`counts`)."""
+    m = (q + 1) * n
+    iteration = q * counts.field + 2 * q * n + counts.gradient + 2 * q * q * n + 2 * m * m + 2 * m
+    substep = 2 * HISTORY * (q + 1) * n + counts.jacobian + 2 * n * n + q * counts.field + 2 * q * n
+    assembly = 2 * q * q * n * n + 4 * n**3 + 2 * q * n * n
+    matrix = counts.both + 2 * n * counts.gradient + assembly + 2 * m**3 / 3
+    return SprayFlops(iteration, substep, matrix)
+
+
+def tape_counts(field: Tape, hamiltonian: Tape, n: int) -> OperationCounts:
+    """`OperationCounts` by forward mode on the tapes (an upper bound of those of the code compiled
+    per system): X with no, n and 2 n directions, and H's gradient."""
+    ops, h_ops = field.ops.shape[0], hamiltonian.ops.shape[0]
+    return OperationCounts(2 * ops, 2 * ops * (n + 1), 2 * ops * (2 * n + 1), 2 * h_ops * (n + 1) + 2 * n)
+
+
+def rebuild_costs(field: Tape, hamiltonian: Tape, n: int) -> np.ndarray:
+    """`SprayTapes.rebuild_cost`: for each Q up to MAX_NODES (at least 2), a chord matrix's
+    operations over a chord iteration's (`spray_flops` on `tape_counts`)."""
+    counts = tape_counts(field, hamiltonian, n)
+    costs = [spray_flops(n, max(q, 2), counts) for q in range(MAX_NODES + 1)]
+    return np.array([c.matrix / c.iteration for c in costs])
+
+
 def spray_tapes(system) -> SprayTapes:
     """The tapes of the direct form (`plain_tapes`; InputError where it refuses the system), with
-    the addresses of the field and of H's gradient compiled for the system."""
+    the addresses of the field and of H's gradient compiled for the system and the cost of a
+    chord matrix (`rebuild_costs`)."""
     field, h = plain_tapes(system)
-    return SprayTapes(field, h, derivatives_at(system, hessian=False), spray_at(system, field))
+    return SprayTapes(field, h, derivatives_at(system, hessian=False), spray_at(system, field),
+                      rebuild_costs(field, h, system.dim))
 
 
 def direct_form_available(system) -> bool:
