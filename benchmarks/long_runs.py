@@ -23,6 +23,7 @@ largest |C_k(x(t)) - C_k(x0)|).
 
 from __future__ import annotations
 
+import argparse
 import math
 import sys
 import time
@@ -35,7 +36,7 @@ from rkhp.integrators.methods import resolve_method, resolve_system
 from rkhp.studies import peers as P
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from work_precision import machine, option, peer_of, versions  # noqa: E402
+from work_precision import machine, parser, peer_of, run_script, versions  # noqa: E402
 
 SYSTEMS = ("nambu", "charged-particle", "rigid-body")
 T_FINAL = 1e5
@@ -154,12 +155,26 @@ def study(name: str, t_final: float, peer_name: str) -> list[str]:
             "At equal CPU time:", "", *COMPARE_HEAD, *comparison(ours, peer), ""]
 
 
+def positive(text: str) -> float:
+    """--t-final: a positive finite number."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0 < value < math.inf:
+        raise argparse.ArgumentTypeError(f"not a positive number: {text!r}")
+    return value
+
+
 def main(argv) -> None:
     argv = list(argv)
     command = " ".join(["python benchmarks/long_runs.py", *argv])
-    t_final = float(option(argv, "--t-final", str(T_FINAL)))
-    write = option(argv, "--write", None)
-    systems = tuple(argv) or SYSTEMS
+    p = parser("python benchmarks/long_runs.py", __doc__)
+    p.add_argument("systems", nargs="*", metavar="SYSTEM", help="built-in names or spec files")
+    p.add_argument("--t-final", type=positive, default=T_FINAL, metavar="T", help="the end time")
+    p.add_argument("--write", metavar="PAGE", help="write the page here")
+    args = p.parse_args(argv)
+    t_final, write, systems = args.t_final, args.write, tuple(args.systems) or SYSTEMS
     started, where = time.strftime("%Y-%m-%d %H:%M"), machine()
     print(f"# {command}  ({started}; {where})", flush=True)
     peer_name = "scipy:dop853" if P.absent(peer_of("numbalsoda:dop853")) else "numbalsoda:dop853"
@@ -180,4 +195,4 @@ def main(argv) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    run_script(main, sys.argv[1:])

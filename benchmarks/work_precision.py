@@ -30,6 +30,7 @@ Long runs (T = 10^5, at equal CPU time) are benchmarks/long_runs.py.
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
 import platform
@@ -276,25 +277,47 @@ def page(command: str, started: str, where: str, rows: list[Row], absent: dict, 
     return "\n".join(text)
 
 
-def option(argv, flag, default):
-    if flag in argv:
-        i = argv.index(flag)
-        value = argv[i + 1]
-        del argv[i:i + 2]
-        return value
-    return default
+def parser(program: str, doc: str) -> argparse.ArgumentParser:
+    """An argument parser for a benchmark script whose --help prints its module docstring `doc`."""
+    return argparse.ArgumentParser(prog=program, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def target_list(text: str) -> tuple[float, ...]:
+    """--targets: end-point errors separated by commas, each in (0, 1)."""
+    try:
+        targets = tuple(float(t) for t in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a list of numbers: {text!r}") from None
+    if not all(0 < t < 1 for t in targets):
+        raise argparse.ArgumentTypeError(f"each target error must lie in (0, 1): {text!r}")
+    return targets
+
+
+def round_count(text: str) -> int:
+    """--rounds: an integer from 1 to 1000."""
+    if not text.isdigit() or not 1 <= int(text) <= 1000:
+        raise argparse.ArgumentTypeError(f"not an integer from 1 to 1000: {text!r}")
+    return int(text)
+
+
+def arguments(argv) -> argparse.Namespace:
+    """The command line (see the module)."""
+    p = parser("python benchmarks/work_precision.py", __doc__)
+    p.add_argument("systems", nargs="*", metavar="SYSTEM", help="built-in names or spec files")
+    p.add_argument("--quick", action="store_true", help="the first system, 3 rounds")
+    p.add_argument("--targets", type=target_list, default=TARGETS, help="end-point errors, comma separated")
+    p.add_argument("--rounds", type=round_count, metavar="N", help="interleaved rounds")
+    p.add_argument("--write", metavar="PAGE", help="write the page here")
+    return p.parse_args(argv)
 
 
 def main(argv) -> None:
     argv = list(argv)
     command = " ".join(["python benchmarks/work_precision.py", *argv])
-    quick = "--quick" in argv
-    if quick:
-        argv.remove("--quick")
-    targets = tuple(float(t) for t in option(argv, "--targets", ",".join(map(str, TARGETS))).split(","))
-    rounds = int(option(argv, "--rounds", str(3 if quick else ROUNDS)))
-    write = option(argv, "--write", None)
-    systems = tuple(argv) or (SYSTEMS[:1] if quick else SYSTEMS)
+    args = arguments(argv)
+    targets, quick, write = args.targets, args.quick, args.write
+    rounds = args.rounds or (3 if quick else ROUNDS)
+    systems = tuple(args.systems) or (SYSTEMS[:1] if quick else SYSTEMS)
     started = time.strftime("%Y-%m-%d %H:%M")
     where = machine()
     print(f"# {command}  ({started}; {where})")
@@ -311,5 +334,16 @@ def main(argv) -> None:
         print(f"# written: {write}")
 
 
+def run_script(main_function, argv) -> None:
+    """main_function(argv), a bad system name or spec file reported in one line (exit 2)."""
+    from rkhp.base.errors import InputError
+
+    try:
+        main_function(argv)
+    except InputError as error:
+        print(f"error: {error}", file=sys.stderr)
+        sys.exit(2)
+
+
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    run_script(main, sys.argv[1:])

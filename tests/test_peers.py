@@ -8,6 +8,8 @@ from __future__ import annotations
 import ctypes
 import importlib.util
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -233,3 +235,18 @@ def test_work_precision_benchmark_takes_a_spec_file(tmp_path):
     page = tmp_path / "wp.md"
     _benchmark().main([str(VORTICES), "--quick", "--targets", "1e-6", "--rounds", "1", "--write", str(page)])
     assert "| `vortices-8` | 1e-06 |" in page.read_text()
+
+
+@pytest.mark.parametrize("script, args, says", [
+    ("work_precision.py", ["--rounds", "0"], "--rounds"),
+    ("work_precision.py", ["--targets", "1e-8,x"], "--targets"),
+    ("work_precision.py", ["no-such-system"], "unknown system 'no-such-system'"),
+    ("long_runs.py", ["--t-final", "-1"], "--t-final"),
+    ("long_runs.py", ["--no-such-flag"], "unrecognized arguments"),
+    ("long_runs.py", ["no-such-system"], "unknown system 'no-such-system'"),
+])
+def test_the_benchmarks_refuse_bad_arguments_in_one_line(script, args, says):
+    done = subprocess.run([sys.executable, str(ROOT / "benchmarks" / script), *args], capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert says in done.stderr.strip().splitlines()[-1]
