@@ -11,6 +11,7 @@ Wanner II.4) against a DOP853 reference (rkhp.studies.reference).
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -33,6 +34,7 @@ from rkhp.taylor.tape import functions as f
 from rkhp.taylor.tape import record_tape
 
 TRIPLE_JUMP = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
+ROOT = Path(__file__).resolve().parent.parent
 
 
 @pytest.fixture(scope="module", params=["charged-particle", "nambu"])
@@ -150,6 +152,20 @@ def test_substeps_near_the_largest_that_converge_take_newtons_method():
     tower = run(system, load_tableau("euler"), 1.0 / 3.0, 30, gammas=gammas, provider=TOWER)
     assert direct.ok and tower.ok
     assert np.abs(direct.states - tower.states).max() < 1e-9
+
+
+@pytest.mark.parametrize("name", ["charged-particle", "benchmarks/data/vortices-8.toml"])
+def test_a_tolerance_below_round_off_iterates_to_stagnation(name):
+    """kahan-li8 at h = 0.1 with the chord iterations' tolerance 2^-90, far below round-off: the
+    corrections end wandering at round-off, and the iterations stop there (docs/general-poisson.md
+    "The Euler step in direct form") on the states of the default tolerance, to round-off over
+    the run; no new matrix is taken for a correction at round-off, which kept them from it."""
+    system = get_system(str(ROOT / name) if name.endswith(".toml") else name)
+    gammas = load_composition("kahan-li8").gamma_float
+    default = run(system, load_tableau("euler"), 0.1, 100, gammas=gammas)
+    tight = run(system, load_tableau("euler"), 0.1, 100, gammas=gammas, tol=2.0**-90)
+    assert default.ok and tight.ok
+    assert np.abs(tight.states - default.states).max() < 1e-12
 
 
 # ----------------------------------------------------------------------------------------------

@@ -59,6 +59,7 @@ from .derivatives import derivatives_at
 from .direct_form import (
     HISTORY,
     RATE_MARGIN,
+    REFRESH_FLOOR,
     SLOW_CONTRACTION,
     STAGNATION,
     add_increment,
@@ -462,7 +463,8 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
         if since >= 2 and size >= 0.5 * previous and size <= STAGNATION * scale:
             converged = True
             break
-        if since >= 2 and not fresh and theta > SLOW_CONTRACTION and size > 1e3 * solver.tol * scale:
+        floor = max(1e3 * solver.tol, REFRESH_FLOOR) * scale
+        if since >= 2 and not fresh and theta > SLOW_CONTRACTION and size > floor:
             fresh = True
             cause = _refresh_chord_z(i, y0, hs, form, work, memory, n)
             if cause != Failure.OK:

@@ -38,6 +38,11 @@ DIRECT_TOLERANCE = 2.0**-60
 the corrections stagnate (`STAGNATION`). Stopping at 1e-15 left the stages off the collocation
 solution by that much, which moves a non-quadratic Casimir systematically (docs/general-poisson.md
 "The Euler step in direct form")."""
+REFRESH_FLOOR = 1e3 * DIRECT_TOLERANCE
+"""No new matrix for a correction at most max(1e3 tol, this) (relative to max(1, |y0|)): at the
+default tolerance 1e3 tol, about four units of round-off, where the corrections no longer
+measure a contraction (they wander at round-off, in cycles that a new matrix each iteration
+would keep from stagnating); so a tolerance below the default iterates to stagnation."""
 HISTORY = 4
 """Previous solutions of a substep kept for the closed form's extrapolated start (cubic: on the
 charged particle at h = 0.1, step 11, a cubic start erred by 8.3e-7 against 7.4e-6 for a

@@ -70,6 +70,7 @@ from ..taylor.tape import Tape
 from .derivatives import derivatives_at, spray_at
 from .direct_form import (
     RATE_MARGIN,
+    REFRESH_FLOOR,
     SLOW_CONTRACTION,
     STAGNATION,
     add_increment,
@@ -565,7 +566,8 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     its cost (`_worth_rebuilding`), and when an iteration
     contracts by more than SLOW_CONTRACTION (once per substep); takes the exact Jacobian at the
     current iterate (`_newton_matrix_p`) when a fresh matrix contracts by more than that, and at
-    each iteration from the (max_iter // 2)-th while the correction exceeds 1e3 tol max(1, |y0|).
+    each iteration from the (max_iter // 2)-th while the correction exceeds max(1e3 tol,
+    REFRESH_FLOOR) max(1, |y0|).
     Stops when the correction, or its predicted successor theta / (1 - theta) |d| (theta the
     measured contraction; after the first iteration, twice the substep's last measured first
     contraction), is at most tol max(1, |y0|); then X is evaluated at the final (Z, p) and
@@ -616,7 +618,7 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
             converged = True  # the corrections stagnate at round-off
             break
         rescue = it >= max_iter // 2
-        if size > 1e3 * tol * scale and ((since >= 2 and theta > SLOW_CONTRACTION) or rescue):
+        if size > max(1e3 * tol, REFRESH_FLOOR) * scale and ((since >= 2 and theta > SLOW_CONTRACTION) or rescue):
             if fresh or rescue:
                 cause = _newton_matrix_p(i, q, y0, hs, tapes, work, memory, n)
             else:
