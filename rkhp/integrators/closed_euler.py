@@ -21,14 +21,15 @@ solved by quasi-Newton iterations z += B (G(x(z)) - z) from B = M^-1, M = I - G'
 differences of the gradient, `rkhp.integrators.direct_form.hessian`), a chord matrix that
 contracts by O(h^2) an iteration, improved by Broyden's update of B from each correction and the
 change of the residual it brought (measured on RKHP Euler: 4.3 iterations a step against 6.6 for
-the plain chord iterations on the rigid body at h = 0.1, 5.8 against 8.1 on Lotka–Volterra,
-4.1 against 4.6 on toda:12 at h = 0.05).
+the plain chord iterations on the rigid body at h = 0.1, 5.8 against 8.1 on Lotka–Volterra),
+except on the diagonal algebras, whose point costs less than the update (`ClosedForm.broyden`).
 B is built once per substep of a composition and kept, with its updates, across steps (rebuilt
 when its contraction grows, `REFRESH_CONTRACTION`, `rkhp.integrators.direct_form.SLOW_CONTRACTION`).
 Each substep starts from z extrapolated over the same substep of the previous steps (`HISTORY`,
 as the spray's direct form, docs/general-poisson.md "The Euler step in direct form").
 
-e^-K y0 and psi(K) y0 are power series, or Rodrigues' closed forms on so(3)*, under the guard of
+e^-K y0 and psi(K) y0 are power series, or closed forms on so(3)* (Rodrigues') and on the
+diagonal algebras (K(p) = [[D, 0], [E, 0]]: n exponentials, the Toda lattice), under the guard of
 the family's phi (`rkhp.integrators.lie_poisson_point`).
 
 Compiled data: `ClosedForm` (the family's structure and H's tape), `ClosedWork` (work arrays),
@@ -68,7 +69,7 @@ from .direct_form import (
     weight,
 )
 from .failure import Failure
-from .lie_poisson_point import exp_series, rotation_jacobian, rotation_point
+from .lie_poisson_point import diagonal_point, exp_series, rotation_jacobian, rotation_point
 
 CONSTANT, LIE_POISSON, LOG_CANONICAL = 0, 1, 2
 """The families of `ClosedForm.kind`."""
@@ -89,9 +90,10 @@ solve each substep by Newton's method (`newton_substep`) on so(3)*, and on the c
 log-canonical families up to this dimension; the others keep a chord matrix across steps with
 Broyden's updates (`closed_substep`): where Hess H is interpreted (central differences of the
 gradient, 2 n gradients), more but cheaper chord iterations take less time
-(`benchmarks/substeps.py`); on other Lie–Poisson algebras x'(z) has no closed form; and in more
-dimensions the Hessian's n^2 entries and its factorisation cost more than the iterations they
-save."""
+(`benchmarks/substeps.py`); on other Lie–Poisson algebras x'(z) has no closed form, or (the
+diagonal algebras) the chord iterations on their closed-form point cost less than Newton's
+factorisations; and in more dimensions the Hessian's n^2 entries and its factorisation cost more
+than the iterations they save."""
 NEWTON_REFRESH = 1e-7
 """`newton_substep` takes the exact Jacobian again after a correction above this (relative to
 max(1, |y0|)); below it the last one serves (its chord step contracts by about L 1e-7)."""
@@ -106,7 +108,12 @@ class ClosedForm(NamedTuple):
     identically zero: pairs (e, 2) the (i, k) of entry e, K_ik = sum over r in
     starts[e]..starts[e+1]-1 of coefs[r] p[cols[r]] (coefs = -C_ijk, cols = j); rotation: the
     scalar s with K(z) = hat(s z) when the algebra is so(3) (C = -s epsilon; e^-K and psi(K) are
-    then Rodrigues' closed forms, `rotation_point`), else 0; exact: whether each substep's
+    then Rodrigues' closed forms, `rotation_point`), else 0; diagonal (n,) int64: on a diagonal
+    algebra (K(p) = [[D, 0], [E, 0]], `rkhp.integrators.lie_poisson_point`) the entry of K_kk
+    for each k (-1 where it vanishes; e^-K and psi(K) are then closed forms, `diagonal_point`),
+    else empty; broyden: whether the chord iterations (`closed_substep`) take Broyden's update
+    (not on the diagonal algebras: with the point in closed form the update's 6 n^2 flops an
+    iteration cost more than the iterations it saves, `benchmarks/substeps.py`); exact: whether each substep's
     matrix is the exact Jacobian at its iterates (`EXACT_DIMENSION`, `newton_substep`);
     hessian_constant: whether H is a polynomial of degree at most 2 (`rkhp.taylor.scalar.
     polynomial_degree`), and then hessian (n, n) its Hessian (else zeros); derivatives_at: the
@@ -122,6 +129,8 @@ class ClosedForm(NamedTuple):
     coefs: np.ndarray
     hamiltonian: Tape
     rotation: float
+    diagonal: np.ndarray
+    broyden: bool
     exact: bool
     hessian_constant: bool
     hessian: np.ndarray
@@ -208,6 +217,8 @@ def _point(y0, form, work, n):
     returns Failure.OK or the series' failure."""
     if form.kind == LIE_POISSON and form.rotation != 0.0:
         return rotation_point(y0, form, work)
+    if form.kind == LIE_POISSON and form.diagonal.shape[0] > 0:
+        return diagonal_point(y0, form, work, n)
     if form.kind == LIE_POISSON:
         return exp_series(y0, form, work, n)
     M = form.matrix
@@ -436,7 +447,7 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
         _target(hs, form, work, n)
         for k in range(n):
             work.res[k] -= work.z[k]
-        if since >= 2 and previous > BROYDEN_FLOOR * scale:
+        if form.broyden and since >= 2 and previous > BROYDEN_FLOOR * scale:
             _broyden(memory.inverse[i], work, n)
         size = 0.0
         for k in range(n):
@@ -639,14 +650,17 @@ def _read_form(system) -> ClosedForm:
     else:
         for k in range(n):
             C[:, :, k] = system.poisson(np.eye(n)[k])
+    entries = _lie_entries(C)
     rotation = _rotation_scale(C) if kind == LIE_POISSON else 0.0
+    diagonal = _diagonal_entries(entries[0], n) if kind == LIE_POISSON and rotation == 0.0 else np.zeros(0, np.int64)
     tape = shared(Tape(*h))
     quadratic = polynomial_degree(tape) <= 2
     newton = rotation != 0.0 or (kind != LIE_POISSON and n <= EXACT_DIMENSION)
     address = derivatives_at(system, hessian=newton and not quadratic)
     exact = newton and (quadratic or address != 0)
-    form = ClosedForm(kind, np.ascontiguousarray(matrix), *_lie_entries(C), tape, rotation, exact, quadratic,
-                      np.zeros((n, n)), address)
+    broyden = diagonal.size == 0
+    form = ClosedForm(kind, np.ascontiguousarray(matrix), *entries, tape, rotation, diagonal, broyden, exact,
+                      quadratic, np.zeros((n, n)), address)
     if quadratic:
         _quadratic_hessian(form, closed_work(form, n), n)
     return form
@@ -672,6 +686,20 @@ def _rotation_scale(C: np.ndarray) -> float:
         epsilon[i, j, k], epsilon[i, k, j] = 1.0, -1.0
     s = -float(C[0, 1, 2])
     return s if s != 0.0 and np.array_equal(C, -s * epsilon) else 0.0
+
+
+def _diagonal_entries(pairs: np.ndarray, n: int) -> np.ndarray:
+    """`ClosedForm.diagonal` from K's entries (pairs (i, k)): the entry of K_kk per k (-1 where
+    none) when K is diagonal on the set A of its non-zero columns and zero on the others (every
+    entry (i, k) off the diagonal has its row i outside A), else an empty array."""
+    columns = set(pairs[:, 1].tolist())
+    if any(i != k and i in columns for i, k in pairs.tolist()):
+        return np.zeros(0, np.int64)
+    diagonal = np.full(n, -1, np.int64)
+    for e, (i, k) in enumerate(pairs.tolist()):
+        if i == k:
+            diagonal[k] = e
+    return diagonal
 
 
 def closed_form_available(system) -> bool:

@@ -8,6 +8,13 @@ guard of the family's phi (|K|_F < 0.9 * 2 pi, `rkhp.taylor.composites.phimv`): 
 it fails as the engine's Newton iteration does on the NaN that phi gives there
 (NEWTON_NON_FINITE). On so(3)* they are Rodrigues' closed forms (`rotation_point`), with the
 Jacobian of x in z (`rotation_jacobian`).
+
+On a diagonal algebra K(p) reads x only through the coordinates A of its non-zero columns and is
+diagonal on them: K = [[D, 0], [E, 0]] in the split (A, the rest), D = diag(d) (the periodic
+Toda lattice in Flaschka's variables). Then K^m = [[D^m, 0], [E D^(m-1), 0]], so with a = y0 on A
+and w = -d, phi_k(w) = sum_m w^m / (m + k)! componentwise (docs/theory.md §4):
+e^-K y0 - y0 = (w phi_1(w) a, -E phi_1(w) a) and psi(K) y0 = (phi_1(w) a, y0 - E phi_2(w) a) on
+(A, the rest): closed forms of |A| exponentials (`diagonal_point`).
 """
 
 from __future__ import annotations
@@ -31,6 +38,14 @@ ROTATION_SERIES = 1.0
 as their power series (ROTATION_TERMS terms: the next is below 2^-56 of the first), above it
 taken from sin and cos (whose differences lose at most a few units of round-off there)."""
 ROTATION_TERMS = 9
+PHI_SERIES = 1.0
+"""Below this |w| the functions phi_1, phi_2 of `diagonal_point` are summed as the power series of
+phi_2 (PHI_TERMS terms: the next is below 2^-56 of the first) with phi_1 = 1 + w phi_2; above it
+phi_1 = expm1(w) / w and phi_2 = (phi_1 - 1) / w (at |w| = 1 the difference loses at most a
+factor 3 of round-off)."""
+PHI_TERMS = 18
+PHI_TABLE = np.array([1.0 / math.factorial(m + 2) for m in range(PHI_TERMS)])
+"""1 / (m + 2)!, the coefficients of phi_2's series."""
 
 
 def _rotation_series_table() -> np.ndarray:
@@ -51,11 +66,8 @@ ROTATION_SERIES_TABLE = _rotation_series_table()
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def exp_series(y0, form, work, n):
-    """Lie-poisson: K(work.z) into work.kval, then work.dy := e^-K y0 - y0 and work.xbar :=
-    psi(K) y0 by their power series (see the module), summed until the next terms' bound is
-    below round-off. Returns Failure.OK, or NEWTON_NON_FINITE when |K|_F is not below PHI_GUARD
-    (or not finite)."""
+def _k_entries(form, work):
+    """K(work.z)'s entries into work.kval; returns |K|_F."""
     norm = 0.0
     for e in range(form.pairs.shape[0]):
         acc = 0.0
@@ -63,7 +75,16 @@ def exp_series(y0, form, work, n):
             acc += form.coefs[r] * work.z[form.cols[r]]
         work.kval[e] = acc
         norm += acc * acc
-    norm = math.sqrt(norm)
+    return math.sqrt(norm)
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def exp_series(y0, form, work, n):
+    """Lie-poisson: K(work.z) into work.kval, then work.dy := e^-K y0 - y0 and work.xbar :=
+    psi(K) y0 by their power series (see the module), summed until the next terms' bound is
+    below round-off. Returns Failure.OK, or NEWTON_NON_FINITE when |K|_F is not below PHI_GUARD
+    (or not finite)."""
+    norm = _k_entries(form, work)
     if not norm < PHI_GUARD:
         return Failure.NEWTON_NON_FINITE
     size0 = 0.0
@@ -167,3 +188,46 @@ def rotation_jacobian(y0, form, work, D):
                 hat = y0[3 - i - j]
             d2 = (qy if i == j else 0.0) + q[i] * y0[j] - 2.0 * y0[i] * q[j]
             D[i, j] = form.rotation * ((-c1[i] * da + c2[i] * db) * q[j] + a * hat + b * d2)
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _phi_functions(w):
+    """(phi_1(w), phi_2(w)), phi_k(w) = sum_m w^m / (m + k)!: the series below PHI_SERIES (the
+    singularities of (e^w - 1) / w and (e^w - 1 - w) / w^2 at 0 are removable), else phi_1 =
+    expm1(w) / w and phi_2 = (phi_1 - 1) / w."""
+    if abs(w) < PHI_SERIES:
+        p2 = 0.0
+        for m in range(PHI_TERMS - 1, -1, -1):
+            p2 = p2 * w + PHI_TABLE[m]
+        return 1.0 + w * p2, p2
+    p1 = math.expm1(w) / w
+    return p1, (p1 - 1.0) / w
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def diagonal_point(y0, form, work, n):
+    """A diagonal algebra (see the module; form.diagonal[k] the entry of K_kk, or -1): work.dy :=
+    e^-K y0 - y0 and work.xbar := psi(K) y0 in closed form from K(work.z)'s entries (work.kval);
+    work.kv := phi_1(-K_kk) and work.tmp := phi_2(-K_kk) per column k (1 and 1/2 where K_kk
+    vanishes). Failure as `exp_series`."""
+    norm = _k_entries(form, work)
+    if not norm < PHI_GUARD:
+        return Failure.NEWTON_NON_FINITE
+    p1, p2 = work.kv, work.tmp
+    for k in range(n):
+        p1[k] = 1.0
+        p2[k] = 0.5
+        work.dy[k] = 0.0
+        work.xbar[k] = y0[k]
+        e = form.diagonal[k]
+        if e >= 0:
+            w = -work.kval[e]
+            p1[k], p2[k] = _phi_functions(w)
+            work.dy[k] = w * p1[k] * y0[k]
+            work.xbar[k] = p1[k] * y0[k]
+    for e in range(form.pairs.shape[0]):
+        i, k = form.pairs[e, 0], form.pairs[e, 1]
+        if i != k:
+            work.dy[i] -= work.kval[e] * p1[k] * y0[k]
+            work.xbar[i] -= work.kval[e] * p2[k] * y0[k]
+    return Failure.OK
