@@ -56,4 +56,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    from work_precision import parser
+
+    parser("python benchmarks/compile_parts.py", __doc__).parse_args()
     main()

@@ -142,4 +142,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    from work_precision import parser
+
+    parser("python benchmarks/general.py", __doc__).parse_args()
     main()

@@ -73,8 +73,15 @@ def coefficients(system, method) -> tuple[int, int]:
     return degree, len(b) * n * comb(n + degree - 1, n)
 
 
-def main() -> None:
-    plot = sys.argv[1] if len(sys.argv) > 1 else "implicit-work-precision.png"
+def main(argv) -> None:
+    from work_precision import parser
+
+    p = parser("python benchmarks/implicit.py", __doc__)
+    p.add_argument("plot", nargs="?", default="implicit-work-precision.png", metavar="PLOT",
+                   help="the work-precision figure")
+    from rkhp.studies.plots import check_plot_path
+
+    plot = check_plot_path(p.parse_args(argv).plot, force=True)  # before the work: a bad name fails first
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}")
     rb = get_system("rigid-body")
     explicit, newton, _ = per_step(rb, "paper-three-stage", 0.1)
@@ -106,8 +113,10 @@ def main() -> None:
         points = ", ".join(f"{p.steps}: {p.error:.1e} in {p.seconds * 1e3:.2f} ms"
                            for p in curve.points if p.error is not None)
         print(f"[3] {curve.method}: {points}")
-    print(f"[3] plot: {plot_work_precision(study, plot)}")
+    print(f"[3] plot: {plot_work_precision(study, plot, force=True)}")
 
 
 if __name__ == "__main__":
-    main()
+    from work_precision import run_script
+
+    run_script(main, sys.argv[1:])

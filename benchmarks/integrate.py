@@ -118,4 +118,7 @@ def work_precision(rb) -> None:
 
 
 if __name__ == "__main__":
+    from work_precision import parser
+
+    parser("python benchmarks/integrate.py", __doc__).parse_args()
     main()

@@ -84,5 +84,8 @@ def _hamiltonian_us(system, states) -> float:
 
 
 if __name__ == "__main__":
+    from work_precision import parser
+
+    parser("python benchmarks/modified.py", __doc__).parse_args()
     commands()
     rigid_body()

@@ -199,6 +199,9 @@ def _option(argv: list[str], flag: str) -> str:
 
 
 def main(argv: list[str]) -> int:
+    if argv in (["-h"], ["--help"]):
+        print(__doc__)
+        return 0
     try:
         if argv[:1] == ["record"]:
             if "--" not in argv or argv.index("--") == len(argv) - 1:

@@ -13,7 +13,6 @@ up before timing. Run: ``.venv/bin/python benchmarks/search.py [--quick]``.
 from __future__ import annotations
 
 import statistics
-import sys
 import time
 
 from rkhp.search.driver import SearchOptions, search
@@ -34,7 +33,11 @@ def time_to_first(stages: int, order: int, cls: str, seed: int, closed: bool) ->
 
 
 def main() -> None:
-    quick = "--quick" in sys.argv
+    from work_precision import parser
+
+    p = parser("python benchmarks/search.py", __doc__)
+    p.add_argument("--quick", action="store_true", help="3 seeds, 10 restarts for the rates")
+    quick = p.parse_args().quick
     seeds = range(3 if quick else 5)
     rate_restarts = 10 if quick else 40
     search(2, 3, "degenerate", options=SearchOptions(restarts=5))  # warm-up: imports, caches

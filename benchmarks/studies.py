@@ -75,5 +75,8 @@ def peer_step_costs(steps: int = 20_000, repeats: int = 5) -> None:
 
 
 if __name__ == "__main__":
+    from work_precision import parser
+
+    parser("python benchmarks/studies.py", __doc__).parse_args()
     converge_cold_warm()
     peer_step_costs()

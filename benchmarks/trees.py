@@ -79,4 +79,7 @@ def main():
 
 
 if __name__ == "__main__":
+    from work_precision import parser
+
+    parser("python benchmarks/trees.py", __doc__).parse_args()
     main()

@@ -60,7 +60,11 @@ def show(label: str, r: dict, target: float | None = None) -> None:
 
 
 def main() -> None:
-    quick = "--quick" in sys.argv
+    from work_precision import parser
+
+    p = parser("python benchmarks/verify.py", __doc__)
+    p.add_argument("--quick", action="store_true", help="skip the checks at 60 digits")
+    quick = p.parse_args().quick
     print("rkhp verify (wall clock; order shown as general/degenerate)")
     show("feagin14, float, every tree up to order 15", run(CHILD, "feagin14", "float", "4"), 0.5)
     if not quick:
