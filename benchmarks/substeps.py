@@ -131,7 +131,7 @@ def closed_flops(system, form, n: int) -> dict:
         point = 12 * (4 * len(form.coefs) + 6 * n)  # about 12 terms of two series (|K| about 0.1)
     else:
         point = 2 * n * n + (40 * n if form.kind == closed_euler.LOG_CANONICAL else 2 * n)
-    solve = 2 * n * n + (6 * n * n if form.broyden and not form.exact else 0)  # the chord path's Broyden update
+    solve = 2 * n * n + (6 * n * n if not form.exact else 0)  # the chord path's Broyden update
     jacobian = 2 * n**3 + (2 * n**3 // 3) + 2 * n**3 + (0 if form.hessian_constant else hessian)
     return {"iteration": point + gradient + solve, "jacobian": jacobian, "point": point}
 

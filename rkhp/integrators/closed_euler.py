@@ -21,8 +21,8 @@ solved by quasi-Newton iterations z += B (G(x(z)) - z) from B = M^-1, M = I - G'
 differences of the gradient, `rkhp.integrators.direct_form.hessian`), a chord matrix that
 contracts by O(h^2) an iteration, improved by Broyden's update of B from each correction and the
 change of the residual it brought (measured on RKHP Euler: 4.3 iterations a step against 6.6 for
-the plain chord iterations on the rigid body at h = 0.1, 5.8 against 8.1 on Lotka–Volterra),
-except on the diagonal algebras, whose point costs less than the update (`ClosedForm.broyden`).
+the plain chord iterations on the rigid body at h = 0.1, 5.8 against 8.1 on Lotka–Volterra,
+4.5 against 8.5 on the ax + b algebra).
 B is built once per substep of a composition and kept, with its updates, across steps (rebuilt
 when its contraction grows, `REFRESH_CONTRACTION`, `rkhp.integrators.direct_form.SLOW_CONTRACTION`).
 Each substep starts from z extrapolated over the same substep of the previous steps (`HISTORY`,
@@ -111,9 +111,7 @@ class ClosedForm(NamedTuple):
     then Rodrigues' closed forms, `rotation_point`), else 0; diagonal (n,) int64: on a diagonal
     algebra (K(p) = [[D, 0], [E, 0]], `rkhp.integrators.lie_poisson_point`) the entry of K_kk
     for each k (-1 where it vanishes; e^-K and psi(K) are then closed forms, `diagonal_point`),
-    else empty; broyden: whether the chord iterations (`closed_substep`) take Broyden's update
-    (not on the diagonal algebras: with the point in closed form the update's 6 n^2 flops an
-    iteration cost more than the iterations it saves, `benchmarks/substeps.py`); exact: whether each substep's
+    else empty; exact: whether each substep's
     matrix is the exact Jacobian at its iterates (`EXACT_DIMENSION`, `newton_substep`);
     hessian_constant: whether H is a polynomial of degree at most 2 (`rkhp.taylor.scalar.
     polynomial_degree`), and then hessian (n, n) its Hessian (else zeros); derivatives_at: the
@@ -130,7 +128,6 @@ class ClosedForm(NamedTuple):
     hamiltonian: Tape
     rotation: float
     diagonal: np.ndarray
-    broyden: bool
     exact: bool
     hessian_constant: bool
     hessian: np.ndarray
@@ -447,7 +444,7 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
         _target(hs, form, work, n)
         for k in range(n):
             work.res[k] -= work.z[k]
-        if form.broyden and since >= 2 and previous > BROYDEN_FLOOR * scale:
+        if since >= 2 and previous > BROYDEN_FLOOR * scale:
             _broyden(memory.inverse[i], work, n)
         size = 0.0
         for k in range(n):
@@ -658,9 +655,8 @@ def _read_form(system) -> ClosedForm:
     newton = rotation != 0.0 or (kind != LIE_POISSON and n <= EXACT_DIMENSION)
     address = derivatives_at(system, hessian=newton and not quadratic)
     exact = newton and (quadratic or address != 0)
-    broyden = diagonal.size == 0
-    form = ClosedForm(kind, np.ascontiguousarray(matrix), *entries, tape, rotation, diagonal, broyden, exact,
-                      quadratic, np.zeros((n, n)), address)
+    form = ClosedForm(kind, np.ascontiguousarray(matrix), *entries, tape, rotation, diagonal, exact, quadratic,
+                      np.zeros((n, n)), address)
     if quadratic:
         _quadratic_hessian(form, closed_work(form, n), n)
     return form
