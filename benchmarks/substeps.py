@@ -123,7 +123,7 @@ def closed_flops(system, form, n: int) -> dict:
     gradient = derivatives_code(system, False).operations if form.derivatives_at else forward
     hessian = derivatives_code(system, True).operations if form.derivatives_at and form.exact else 2 * n * forward
     if form.kind == closed_euler.LIE_POISSON and form.rotation:
-        point = 70
+        point = 70 if n == 3 else 190  # Rodrigues' forms; on se(3)* with their derivative along r
     elif form.kind == closed_euler.LIE_POISSON and form.diagonal.size:
         columns = int(np.count_nonzero(form.diagonal >= 0))
         point = 2 * len(form.coefs) + 40 * columns + 4 * (len(form.pairs) - columns) + 2 * n  # an exponential a column

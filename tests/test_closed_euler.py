@@ -20,7 +20,7 @@ from rkhp.base.errors import InputError
 from rkhp.integrators.closed_euler import closed_form, closed_work
 from rkhp.integrators.driver import integrate_closed_euler, run
 from rkhp.integrators.failure import Failure
-from rkhp.integrators.lie_poisson_point import diagonal_point
+from rkhp.integrators.lie_poisson_point import diagonal_point, se3_point
 from rkhp.integrators.methods import integrate, resolve_method
 from rkhp.integrators.rkhp_method import integrate_rkhp as engine_integrate
 from rkhp.integrators.substeps import CLOSED, TOWER, choose
@@ -40,7 +40,7 @@ def constant_system():
                          name="constant-3", x0=(0.3, -0.2, 0.5), t_final=1.0)
 
 
-SYSTEMS = {"rigid-body": 0.1, "toda:12": 0.05, "lotka-volterra": 0.1, "volterra-lattice:7": 0.05,
+SYSTEMS = {"rigid-body": 0.1, "toda:12": 0.05, "lotka-volterra": 0.1, "volterra-lattice:7": 0.05, "heavy-top": 0.1,
            "constant-3": 0.1}
 
 
@@ -51,7 +51,7 @@ def system_named(name):
 @pytest.mark.parametrize("name", sorted(SYSTEMS))
 def test_euler_is_the_engine_euler(name):
     """40 steps; measured (largest difference / largest |y|): rigid-body 1.8e-14, toda:12
-    4.5e-15, lotka-volterra 5.4e-15, volterra-lattice:7 1.3e-14, constant-3 2.3e-15."""
+    4.5e-15, lotka-volterra 5.4e-15, volterra-lattice:7 1.3e-14, constant-3 2.3e-15, heavy-top 8.1e-16."""
     system, h = system_named(name), SYSTEMS[name]
     direct = integrate_closed_euler(system, (1.0,), h, 40)
     engine = engine_integrate(system, "euler", h, 40)
@@ -121,15 +121,17 @@ def _exponentials(K, y0):
     return np.array(exponential, dtype=float), np.array(psi, dtype=float)
 
 
-@pytest.mark.parametrize("name", ["toda", "toda:12"])
-def test_on_toda_the_point_is_the_matrix_exponential(name):
-    """Toda's algebra is diagonal (K(p) = [[D, 0], [E, 0]]): the closed forms of e^-K y0 - y0 and
-    psi(K) y0 = phi_1(-K) y0 against mpmath's expm, at random z with |K|_F from 1e-6 to near the
-    guard of phi (measured: 1.4e-16 relative at |K|_F = 5, where scipy's expm is 3e-14 off)."""
+@pytest.mark.parametrize("name", ["toda", "toda:12", "heavy-top"])
+def test_the_closed_points_are_the_matrix_exponential(name):
+    """The closed forms of e^-K y0 - y0 and psi(K) y0 = phi_1(-K) y0 on Toda's diagonal algebra
+    (K(p) = [[D, 0], [E, 0]]) and on se(3)* (the heavy top, K = [[hat q, hat r], [0, hat q]])
+    against mpmath's expm, at random z with |K|_F from 1e-6 to near the guard of phi (measured:
+    1.4e-16 relative at |K|_F = 5 on toda:12, where scipy's expm is 3e-14 off)."""
     system = get_system(name)
     n, C = system.dim, _structure(system)
     form = closed_form(system)
-    assert form.diagonal.size == n and form.rotation == 0.0
+    point = se3_point if name == "heavy-top" else diagonal_point
+    assert (form.rotation != 0.0) == (name == "heavy-top") and (form.diagonal.size == n) == (name != "heavy-top")
     work = closed_work(form, n)
     rng = np.random.default_rng(7)
     for size in (1e-6, 0.1, 1.0, 5.0):
@@ -138,7 +140,7 @@ def test_on_toda_the_point_is_the_matrix_exponential(name):
         z *= size / np.linalg.norm(np.einsum("ijk,j->ik", C, z))
         K = np.einsum("ijk,j->ik", -C, z)
         work.z[:] = z
-        assert diagonal_point(y0, form, work, n) == Failure.OK
+        assert (point(y0, form, work, n) if point is diagonal_point else point(y0, form, work)) == Failure.OK
         exponential, psi = _exponentials(K, y0)
         scale = max(np.abs(y0).max(), np.abs(exponential).max())
         np.testing.assert_allclose(work.dy, exponential, rtol=0, atol=1e-15 * scale)
@@ -172,7 +174,7 @@ def test_on_other_diagonal_algebras_euler_is_the_engine_euler(name):
 
 
 @pytest.mark.parametrize("name", ["rigid-body", "heavy-top"])
-def test_other_algebras_are_not_diagonal(name):
+def test_the_rotation_algebras_are_not_diagonal(name):
     assert closed_form(get_system(name)).diagonal.size == 0
 
 

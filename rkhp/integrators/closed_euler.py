@@ -28,9 +28,10 @@ when its contraction grows, `REFRESH_CONTRACTION`, `rkhp.integrators.direct_form
 Each substep starts from z extrapolated over the same substep of the previous steps (`HISTORY`,
 as the spray's direct form, docs/general-poisson.md "The Euler step in direct form").
 
-e^-K y0 and psi(K) y0 are power series, or closed forms on so(3)* (Rodrigues') and on the
-diagonal algebras (K(p) = [[D, 0], [E, 0]]: n exponentials, the Toda lattice), under the guard of
-the family's phi (`rkhp.integrators.lie_poisson_point`).
+e^-K y0 and psi(K) y0 are power series, or closed forms on so(3)* (Rodrigues'), se(3)* (the heavy
+top: Rodrigues' and their derivative) and the diagonal algebras (K(p) = [[D, 0], [E, 0]]: n
+exponentials, the Toda lattice), under the guard of the family's phi
+(`rkhp.integrators.lie_poisson_point`).
 
 Compiled data: `ClosedForm` (the family's structure and H's tape), `ClosedWork` (work arrays),
 `ChordMemory` (what each substep keeps across steps, B included), `ClosedSubstep` (the three, and
@@ -69,7 +70,7 @@ from .direct_form import (
     weight,
 )
 from .failure import Failure
-from .lie_poisson_point import diagonal_point, exp_series, rotation_jacobian, rotation_point
+from .lie_poisson_point import diagonal_point, exp_series, rotation_jacobian, rotation_point, se3_point
 
 CONSTANT, LIE_POISSON, LOG_CANONICAL = 0, 1, 2
 """The families of `ClosedForm.kind`."""
@@ -90,9 +91,9 @@ solve each substep by Newton's method (`newton_substep`) on so(3)*, and on the c
 log-canonical families up to this dimension; the others keep a chord matrix across steps with
 Broyden's updates (`closed_substep`): where Hess H is interpreted (central differences of the
 gradient, 2 n gradients), more but cheaper chord iterations take less time
-(`benchmarks/substeps.py`); on other Lie–Poisson algebras x'(z) has no closed form, or (the
-diagonal algebras) the chord iterations on their closed-form point cost less than Newton's
-factorisations; and in more dimensions the Hessian's n^2 entries and its factorisation cost more
+(`benchmarks/substeps.py`); on other Lie–Poisson algebras x'(z) is not written (se(3)*, the
+series), or (the diagonal algebras) the chord iterations on their closed-form point cost less than
+Newton's factorisations; and in more dimensions the Hessian's n^2 entries and its factorisation cost more
 than the iterations they save."""
 NEWTON_REFRESH = 1e-7
 """`newton_substep` takes the exact Jacobian again after a correction above this (relative to
@@ -108,7 +109,8 @@ class ClosedForm(NamedTuple):
     identically zero: pairs (e, 2) the (i, k) of entry e, K_ik = sum over r in
     starts[e]..starts[e+1]-1 of coefs[r] p[cols[r]] (coefs = -C_ijk, cols = j); rotation: the
     scalar s with K(z) = hat(s z) when the algebra is so(3) (C = -s epsilon; e^-K and psi(K) are
-    then Rodrigues' closed forms, `rotation_point`), else 0; diagonal (n,) int64: on a diagonal
+    then Rodrigues' closed forms, `rotation_point`) and K(z) = [[hat(q), hat(r)], [0, hat(q)]],
+    (q, r) = s z, when it is se(3) (`se3_point`), else 0; diagonal (n,) int64: on a diagonal
     algebra (K(p) = [[D, 0], [E, 0]], `rkhp.integrators.lie_poisson_point`) the entry of K_kk
     for each k (-1 where it vanishes; e^-K and psi(K) are then closed forms, `diagonal_point`),
     else empty; exact: whether each substep's
@@ -212,6 +214,8 @@ def chord_memory(s: int, n: int) -> ChordMemory:
 def _point(y0, form, work, n):
     """work.xbar (x with alpha(x, p) = y0) and work.dy (y1 - y0) from work.z (see the module);
     returns Failure.OK or the series' failure."""
+    if form.kind == LIE_POISSON and form.rotation != 0.0 and n == 6:
+        return se3_point(y0, form, work)
     if form.kind == LIE_POISSON and form.rotation != 0.0:
         return rotation_point(y0, form, work)
     if form.kind == LIE_POISSON and form.diagonal.shape[0] > 0:
@@ -652,7 +656,7 @@ def _read_form(system) -> ClosedForm:
     diagonal = _diagonal_entries(entries[0], n) if kind == LIE_POISSON and rotation == 0.0 else np.zeros(0, np.int64)
     tape = shared(Tape(*h))
     quadratic = polynomial_degree(tape) <= 2
-    newton = rotation != 0.0 or (kind != LIE_POISSON and n <= EXACT_DIMENSION)
+    newton = (rotation != 0.0 and n == 3) or (kind != LIE_POISSON and n <= EXACT_DIMENSION)
     address = derivatives_at(system, hessian=newton and not quadratic)
     exact = newton and (quadratic or address != 0)
     form = ClosedForm(kind, np.ascontiguousarray(matrix), *entries, tape, rotation, diagonal, exact, quadratic,
@@ -673,15 +677,22 @@ def _quadratic_hessian(form: ClosedForm, work: ClosedWork, n: int) -> None:
 
 
 def _rotation_scale(C: np.ndarray) -> float:
-    """s when the structure constants are those of so(3) scaled, C = -s epsilon (then K(z) =
-    hat(s z), `ClosedForm.rotation`), else 0."""
-    if C.shape != (3, 3, 3):
+    """s when the structure constants are those of so(3) or se(3) scaled: C = -s epsilon on
+    so(3); on se(3), x = (M, Gamma), C = -s epsilon on the (M, M, M) and (M, Gamma, Gamma) blocks
+    and +s epsilon on (Gamma, M, Gamma) (the heavy top's). Then K(z) = hat(s z), or
+    [[hat(q), hat(r)], [0, hat(q)]] with (q, r) = s z (`ClosedForm.rotation`); else 0."""
+    if C.shape not in ((3, 3, 3), (6, 6, 6)):
         return 0.0
     epsilon = np.zeros((3, 3, 3))
     for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
         epsilon[i, j, k], epsilon[i, k, j] = 1.0, -1.0
+    unit = -epsilon
+    if C.shape == (6, 6, 6):
+        unit = np.zeros((6, 6, 6))
+        unit[:3, :3, :3] = unit[:3, 3:, 3:] = -epsilon
+        unit[3:, :3, 3:] = epsilon.transpose(1, 0, 2)
     s = -float(C[0, 1, 2])
-    return s if s != 0.0 and np.array_equal(C, -s * epsilon) else 0.0
+    return s if s != 0.0 and np.array_equal(C, s * unit) else 0.0
 
 
 def _diagonal_entries(pairs: np.ndarray, n: int) -> np.ndarray:

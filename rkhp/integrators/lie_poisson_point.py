@@ -15,6 +15,13 @@ Toda lattice in Flaschka's variables). Then K^m = [[D^m, 0], [E D^(m-1), 0]], so
 and w = -d, phi_k(w) = sum_m w^m / (m + k)! componentwise (docs/theory.md §4):
 e^-K y0 - y0 = (w phi_1(w) a, -E phi_1(w) a) and psi(K) y0 = (phi_1(w) a, y0 - E phi_2(w) a) on
 (A, the rest): closed forms of |A| exponentials (`diagonal_point`).
+
+On se(3)* (the heavy top), x = (M, Gamma) and K = [[hat(q), hat(r)], [0, hat(q)]] with (q, r) =
+s p: a function of a block triangular matrix with equal diagonal blocks is f(K) = [[f(hat q),
+Df(hat q)[hat r]], [0, f(hat q)]], Df the derivative along hat(r), and f(hat q) = I + beta hat(q)
++ gamma hat(q)^2 with beta, gamma functions of theta = |q| (Rodrigues'), so that Df(hat q)[hat r]
+= (q . r)(beta'/theta hat(q) + gamma'/theta hat(q)^2) + beta hat(r) + gamma (hat(q) hat(r) +
+hat(r) hat(q)): closed forms in cross products (`se3_point`, docs/theory.md §4).
 """
 
 from __future__ import annotations
@@ -230,4 +237,52 @@ def diagonal_point(y0, form, work, n):
         if i != k:
             work.dy[i] -= work.kval[e] * p1[k] * y0[k]
             work.xbar[i] -= work.kval[e] * p2[k] * y0[k]
+    return Failure.OK
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def se3_point(y0, form, work):
+    """se(3)*: x = (M, Gamma), with q = s z_1..3 and r = s z_4..6, K = [[hat(q), hat(r)], [0,
+    hat(q)]] (see the module): f(K) y0 = (f(hat q) M + Df(hat q)[hat r] Gamma, f(hat q) Gamma) for
+    f(K) = e^-K and psi(K), f(hat q) = I + beta hat(q) + gamma hat(q)^2 as in `rotation_point`, and
+    its derivative along r, Df[hat r] = (q . r) (beta'/theta hat(q) + gamma'/theta hat(q)^2) +
+    beta hat(r) + gamma (hat(q) hat(r) + hat(r) hat(q)). Failure as `exp_series` (|K|_F^2 =
+    4 theta^2 + 2 |r|^2). Work: work.v, work.kv, work.tmp, work.xz, work.by hold q, r and the
+    products (none of them is read across a point by `rkhp.integrators.closed_euler`)."""
+    q, r, c1, c2, e1 = work.v, work.kv, work.tmp, work.xz, work.by
+    for k in range(3):
+        q[k] = form.rotation * work.z[k]
+        r[k] = form.rotation * work.z[3 + k]
+    theta2 = q[0] * q[0] + q[1] * q[1] + q[2] * q[2]
+    rr = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+    if not math.sqrt(4.0 * theta2 + 2.0 * rr) < PHI_GUARD:
+        return Failure.NEWTON_NON_FINITE
+    sinc, a, b, da, db = _rotation_coefficients(math.sqrt(theta2))
+    qr = q[0] * r[0] + q[1] * r[1] + q[2] * r[2]
+    # Gamma's parts: c1 = q x G, c2 = q x c1; e1 = r x G, then the symmetric products
+    _cross(q, y0[3:], c1)
+    _cross(q, c1, c2)
+    _cross(r, y0[3:], e1)
+    for k in range(3):
+        work.dy[3 + k] = -sinc * c1[k] + a * c2[k]
+        work.xbar[3 + k] = y0[3 + k] - a * c1[k] + b * c2[k]
+    # coupling: (q . r)(beta'/theta c1 + gamma'/theta c2) + beta e1 + gamma (q x e1 + r x c1);
+    # e^-K: beta = -sinc (beta'/theta = a - b), gamma = a; psi: beta = -a, gamma = b
+    for k in range(3):
+        work.dy[k] = qr * ((a - b) * c1[k] + da * c2[k]) - sinc * e1[k]
+        work.xbar[k] = qr * (-da * c1[k] + db * c2[k]) - a * e1[k]
+    _cross(q, e1, c1)  # q x (r x G)
+    _cross(r, y0[3:], e1)
+    _cross(q, y0[3:], c2)
+    _cross(r, c2, e1)  # r x (q x G)
+    for k in range(3):
+        sym = c1[k] + e1[k]
+        work.dy[k] += a * sym
+        work.xbar[k] += b * sym
+    # M's own part
+    _cross(q, y0[:3], c1)
+    _cross(q, c1, c2)
+    for k in range(3):
+        work.dy[k] += -sinc * c1[k] + a * c2[k]
+        work.xbar[k] += y0[k] - a * c1[k] + b * c2[k]
     return Failure.OK
