@@ -93,8 +93,8 @@ Broyden's updates (`closed_substep`): where Hess H is interpreted (central diffe
 gradient, 2 n gradients), more but cheaper chord iterations take less time
 (`benchmarks/substeps.py`); on other Lie–Poisson algebras x'(z) is not written (se(3)*, the
 series), or (the diagonal algebras) the chord iterations on their closed-form point cost less than
-Newton's factorisations; and in more dimensions the Hessian's n^2 entries and its factorisation cost more
-than the iterations they save."""
+Newton's factorisations; and in more dimensions the Hessian's n^2 entries and its factorisation
+cost more than the iterations they save."""
 NEWTON_REFRESH = 1e-7
 """`newton_substep` takes the exact Jacobian again after a correction above this (relative to
 max(1, |y0|)); below it the last one serves (its chord step contracts by about L 1e-7)."""
@@ -113,8 +113,8 @@ class ClosedForm(NamedTuple):
     (q, r) = s z, when it is se(3) (`se3_point`), else 0; diagonal (n,) int64: on a diagonal
     algebra (K(p) = [[D, 0], [E, 0]], `rkhp.integrators.lie_poisson_point`) the entry of K_kk
     for each k (-1 where it vanishes; e^-K and psi(K) are then closed forms, `diagonal_point`),
-    else empty; exact: whether each substep's
-    matrix is the exact Jacobian at its iterates (`EXACT_DIMENSION`, `newton_substep`);
+    else empty; exact: whether each substep's matrix is the exact Jacobian at its iterates
+    (`EXACT_DIMENSION`, `newton_substep`);
     hessian_constant: whether H is a polynomial of degree at most 2 (`rkhp.taylor.scalar.
     polynomial_degree`), and then hessian (n, n) its Hessian (else zeros); derivatives_at: the
     address of H's gradient and Hessian compiled for this system (`rkhp.integrators.derivatives`;

@@ -271,12 +271,10 @@ def se3_point(y0, form, work):
     for k in range(3):
         work.dy[k] = qr * ((a - b) * c1[k] + da * c2[k]) - sinc * e1[k]
         work.xbar[k] = qr * (-da * c1[k] + db * c2[k]) - a * e1[k]
-    _cross(q, e1, c1)  # q x (r x G)
-    _cross(r, y0[3:], e1)
-    _cross(q, y0[3:], c2)
-    _cross(r, c2, e1)  # r x (q x G)
+    _cross(q, e1, c2)  # q x (r x G); q x (q x G) is no longer needed
+    _cross(r, c1, e1)  # r x (q x G); r x G is no longer needed
     for k in range(3):
-        sym = c1[k] + e1[k]
+        sym = c2[k] + e1[k]
         work.dy[k] += a * sym
         work.xbar[k] += b * sym
     # M's own part
