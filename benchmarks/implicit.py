@@ -76,11 +76,11 @@ def coefficients(system, method) -> tuple[int, int]:
 def main(argv) -> None:
     from work_precision import parser
 
+    from rkhp.studies.plots import check_plot_path
+
     p = parser("python benchmarks/implicit.py", __doc__)
     p.add_argument("plot", nargs="?", default="implicit-work-precision.png", metavar="PLOT",
                    help="the work-precision figure")
-    from rkhp.studies.plots import check_plot_path
-
     plot = check_plot_path(p.parse_args(argv).plot, force=True)  # before the work: a bad name fails first
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}")
     rb = get_system("rigid-body")
