@@ -410,6 +410,19 @@ def test_the_processor_runs_once_and_its_inverse_at_the_output_only():
     assert np.abs(every.states[3] - third.final_state).max() < 1e-15
 
 
+def test_the_inverse_processor_starts_from_its_solutions_at_the_states_before():
+    """With every state kept, P^-1 runs from each of the 50 states; each of its substeps starts
+    from its own solutions at the states before, as a kernel substep starts from the steps before,
+    so on toda (a chord form) the matrices of its 20 substeps are built fewer times than the states
+    it runs from, and the run reports the matrices of all its substeps (the kernel's too)."""
+    order, kernel, processor = PROCESSED["bcm8-s13"]
+    every = integrate("toda", "bcm8-s13", 0.2, 50).raise_if_failed()
+    built = np.array(every.extra["refreshes"])
+    assert built.size == kernel + 2 * processor
+    assert built[-processor:].sum() < 50
+    assert np.all(built[processor:-processor] >= 1)
+
+
 @pytest.mark.parametrize("system", ["charged-particle", "rigid-body"])
 def test_a_processed_composition_retraces_itself(system):
     """The processor is taken at |h|: a run back with -h is the inverse of the run forward (the

@@ -20,11 +20,13 @@ ROOT = Path(rkhp.__file__).parent
 
 #: name -> the modules allowed to define it, and why
 PROTOCOLS = {
-    # the substep providers of the driver: numba resolves the stubs `begin` and `substep` of
-    # rkhp.integrators.substeps to each provider's compiled functions of the same names
+    # the substep providers of the driver: numba resolves the stubs `begin`, `resume` and `substep`
+    # of rkhp.integrators.substeps to each provider's compiled functions of the same names
     # (docs/engine.md "One driver, many substeps")
     "begin": {"integrators/substeps.py", "integrators/tower_substep.py", "integrators/closed_euler.py",
               "integrators/spray_euler.py", "integrators/taylor.py"},
+    "resume": {"integrators/substeps.py", "integrators/tower_substep.py", "integrators/closed_euler.py",
+               "integrators/spray_euler.py", "integrators/taylor.py"},
     "substep": {"integrators/substeps.py", "integrators/closed_euler.py", "integrators/spray_euler.py",
                 "integrators/taylor.py"},
     # a module's attribute hook (PEP 562): the lazy names of a package (rkhp._lazy), numba served

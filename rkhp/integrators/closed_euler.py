@@ -563,13 +563,20 @@ def newton_substep(i, y0, hs, form, work, memory, solver):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def begin(data, y0):
-    """Start a run at y0 (the state work.y, carried as the double-double y + y_low,
-    `rkhp.integrators.direct_form.add_increment`), every substep's memory emptied."""
-    work, memory = data.work, data.memory
+def resume(data, y0):
+    """The state set to y0 (work.y, carried as the double-double y + y_low,
+    `rkhp.integrators.direct_form.add_increment`), every substep's memory kept."""
+    work = data.work
     for k in range(y0.shape[0]):
         work.y[k] = y0[k]
         work.y_low[k] = 0.0
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def begin(data, y0):
+    """Start a run at y0 (`resume`), every substep's memory emptied."""
+    resume(data, y0)
+    memory = data.memory
     for i in range(memory.count.shape[0]):
         memory.count[i] = 0
         memory.ready[i] = 0

@@ -35,7 +35,7 @@ from .engine_state import Solver, state_failure
 from .failure import Failure, failure_status
 from .newton import NEWTON_MAX_ITERATIONS
 from .prepared import Lender, Lent
-from .substeps import CLOSED, PROVIDERS, SPRAY, THP, begin, choose, substep
+from .substeps import CLOSED, PROVIDERS, SPRAY, THP, begin, choose, resume, substep
 from .taylor import thp_method
 from .trajectory import GROWTH, Trajectory, checked
 
@@ -62,7 +62,8 @@ def drive(y0, gammas, processor, h, n_steps, data, solver, record):
     gammas[1] h, ...; with one, gammas holds the processor's `processor` coefficients, the
     kernel's and the inverse processor's (`rkhp.tableaux.compositions.one_step`): the processor's
     substeps (of size gammas[i] |h|) run once from y0, each step is the kernel's, and the inverse
-    processor's run from each state kept (every state with `record.keep_all`, else the last).
+    processor's run from each state kept (every state with `record.keep_all`, else the last),
+    each of its substeps warm-started from its runs from the states before (`resume`).
     Returns (completed steps, Failure of the step after them or Failure.OK)."""
     context = begin(data, y0)
     n = y0.shape[0]
@@ -86,7 +87,7 @@ def drive(y0, gammas, processor, h, n_steps, data, solver, record):
     first = 0 if not record.keep_all and steps > 0 else 1
     rows = steps + 1 if record.keep_all else 1
     for row in range(first, rows):
-        context = begin(data, record.states[row])
+        resume(data, record.states[row])
         failed, it, done = _substeps(data, context, gammas, end - processor, end, abs(h), solver)
         if failed != Failure.OK:  # the output of this row failed: the run ends before it
             if not record.keep_all:

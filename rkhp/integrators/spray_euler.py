@@ -644,16 +644,23 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def begin(data, y0):
-    """Start a run at y0 (the state work.y, carried as the double-double y + y_low: each substep
-    adds its increment without rounding the state to doubles, so the rounding of the states does
-    not accumulate; what remains of a non-quadratic Casimir's error is each substep's systematic
+def resume(data, y0):
+    """The state set to y0 (work.y, carried as the double-double y + y_low: each substep adds its
+    increment without rounding the state to doubles, so the rounding of the states does not
+    accumulate; what remains of a non-quadratic Casimir's error is each substep's systematic
     part, far below a unit of round-off, docs/compositions.md "Long runs"), every substep's memory
-    emptied."""
-    work, memory = data.work, data.memory
+    kept."""
+    work = data.work
     for k in range(y0.shape[0]):
         work.y[k] = y0[k]
         work.y_low[k] = 0.0
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def begin(data, y0):
+    """Start a run at y0 (`resume`), every substep's memory emptied."""
+    resume(data, y0)
+    memory = data.memory
     for i in range(memory.nodes.shape[0]):
         memory.counts[i, 0] = 0
         memory.counts[i, 1] = 0

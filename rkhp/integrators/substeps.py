@@ -22,12 +22,14 @@ providers in order of preference, and the first that accepts the system runs (a 
 the symmetric realisation and tapes it can evaluate). `choose` reads it; `rkhp integrate
 --explain` prints its choice.
 
-A provider is two compiled functions over its data (a NamedTuple of its own class, whose field ``y``
-is the state the substeps advance: the driver records it and checks it): ``begin(data, y0)``
-starts a run at y0 and returns a context, ``substep(data, context, i, hs, solver)`` takes substep i
-of size hs from the state and returns (Failure, iterations, stage sweeps). The driver's loop calls
-the stubs `begin` and `substep` below, which numba resolves by the class of the data
-(`_by_class`), so the loop is written once and compiled once per provider.
+A provider is three compiled functions over its data (a NamedTuple of its own class, whose field
+``y`` is the state the substeps advance: the driver records it and checks it): ``begin(data, y0)``
+starts a run at y0 and returns a context, ``resume(data, y)`` sets the state to y and keeps what
+each substep remembers of the steps before (the start of its iterations: the driver's inverse
+processor runs from each kept state of a run), ``substep(data, context, i, hs, solver)`` takes
+substep i of size hs from the state and returns (Failure, iterations, stage sweeps). The driver's
+loop calls the stubs `begin`, `resume` and `substep` below, which numba resolves by the class of
+the data (`_by_class`), so the loop is written once and compiled once per provider.
 """
 
 from __future__ import annotations
@@ -51,8 +53,9 @@ class Provider(NamedTuple):
     system); how it builds its data for a run (`prepare(system, tableau, substeps, **options) ->
     data`; the tower's option: ``stage_degree``, `tower_substep.tower_substep`; THP's tableau is
     its `taylor.ThpMethod`); what a run reports of it (`extra(data) -> dict`); its default
-    tolerance (relative to max(1, |y|)); its compiled ``begin``, and ``substep_for(data type)``,
-    its compiled ``substep`` for data of that numba type (see the module)."""
+    tolerance (relative to max(1, |y|)); its compiled ``begin`` and ``resume``, and
+    ``substep_for(data type)``, its compiled ``substep`` for data of that numba type (see the
+    module)."""
 
     name: str
     data_class: type
@@ -61,6 +64,7 @@ class Provider(NamedTuple):
     extra: Callable
     tolerance: float
     begin: object
+    resume: object
     substep_for: Callable
 
 
@@ -74,18 +78,18 @@ def _tower_substep_for(data):
 TOWER = Provider("tower", tower_substep.TowerSubstep, lambda system: True,
                  tower_substep.tower_substep,
                  tower_substep.tower_extra, tower_substep.TOLERANCE,
-                 tower_substep.begin, _tower_substep_for)
+                 tower_substep.begin, tower_substep.resume, _tower_substep_for)
 CLOSED = Provider("closed", closed_euler.ClosedSubstep, closed_euler.closed_form_available,
                   lambda system, tableau, s, **options: closed_euler.closed_substep_data(system, s),
                   closed_euler.closed_extra, DIRECT_TOLERANCE,
-                  closed_euler.begin, lambda data: closed_euler.substep)
+                  closed_euler.begin, closed_euler.resume, lambda data: closed_euler.substep)
 SPRAY = Provider("spray", spray_euler.SpraySubstep, spray_euler.direct_form_available,
                  lambda system, tableau, s, **options: spray_euler.spray_substep_data(system, s),
                  spray_euler.spray_extra, DIRECT_TOLERANCE,
-                 spray_euler.begin, lambda data: spray_euler.substep)
+                 spray_euler.begin, spray_euler.resume, lambda data: spray_euler.substep)
 THP = Provider("thp", taylor.ThpSubstep, lambda system: True,
               lambda system, method, s, **options: taylor.thp_substep(system, method, s),
-              taylor.thp_extra, taylor.TOLERANCE, taylor.begin, lambda data: taylor.substep)
+              taylor.thp_extra, taylor.TOLERANCE, taylor.begin, taylor.resume, lambda data: taylor.substep)
 PROVIDERS = {p.name: p for p in (TOWER, CLOSED, SPRAY, THP)}
 
 SUBSTEPS: dict[tuple[str, str], tuple[Provider, ...]] = {
@@ -172,6 +176,11 @@ def begin(data, y0):
     raise NotImplementedError("compiled code only")
 
 
+def resume(data, y):
+    """Set the state to y, each substep's memory kept (compiled code only)."""
+    raise NotImplementedError("compiled code only")
+
+
 def substep(data, context, i, hs, solver):
     """Substep i of size hs; returns (Failure, iterations, stage sweeps) (compiled code only)."""
     raise NotImplementedError("compiled code only")
@@ -188,6 +197,16 @@ def _begin(data, y0):
         return impl(data, y0)
 
     return begin_with
+
+
+@overload(resume, inline="always", jit_options=_OPTIONS)
+def _resume(data, y):
+    impl = _by_class(data).resume
+
+    def resume_with(data, y):
+        impl(data, y)
+
+    return resume_with
 
 
 @overload(substep, inline="always", jit_options=_OPTIONS)

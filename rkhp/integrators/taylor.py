@@ -231,12 +231,18 @@ def _thp_newton(data, at, h, solver):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def begin(data, y0):
-    """Start a run at y0 (the state data.y); returns the addresses of the tapes, spaces and work
-    arrays (`rkhp.integrators.tree_jets.addresses`: copies on the stack of the loop this is
-    inlined into)."""
+def resume(data, y0):
+    """The state set to y0 (data.y): a THP step keeps nothing from the steps before."""
     for k in range(y0.shape[0]):
         data.y[k] = y0[k]
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def begin(data, y0):
+    """Start a run at y0 (`resume`); returns the addresses of the tapes, spaces and work
+    arrays (`rkhp.integrators.tree_jets.addresses`: copies on the stack of the loop this is
+    inlined into)."""
+    resume(data, y0)
     return addresses(data.jets)
 
 

@@ -195,15 +195,23 @@ def _swap_history(buf, memory, i, n, into_buffers):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
+def resume(data, y0):
+    """The state set to y0 (buf.y), every substep's history and every scalar the steps keep
+    (buf.memo) kept."""
+    buf = data.buf
+    for k in range(y0.shape[0]):
+        buf.y[k] = y0[k]
+
+
+@nb.njit(inline="always", **NJIT_NORC)
 def begin(data, y0):
-    """Start a run at y0 (the state buf.y), every substep without history and every scalar the
+    """Start a run at y0 (`resume`), every substep without history and every scalar the
     steps keep (buf.memo: history, Lipschitz estimate, factorisation, stage solve) as in new
     buffers, so that a run on data prepared before computes what it computes on new data;
     returns the tapes evaluated at their interpreter's address (`engine_state.interpreted`:
     copies on the stack of the loop this is inlined into)."""
+    resume(data, y0)
     buf = data.buf
-    for k in range(y0.shape[0]):
-        buf.y[k] = y0[k]
     for j in range(buf.memo.shape[0]):
         buf.memo[j] = 0.0
     for i in range(data.memory.count.shape[0]):
