@@ -33,19 +33,18 @@ HESSIAN_STEP = 2.0**-17
 STAGNATION = 64 * 2.0**-52
 """Corrections at most this (relative to max(1, |y0|)) that no longer halve are round-off: the
 iterations have converged as far as float64 allows."""
-DIRECT_TOLERANCE = 2.0**-54
-"""The chord iterations' default tolerance (relative): a quarter of a unit of round-off, so that
-an iteration stops once its next correction is predicted below the rounding of the result, or
-where the corrections stagnate at round-off (`STAGNATION`). A tolerance above round-off (1e-15)
-leaves the stages off the collocation solution by that much, which moves a non-quadratic Casimir
-systematically (docs/general-poisson.md "The Euler step in direct form")."""
-REFRESH_FLOOR = 1e3 * 2.0**-60
-"""No new matrix for a correction at most max(1e3 tol, this) (relative to max(1, |y0|)): this
-floor, about four units of round-off, is where the corrections no longer measure a contraction
-(they wander at round-off, in cycles that a new matrix each iteration would keep from
-stagnating), so a tolerance below 2^-60 iterates to stagnation; at the default tolerance,
-1e3 tol (about 250 units of round-off) is a few iterations from the end even at a slow
-contraction, fewer than a new matrix costs."""
+DIRECT_TOLERANCE = 2.0**-60
+"""The chord iterations' default tolerance (relative): below round-off, so that they run until
+the corrections stagnate (`STAGNATION`). Stopping at 1e-15 left the stages off the collocation
+solution by that much, which moves a non-quadratic Casimir systematically (docs/general-poisson.md
+"The Euler step in direct form"); stopping at a quarter of a unit of round-off (2^-54) leaves a
+symmetric composition run forward and back an order of magnitude further from its start on the
+charged particle and toda:12."""
+REFRESH_FLOOR = 1e3 * DIRECT_TOLERANCE
+"""No new matrix for a correction at most max(1e3 tol, this) (relative to max(1, |y0|)): at the
+default tolerance 1e3 tol, about four units of round-off, where the corrections no longer
+measure a contraction (they wander at round-off, in cycles that a new matrix each iteration
+would keep from stagnating); so a tolerance below the default iterates to stagnation."""
 HISTORY = 4
 """Previous solutions of a substep kept for the closed form's extrapolated start (cubic: on the
 charged particle at h = 0.1, step 11, a cubic start erred by 8.3e-7 against 7.4e-6 for a
