@@ -415,7 +415,7 @@ def test_the_inverse_processor_starts_from_its_solutions_at_the_states_before():
     from its own solutions at the states before, as a kernel substep starts from the steps before,
     so on toda (a chord form) the matrices of its 20 substeps are built fewer times than the states
     it runs from, and the run reports the matrices of all its substeps (the kernel's too)."""
-    order, kernel, processor = PROCESSED["bcm8-s13"]
+    _, kernel, processor = PROCESSED["bcm8-s13"]
     every = integrate("toda", "bcm8-s13", 0.2, 50).raise_if_failed()
     built = np.array(every.extra["refreshes"])
     assert built.size == kernel + 2 * processor
