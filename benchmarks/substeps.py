@@ -30,8 +30,8 @@ h = 10/45: per substep,
 microseconds, chord iterations, refreshes of the chord matrix, the collocation nodes Q, and
 estimates of the operations run and of those the mathematics needs (`compiled_spray_flops`, the
 model of `rkhp.integrators.spray_euler.spray_flops`: per iteration
-the stages' field, the gradient and the solve; per matrix its derivatives, assembly and
-factorisation; `limit`: two iterations a substep, the matrices as the run built them (a matrix
+the stages' field, the gradient and the product with the inverse; per matrix its derivatives,
+assembly and inversion; `limit`: two iterations a substep, the matrices as the run built them (a matrix
 built at every substep costs more than the iterations it saves: Newton's method is no limit
 here), and the substep's start and close), with the rate achieved.
 

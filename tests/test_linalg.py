@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rkhp.taylor.linalg import lu_factor, lu_solve
+from rkhp.taylor.linalg import inverse_transposed, lu_factor, lu_solve
 
 
 def column_by_column(A: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -56,3 +56,19 @@ def test_a_zero_column_is_singular():
     A = np.random.default_rng(0).standard_normal((40, 40))
     A[:, 23] = 0.0
     assert not lu_factor(A, np.zeros(A.shape[0], np.int64))
+
+
+@pytest.mark.parametrize("n", SIZES)
+def test_the_transposed_inverse_against_numpy(n):
+    rng = np.random.default_rng(100 + n)
+    A = rng.standard_normal((n, n)) * rng.uniform(0.1, 10.0, (n, 1)) + 3.0 * np.eye(n)
+    out, X = A.copy(), np.zeros((n, n))
+    assert inverse_transposed(out, np.zeros(n, np.int64), X)
+    want = np.linalg.inv(A)
+    assert np.allclose(out.T, want, rtol=1e-10, atol=1e-12 * np.abs(want).max())
+    assert np.allclose(A @ out.T, np.eye(n), atol=1e-11 * np.linalg.cond(A))
+
+
+def test_the_inverse_of_a_singular_matrix_is_refused():
+    A = np.array([[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 1.0, 1.0]])
+    assert not inverse_transposed(A, np.zeros(3, np.int64), np.zeros((3, 3)))

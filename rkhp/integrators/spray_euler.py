@@ -21,7 +21,8 @@ numbers, solve by chord iterations with the frozen Jacobian
     [ -h H w^T (x) J   I - (h/2) H P    ]     H = Hess H(y0), c_i = sum_j A_ij, sum_j w_j = 1/2,
 
 which contracts the error by O(h^2) an iteration (by O(h) the first iteration of a step, when the
-matrix was built at an earlier step: `SLOW_CONTRACTION`), factorised once and kept across steps for each substep of a
+matrix was built at an earlier step: `SLOW_CONTRACTION`), inverted once (an iteration's correction is
+then one product of the inverse with the residual, `_solve`) and kept across steps for each substep of a
 composition (refreshed when the iterations contract slowly, when the number of nodes changes, and
 before iterating when the iterations a fresh matrix would save pay for it, `_worth_rebuilding`:
 the contraction of a kept matrix grows from 1e-3 just after its build to 0.02 to 0.2 as the
@@ -62,7 +63,7 @@ from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
 from ..taylor.composites import _norm_bound
 from ..taylor.generated import call_at
-from ..taylor.linalg import lu_factor, max_abs
+from ..taylor.linalg import aligned_zeros, inverse_transposed, max_abs, padded
 from ..taylor.ops import SCRATCH_BASE, SPRAY
 from ..taylor.rows import subprogram_at
 from ..taylor.scalar import SCALAR_CODES, gradients, shared, values
@@ -120,14 +121,16 @@ class SprayTapes(NamedTuple):
 
 
 class EulerWork(NamedTuple):
-    """Work arrays of one substep (n: dimension, m = (MAX_NODES + 1) n).
+    """Work arrays of one substep (n: dimension, m = (MAX_NODES + 1) n; res, tmp and inverting
+    start on cache lines, inverting's rows padded to whole lines: `rkhp.taylor.linalg.aligned_zeros`).
 
     W (slots, 2 n + 1): the tapes' slots, values and first derivatives (`rkhp.taylor.scalar`);
     Z, X (MAX_NODES, n): stage increments and their field values; p, g, xbar, y, y_low, dy (n):
     the momentum, grad H(xbar), the average, the state as the double-double y + y_low (`begin`), a
     substep's increment; hess (n, n): Hess H at the refresh point; res, tmp (m): the residual (then
-    the correction) and lu_solve's work vector; u (2 n), out (n + 2 n^2): the arguments (y, p) and
-    the results (X, d_y X, pi) of the compiled field."""
+    the correction) and a work vector; u (2 n), out (n + 2 n^2): the arguments (y, p) and
+    the results (X, d_y X, pi) of the compiled field; perm (m) int64, inverting (m, padded m): the work
+    space of a chord matrix's inverse (`rkhp.taylor.linalg.inverse_transposed`)."""
 
     W: np.ndarray
     Z: np.ndarray
@@ -143,6 +146,8 @@ class EulerWork(NamedTuple):
     tmp: np.ndarray
     u: np.ndarray
     out: np.ndarray
+    perm: np.ndarray
+    inverting: np.ndarray
 
 
 class SubstepMemory(NamedTuple):
@@ -150,8 +155,8 @@ class SubstepMemory(NamedTuple):
 
     p_hist (s, HISTORY, n), z_hist (s, HISTORY, MAX_NODES, n): its last solutions, newest first;
     counts (s, 2) int64: how many of them are valid for p and for Z (Z's only with the same
-    number of nodes, z_nodes (s,)); nodes (s,) int64: Q of the factorised chord matrix (0: none
-    yet); LU (s, m, m), perm (s, m): its factors (transposed, `_solve`), m = (Q + 1) n used; J, P (s, n, n): d_y X and
+    number of nodes, z_nodes (s,)); nodes (s,) int64: Q of the inverted chord matrix (0: none
+    yet); inverse (s, m, padded m): its inverse, transposed (`_solve`), m = (Q + 1) n used; J, P (s, n, n): d_y X and
     pi at the refresh point; rate (s,): the contraction of the first two iterations, last
     measured (1: none yet); refreshes (s,) int64: how many times the matrix was built in this
     run; order (s,) int64: how many previous solutions the next start extrapolates from at most
@@ -164,8 +169,7 @@ class SubstepMemory(NamedTuple):
     counts: np.ndarray
     z_nodes: np.ndarray
     nodes: np.ndarray
-    LU: np.ndarray
-    perm: np.ndarray
+    inverse: np.ndarray
     J: np.ndarray
     P: np.ndarray
     rate: np.ndarray
@@ -185,15 +189,17 @@ def euler_work(tapes: SprayTapes, n: int) -> EulerWork:
     slots = max(tapes.field.n_slots, tapes.hamiltonian.n_slots)
     return EulerWork(np.zeros((slots, 2 * n + 1)), np.zeros((MAX_NODES, n)), np.zeros((MAX_NODES, n)),
                      euler_vector(), euler_vector(), euler_vector(), euler_vector(), euler_vector(), euler_vector(),
-                     np.zeros((n, n)), np.zeros(m), np.zeros(m), np.zeros(2 * n), np.zeros(n + 2 * n * n))
+                     np.zeros((n, n)), aligned_zeros(m), aligned_zeros(m), np.zeros(2 * n), np.zeros(n + 2 * n * n),
+                     np.zeros(m, np.int64), aligned_zeros((m, padded(m))))
 
 
 def substep_memory(s: int, n: int) -> SubstepMemory:
-    """The memory of s substeps in dimension n (empty: every substep starts cold)."""
+    """The memory of s substeps in dimension n (empty: every substep starts cold); the inverses'
+    rows start on cache lines (`rkhp.taylor.linalg.aligned_zeros`, rows padded to whole lines)."""
     m = (MAX_NODES + 1) * n
     return SubstepMemory(np.zeros((s, HISTORY, n)), np.zeros((s, HISTORY, MAX_NODES, n)),
                          np.zeros((s, 2), np.int64), np.zeros(s, np.int64), np.zeros(s, np.int64),
-                         np.zeros((s, m, m)), np.zeros((s, m), np.int64), np.zeros((s, n, n)),
+                         aligned_zeros((s, m, padded(m))), np.zeros((s, n, n)),
                          np.zeros((s, n, n)), np.ones(s), np.zeros(s, np.int64), np.full(s, HISTORY, np.int64),
                          np.ones(s), np.zeros(s, np.int64))
 
@@ -237,7 +243,7 @@ def _field_at(tapes, work, y0, j, n):
 @nb.njit(**NJIT_NORC)
 def _refresh_chord_p(i, y0, hs, tapes, work, memory, n, current):
     """Substep i's chord matrix with step hs at (y0, work.p) (see the module): J, P, Q and the
-    factors of the matrix into the memory; the stages restarted by `_start_stages` when Q differs
+    inverse of the matrix into the memory; the stages restarted by `_start_stages` when Q differs
     from `current`, the number of nodes work.Z holds (0 for none). Returns Failure.OK,
     STAGES_NO_CONVERGENCE when no Q <= MAX_NODES suffices (the step is too large for the flow),
     or SINGULAR."""
@@ -251,9 +257,9 @@ def _refresh_chord_p(i, y0, hs, tapes, work, memory, n, current):
     if q != current:
         _start_stages(i, q, memory, work, n)
     hessian(tapes, work, y0, n)
-    LU, H = memory.LU[i], work.hess
+    M, H = memory.inverse[i], work.hess
     m = (q + 1) * n
-    _set_identity(LU, m)
+    _set_identity(M, m)
     for a in range(q):
         c = 0.0
         for b in range(q):
@@ -261,16 +267,16 @@ def _refresh_chord_p(i, y0, hs, tapes, work, memory, n, current):
         for k in range(n):
             for b in range(q):
                 for l in range(n):
-                    LU[a * n + k, b * n + l] -= TABLE_A[q, a, b] * J[k, l]
+                    M[a * n + k, b * n + l] -= TABLE_A[q, a, b] * J[k, l]
             for l in range(n):
-                LU[a * n + k, q * n + l] = -c * P[k, l]
+                M[a * n + k, q * n + l] = -c * P[k, l]
     for k in range(n):
         for l in range(n):
             hj, hp = _hessian_times(H, J, P, k, l, n)
             for b in range(q):
-                LU[q * n + k, b * n + l] = -hs * TABLE_W[q, b] * hj
-            LU[q * n + k, q * n + l] -= 0.5 * hs * hp
-    return _factorise(i, m, memory)
+                M[q * n + k, b * n + l] = -hs * TABLE_W[q, b] * hj
+            M[q * n + k, q * n + l] -= 0.5 * hs * hp
+    return _invert(i, m, work, memory)
 
 
 @nb.njit(**NJIT_NORC)
@@ -284,7 +290,7 @@ def _newton_matrix_p(i, q, y0, hs, tapes, work, memory, n):
     memory.refreshes[i] += 1
     for j in range(q):
         _field_at(tapes, work, y0, j, n)
-    LU, H, J, P, Y = memory.LU[i], work.hess, memory.J[i], memory.P[i], work.tmp
+    M, H, J, P, Y = memory.inverse[i], work.hess, memory.J[i], memory.P[i], work.tmp
     for k in range(n):
         acc = y0[k]
         for j in range(q):
@@ -292,7 +298,7 @@ def _newton_matrix_p(i, q, y0, hs, tapes, work, memory, n):
         Y[k] = acc
     hessian(tapes, work, Y[:n], n)
     m = (q + 1) * n
-    _set_identity(LU, m)
+    _set_identity(M, m)
     for b in range(q):
         for k in range(n):
             Y[k] = y0[k] + work.Z[b, k]
@@ -300,22 +306,22 @@ def _newton_matrix_p(i, q, y0, hs, tapes, work, memory, n):
         for a in range(q):
             for k in range(n):
                 for l in range(n):
-                    LU[a * n + k, b * n + l] -= TABLE_A[q, a, b] * J[k, l]
-                    LU[a * n + k, q * n + l] -= TABLE_A[q, a, b] * P[k, l]
+                    M[a * n + k, b * n + l] -= TABLE_A[q, a, b] * J[k, l]
+                    M[a * n + k, q * n + l] -= TABLE_A[q, a, b] * P[k, l]
         for k in range(n):
             for l in range(n):
                 hj, hp = _hessian_times(H, J, P, k, l, n)
-                LU[q * n + k, b * n + l] = -hs * TABLE_W[q, b] * hj
-                LU[q * n + k, q * n + l] -= hs * TABLE_W[q, b] * hp
-    return _factorise(i, m, memory)
+                M[q * n + k, b * n + l] = -hs * TABLE_W[q, b] * hj
+                M[q * n + k, q * n + l] -= hs * TABLE_W[q, b] * hp
+    return _invert(i, m, work, memory)
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _set_identity(LU, m):
-    """LU[:m, :m] := the identity (the chord and Newton matrices are I minus their blocks)."""
+def _set_identity(M, m):
+    """M[:m, :m] := the identity (the chord and Newton matrices are I minus their blocks)."""
     for r in range(m):
         for col in range(m):
-            LU[r, col] = 1.0 if r == col else 0.0
+            M[r, col] = 1.0 if r == col else 0.0
 
 
 @nb.njit(inline="always", **NJIT_NORC)
@@ -330,15 +336,11 @@ def _hessian_times(H, J, P, k, l, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _factorise(i, m, memory):
-    """memory.LU[i, :m, :m] replaced by its LU factors, stored transposed (`_solve`), row order
-    memory.perm[i]; Failure.OK or SINGULAR."""
-    LU = memory.LU[i]
-    if not lu_factor(LU[:m, :m], memory.perm[i, :m]):
+def _invert(i, m, work, memory):
+    """memory.inverse[i, :m, :m] (the matrix just assembled) replaced by its inverse, transposed
+    (`rkhp.taylor.linalg.inverse_transposed`, `_solve`); Failure.OK or SINGULAR."""
+    if not inverse_transposed(memory.inverse[i, :m, :m], work.perm[:m], work.inverting[:m, :m]):
         return Failure.SINGULAR
-    for r in range(m):
-        for col in range(r):
-            LU[r, col], LU[col, r] = LU[col, r], LU[r, col]
     return Failure.OK
 
 
@@ -496,23 +498,17 @@ def _remember_p(i, q, memory, work, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _solve(LU, perm, i, m, b, tmp):
-    """b[:m] := M^-1 b[:m] from the factors of substep i's chord matrix M (`lu_factor`'s,
-    stored transposed: LU[i, c, r] is the factors' entry (r, c)), the triangular solves by columns:
-    each inner loop updates a contiguous run of tmp from a contiguous row of LU[i], which the
-    compiler vectorises (by rows, as `rkhp.taylor.linalg.lu_solve`, each row is one chain of
-    dependent additions; measured 30% slower at m = 40)."""
+def _solve(inverse, i, m, b, tmp):
+    """b[:m] := M^-1 b[:m] from the inverse of substep i's chord matrix M, stored transposed
+    (inverse[i, c] is column c of M^-1): the sum of the columns times b, each a contiguous loop
+    of fixed length m, which the compiler vectorises (the triangular solves of M's LU factors
+    are chains of dependent updates, with a division a row)."""
     for r in range(m):
-        tmp[r] = b[perm[i, r]]
+        tmp[r] = 0.0
     for c in range(m):
-        x = tmp[c]
-        for r in range(c + 1, m):
-            tmp[r] -= LU[i, c, r] * x
-    for c in range(m - 1, -1, -1):
-        x = tmp[c] / LU[i, c, c]
-        tmp[c] = x
-        for r in range(c):
-            tmp[r] -= LU[i, c, r] * x
+        x = b[c]
+        for r in range(m):
+            tmp[r] += inverse[i, c, r] * x
     for r in range(m):
         b[r] = tmp[r]
 
@@ -520,7 +516,7 @@ def _solve(LU, perm, i, m, b, tmp):
 @nb.njit(inline="always", **NJIT_NORC)
 def _sweep(i, q, y0, hs, tapes, work, memory, n):
     """One chord iteration of substep i: X at the stages, the residual of (Z, p), the correction
-    by the stored factors (into work.res), applied to work.Z and work.p; returns its largest
+    by the stored inverse (into work.res), applied to work.Z and work.p; returns its largest
     component (NaN-safe)."""
     for j in range(q):
         _field_at(tapes, work, y0, j, n)
@@ -539,7 +535,7 @@ def _sweep(i, q, y0, hs, tapes, work, memory, n):
             res[a * n + k] = acc
     for k in range(n):
         res[q * n + k] = hs * work.g[k] - work.p[k]
-    _solve(memory.LU, memory.perm, i, (q + 1) * n, res, work.tmp)
+    _solve(memory.inverse, i, (q + 1) * n, res, work.tmp)
     size = 0.0
     for a in range(q):
         for k in range(n):
@@ -740,7 +736,7 @@ class SprayFlops(NamedTuple):
     iteration: X at the stages, xbar, the gradient, the residual, the solve and the corrections;
     substep: the start extrapolated from HISTORY steps, J for the node count, X at the final
     stages and y1; matrix: a chord matrix built at y0 (X with its derivatives, the Hessian by
-    central differences of the gradient, the assembly, the factorisation)."""
+    central differences of the gradient, the assembly, the inversion: LU factors, then the columns of the inverse)."""
 
     iteration: float
     substep: float
@@ -764,7 +760,7 @@ def spray_flops(n: int, q: float, counts: OperationCounts) -> SprayFlops:
     iteration = q * counts.field + 2 * q * n + counts.gradient + 2 * q * q * n + 2 * m * m + 2 * m
     substep = 2 * HISTORY * (q + 1) * n + counts.jacobian + 2 * n * n + q * counts.field + 2 * q * n
     assembly = 2 * q * q * n * n + 4 * n**3 + 2 * q * n * n
-    matrix = counts.both + 2 * n * counts.gradient + assembly + 2 * m**3 / 3
+    matrix = counts.both + 2 * n * counts.gradient + assembly + 8 * m**3 / 3
     return SprayFlops(iteration, substep, matrix)
 
 
