@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rkhp.taylor.linalg import inverse_transposed, lu_factor, lu_solve
+from rkhp.taylor.linalg import aligned_zeros, inverse_transposed, lu_factor, lu_solve, padded
 
 
 def column_by_column(A: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -72,3 +72,14 @@ def test_the_transposed_inverse_against_numpy(n):
 def test_the_inverse_of_a_singular_matrix_is_refused():
     A = np.array([[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 1.0, 1.0]])
     assert not inverse_transposed(A, np.zeros(3, np.int64), np.zeros((3, 3)))
+
+
+@pytest.mark.parametrize("shape", [(1,), (7,), (3, 5), (2, 9, 16)])
+def test_aligned_zeros_start_on_a_cache_line(shape):
+    a = aligned_zeros(shape)
+    assert a.shape == shape and a.dtype == np.float64 and a.flags.c_contiguous
+    assert a.ctypes.data % 64 == 0 and not a.any()
+
+
+def test_padded_rows_are_whole_cache_lines():
+    assert [padded(m) for m in (1, 8, 9, 16, 17, 208)] == [8, 8, 16, 16, 24, 208]

@@ -2,7 +2,8 @@
 partial pivoting of the spray kernel's Newton matrices (`rkhp.taylor.composites`) and of the
 engine's Newton solve (`rkhp.integrators.engine.newton_solve`), the explicit inverse of the spray
 direct form's chord matrices (`inverse_transposed`), and the max-norm of the integrators' stopping
-tests (`max_abs`)."""
+tests (`max_abs`); in Python, the allocation of work arrays on cache lines for them
+(`aligned_zeros`, `padded`)."""
 
 from __future__ import annotations
 
