@@ -15,7 +15,14 @@ its average are computed by Q-node Gauss collocation on [0, 1] (`rkhp.taylor.col
 stage increments Z_j with Y_j = y0 + Z_j, Z_i = sum_j A_ij X_p(Y_j), then y1 = y0 + sum_j b_j X_p(Y_j) and
 xbar = y0 + sum_j w_j X_p(Y_j) (w_j = b_j (1 - c_j): the average is the end value of the
 augmented equation z' = y, exact for the collocation polynomial). The unknowns (Z, p), (Q + 1) n
-numbers, solve by chord iterations with the frozen Jacobian
+numbers, solve first by fixed-point sweeps (`_sweeps`)
+
+    X_j := X_p(y0 + Z_j),   Z := A X,   p := h grad H(y0 + sum_j w_j X_j),
+
+which contract the error by O(h) a sweep (X_p = pi p is O(h): |A (x) d_y X_p| and
+|h Hess H pi / 2| are O(h)), about as fast as the chord iterations below with a kept matrix at
+the compositions' step sizes, without their linear solve; while a sweep contracts the changes
+by at most `PICARD_RATE`, else by chord iterations with the frozen Jacobian
 
     [ I - A (x) J      -c (x) P         ]     J = d_y X_p(y0), P = pi(y0) = d_p X_p(y0),
     [ -h H w^T (x) J   I - (h/2) H P    ]     H = Hess H(y0), c_i = sum_j A_ij, sum_j w_j = 1/2,
@@ -32,9 +39,11 @@ matrix is the exact Jacobian at the current iterate (`_newton_matrix_p`: d_y X a
 stage, Hess H at xbar; Newton's method), taken again at each iteration until the correction nears
 the tolerance: the substeps near the largest steps the iterations converge at (|h| about 0.6 to
 0.9 on the charged particle), where a matrix built at y0 contracts by 0.1 to 0.25. Each
-substep starts from its own previous solutions, (p, Z) extrapolated (a polynomial in the step
-index) from the same substep of up to eight previous steps (`HISTORY`, as many as predicted the
-last solution best). On a constant pi, J = 0 and the step is the implicit midpoint rule.
+substep starts from its own previous solutions: the average's increment xbar - y0 and Z
+extrapolated (a polynomial in the step index) from the same substep of up to eight previous
+steps (`HISTORY`, as many as predicted the last increment best), and p = h grad H(y0 + that
+increment), whose error is then O(h) times the extrapolation's (`_predict_p`). On a constant pi,
+J = 0 and the step is the implicit midpoint rule.
 
 Number of nodes: Q is the smallest (at least 2) with E_Q theta^(2Q) <= NODE_BOUND, E_Q the
 average's error constant for y' = lambda y (`rkhp.taylor.collocation.average_error_constant`) and
@@ -81,6 +90,14 @@ from .direct_form import (
 )
 from .failure import Failure
 
+MAX_PICARD = 30
+"""Fixed-point sweeps of a substep at most (`_sweeps`); the chord iterations go on from
+there."""
+PICARD_RATE = 0.25
+"""The fixed-point sweeps give way to the chord iterations when a sweep's change exceeds this
+times the one before: a sweep then gains less than 0.6 decades, where a chord iteration with a
+kept matrix gains 1.3 to 1.7 (contraction 0.02 to 0.05) at the price of the sweep and a product
+with the matrix's inverse."""
 HISTORY = 8
 """Previous solutions of a substep kept for its extrapolated start (a polynomial in the step
 index of degree at most 7; the closed form keeps `rkhp.integrators.direct_form.HISTORY`): the
@@ -153,8 +170,9 @@ class EulerWork(NamedTuple):
 class SubstepMemory(NamedTuple):
     """What substep i of a composition keeps from one step to the next (index i first).
 
-    p_hist (s, HISTORY, n), z_hist (s, HISTORY, MAX_NODES, n): its last solutions, newest first;
-    counts (s, 2) int64: how many of them are valid for p and for Z (Z's only with the same
+    x_hist (s, HISTORY, n), z_hist (s, HISTORY, MAX_NODES, n): its last solutions, the average's
+    increments xbar - y0 and the stage increments Z, newest first; counts (s, 2) int64: how many
+    of them are valid for xbar - y0 and for Z (Z's only with the same
     number of nodes, z_nodes (s,)); nodes (s,) int64: Q of the inverted chord matrix (0: none
     yet); inverse (s, m, padded m): its inverse, transposed (`_solve`), m = (Q + 1) n used; J, P (s, n, n): d_y X and
     pi at the refresh point; rate (s,): the contraction of the first two iterations, last
@@ -162,9 +180,9 @@ class SubstepMemory(NamedTuple):
     run; order (s,) int64: how many previous solutions the next start extrapolates from at most
     (`_remember_p`); built_rate (s,): the contraction measured at the first substep of the
     matrix's last build (1: none yet); iterations (s,) int64: the chord iterations of the last
-    substep."""
+    substep (0 where the fixed-point sweeps converged)."""
 
-    p_hist: np.ndarray
+    x_hist: np.ndarray
     z_hist: np.ndarray
     counts: np.ndarray
     z_nodes: np.ndarray
@@ -395,20 +413,18 @@ def _theta(y0, tapes, work, n):
 
 @nb.njit(inline="always", **NJIT_NORC)
 def _predict_p(i, y0, hs, tapes, work, memory, n):
-    """work.p from substep i's previous solutions (their polynomial extrapolation in the step
-    index, `weight`), or hs grad H(y0) without any."""
+    """work.p := hs grad H(y0 + d), d the average's increment xbar - y0 extrapolated from substep
+    i's previous solutions (their polynomial in the step index, `weight`; d = 0 without any)."""
     count = min(memory.counts[i, 0], memory.order[i])
-    hist = memory.p_hist[i]
-    if count == 0:
-        gradient(tapes, work, y0, n)
-        for k in range(n):
-            work.p[k] = hs * work.g[k]
-        return
+    hist = memory.x_hist[i]
     for k in range(n):
         acc = 0.0
         for r in range(count):
             acc += weight(count, r) * hist[r, k]
-        work.p[k] = acc
+        work.xbar[k] = y0[k] + acc
+    gradient(tapes, work, work.xbar, n)
+    for k in range(n):
+        work.p[k] = hs * work.g[k]
 
 
 @nb.njit(**NJIT_NORC)
@@ -444,10 +460,85 @@ def _start_stages(i, q, memory, work, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _best_order(i, memory, work, n):
+def _picard(q, y0, hs, tapes, work, n):
+    """One fixed-point sweep of the equations: X_b := X(y0 + Z_b, p), Z_a := sum_b A_ab X_b,
+    p := hs grad H(y0 + sum_b w_b X_b); (Z, p) first saved in work.tmp. Returns the largest
+    change (NaN-safe)."""
+    for j in range(q):
+        _field_at(tapes, work, y0, j, n)
+    size = 0.0
+    for a in range(q):
+        for k in range(n):
+            acc = 0.0
+            for b in range(q):
+                acc += TABLE_A[q, a, b] * work.X[b, k]
+            work.tmp[a * n + k] = work.Z[a, k]
+            d = abs(acc - work.Z[a, k])
+            if not d <= size:
+                size = d
+            work.Z[a, k] = acc
+    for k in range(n):
+        acc = y0[k]
+        for j in range(q):
+            acc += TABLE_W[q, j] * work.X[j, k]
+        work.xbar[k] = acc
+    gradient(tapes, work, work.xbar, n)
+    for k in range(n):
+        work.tmp[q * n + k] = work.p[k]
+        new = hs * work.g[k]
+        d = abs(new - work.p[k])
+        if not d <= size:
+            size = d
+        work.p[k] = new
+    return size
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _undo_picard(q, work, n):
+    """(Z, p) as before the last `_picard` sweep."""
+    for a in range(q):
+        for k in range(n):
+            work.Z[a, k] = work.tmp[a * n + k]
+    for k in range(n):
+        work.p[k] = work.tmp[q * n + k]
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _sweeps(q, y0, hs, tapes, work, n, tol, stagnation):
+    """Fixed-point sweeps (`_picard`) from the predicted (Z, p), while each contracts the changes
+    by at most PICARD_RATE: returns (sweeps, whether they converged), with the tests of the
+    chord iterations (`euler_substep`; tol and stagnation absolute). A sweep whose change grows
+    (or is not finite) is undone, and the chord iterations go on from there."""
+    previous = np.inf
+    sweeps = 0
+    while sweeps < MAX_PICARD:
+        size = _picard(q, y0, hs, tapes, work, n)
+        if not size < np.inf:
+            _undo_picard(q, work, n)
+            return sweeps, False
+        sweeps += 1
+        if size <= tol:
+            return sweeps, True
+        if sweeps >= 2 and size >= 0.5 * previous and size <= stagnation:
+            return sweeps, True
+        if size > previous:
+            _undo_picard(q, work, n)
+            return sweeps - 1, False
+        if sweeps >= 2:
+            theta = size / previous
+            if theta < 0.5 and theta / (1.0 - theta) * size <= tol:
+                return sweeps, True
+            if theta > PICARD_RATE:
+                return sweeps, False
+        previous = size
+    return sweeps, False
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _best_order(i, memory, y0, work, n):
     """The number of substep i's previous solutions whose extrapolation comes closest to its
-    converged p (largest component of the difference); HISTORY, to let the order grow, when that
-    is all there were."""
+    converged xbar - y0 (largest component of the difference); HISTORY, to let the order grow,
+    when that is all there were."""
     count = memory.counts[i, 0]
     best = np.inf
     chosen = count
@@ -456,8 +547,8 @@ def _best_order(i, memory, work, n):
         for k in range(n):
             acc = 0.0
             for r in range(c):
-                acc += weight(c, r) * memory.p_hist[i, r, k]
-            err = max(err, abs(acc - work.p[k]))
+                acc += weight(c, r) * memory.x_hist[i, r, k]
+            err = max(err, abs(acc - (work.xbar[k] - y0[k])))
         if err < best:
             best = err
             chosen = c
@@ -479,18 +570,18 @@ def _worth_rebuilding(i, q, tapes, memory):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _remember_p(i, q, memory, work, n):
-    """Push the converged (p, Z) of substep i into its history, after choosing how many previous
-    solutions its next start extrapolates from: as many as would have predicted this p best
-    (`_best_order`)."""
-    memory.order[i] = _best_order(i, memory, work, n)
+def _remember_p(i, q, memory, y0, work, n):
+    """Push the converged xbar - y0 and Z of substep i into its history, after choosing how many
+    previous solutions its next start extrapolates from: as many as would have predicted this
+    xbar - y0 best (`_best_order`)."""
+    memory.order[i] = _best_order(i, memory, y0, work, n)
     for r in range(HISTORY - 1, 0, -1):
         for k in range(n):
-            memory.p_hist[i, r, k] = memory.p_hist[i, r - 1, k]
+            memory.x_hist[i, r, k] = memory.x_hist[i, r - 1, k]
             for j in range(q):
                 memory.z_hist[i, r, j, k] = memory.z_hist[i, r - 1, j, k]
     for k in range(n):
-        memory.p_hist[i, 0, k] = work.p[k]
+        memory.x_hist[i, 0, k] = work.xbar[k] - y0[k]
         for j in range(q):
             memory.z_hist[i, 0, j, k] = work.Z[j, k]
     memory.counts[i, 0] = min(memory.counts[i, 0] + 1, HISTORY)
@@ -514,7 +605,7 @@ def _solve(inverse, i, m, b, tmp):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _sweep(i, q, y0, hs, tapes, work, memory, n):
+def _chord_iteration(i, q, y0, hs, tapes, work, memory, n):
     """One chord iteration of substep i: X at the stages, the residual of (Z, p), the correction
     by the stored inverse (into work.res), applied to work.Z and work.p; returns its largest
     component (NaN-safe)."""
@@ -555,16 +646,19 @@ def _sweep(i, q, y0, hs, tapes, work, memory, n):
 def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     """One Euler substep of step hs in direct form (see the module) from y0: its increment
     y1 - y0 into work.dy, substep i of the composition (its memory); returns (Failure, chord
-    iterations).
+    iterations, fixed-point sweeps).
 
-    Starts from the extrapolated (p, Z); refreshes the chord matrix at the first substep, when
+    Starts from the predicted (p, Z) (`_predict_p`, `_start_stages`) and sweeps
+    (`_sweeps`); where the sweeps did not converge, iterates with the chord matrix from
+    where they left. Refreshes the chord matrix at the first substep, when
     the number of nodes that theta asks for changes (`nodes_for`), when a fresh matrix is worth
     its cost (`_worth_rebuilding`), and when an iteration
     contracts by more than SLOW_CONTRACTION (once per substep); takes the exact Jacobian at the
     current iterate (`_newton_matrix_p`) when a fresh matrix contracts by more than that, and at
     each iteration from the (max_iter // 2)-th while the correction exceeds max(1e3 tol,
     REFRESH_FLOOR) max(1, |y0|).
-    Stops when the correction, or its predicted successor theta / (1 - theta) |d| (theta the
+    Stops (sweeps and iterations alike) when the correction, or its predicted successor
+    theta / (1 - theta) |d| (theta the
     measured contraction; after the first iteration, twice the substep's last measured first
     contraction), is at most tol max(1, |y0|); then X is evaluated at the final (Z, p) and
     y1 = y0 + sum_j b_j X_j."""
@@ -580,24 +674,24 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     if q == 0:
         cause = _refresh_chord_p(i, y0, hs, tapes, work, memory, n, np.int64(0))
         if cause != Failure.OK:
-            return cause, 0
+            return cause, 0, 0
         fresh = True
         q = memory.nodes[i]
     else:
         _start_stages(i, q, memory, work, n)
+    sweeps, converged = _sweeps(q, y0, hs, tapes, work, n, tol * scale, STAGNATION * scale)
     previous = np.inf
     since = 0
-    converged = False
     it = 0
     size = 0.0
-    while it < max_iter:
+    while not converged and it < max_iter:
         it += 1
         since += 1
-        size = _sweep(i, q, y0, hs, tapes, work, memory, n)
+        size = _chord_iteration(i, q, y0, hs, tapes, work, memory, n)
         if not size < np.inf:
-            return Failure.NEWTON_NON_FINITE, it
+            return Failure.NEWTON_NON_FINITE, it, sweeps
         if size > 1e8 * scale:
-            return Failure.NEWTON_DIVERGED, it
+            return Failure.NEWTON_DIVERGED, it, sweeps
         if since == 1:
             theta = RATE_MARGIN * memory.rate[i]
         else:
@@ -621,12 +715,12 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
                 fresh = True
                 cause = _refresh_chord_p(i, y0, hs, tapes, work, memory, n, q)
             if cause != Failure.OK:
-                return cause, it
+                return cause, it, sweeps
             q = memory.nodes[i]
             since = 0
         previous = size
     if not converged:
-        return Failure.NEWTON_NO_CONVERGENCE, it
+        return Failure.NEWTON_NO_CONVERGENCE, it, sweeps
     for j in range(q):
         _field_at(tapes, work, y0, j, n)
     for k in range(n):
@@ -634,9 +728,9 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
         for j in range(q):
             acc += TABLE_B[q, j] * work.X[j, k]
         work.dy[k] = acc
-    _remember_p(i, q, memory, work, n)
+    _remember_p(i, q, memory, y0, work, n)
     memory.iterations[i] = it
-    return Failure.OK, it
+    return Failure.OK, it, sweeps
 
 
 @nb.njit(inline="always", **NJIT_NORC)
@@ -673,12 +767,13 @@ def begin(data, y0):
 def substep(data, context, i, hs, solver):
     """Substep i of size hs in direct form (`euler_substep`: solver.tol relative to max(1, |y|),
     at most solver.max_iter chord iterations), its increment added to the state without rounding
-    it (`add_increment`); returns (Failure, iterations, 0 stage sweeps)."""
+    it (`add_increment`); returns (Failure, chord iterations, fixed-point sweeps: the stage
+    sweeps the run reports)."""
     work = data.work
-    cause, it = euler_substep(i, work.y, hs, data.tapes, work, data.memory, solver.tol, solver.max_iter)
+    cause, it, sweeps = euler_substep(i, work.y, hs, data.tapes, work, data.memory, solver.tol, solver.max_iter)
     if cause == Failure.OK:
         add_increment(work.y, work.y_low, work.dy, work.y.shape[0])
-    return cause, it, 0
+    return cause, it, sweeps
 
 
 # ----------------------------------------------------------------------------------------------
@@ -734,11 +829,13 @@ def plain_tapes(system) -> tuple[Tape, Tape]:
 class SprayFlops(NamedTuple):
     """Floating-point operations of the direct form's parts with Q nodes (`spray_flops`).
     iteration: X at the stages, xbar, the gradient, the residual, the solve and the corrections;
-    substep: the start extrapolated from HISTORY steps, J for the node count, X at the final
-    stages and y1; matrix: a chord matrix built at y0 (X with its derivatives, the Hessian by
+    sweep: a fixed-point sweep (X at the stages, Z, xbar, the gradient, the changes);
+    substep: the start extrapolated from HISTORY steps with its gradient, J for the node count,
+    X at the final stages and y1; matrix: a chord matrix built at y0 (X with its derivatives, the Hessian by
     central differences of the gradient, the assembly, the inversion: LU factors, then the columns of the inverse)."""
 
     iteration: float
+    sweep: float
     substep: float
     matrix: float
 
@@ -758,10 +855,12 @@ def spray_flops(n: int, q: float, counts: OperationCounts) -> SprayFlops:
     those of one evaluation of each function (`counts`)."""
     m = (q + 1) * n
     iteration = q * counts.field + 2 * q * n + counts.gradient + 2 * q * q * n + 2 * m * m + 2 * m
-    substep = 2 * HISTORY * (q + 1) * n + counts.jacobian + 2 * n * n + q * counts.field + 2 * q * n
+    sweep = q * counts.field + 2 * q * n + counts.gradient + 2 * q * q * n + 2 * m
+    substep = (2 * HISTORY * (q + 1) * n + counts.gradient + counts.jacobian + 2 * n * n + q * counts.field
+               + 2 * q * n)
     assembly = 2 * q * q * n * n + 4 * n**3 + 2 * q * n * n
     matrix = counts.both + 2 * n * counts.gradient + assembly + 8 * m**3 / 3
-    return SprayFlops(iteration, substep, matrix)
+    return SprayFlops(iteration, sweep, substep, matrix)
 
 
 def tape_counts(field: Tape, hamiltonian: Tape, n: int) -> OperationCounts:
