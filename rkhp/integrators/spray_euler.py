@@ -650,9 +650,10 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
 
     Starts from the predicted (p, Z) (`_predict_p`, `_start_stages`) and sweeps
     (`_sweeps`); where the sweeps did not converge, iterates with the chord matrix from
-    where they left. Refreshes the chord matrix at the first substep, when
-    the number of nodes that theta asks for changes (`nodes_for`), when a fresh matrix is worth
-    its cost (`_worth_rebuilding`), and when an iteration
+    where they left. Q is that of the previous stages (`SubstepMemory.z_nodes`) unless theta asks
+    for more or for two fewer (`nodes_for`). The chord matrix is built only for the iterations:
+    before them where it has another Q than the stages or a fresh one is worth its cost
+    (`_worth_rebuilding`), and when an iteration
     contracts by more than SLOW_CONTRACTION (once per substep); takes the exact Jacobian at the
     current iterate (`_newton_matrix_p`) when a fresh matrix contracts by more than that, and at
     each iteration from the (max_iter // 2)-th while the correction exceeds max(1e3 tol,
@@ -665,21 +666,23 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     n = y0.shape[0]
     scale = max(1.0, max_abs(y0))
     _predict_p(i, y0, hs, tapes, work, memory, n)
+    needed = nodes_for(_theta(y0, tapes, work, n))
+    if needed > MAX_NODES:
+        return Failure.STAGES_NO_CONVERGENCE, 0, 0
+    q = memory.z_nodes[i]
+    if q == 0 or needed > q or needed < q - 1:
+        q = needed
+    if memory.z_nodes[i] != q or memory.counts[i, 1] == 0:
+        _field_jacobians(y0, tapes, work, n, memory.J[i], memory.P[i], True)
+    _start_stages(i, q, memory, work, n)
+    sweeps, converged = _sweeps(q, y0, hs, tapes, work, n, tol * scale, STAGNATION * scale)
     fresh = False
-    q = memory.nodes[i]
-    if q > 0:
-        needed = nodes_for(_theta(y0, tapes, work, n))
-        if needed > q or needed < q - 1 or _worth_rebuilding(i, q, tapes, memory):
-            q = 0
-    if q == 0:
-        cause = _refresh_chord_p(i, y0, hs, tapes, work, memory, n, np.int64(0))
+    if not converged and (memory.nodes[i] != q or _worth_rebuilding(i, q, tapes, memory)):
+        cause = _refresh_chord_p(i, y0, hs, tapes, work, memory, n, q)
         if cause != Failure.OK:
-            return cause, 0, 0
+            return cause, 0, sweeps
         fresh = True
         q = memory.nodes[i]
-    else:
-        _start_stages(i, q, memory, work, n)
-    sweeps, converged = _sweeps(q, y0, hs, tapes, work, n, tol * scale, STAGNATION * scale)
     previous = np.inf
     since = 0
     it = 0
