@@ -920,6 +920,6 @@ def spray_substep_data(system, substeps: int) -> SpraySubstep:
 
 
 def spray_extra(data: SpraySubstep) -> dict:
-    """What a run reports of its direct-form substeps: the collocation nodes of each and how often
-    each rebuilt its chord matrix."""
-    return {"nodes": data.memory.nodes.tolist(), "refreshes": data.memory.refreshes.tolist()}
+    """What a run reports of its direct-form substeps: the collocation nodes of each (of its last
+    stages) and how often each built its chord matrix."""
+    return {"nodes": data.memory.z_nodes.tolist(), "refreshes": data.memory.refreshes.tolist()}
