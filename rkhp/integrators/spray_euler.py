@@ -757,6 +757,7 @@ def begin(data, y0):
     for i in range(memory.nodes.shape[0]):
         memory.counts[i, 0] = 0
         memory.counts[i, 1] = 0
+        memory.z_nodes[i] = 0
         memory.nodes[i] = 0
         memory.rate[i] = 1.0
         memory.refreshes[i] = 0
