@@ -460,6 +460,18 @@ def _start_stages(i, q, memory, work, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
+def _average_gradient(q, y0, tapes, work, n):
+    """work.xbar := y0 + sum_j w_j X_j, the flow's average from the stages' field work.X, and
+    work.g := grad H(xbar)."""
+    for k in range(n):
+        acc = y0[k]
+        for j in range(q):
+            acc += TABLE_W[q, j] * work.X[j, k]
+        work.xbar[k] = acc
+    gradient(tapes, work, work.xbar, n)
+
+
+@nb.njit(inline="always", **NJIT_NORC)
 def _picard(q, y0, hs, tapes, work, n):
     """One fixed-point sweep of the equations: X_b := X(y0 + Z_b, p), Z_a := sum_b A_ab X_b,
     p := hs grad H(y0 + sum_b w_b X_b); (Z, p) first saved in work.tmp. Returns the largest
@@ -477,12 +489,7 @@ def _picard(q, y0, hs, tapes, work, n):
             if not d <= size:
                 size = d
             work.Z[a, k] = acc
-    for k in range(n):
-        acc = y0[k]
-        for j in range(q):
-            acc += TABLE_W[q, j] * work.X[j, k]
-        work.xbar[k] = acc
-    gradient(tapes, work, work.xbar, n)
+    _average_gradient(q, y0, tapes, work, n)
     for k in range(n):
         work.tmp[q * n + k] = work.p[k]
         new = hs * work.g[k]
@@ -611,12 +618,7 @@ def _chord_iteration(i, q, y0, hs, tapes, work, memory, n):
     component (NaN-safe)."""
     for j in range(q):
         _field_at(tapes, work, y0, j, n)
-    for k in range(n):
-        acc = y0[k]
-        for j in range(q):
-            acc += TABLE_W[q, j] * work.X[j, k]
-        work.xbar[k] = acc
-    gradient(tapes, work, work.xbar, n)
+    _average_gradient(q, y0, tapes, work, n)
     res = work.res
     for a in range(q):
         for k in range(n):
