@@ -49,8 +49,9 @@ Number of nodes: Q is the smallest (at least 2) with E_Q theta^(2Q) <= NODE_BOUN
 average's error constant for y' = lambda y (`rkhp.taylor.collocation.average_error_constant`) and
 theta = `_norm_bound` of J >= |J|_2, computed at each substep from the derivatives of X at
 (y0, predicted p) by forward mode (`rkhp.taylor.scalar`). A substep needing more nodes than its
-matrix has, or two fewer, refreshes the matrix (one fewer keeps it: more nodes than needed only
-cost, and Q would otherwise toggle along an orbit).
+previous stages had, or two fewer, starts its stages afresh with that Q (one fewer keeps them:
+more nodes than needed only cost, and Q would otherwise toggle along an orbit), and its chord
+matrix, where it needs one, is rebuilt for it.
 
 Compiled data: `SprayTapes` (X and H as plain tapes),
 `EulerWork` (work arrays of one substep), `SubstepMemory` (what each substep keeps across steps).
