@@ -105,7 +105,7 @@ index of degree at most 7; the closed form keeps `rkhp.integrators.direct_form.H
 start's error falls as (h omega)^k with k solutions along an orbit of frequency omega, and at the
 contraction of a matrix kept across steps each decade less saves about one chord iteration. Where
 h omega is not small the higher differences grow instead: each substep extrapolates from as many
-as would have predicted its last solution best (`_remember_p`)."""
+as would have predicted its last solution best (`_remember`)."""
 AMORTISE = 2.0
 """A substep rebuilds its chord matrix before iterating when AMORTISE times the iterations that
 would save at this step exceeds the matrix's cost in iterations (`_worth_rebuilding`): a fresh
@@ -179,7 +179,7 @@ class SubstepMemory(NamedTuple):
     pi at the refresh point; rate (s,): the contraction of the first two iterations, last
     measured (1: none yet); refreshes (s,) int64: how many times the matrix was built in this
     run; order (s,) int64: how many previous solutions the next start extrapolates from at most
-    (`_remember_p`); built_rate (s,): the contraction measured at the first substep of the
+    (`_remember`); built_rate (s,): the contraction measured at the first substep of the
     matrix's last build (1: none yet); iterations (s,) int64: the chord iterations of the last
     substep (0 where the fixed-point sweeps converged)."""
 
@@ -578,7 +578,7 @@ def _worth_rebuilding(i, q, tapes, memory):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _remember_p(i, q, memory, y0, work, n):
+def _remember(i, q, memory, y0, work, n):
     """Push the converged xbar - y0 and Z of substep i into its history, after choosing how many
     previous solutions its next start extrapolates from: as many as would have predicted this
     xbar - y0 best (`_best_order`)."""
@@ -734,7 +734,7 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
         for j in range(q):
             acc += TABLE_B[q, j] * work.X[j, k]
         work.dy[k] = acc
-    _remember_p(i, q, memory, y0, work, n)
+    _remember(i, q, memory, y0, work, n)
     memory.iterations[i] = it
     return Failure.OK, it, sweeps
 
