@@ -15,10 +15,11 @@ tower's steps, relative to the largest |y|.
 
 Second table, the race's settings (the composition and steps with which rkhp reaches 1e-10 at
 T = 10 in docs/results/work-precision.md; kahan-li8 at h = 0.25 on the heavy top and the pendulum,
-which that page does not race): per substep, microseconds, iterations, Jacobians (chord
-matrices or Newton's), and an estimate of the floating-point operations the substep ran
+which that page does not race): per substep, microseconds, iterations, fixed-point sweeps (of the
+substeps without previous solutions), Jacobians (chord matrices or Newton's), and an estimate of
+the floating-point operations the substep ran
 (`flops`: per iteration the point x(z) and y1, H's gradient (its compiled code's operations, or
-forward mode on the tape) and the linear solve;
+forward mode on the tape) and the linear solve; per sweep the point and the gradient;
 per Jacobian its assembly and factorisation) and of those the mathematics needs (`limit`: two
 iterations and the closing point, with one Jacobian (Newton's method) or the chord matrices the
 run built where it built fewer), with the rate the run achieved (flops / time).
@@ -138,7 +139,7 @@ def closed_flops(system, form, n: int) -> dict:
         point = 2 * n * n + (40 * n if form.kind == closed_euler.LOG_CANONICAL else 2 * n)
     solve = 2 * n * n + (6 * n * n if not form.exact else 0)  # the chord path's Broyden update
     jacobian = 2 * n**3 + (2 * n**3 // 3) + 2 * n**3 + (0 if form.hessian_constant else hessian)
-    return {"iteration": point + gradient + solve, "jacobian": jacobian, "point": point}
+    return {"iteration": point + gradient + solve, "sweep": point + gradient, "jacobian": jacobian, "point": point}
 
 
 def race(name: str, composition: str, steps: int) -> dict:
@@ -152,13 +153,14 @@ def race(name: str, composition: str, steps: int) -> dict:
     trajectory = run(system, load_tableau("euler"), h, steps, gammas=gammas)
     substeps = steps * s
     iterations = float(np.sum(trajectory.newton_iterations)) / substeps
+    sweeps = float(np.sum(trajectory.stage_sweeps)) / substeps
     jacobians = float(np.sum(trajectory.extra["refreshes"])) / substeps
     parts = closed_flops(system, setup(system, load_tableau("euler"), gammas).data.form, system.dim)
-    flops = iterations * parts["iteration"] + jacobians * parts["jacobian"] + parts["point"]
+    flops = iterations * parts["iteration"] + sweeps * parts["sweep"] + jacobians * parts["jacobian"] + parts["point"]
     limit = 2 * parts["iteration"] + min(1.0, jacobians) * parts["jacobian"] + parts["point"]
     us = 1e6 * best / substeps
-    return {"us": us, "iterations": iterations, "jacobians": jacobians, "flops": flops, "limit": limit,
-            "rate": flops / us / 1e3, "h": h}
+    return {"us": us, "iterations": iterations, "sweeps": sweeps, "jacobians": jacobians, "flops": flops,
+            "limit": limit, "rate": flops / us / 1e3, "h": h}
 
 
 SPRAY_RACE = (("benchmarks/data/vortices-8.toml", "bcm8-s13", 609, 10.0),
@@ -221,12 +223,12 @@ def main() -> None:
         sys.stdout.flush()
     print()
     print(f"the race's settings: per substep (min of {REPEATS}, thread CPU time)")
-    print(f"{'system':<18} {'method':<22} {'h':>6} {'us':>6} {'iter':>5} {'jac':>5} {'flops':>7} "
+    print(f"{'system':<18} {'method':<22} {'h':>6} {'us':>6} {'iter':>5} {'sweeps':>6} {'jac':>5} {'flops':>7} "
           f"{'limit':>6} {'GFLOP/s':>8}")
     for name, composition, steps in RACE:
         m = race(name, composition, steps)
         print(f"{name:<18} {composition:<22} {m['h']:>6.3f} {m['us']:>6.2f} {m['iterations']:>5.2f} "
-              f"{m['jacobians']:>5.2f} {m['flops']:>7.0f} {m['limit']:>6.0f} {m['rate']:>8.2f}")
+              f"{m['sweeps']:>6.2f} {m['jacobians']:>5.2f} {m['flops']:>7.0f} {m['limit']:>6.0f} {m['rate']:>8.2f}")
         sys.stdout.flush()
     print()
     print(f"the spray's direct form at the race's settings: per substep (min of {REPEATS}, thread CPU time)")

@@ -27,7 +27,7 @@ from rkhp.integrators.substeps import CLOSED, TOWER, choose
 from rkhp.studies.converge import converge
 from rkhp.systems import get_system
 from rkhp.systems.families import LieAlgebra, family_system
-from rkhp.tableaux.compositions import load_composition
+from rkhp.tableaux.compositions import load_composition, one_step
 from rkhp.taylor.tape import functions as f
 
 #: a constant pi of rank 2 on R^3 (Casimir k . x, k = (1, 2, 4)) with a non-quadratic H
@@ -214,8 +214,28 @@ def test_a_step_beyond_the_guard_of_phi_fails_with_a_cause():
 
 
 def test_a_solve_that_does_not_converge_fails_with_a_cause():
+    """The first step's substep has no previous solutions: it converges by fixed-point sweeps;
+    the second iterates with the chord matrix, one iteration allowed."""
     run = integrate_closed_euler(get_system("toda:12"), (1.0,), 0.05, 5, max_iter=1)
-    assert run.cause == Failure.NEWTON_NO_CONVERGENCE and run.failed_step == 0
+    assert run.cause == Failure.NEWTON_NO_CONVERGENCE and run.failed_step == 1
+    assert run.stage_sweeps[0] >= 1 and run.newton_iterations[0] == 0
+
+
+def test_substeps_without_previous_solutions_converge_by_sweeps():
+    """One step of bcm8-s13 (Blanes, Casas & Ros' processed composition: a processor of 20
+    substeps run once from y0, a kernel of 13, the inverse processor once at the end) on toda:12
+    at h = 0.1: no substep has previous solutions; the sweeps z := G(x(z)) converge, with no
+    chord iteration and no matrix built, on the states of the same substeps solved by the
+    engine's Taylor tower (Newton on the jets, an independent solver)."""
+    system, euler = get_system("toda:12"), resolve_method("euler").tableau
+    comp = load_composition("bcm8-s13")
+    gammas, m = np.array(one_step(comp, float)), len(comp.processor)
+    direct = run(system, euler, 0.1, 1, gammas=gammas, processor=m, keep_all=False)
+    engine = run(system, euler, 0.1, 1, gammas=gammas, processor=m, provider=TOWER, keep_all=False)
+    assert choose(system, euler).provider is CLOSED and direct.ok and engine.ok
+    assert direct.newton_iterations.sum() == 0 and sum(direct.extra["refreshes"]) == 0
+    assert direct.stage_sweeps.sum() >= len(gammas)
+    assert np.abs(direct.final_state - engine.final_state).max() < 1e-14 * np.abs(engine.final_state).max()
 
 
 def test_a_failed_run_is_one_line_and_exit_1(run_cli):

@@ -25,6 +25,11 @@ the plain chord iterations on the rigid body at h = 0.1, 5.8 against 8.1 on Lotk
 4.5 against 8.5 on the ax + b algebra).
 B is built once per substep of a composition and kept, with its updates, across steps (rebuilt
 when its contraction grows, `REFRESH_CONTRACTION`, `rkhp.integrators.direct_form.SLOW_CONTRACTION`).
+A substep without previous solutions (the first step's, a processor's: it runs once a call) first
+sweeps z := G(x(z)), which contracts by O(h) (|h Hess H x'| is O(h)) without a matrix, and builds
+B only where the sweeps slow (`rkhp.integrators.direct_form.sweep_verdict`): a matrix costs 2n
+gradients and an n x n inverse, more than the sweeps a single substep takes; a substep that
+recurs iterates with its B, whose iterations cost an n x n product but contract by O(h^2).
 Each substep starts from z extrapolated over the same substep of the previous steps (`HISTORY`,
 as the spray's direct form, docs/general-poisson.md "The Euler step in direct form").
 
@@ -60,13 +65,18 @@ from ..taylor.tape import Tape
 from .derivatives import derivatives_at
 from .direct_form import (
     HISTORY,
+    MAX_PICARD,
     RATE_MARGIN,
     REFRESH_FLOOR,
     SLOW_CONTRACTION,
     STAGNATION,
+    SWEEP_CONVERGED,
+    SWEEP_ON,
+    SWEEP_UNDO,
     add_increment,
     gradient,
     hessian,
+    sweep_verdict,
     weight,
 )
 from .failure import Failure
@@ -411,9 +421,40 @@ def _broyden(B, work, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
+def _sweeps_z(y0, hs, form, work, n, tol, stagnation):
+    """Fixed-point sweeps z := G(x(z)) from work.z while `rkhp.integrators.direct_form.
+    sweep_verdict` lets them go on: returns (sweeps, whether they converged; a sweep it undoes is
+    not counted). Where x(z) fails they stop, z unchanged: the chord iteration that follows meets
+    the failure at the same z and reports it."""
+    previous = np.inf
+    sweeps = 0
+    while sweeps < MAX_PICARD:
+        if _point(y0, form, work, n) != Failure.OK:
+            return sweeps, False
+        _target(hs, form, work, n)
+        size = 0.0
+        for k in range(n):
+            d = abs(work.res[k] - work.z[k])
+            work.last[k] = work.z[k]
+            work.z[k] = work.res[k]
+            if not d <= size:
+                size = d
+        sweeps += 1
+        verdict = sweep_verdict(sweeps, size, previous, tol, stagnation)
+        if verdict == SWEEP_UNDO:
+            for k in range(n):
+                work.z[k] = work.last[k]
+            return sweeps - 1, False
+        if verdict != SWEEP_ON:
+            return sweeps, verdict == SWEEP_CONVERGED
+        previous = size
+    return sweeps, False
+
+
+@nb.njit(inline="always", **NJIT_NORC)
 def closed_substep(i, y0, hs, form, work, memory, solver):
     """One Euler substep of step hs in direct form from y0 (substep i of the composition, its
-    memory): its increment y1 - y0 into work.dy; returns (Failure, iterations).
+    memory): its increment y1 - y0 into work.dy.
 
     Starts from the extrapolated z; iterates z += B r, r = G(x(z)) - z, B updated by `_broyden`
     from the second iteration on; builds B afresh at the substep's first call, when its last
@@ -425,26 +466,30 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
     when corrections at round-off stop halving (`rkhp.integrators.direct_form.STAGNATION`); then
     x and y1 are taken at the final z. The first iteration predicts nothing: the previous step's
     first contraction, which the spray's direct form uses there, is no bound once Broyden's
-    update has improved B (measured below 1e-4 on the rigid body)."""
+    update has improved B (measured below 1e-4 on the rigid body). A substep without previous
+    solutions first sweeps (`_sweeps_z`), B built and iterated only where the sweeps did not
+    converge. Returns (Failure, iterations, sweeps)."""
     n = y0.shape[0]
     scale = max(1.0, max_abs(y0))
     _predict_z(i, y0, hs, form, work, memory, n)
+    sweeps, converged = 0, False
+    if memory.count[i] == 0:
+        sweeps, converged = _sweeps_z(y0, hs, form, work, n, solver.tol * scale, STAGNATION * scale)
     fresh = False
-    if memory.ready[i] == 0 or memory.rate[i] > REFRESH_CONTRACTION:
+    if not converged and (memory.ready[i] == 0 or memory.rate[i] > REFRESH_CONTRACTION):
         cause = _refresh_chord_z(i, y0, hs, form, work, memory, n)
         if cause != Failure.OK:
-            return cause, 0
+            return cause, 0, sweeps
         fresh = True
     previous = np.inf
     since = 0
     it = 0
-    converged = False
-    while it < solver.max_iter:
+    while not converged and it < solver.max_iter:
         it += 1
         since += 1
         cause = _point(y0, form, work, n)
         if cause != Failure.OK:
-            return cause, it
+            return cause, it, sweeps
         _target(hs, form, work, n)
         for k in range(n):
             work.res[k] -= work.z[k]
@@ -461,9 +506,9 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
             if not abs(acc) <= size:
                 size = abs(acc)
         if not size < np.inf:
-            return Failure.NEWTON_NON_FINITE, it
+            return Failure.NEWTON_NON_FINITE, it, sweeps
         if size > 1e8 * scale:
-            return Failure.NEWTON_DIVERGED, it
+            return Failure.NEWTON_DIVERGED, it, sweeps
         theta = size / previous if since >= 2 else np.inf  # no prediction from one correction
         if since == 2:
             memory.rate[i] = theta
@@ -480,16 +525,16 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
             fresh = True
             cause = _refresh_chord_z(i, y0, hs, form, work, memory, n)
             if cause != Failure.OK:
-                return cause, it
+                return cause, it, sweeps
             since = 0
         previous = size
     if not converged:
-        return Failure.NEWTON_NO_CONVERGENCE, it
+        return Failure.NEWTON_NO_CONVERGENCE, it, sweeps
     cause = _point(y0, form, work, n)
     if cause != Failure.OK:
-        return cause, it
+        return cause, it, sweeps
     _remember_z(i, memory, work, n)
-    return Failure.OK, it
+    return Failure.OK, it, sweeps
 
 
 @nb.njit(inline="always", **NJIT_NORC)
@@ -589,15 +634,16 @@ def begin(data, y0):
 def substep(data, context, i, hs, solver):
     """Substep i of size hs in direct form (`newton_substep` where the form is exact, else
     `closed_substep`), its increment added to the state
-    without rounding it (`add_increment`); returns (Failure, iterations, 0 stage sweeps)."""
+    without rounding it (`add_increment`); returns (Failure, iterations, sweeps)."""
     work, form = data.work, data.form
+    sweeps = 0
     if form.exact:
         cause, it = newton_substep(i, work.y, hs, form, work, data.memory, solver)
     else:
-        cause, it = closed_substep(i, work.y, hs, form, work, data.memory, solver)
+        cause, it, sweeps = closed_substep(i, work.y, hs, form, work, data.memory, solver)
     if cause == Failure.OK:
         add_increment(work.y, work.y_low, work.dy, work.y.shape[0])
-    return cause, it, 0
+    return cause, it, sweeps
 
 
 # ----------------------------------------------------------------------------------------------

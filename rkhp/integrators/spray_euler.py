@@ -22,7 +22,10 @@ numbers, solve first by fixed-point sweeps (`_sweeps`)
 which contract the error by O(h) a sweep (X_p = pi p is O(h): |A (x) d_y X_p| and
 |h Hess H pi / 2| are O(h)), about as fast as the chord iterations below with a kept matrix at
 the compositions' step sizes, without their linear solve; while a sweep contracts the changes
-by at most `PICARD_RATE`, else by chord iterations with the frozen Jacobian
+by at most `PICARD_RATE` (`rkhp.integrators.direct_form.sweep_verdict`; a substep without
+previous solutions, whose start is off by O(h^2) in p, first takes one sweep that is not judged:
+it carries the error of p into Z, and its change measures the start, not the contraction), else
+by chord iterations with the frozen Jacobian
 
     [ I - A (x) J      -c (x) P         ]     J = d_y X_p(y0), P = pi(y0) = d_p X_p(y0),
     [ -h H w^T (x) J   I - (h/2) H P    ]     H = Hess H(y0), c_i = sum_j A_ij, sum_j w_j = 1/2,
@@ -80,25 +83,22 @@ from ..taylor.scalar import SCALAR_CODES, gradients, shared, values
 from ..taylor.tape import Tape
 from .derivatives import derivatives_at, spray_at
 from .direct_form import (
+    MAX_PICARD,
     RATE_MARGIN,
     REFRESH_FLOOR,
     SLOW_CONTRACTION,
     STAGNATION,
+    SWEEP_CONVERGED,
+    SWEEP_ON,
+    SWEEP_UNDO,
     add_increment,
     gradient,
     hessian,
+    sweep_verdict,
     weight,
 )
 from .failure import Failure
 
-MAX_PICARD = 30
-"""Fixed-point sweeps of a substep at most (`_sweeps`); the chord iterations go on from
-there."""
-PICARD_RATE = 0.25
-"""The fixed-point sweeps give way to the chord iterations when a sweep's change exceeds this
-times the one before: a sweep then gains less than 0.6 decades, where a chord iteration with a
-kept matrix gains 1.3 to 1.7 (contraction 0.02 to 0.05) at the price of the sweep and a product
-with the matrix's inverse."""
 HISTORY = 8
 """Previous solutions of a substep kept for its extrapolated start (a polynomial in the step
 index of degree at most 7; the closed form keeps `rkhp.integrators.direct_form.HISTORY`): the
@@ -513,31 +513,19 @@ def _undo_picard(q, work, n):
 
 @nb.njit(inline="always", **NJIT_NORC)
 def _sweeps(q, y0, hs, tapes, work, n, tol, stagnation):
-    """Fixed-point sweeps (`_picard`) from the predicted (Z, p), while each contracts the changes
-    by at most PICARD_RATE: returns (sweeps, whether they converged), with the tests of the
-    chord iterations (`euler_substep`; tol and stagnation absolute). A sweep whose change grows
-    (or is not finite) is undone, and the chord iterations go on from there."""
+    """Fixed-point sweeps (`_picard`) from the current (Z, p) while `sweep_verdict` lets them
+    go on: returns (sweeps, whether they converged; a sweep it undoes is not counted)."""
     previous = np.inf
     sweeps = 0
     while sweeps < MAX_PICARD:
         size = _picard(q, y0, hs, tapes, work, n)
-        if not size < np.inf:
-            _undo_picard(q, work, n)
-            return sweeps, False
         sweeps += 1
-        if size <= tol:
-            return sweeps, True
-        if sweeps >= 2 and size >= 0.5 * previous and size <= stagnation:
-            return sweeps, True
-        if size > previous:
+        verdict = sweep_verdict(sweeps, size, previous, tol, stagnation)
+        if verdict == SWEEP_UNDO:
             _undo_picard(q, work, n)
             return sweeps - 1, False
-        if sweeps >= 2:
-            theta = size / previous
-            if theta < 0.5 and theta / (1.0 - theta) * size <= tol:
-                return sweeps, True
-            if theta > PICARD_RATE:
-                return sweeps, False
+        if verdict != SWEEP_ON:
+            return sweeps, verdict == SWEEP_CONVERGED
         previous = size
     return sweeps, False
 
@@ -652,7 +640,8 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     iterations, fixed-point sweeps).
 
     Starts from the predicted (p, Z) (`_predict_p`, `_start_stages`) and sweeps
-    (`_sweeps`); where the sweeps did not converge, iterates with the chord matrix from
+    (`_sweeps`, after one sweep not judged where the substep has no previous solutions: see the
+    module); where the sweeps did not converge, iterates with the chord matrix from
     where they left. Q is that of the previous stages (`SubstepMemory.z_nodes`) unless theta asks
     for more or for two fewer (`nodes_for`). The chord matrix is built only for the iterations:
     before them where it has another Q than the stages or a fresh one is worth its cost
@@ -678,7 +667,14 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     if memory.z_nodes[i] != q or memory.counts[i, 1] == 0:
         _field_jacobians(y0, tapes, work, n, memory.J[i], memory.P[i], True)
     _start_stages(i, q, memory, work, n)
+    aligned = 0
+    if memory.counts[i, 0] == 0:
+        if _picard(q, y0, hs, tapes, work, n) < np.inf:
+            aligned = 1
+        else:
+            _undo_picard(q, work, n)
     sweeps, converged = _sweeps(q, y0, hs, tapes, work, n, tol * scale, STAGNATION * scale)
+    sweeps += aligned
     fresh = False
     if not converged and (memory.nodes[i] != q or _worth_rebuilding(i, q, tapes, memory)):
         cause = _refresh_chord_p(i, y0, hs, tapes, work, memory, n, q)

@@ -39,8 +39,9 @@ class Trajectory:
         times: shape (k+1,).
         states: shape (k+1, n); for a failed run, only the steps before the failure.
         newton_iterations: shape (k,), Newton iterations per step (zeros for explicit peers).
-        stage_sweeps: shape (k,), sweeps of the implicit stages per step (RKHP with an implicit
-            tableau; zeros otherwise, empty for the other integrators).
+        stage_sweeps: shape (k,), fixed-point sweeps per step: of the implicit stages (RKHP with
+            an implicit tableau) and of the direct forms' Euler substeps (their unknowns swept
+            before any chord iteration); zeros otherwise, empty for the other integrators.
         status: "ok", or a failure message naming the step, the time and the cause.
         failed_step: the 0-based index of the step that failed (step k goes from y_k to y_{k+1};
             it equals the number of completed steps, and states has failed_step + 1 rows), or
