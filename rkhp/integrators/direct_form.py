@@ -29,8 +29,8 @@ substep; as the engine's Newton iteration, `rkhp.integrators.engine.rkhp_step`).
 kept across steps: it goes stale by O(h) a step, which the first iteration of a step feels (its
 p-columns: measured 0.05 on nambu at h = 0.1 even just after a refresh), the later ones less."""
 MAX_PICARD = 30
-"""Fixed-point sweeps of a substep at most (`_sweeps`); the chord iterations go on from
-there."""
+"""Fixed-point sweeps of a substep at most (`rkhp.integrators.spray_euler._sweeps`,
+`rkhp.integrators.closed_euler._sweeps_z`); the chord iterations go on from there."""
 PICARD_RATE = 0.25
 """The fixed-point sweeps give way to the chord iterations when a sweep's change exceeds this
 times the one before: a sweep then gains less than 0.6 decades, where a chord iteration with a
