@@ -9,10 +9,12 @@ shared machine the time other work takes from it is not counted), the minimum ov
 
 - by name: ``rkhp.integrate(SYSTEM, METHOD, H, STEPS)``, as documented;
 - resolved: ``method.integrate(system, H, STEPS)`` with the system and the method resolved once;
-- loop: the compiled loop alone, `rkhp.integrators.driver.drive` called through its dispatcher
-  with its arguments prepared once (the provider's data, the solver, the record it writes).
+- with x0: ``method.integrate(system, H, STEPS, x0)``, the start given (as a study gives it);
+- loop: the compiled loop alone, `rkhp.integrators.driver.drive`'s compiled entry point for the
+  run's types (`driver.compiled_loop`: no dispatcher) with its arguments prepared once (the
+  provider's data, the solver, the record it writes).
 
-It prints microseconds per call, the cost of each call over the loop, and whether the three
+It prints microseconds per call, the cost of each call over the loop, and whether the four
 computed the same final state bit for bit. Then an ensemble: the final states of K starts near
 the system's start by K calls of ``method.integrate``, and by one `Method.integrate_ensemble`
 call on one thread and on the threads available (CPU time of the process, all its threads, and
@@ -44,6 +46,9 @@ def calls(system_name: str, method_name: str, h: float, steps: int) -> dict:
     gammas = (1.0,) if method.kind == "rkhp" else method.composition.gamma_float
     ready = driver.setup(system, method.tableau, gammas)
     y0, out = system.start(), driver.record(steps, system.dim, True)
+    args = (y0, ready.gammas, 0, h, steps, ready.data, ready.solver, out)
+    driver.drive(*args)
+    entry = driver.compiled_loop(args)
 
     def by_name():
         return rkhp.integrate(system_name, method_name, h, steps).final_state
@@ -51,11 +56,14 @@ def calls(system_name: str, method_name: str, h: float, steps: int) -> dict:
     def resolved():
         return method.integrate(system, h, steps).final_state
 
+    def with_x0():
+        return method.integrate(system, h, steps, y0).final_state
+
     def loop():
-        driver.drive(y0, ready.gammas, 0, h, steps, ready.data, ready.solver, out)
+        entry(*args)
         return out.states[-1]
 
-    return {"by name": by_name, "resolved": resolved, "loop": loop}
+    return {"by name": by_name, "resolved": resolved, "with x0": with_x0, "loop": loop}
 
 
 def least_cpu(contenders: dict, rounds: int) -> tuple[dict, dict]:
@@ -72,15 +80,16 @@ def least_cpu(contenders: dict, rounds: int) -> tuple[dict, dict]:
 
 def per_call(cases, rounds: int) -> None:
     print(f"microseconds per call (thread CPU time, minimum of {rounds} interleaved rounds, warm)")
-    print(f"{'case':42s} {'by name':>9s} {'resolved':>9s} {'loop':>9s} {'name-loop':>10s} "
-          f"{'resolved-loop':>14s}  same")
+    print(f"{'case':42s} {'by name':>9s} {'resolved':>9s} {'with x0':>9s} {'loop':>9s} {'name-loop':>10s} "
+          f"{'resolved-loop':>14s} {'x0-loop':>8s}  same")
     for case in cases:
         name, method, h, steps = case.split("/")
         best, results = least_cpu(calls(name, method, float(h), int(steps)), rounds)
         us = {key: 1e6 * value for key, value in best.items()}
         same = all(np.array_equal(results["loop"], r) for r in results.values())
-        print(f"{case:42s} {us['by name']:9.1f} {us['resolved']:9.1f} {us['loop']:9.1f} "
-              f"{us['by name'] - us['loop']:10.1f} {us['resolved'] - us['loop']:14.1f}  {same}")
+        print(f"{case:42s} {us['by name']:9.1f} {us['resolved']:9.1f} {us['with x0']:9.1f} {us['loop']:9.1f} "
+              f"{us['by name'] - us['loop']:10.1f} {us['resolved'] - us['loop']:14.1f} "
+              f"{us['with x0'] - us['loop']:8.1f}  {same}")
 
 
 def ensemble(case: str, k: int, rounds: int) -> None:

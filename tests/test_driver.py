@@ -30,10 +30,12 @@ QUICK = [key for key in REFERENCE
 
 
 def _check(key: str) -> None:
-    """The run of `key` as the reference has it: its final state to 1e-13 (relative), or, for a
+    """The run of `key` as the reference has it: its final state to 5e-13 (relative), or, for a
     run that failed, a failure of the same cause. The driver ran the 216 bit for bit as before;
     the direct forms have since changed at round-off (Rodrigues' formulas on so(3)*, Newton's
-    method, more collocation nodes), which moves a run at the edge of convergence by a step."""
+    method, more collocation nodes, sweeps in the first substeps), which moves a run at the edge
+    of convergence by a step. The bound is round-off's after 20 steps: on point-vortices, Euler's
+    run by the tower and by the spray's direct form differ by 1.3e-13."""
     name, realisation, method = key.split("/")
     trajectory = resolve_method(method).integrate(resolve_system(name, realisation), 0.1, 20)
     expected = REFERENCE[key]
@@ -42,7 +44,7 @@ def _check(key: str) -> None:
         return
     assert trajectory.status == "ok"
     final = np.array(expected["final"])
-    assert np.abs(trajectory.states[-1] - final).max() <= 1e-13 * max(1.0, np.abs(final).max())
+    assert np.abs(trajectory.states[-1] - final).max() <= 5e-13 * max(1.0, np.abs(final).max())
 
 
 @pytest.mark.parametrize("key", QUICK)

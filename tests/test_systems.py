@@ -243,3 +243,36 @@ def test_check_json_holds_every_deviation_of_its_table(run_cli):
     assert doc["degeneracy"] < 1e-14 and doc["symmetry"] < 1e-14
     rc, table, err = run_cli("check", "rigid-body", "--samples", "5")
     assert f"{doc['degeneracy']:.2e}" in table and f"{doc['symmetry']:.2e}" in table
+
+
+@pytest.mark.parametrize("given", [
+    [math.cos(1.1), 0.0, math.sin(1.1)], (math.cos(1.1), 0, math.sin(1.1)),
+    np.array([math.cos(1.1), 0.0, math.sin(1.1)]), np.array([math.cos(1.1), 0.0, math.sin(1.1)], np.float32)])
+def test_a_start_is_checked_the_same_as_a_list_or_an_array(given):
+    """`start` and `with_x0` take a start as a list, a tuple or an array of reals alike: a new
+    float64 vector, the system's own object left as it is."""
+    system = get_system("rigid-body")
+    start = system.start(given)
+    assert start.dtype == np.float64 and start.shape == (3,)
+    assert np.array_equal(start, np.asarray(given, dtype=np.float64))
+    assert start is not given and np.array_equal(system.with_x0(given).x0, start)
+    start[0] = 5.0
+    assert system.x0[0] != 5.0
+
+
+@pytest.mark.parametrize("name, given, message", [
+    ("rigid-body", np.array([0.4, np.nan, 0.9]), r"x0\[1\] must be finite"),
+    ("rigid-body", np.array([0.4, 0.0, np.inf]), r"x0\[2\] must be finite"),
+    ("rigid-body", np.array([True, False, True]), r"x0\[0\] must be a real number, got bool"),
+    ("rigid-body", np.array([[0.4, 0.0, 0.9]]), "array of shape"),
+    ("rigid-body", np.array([0.4, 0.0]), "x0 has 2 components; rigid-body has dimension 3"),
+    ("rigid-body", np.array(["0.4", "0", "0.9"]), r"x0\[0\] must be a real number, got str_"),
+    ("lotka-volterra", np.array([1.0, -0.5, 2.0]), r"outside the domain \(positive orthant\)"),
+])
+def test_a_bad_start_is_refused_naming_what_is_wrong(name, given, message):
+    """An array start is refused as a list is: the component that is not a finite real, the
+    size, the domain (InputError, which the commands turn into exit 2)."""
+    system = get_system(name)
+    for check in (system.start, system.with_x0):
+        with pytest.raises(InputError, match=message):
+            check(given)

@@ -64,7 +64,7 @@ def drive(y0, gammas, processor, h, n_steps, data, solver, record):
     substeps (of size gammas[i] |h|) run once from y0, each step is the kernel's, and the inverse
     processor's run from each state kept (every state with `record.keep_all`, else the last),
     each of its substeps warm-started from its runs from the states before (`resume`).
-    Returns (completed steps, Failure of the step after them or Failure.OK)."""
+    Returns (completed steps, the code of the Failure of the step after them or 0, Failure.OK)."""
     context = begin(data, y0)
     n = y0.shape[0]
     peak = 0.0
@@ -78,12 +78,12 @@ def drive(y0, gammas, processor, h, n_steps, data, solver, record):
     if cause != Failure.OK:
         record.iterations[0] = it
         record.sweeps[0] = done
-        return 0, cause
+        return 0, _code(cause)
     steps, cause = _steps(data, context, gammas, processor, end - processor, h, n_steps, solver, record)
     record.iterations[0] += it
     record.sweeps[0] += done
     if processor == 0:
-        return steps, cause
+        return steps, _code(cause)
     first = 0 if not record.keep_all and steps > 0 else 1
     rows = steps + 1 if record.keep_all else 1
     for row in range(first, rows):
@@ -93,14 +93,21 @@ def drive(y0, gammas, processor, h, n_steps, data, solver, record):
             if not record.keep_all:
                 for k in range(n):
                     record.states[0, k] = y0[k]
-            return (row - 1 if record.keep_all else 0), failed
+            return (row - 1 if record.keep_all else 0), _code(failed)
         at = row - 1 if record.keep_all else steps - 1
         record.iterations[at] += it
         record.sweeps[at] += done
         for k in range(n):
             record.states[row, k] = data.y[k]
             record.peak[1] = max(record.peak[1], abs(data.y[k]))
-    return steps, cause
+    return steps, _code(cause)
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _code(cause):
+    """A Failure's integer code: Python receives a plain int, where a Failure member would be
+    boxed (the enum class unpickled) on every call."""
+    return cause + 0
 
 
 @nb.njit(**NJIT_NORC)
@@ -273,14 +280,13 @@ def run_checked(system, tableau, h, n_steps, x0, gammas: np.ndarray, span: float
     method calls (`rkhp.integrators.methods`)."""
     h, n_steps = check_step(h, n_steps, system.dim)
     y0 = system.start(x0)
-    n = system.dim
     lent = _take(system, tableau, gammas, provider, tol, max_iter, options)
     try:
         lent, compile_seconds = _warm(lent, y0, gammas, processor, h)
         ready, loop = lent.item
-        out = record(n_steps, n, keep_all)
+        out = record(n_steps, y0.shape[0], keep_all)
         t0 = time.perf_counter()
-        done, cause = loop(y0, gammas, processor, h, n_steps, ready.data, ready.solver, out)
+        done, code = loop(y0, gammas, processor, h, n_steps, ready.data, ready.solver, out)
         run_seconds = time.perf_counter() - t0
         details = {"substep": ready.provider.name, "newton_tolerance": ready.solver.tol,
                    "newton_max_iterations": ready.solver.max_iter, "realisation": system.realisation,
@@ -289,13 +295,14 @@ def run_checked(system, tableau, h, n_steps, x0, gammas: np.ndarray, span: float
         PREPARED.give(lent)
     if extra:
         details.update(extra)
-    failed = cause != Failure.OK
-    cause = Failure(cause) if failed else Failure.OK
+    failed = code != 0
+    cause = Failure(code) if failed else Failure.OK
     step = h * span
     if keep_all:
         kept, times = out.states[: done + 1], step * np.arange(done + 1)
     else:
-        kept, times = np.vstack([y0, out.states[0]]), np.array([0.0, step * done])
+        kept, times = np.empty((2, y0.shape[0])), np.array([0.0, step * done])
+        kept[0], kept[1] = y0, out.states[0]
     trajectory = Trajectory(
         times=times, states=kept, newton_iterations=out.iterations[: done + failed],
         stage_sweeps=out.sweeps[: done + failed], cause=cause,
@@ -303,8 +310,8 @@ def run_checked(system, tableau, h, n_steps, x0, gammas: np.ndarray, span: float
         failed_step=done if failed else None, compile_seconds=compile_seconds,
         run_seconds=run_seconds, method=name or getattr(tableau, "name", "custom"), system=system.name,
         extra=details, poisson=system)
-    grown = not out.peak[1] <= GROWTH * max(1.0, out.peak[0])
-    return checked(trajectory, system) if keep_all and grown else trajectory
+    grown = keep_all and not out.peak[1] <= GROWTH * max(1.0, out.peak[0])
+    return checked(trajectory, system) if grown else trajectory
 
 
 class Ensemble(NamedTuple):

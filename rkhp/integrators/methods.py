@@ -31,8 +31,10 @@ from __future__ import annotations
 
 import os
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
+from typing import NamedTuple
 
 from ..base.documents import read_text
 from ..base.errors import InputError, NumericalFailure
@@ -57,6 +59,17 @@ SCIPY_METHODS = {"dop853": "DOP853", "rk45": "RK45", "rk23": "RK23", "radau": "R
                  "lsoda": "LSODA"}
 _TAYLOR = re.compile(r"thp([0-9]+)(-t0)?")
 KINDS = ("rkhp", "taylor", "classical", "implicit-midpoint", "scipy", "composition")
+
+
+class DriverPlan(NamedTuple):
+    """What a run of an RKHP method or a composition passes to the driver besides the system and
+    the step (`rkhp.integrators.driver.run_checked`): its substeps' coefficients, the processor's
+    length and what the trajectory reports of the method (a composition's base and substeps)."""
+
+    run: Callable
+    gammas: object
+    processor: int
+    extra: dict | None
 
 
 @dataclass(frozen=True)
@@ -90,17 +103,9 @@ class Method:
         (a processed composition then applies its inverse processor once, to the last state:
         docs/compositions.md). The other kinds keep every state."""
         if self.kind in ("rkhp", "composition"):
-            from .driver import ONE, run_checked
-
-            if self.kind == "rkhp":
-                return run_checked(system, self.tableau, h, n_steps, x0, ONE, 1.0, keep_all=keep_all,
-                                   name=self.name)
-            comp = self.composition
-            extra = {"base": self.tableau.name, "substeps": comp.substeps}
-            if comp.processed:
-                extra["processor_substeps"] = len(comp.processor)
-            return run_checked(system, self.tableau, h, n_steps, x0, self._gammas, 1.0,
-                               processor=len(comp.processor), keep_all=keep_all, name=self.name, extra=extra)
+            plan = self._on_driver
+            return plan.run(system, self.tableau, h, n_steps, x0, plan.gammas, 1.0, processor=plan.processor,
+                            keep_all=keep_all, name=self.name, extra=plan.extra)
         if self.kind == "taylor":
             from .driver import integrate_taylor
 
@@ -144,6 +149,19 @@ class Method:
         x0s, hs, counts = ensemble_plan(system, h, n_steps, x0s)
         return np.array([self.integrate(system, float(hh), int(nn), x0=x).raise_if_failed().final_state
                          for x, hh, nn in zip(x0s, hs, counts, strict=True)]).reshape(x0s.shape)
+
+    @cached_property
+    def _on_driver(self) -> DriverPlan:
+        """How an RKHP method or a composition runs on the driver (resolved once per method)."""
+        from .driver import ONE, run_checked
+
+        if self.kind == "rkhp":
+            return DriverPlan(run_checked, ONE, 0, None)
+        comp = self.composition
+        extra = {"base": self.tableau.name, "substeps": comp.substeps}
+        if comp.processed:
+            extra["processor_substeps"] = len(comp.processor)
+        return DriverPlan(run_checked, self._gammas, len(comp.processor), extra)
 
     @cached_property
     def _gammas(self):

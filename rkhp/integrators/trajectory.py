@@ -31,9 +31,11 @@ FILE_SUFFIXES = (".csv", ".npz")
 COMPILED_ENERGY_FROM = 20_000
 
 
-@dataclass(frozen=True)
+@dataclass
 class Trajectory:
-    """States y_0..y_k at times t_0..t_k of one run.
+    """States y_0..y_k at times t_0..t_k of one run: a plain record, built by every call of the
+    integrators (not frozen: a frozen dataclass's constructor sets each field through
+    object.__setattr__, a cost every call would pay; benchmarks/call_cost.py).
 
     Attributes:
         times: shape (k+1,).

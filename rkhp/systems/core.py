@@ -219,6 +219,22 @@ class PoissonSystem:
             return False
         return bool(np.all(x > 0)) if self.domain == "positive orthant" else True
 
+    def _checked_x0(self, x0) -> np.ndarray:
+        """``x0`` as a new float64 vector if it is one of the system's states (real numbers, as
+        many as the dimension, finite, in the domain); InputError naming what is wrong otherwise."""
+        if isinstance(x0, np.ndarray) and x0.ndim == 1 and x0.dtype.kind in "fiu":
+            x0 = np.array(x0, dtype=np.float64)  # an array of reals: checked as a whole
+            if not np.all(np.isfinite(x0)):
+                x0 = np.array(real_vector(x0, "x0"), dtype=np.float64)  # the component to name
+        else:
+            x0 = np.array(real_vector(x0, "x0"), dtype=np.float64)
+        if x0.shape != (self.dim,):
+            raise InputError(f"x0 has {x0.size} components; {self.name} has dimension {self.dim}")
+        if not self.in_domain(x0):
+            raise InputError(f"x0 = {x0.tolist()} is outside the domain ({self.domain}) of "
+                             f"{self.name}")
+        return x0
+
     def symbolic(self) -> SymbolicSystem | None:
         """The system as expressions where it was given by them (spec files, the built-in systems,
         the reference problems: `rkhp.systems.families.family_system`'s ``hamiltonian_expression``);
@@ -236,16 +252,11 @@ class PoissonSystem:
     def start(self, x0=None) -> np.ndarray:
         """The state a run starts from, as a new float64 vector: ``x0`` checked as by
         :meth:`with_x0` (size, finite, domain), or the system's own when None."""
-        return np.array(self.x0 if x0 is None else self.with_x0(x0).x0, dtype=np.float64)
+        return np.array(self.x0, dtype=np.float64) if x0 is None else self._checked_x0(x0)
 
     def with_x0(self, x0) -> PoissonSystem:
         """The same system started elsewhere (checked: size and domain; no exact solution)."""
-        x0 = np.asarray(real_vector(x0, "x0"), dtype=np.float64)
-        if x0.shape != (self.dim,):
-            raise InputError(f"x0 has {x0.size} components; {self.name} has dimension {self.dim}")
-        if not self.in_domain(x0):
-            raise InputError(f"x0 = {x0.tolist()} is outside the domain ({self.domain}) of "
-                             f"{self.name}")
+        x0 = self._checked_x0(x0)
         same = np.array_equal(x0, self.x0)
         return replace(self, x0=x0, exact_solution=self.exact_solution if same else None)
 
