@@ -2,7 +2,7 @@
 "Work-precision"; the generated page docs/results/work-precision.md).
 
 Run: python benchmarks/work_precision.py [SYSTEM ...] [--quick] [--targets 1e-8,1e-10,1e-12]
-     [--rounds N] [--write PAGE]
+     [--rounds N] [--processes K] [--write PAGE]
 
 SYSTEM: built-in names or spec files (default: rigid-body, lotka-volterra, charged-particle, nambu,
 toda:12 and benchmarks/data/vortices-8.toml, 8 variables with a general pi). For each system and
@@ -14,7 +14,10 @@ of ratio 10^(1/4) (peers, atol = 1e-3 rtol). The settings are then timed togethe
 traced, numba cache loaded; compile times are left out), interleaved (each round calls every
 contender, in an order rotated by one each round; a call shorter than BATCH_SECONDS is repeated
 within its timing and the mean taken), ROUNDS rounds; the minimum over the rounds of the CPU time
-of the calling thread (time.thread_time) is reported, and of the wall time beside it.
+of the calling thread (time.thread_time) is reported, and of the wall time beside it. With
+--processes K the race runs in K fresh processes one after another and each time is the minimum
+over them: a contender's time varies from one process to the next (up to 1.5x for the peers at
+the same settings), beyond what rounds within one process see.
 
 Contenders (rkhp.studies.peers; every field is generated from the system, so spec files race too):
 - rkhp: the compositions of METHODS, the best of them per target (the processed compositions
@@ -119,6 +122,48 @@ class Row:
     def __init__(self, system: str, target: float):
         self.system, self.target = system, target
         self.cells: dict[str, tuple] = {}  # name -> (setting text, cpu s, wall s, error)
+
+
+def row_records(rows: list[Row]) -> list[dict]:
+    """The rows as JSON records (what a process of --processes hands back)."""
+    return [{"system": r.system, "target": r.target, "cells": {k: list(v) for k, v in r.cells.items()}}
+            for r in rows]
+
+
+def fastest(runs: list[list[dict]]) -> list[Row]:
+    """The rows of several processes' runs of the same race (`row_records`), each time the minimum
+    over the runs (CPU and wall apart); the settings and errors are the runs' own, the same in
+    each (the search is deterministic: a run that found another is refused)."""
+    rows = []
+    for records in zip(*runs, strict=True):
+        first = records[0]
+        row = Row(first["system"], first["target"])
+        for name, cell in first["cells"].items():
+            setting, err = cell[0], cell[3]
+            for other in records[1:]:
+                if other["cells"][name][0] != setting:
+                    raise RuntimeError(f"{row.system} at {row.target:.0e}: {name} found another setting "
+                                       f"in another process ({other['cells'][name][0]} against {setting})")
+            row.cells[name] = (setting, min(r["cells"][name][1] for r in records),
+                               min(r["cells"][name][2] for r in records), err)
+        rows.append(row)
+    return rows
+
+
+def in_processes(argv: list[str], processes: int) -> list[Row]:
+    """The race of `argv` run in `processes` fresh processes, one after another (`fastest`)."""
+    import json
+    import subprocess
+    import tempfile
+
+    runs = []
+    with tempfile.TemporaryDirectory() as folder:
+        for k in range(processes):
+            out = Path(folder) / f"rows-{k}.json"
+            print(f"# process {k + 1} of {processes}", flush=True)
+            subprocess.run([sys.executable, __file__, *argv, "--rows-json", str(out)], check=True)
+            runs.append(json.loads(out.read_text()))
+    return fastest(runs)
 
 
 def race(name: str, targets, rounds: int, absent: dict) -> list[Row]:
@@ -249,7 +294,8 @@ def versions() -> str:
     return ", ".join(out)
 
 
-def page(command: str, started: str, where: str, rows: list[Row], absent: dict, targets, rounds: int) -> str:
+def page(command: str, started: str, where: str, rows: list[Row], absent: dict, targets, rounds: int,
+         processes: int = 1) -> str:
     """The generated results page (docs/results/work-precision.md)."""
     text = [
         "# Work-precision against compiled peers (generated)",
@@ -264,8 +310,9 @@ def page(command: str, started: str, where: str, rows: list[Row], absent: dict, 
         "best reference (closed form for the rigid body, else the tighter of scipy's DOP853 and the compiled "
         "DOP853 at rtol 1e-15 cross-checked at 1e-14); each contender at its cheapest setting (steps on a grid "
         "of ratio 2^(1/4), rtol on a grid of ratio 10^(1/4), atol = 1e-3 rtol).",
-        f"- times in ms per call, warm (compile and trace left out), {rounds} interleaved rounds, minimum; short "
-        f"calls repeated within a timing to last {BATCH_SECONDS * 1e3:g} ms.",
+        f"- times in ms per call, warm (compile and trace left out), {rounds} interleaved rounds, minimum"
+        + (f" over the rounds of {processes} processes run one after another" if processes > 1 else "")
+        + f"; short calls repeated within a timing to last {BATCH_SECONDS * 1e3:g} ms.",
         "- rkhp: the best of " + ", ".join(METHODS) + "; numbalsoda:dop853: Hairer's DOP853 (Fortran) on a numba "
         "cfunc field; diffrax: under jax.jit on the CPU, float64; scipy:dop853: solve_ivp on the field written "
         "with plain arithmetic. Every field is generated from the system (rkhp.systems.field_code).",
@@ -300,6 +347,13 @@ def round_count(text: str) -> int:
     return int(text)
 
 
+def process_count(text: str) -> int:
+    """--processes: an integer from 1 to 20."""
+    if not text.isdigit() or not 1 <= int(text) <= 20:
+        raise argparse.ArgumentTypeError(f"not an integer from 1 to 20: {text!r}")
+    return int(text)
+
+
 def arguments(argv) -> argparse.Namespace:
     """The command line (see the module)."""
     p = parser("python benchmarks/work_precision.py", __doc__)
@@ -307,7 +361,10 @@ def arguments(argv) -> argparse.Namespace:
     p.add_argument("--quick", action="store_true", help="the first system, 3 rounds")
     p.add_argument("--targets", type=target_list, default=TARGETS, help="end-point errors, comma separated")
     p.add_argument("--rounds", type=round_count, metavar="N", help="interleaved rounds")
+    p.add_argument("--processes", type=process_count, default=1, metavar="K",
+                   help="run the race in K processes, each time their minimum (default 1)")
     p.add_argument("--write", metavar="PAGE", help="write the page here")
+    p.add_argument("--rows-json", metavar="PATH", help=argparse.SUPPRESS)  # a process of --processes
     return p.parse_args(argv)
 
 
@@ -326,11 +383,23 @@ def main(argv) -> None:
     absent = {p: reason for p in PEERS if (reason := P.absent(peer_of(p)))}
     for reason in absent.values():
         print(reason)
-    rows = []
-    for name in systems:
-        rows += race(name, targets, rounds, absent)
+    if args.processes > 1:
+        child = [*args.systems, *(["--quick"] if quick else []), "--targets", ",".join(map(repr, targets)),
+                 "--rounds", str(rounds)]
+        rows = in_processes(child, args.processes)
+        print(f"# the minimum over {args.processes} processes")
+        for row in rows:
+            print(line(row, absent))
+    else:
+        rows = []
+        for name in systems:
+            rows += race(name, targets, rounds, absent)
+    if args.rows_json:
+        import json
+
+        Path(args.rows_json).write_text(json.dumps(row_records(rows)))
     if write:
-        Path(write).write_text(page(command, started, where, rows, absent, targets, rounds))
+        Path(write).write_text(page(command, started, where, rows, absent, targets, rounds, args.processes))
         print(f"# written: {write}")
 
 

@@ -230,6 +230,24 @@ def test_work_precision_benchmark_runs_tiny(tmp_path, capsys):
         assert (reason in out and reason in text) if reason else f"{name} absent" not in out
 
 
+def test_work_precision_over_processes_takes_each_time_at_its_minimum():
+    """--processes: each contender's CPU and wall times are their minima over the processes'
+    runs (apart), its setting and error the runs' own; a run that found another setting is
+    refused, not merged."""
+    bench = _benchmark()
+    runs = [[{"system": "nambu", "target": 1e-8,
+              "cells": {"bcm6-s13": ["19 steps", cpu, wall, 8.2e-9],
+                        "scipy:dop853": ["rtol 1.8e-08", 2 * cpu, wall, 7.6e-9]}}]
+            for cpu, wall in ((3e-4, 9e-4), (5e-4, 6e-4), (4e-4, 7e-4))]
+    (row,) = bench.fastest(runs)
+    assert (row.system, row.target) == ("nambu", 1e-8)
+    assert row.cells == {"bcm6-s13": ("19 steps", 3e-4, 6e-4, 8.2e-9),
+                         "scipy:dop853": ("rtol 1.8e-08", 6e-4, 6e-4, 7.6e-9)}
+    runs[1][0]["cells"]["bcm6-s13"][0] = "23 steps"
+    with pytest.raises(RuntimeError, match="bcm6-s13 found another setting"):
+        bench.fastest(runs)
+
+
 @pytest.mark.slow
 def test_work_precision_benchmark_takes_a_spec_file(tmp_path):
     page = tmp_path / "wp.md"
@@ -240,6 +258,7 @@ def test_work_precision_benchmark_takes_a_spec_file(tmp_path):
 @pytest.mark.parametrize("script, args, says", [
     ("work_precision.py", ["--rounds", "0"], "--rounds"),
     ("work_precision.py", ["--targets", "1e-8,x"], "--targets"),
+    ("work_precision.py", ["--processes", "0"], "--processes"),
     ("work_precision.py", ["no-such-system"], "unknown system 'no-such-system'"),
     ("long_runs.py", ["--t-final", "-1"], "--t-final"),
     ("long_runs.py", ["no-such-system"], "unknown system 'no-such-system'"),
