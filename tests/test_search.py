@@ -10,6 +10,7 @@ a zero elementary weight (so its condition is violated by exactly 1).
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -117,6 +118,27 @@ def test_groebner_does_not_claim_a_possible_case():
     # the paper's three-stage method exists, so the ideal must be proper
     proof = prove_impossible(ResidualSystem.build(3, 4, "degenerate"), time_limit=60)
     assert not proof.proved and proof.status == "solutions-over-C"
+
+
+def test_a_groebner_worker_ended_before_its_answer_prints_nothing(capfd):
+    """The worker is a forked child of a process whose interrupt handlers (a command's) raise
+    KeyboardInterrupt; ended at the deadline by SIGTERM, it dies silently: no traceback on the
+    stderr it shares with the command."""
+    import signal
+
+    from rkhp.search import prove
+    from rkhp.search.ideal import condition_ideal
+
+    def command_handler(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, command_handler)
+    try:
+        ideal = condition_ideal(ResidualSystem.build(5, 5, "general"))  # a basis takes far longer
+        assert prove._sympy_basis(ideal, time.monotonic() + 1.0, None) is None
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert "Traceback" not in capfd.readouterr().err
 
 
 def test_prove_flag_attaches_the_certificate_to_the_failed_order():

@@ -24,11 +24,13 @@ four times a second while one runs.
 from __future__ import annotations
 
 import multiprocessing
+import signal
 import time
 from dataclasses import dataclass
 from typing import NamedTuple
 
 from ..base.errors import CheckFailed, InputError
+from ..base.interrupts import INTERRUPT_SIGNALS
 from .certificates import Certificate, CertificateCheck, check_certificate
 from .ideal import (
     CERTIFICATE_ELIMINATION,
@@ -152,9 +154,18 @@ class Proof:
 # ----------------------------------------------------------------------------- sympy
 
 
+WORKER_EXIT_SECONDS = 1.0
+"""How long a Groebner worker that has sent its basis is given to end by itself."""
+
+
 def _groebner_worker(exprs, names, conn) -> None:
+    """The basis sent back through `conn`. A forked child: it leaves the interrupt signals to
+    their default action (the parent's handlers, a command's, would turn the SIGTERM that ends a
+    child still running into a traceback on the shared stderr)."""
     import sympy
 
+    for signum in INTERRUPT_SIGNALS:
+        signal.signal(signum, signal.SIG_DFL)
     symbols = sympy.symbols(names)
     basis = sympy.groebner(exprs, *symbols, order="grevlex", domain=sympy.QQ)
     conn.send([str(g) for g in basis.exprs])
@@ -182,6 +193,8 @@ def _sympy_basis(ideal: ConditionIdeal, deadline: float, on_wait) -> tuple[str, 
     except EOFError:
         basis = None
     finally:
+        if basis is not None:
+            proc.join(WORKER_EXIT_SECONDS)  # it has sent its answer: let it end by itself
         if proc.is_alive():
             proc.terminate()
         proc.join()
