@@ -34,6 +34,7 @@ Long runs (T = 10^5, at equal CPU time) are benchmarks/long_runs.py.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import platform
@@ -152,7 +153,6 @@ def fastest(runs: list[list[dict]]) -> list[Row]:
 
 def in_processes(argv: list[str], processes: int) -> list[Row]:
     """The race of `argv` run in `processes` fresh processes, one after another (`fastest`)."""
-    import json
     import subprocess
     import tempfile
 
@@ -340,18 +340,14 @@ def target_list(text: str) -> tuple[float, ...]:
     return targets
 
 
-def round_count(text: str) -> int:
-    """--rounds: an integer from 1 to 1000."""
-    if not text.isdigit() or not 1 <= int(text) <= 1000:
-        raise argparse.ArgumentTypeError(f"not an integer from 1 to 1000: {text!r}")
-    return int(text)
+def count_from_1_to(most: int):
+    """The type of a count option: an integer from 1 to `most` (argparse's error otherwise)."""
+    def count(text: str) -> int:
+        if not text.isdigit() or not 1 <= int(text) <= most:
+            raise argparse.ArgumentTypeError(f"not an integer from 1 to {most}: {text!r}")
+        return int(text)
 
-
-def process_count(text: str) -> int:
-    """--processes: an integer from 1 to 20."""
-    if not text.isdigit() or not 1 <= int(text) <= 20:
-        raise argparse.ArgumentTypeError(f"not an integer from 1 to 20: {text!r}")
-    return int(text)
+    return count
 
 
 def arguments(argv) -> argparse.Namespace:
@@ -360,8 +356,8 @@ def arguments(argv) -> argparse.Namespace:
     p.add_argument("systems", nargs="*", metavar="SYSTEM", help="built-in names or spec files")
     p.add_argument("--quick", action="store_true", help="the first system, 3 rounds")
     p.add_argument("--targets", type=target_list, default=TARGETS, help="end-point errors, comma separated")
-    p.add_argument("--rounds", type=round_count, metavar="N", help="interleaved rounds")
-    p.add_argument("--processes", type=process_count, default=1, metavar="K",
+    p.add_argument("--rounds", type=count_from_1_to(1000), metavar="N", help="interleaved rounds")
+    p.add_argument("--processes", type=count_from_1_to(20), default=1, metavar="K",
                    help="run the race in K processes, each time their minimum (default 1)")
     p.add_argument("--write", metavar="PAGE", help="write the page here")
     p.add_argument("--rows-json", metavar="PATH", help=argparse.SUPPRESS)  # a process of --processes
@@ -395,8 +391,6 @@ def main(argv) -> None:
         for name in systems:
             rows += race(name, targets, rounds, absent)
     if args.rows_json:
-        import json
-
         Path(args.rows_json).write_text(json.dumps(row_records(rows)))
     if write:
         Path(write).write_text(page(command, started, where, rows, absent, targets, rounds, args.processes))

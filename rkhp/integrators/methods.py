@@ -62,9 +62,10 @@ KINDS = ("rkhp", "taylor", "classical", "implicit-midpoint", "scipy", "compositi
 
 
 class DriverPlan(NamedTuple):
-    """What a run of an RKHP method or a composition passes to the driver besides the system and
-    the step (`rkhp.integrators.driver.run_checked`): its substeps' coefficients, the processor's
-    length and what the trajectory reports of the method (a composition's base and substeps)."""
+    """How an RKHP method or a composition runs: the driver's entry (`rkhp.integrators.driver.
+    run_checked`, imported once, not at every call) and what the method passes it besides the
+    system and the step: its substeps' coefficients, the processor's length and what the
+    trajectory reports of the method (a composition's base and substeps)."""
 
     run: Callable
     gammas: object
