@@ -56,6 +56,12 @@ previous stages had, or two fewer, starts its stages afresh with that Q (one few
 more nodes than needed only cost, and Q would otherwise toggle along an orbit), and its chord
 matrix, where it needs one, is rebuilt for it.
 
+The size of a change (a sweep's or a chord iteration's, what the stop tests compare) is the
+largest of |dp| and min(1, theta) |dZ|: Z enters the step only through X_p(y0 + Z_j), whose
+derivative in y is J, |J|_2 <= theta, so an error of Z moves the stages' field, the average,
+hence p, and y1 by at most theta times itself (at the compositions' steps theta is 0.03 to 0.4,
+and Z's changes, carried from p's by P, are the larger); p counts in full.
+
 Compiled data: `SprayTapes` (X and H as plain tapes),
 `EulerWork` (work arrays of one substep), `SubstepMemory` (what each substep keeps across steps).
 `SpraySubstep` (the three, and the state); `begin` and `substep` make the direct form a substep
@@ -473,10 +479,10 @@ def _average_gradient(q, y0, tapes, work, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _picard(q, y0, hs, tapes, work, n):
+def _picard(q, y0, hs, tapes, work, n, zw):
     """One fixed-point sweep of the equations: X_b := X(y0 + Z_b, p), Z_a := sum_b A_ab X_b,
-    p := hs grad H(y0 + sum_b w_b X_b); (Z, p) first saved in work.tmp. Returns the largest
-    change (NaN-safe)."""
+    p := hs grad H(y0 + sum_b w_b X_b); (Z, p) first saved in work.tmp. Returns the size of the
+    change, the largest of |dp| and zw |dZ| (see the module; NaN-safe)."""
     for j in range(q):
         _field_at(tapes, work, y0, j, n)
     size = 0.0
@@ -486,7 +492,7 @@ def _picard(q, y0, hs, tapes, work, n):
             for b in range(q):
                 acc += TABLE_A[q, a, b] * work.X[b, k]
             work.tmp[a * n + k] = work.Z[a, k]
-            d = abs(acc - work.Z[a, k])
+            d = zw * abs(acc - work.Z[a, k])
             if not d <= size:
                 size = d
             work.Z[a, k] = acc
@@ -512,13 +518,13 @@ def _undo_picard(q, work, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _sweeps(q, y0, hs, tapes, work, n, tol, stagnation):
+def _sweeps(q, y0, hs, tapes, work, n, tol, stagnation, zw):
     """Fixed-point sweeps (`_picard`) from the current (Z, p) while `sweep_verdict` lets them
     go on: returns (sweeps, whether they converged; a sweep it undoes is not counted)."""
     previous = np.inf
     sweeps = 0
     while sweeps < MAX_PICARD:
-        size = _picard(q, y0, hs, tapes, work, n)
+        size = _picard(q, y0, hs, tapes, work, n, zw)
         sweeps += 1
         verdict = sweep_verdict(sweeps, size, previous, tol, stagnation)
         if verdict == SWEEP_UNDO:
@@ -601,10 +607,10 @@ def _solve(inverse, i, m, b, tmp):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _chord_iteration(i, q, y0, hs, tapes, work, memory, n):
+def _chord_iteration(i, q, y0, hs, tapes, work, memory, n, zw):
     """One chord iteration of substep i: X at the stages, the residual of (Z, p), the correction
-    by the stored inverse (into work.res), applied to work.Z and work.p; returns its largest
-    component (NaN-safe)."""
+    by the stored inverse (into work.res), applied to work.Z and work.p; returns its size, the
+    largest of |dp| and zw |dZ| (see the module; NaN-safe)."""
     for j in range(q):
         _field_at(tapes, work, y0, j, n)
     _average_gradient(q, y0, tapes, work, n)
@@ -623,8 +629,8 @@ def _chord_iteration(i, q, y0, hs, tapes, work, memory, n):
         for k in range(n):
             d = res[a * n + k]
             work.Z[a, k] += d
-            if not abs(d) <= size:
-                size = abs(d)
+            if not zw * abs(d) <= size:
+                size = zw * abs(d)
     for k in range(n):
         d = res[q * n + k]
         work.p[k] += d
@@ -650,7 +656,8 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     current iterate (`_newton_matrix_p`) when a fresh matrix contracts by more than that, and at
     each iteration from the (max_iter // 2)-th while the correction exceeds max(1e3 tol,
     REFRESH_FLOOR) max(1, |y0|).
-    Stops (sweeps and iterations alike) when the correction, or its predicted successor
+    Stops (sweeps and iterations alike) when the correction (its size as the module says: Z's
+    part times min(1, theta), theta `_theta`), or its predicted successor
     theta / (1 - theta) |d| (theta the
     measured contraction; after the first iteration, twice the substep's last measured first
     contraction), is at most tol max(1, |y0|); then X is evaluated at the final (Z, p) and
@@ -658,7 +665,9 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     n = y0.shape[0]
     scale = max(1.0, max_abs(y0))
     _predict_p(i, y0, hs, tapes, work, memory, n)
-    needed = nodes_for(_theta(y0, tapes, work, n))
+    theta = _theta(y0, tapes, work, n)
+    needed = nodes_for(theta)
+    zw = min(1.0, theta)
     if needed > MAX_NODES:
         return Failure.STAGES_NO_CONVERGENCE, 0, 0
     q = memory.z_nodes[i]
@@ -669,11 +678,11 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     _start_stages(i, q, memory, work, n)
     aligned = 0
     if memory.counts[i, 0] == 0:
-        if _picard(q, y0, hs, tapes, work, n) < np.inf:
+        if _picard(q, y0, hs, tapes, work, n, zw) < np.inf:
             aligned = 1
         else:
             _undo_picard(q, work, n)
-    sweeps, converged = _sweeps(q, y0, hs, tapes, work, n, tol * scale, STAGNATION * scale)
+    sweeps, converged = _sweeps(q, y0, hs, tapes, work, n, tol * scale, STAGNATION * scale, zw)
     sweeps += aligned
     fresh = False
     if not converged and (memory.nodes[i] != q or _worth_rebuilding(i, q, tapes, memory)):
@@ -689,7 +698,7 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     while not converged and it < max_iter:
         it += 1
         since += 1
-        size = _chord_iteration(i, q, y0, hs, tapes, work, memory, n)
+        size = _chord_iteration(i, q, y0, hs, tapes, work, memory, n, zw)
         if not size < np.inf:
             return Failure.NEWTON_NON_FINITE, it, sweeps
         if size > 1e8 * scale:
