@@ -176,6 +176,7 @@ def test_newton_takes_at_most_three_iterations_a_substep_at_the_race_steps(name,
 def test_the_compiled_spray_field_is_the_interpreted_one(name):
     from rkhp.integrators.methods import resolve_system
     from rkhp.integrators.spray_euler import _field_derivatives, euler_work, spray_tapes
+    from rkhp.systems.field_code import POINTS
 
     system = resolve_system(name)
     tapes, n = spray_tapes(system), system.dim
@@ -192,3 +193,10 @@ def test_the_compiled_spray_field_is_the_interpreted_one(name):
         np.testing.assert_allclose(out[:n], rows[:, 0], rtol=1e-14, atol=1e-16)
         np.testing.assert_allclose(out[n: n + n * n].reshape(n, n), rows[:, 1: 1 + n], rtol=1e-13, atol=1e-15)
         np.testing.assert_allclose(out[n + n * n:].reshape(n, n), rows[:, 1 + n: 1 + 2 * n], rtol=1e-14, atol=0)
+    # X at all the points in one call (a collocation's stages), with the last p
+    ys = points(system)
+    q = len(ys)
+    at_once = evaluate(address, np.concatenate([np.zeros(n), work.p, *ys]), q * n, POINTS - q)[: q * n]
+    for j, y in enumerate(ys):
+        _field_derivatives(y, np.int64(-1), tapes, work, n, np.int64(0), np.int64(n))
+        np.testing.assert_allclose(at_once[j * n: (j + 1) * n], work.W[outputs, 0], rtol=1e-14, atol=1e-16)

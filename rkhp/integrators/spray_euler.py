@@ -77,6 +77,7 @@ import numpy as np
 
 from ..base.errors import InputError
 from ..systems.families import GENERAL
+from ..systems.field_code import POINTS
 from ..taylor.collocation import TABLE_A, TABLE_B, TABLE_E, TABLE_W
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
@@ -152,8 +153,9 @@ class EulerWork(NamedTuple):
     Z, X (MAX_NODES, n): stage increments and their field values; p, g, xbar, y, y_low, dy (n):
     the momentum, grad H(xbar), the average, the state as the double-double y + y_low (`begin`), a
     substep's increment; hess (n, n): Hess H at the refresh point; res, tmp (m): the residual (then
-    the correction) and a work vector; u (2 n), out (n + 2 n^2): the arguments (y, p) and
-    the results (X, d_y X, pi) of the compiled field; perm (m) int64, inverting (m, padded m): the work
+    the correction) and a work vector; u ((MAX_NODES + 2) n), out (n + 2 n^2): the arguments of
+    the compiled field, (y, p) or (unused, p, the stages' points), and its results at one point
+    (X, d_y X, pi; at the stages X goes to X); perm (m) int64, inverting (m, padded m): the work
     space of a chord matrix's inverse (`rkhp.taylor.linalg.inverse_transposed`)."""
 
     W: np.ndarray
@@ -214,7 +216,8 @@ def euler_work(tapes: SprayTapes, n: int) -> EulerWork:
     slots = max(tapes.field.n_slots, tapes.hamiltonian.n_slots)
     return EulerWork(np.zeros((slots, 2 * n + 1)), np.zeros((MAX_NODES, n)), np.zeros((MAX_NODES, n)),
                      euler_vector(), euler_vector(), euler_vector(), euler_vector(), euler_vector(), euler_vector(),
-                     np.zeros((n, n)), aligned_zeros(m), aligned_zeros(m), np.zeros(2 * n), np.zeros(n + 2 * n * n),
+                     np.zeros((n, n)), aligned_zeros(m), aligned_zeros(m), np.zeros((MAX_NODES + 2) * n),
+                     np.zeros(n + 2 * n * n),
                      np.zeros(m, np.int64), aligned_zeros((m, padded(m))))
 
 
@@ -246,23 +249,26 @@ def nodes_for(theta):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _field_at(tapes, work, y0, j, n):
-    """work.X[j] := X(y0 + work.Z[j], work.p) (values)."""
+def _fields_at(tapes, work, y0, q, n):
+    """work.X[j] := X(y0 + work.Z[j], work.p) for the q stages: one call of the field compiled
+    for the system for all of them (``what`` = POINTS - q, the points after p in work.u:
+    `rkhp.systems.field_code.spray_code`), else the tape at each."""
     if tapes.field_at != 0:
         for k in range(n):
-            work.u[k] = y0[k] + work.Z[j, k]
             work.u[n + k] = work.p[k]
-        call_at(tapes.field_at, work.u, work.out, 0)
-        for k in range(n):
-            work.X[j, k] = work.out[k]
+        for j in range(q):
+            for k in range(n):
+                work.u[2 * n + n * j + k] = y0[k] + work.Z[j, k]
+        call_at(tapes.field_at, work.u, work.X, np.int64(POINTS - q))
         return
     W = work.W
-    for k in range(n):
-        W[k, 0] = y0[k] + work.Z[j, k]
-        W[n + k, 0] = work.p[k]
-    values(tapes.field, W)
-    for k in range(n):
-        work.X[j, k] = W[tapes.field.outputs[k], 0]
+    for j in range(q):
+        for k in range(n):
+            W[k, 0] = y0[k] + work.Z[j, k]
+            W[n + k, 0] = work.p[k]
+        values(tapes.field, W)
+        for k in range(n):
+            work.X[j, k] = W[tapes.field.outputs[k], 0]
 
 
 @nb.njit(**NJIT_NORC)
@@ -313,8 +319,7 @@ def _newton_matrix_p(i, q, y0, hs, tapes, work, memory, n):
     kept; memory.J[i], memory.P[i] and work.tmp[:n] (xbar, then the stage) serve as work space.
     Returns Failure.OK or SINGULAR."""
     memory.refreshes[i] += 1
-    for j in range(q):
-        _field_at(tapes, work, y0, j, n)
+    _fields_at(tapes, work, y0, q, n)
     M, H, J, P, Y = memory.inverse[i], work.hess, memory.J[i], memory.P[i], work.tmp
     for k in range(n):
         acc = y0[k]
@@ -483,8 +488,7 @@ def _picard(q, y0, hs, tapes, work, n, zw):
     """One fixed-point sweep of the equations: X_b := X(y0 + Z_b, p), Z_a := sum_b A_ab X_b,
     p := hs grad H(y0 + sum_b w_b X_b); (Z, p) first saved in work.tmp. Returns the size of the
     change, the largest of |dp| and zw |dZ| (see the module; NaN-safe)."""
-    for j in range(q):
-        _field_at(tapes, work, y0, j, n)
+    _fields_at(tapes, work, y0, q, n)
     size = 0.0
     for a in range(q):
         for k in range(n):
@@ -611,8 +615,7 @@ def _chord_iteration(i, q, y0, hs, tapes, work, memory, n, zw):
     """One chord iteration of substep i: X at the stages, the residual of (Z, p), the correction
     by the stored inverse (into work.res), applied to work.Z and work.p; returns its size, the
     largest of |dp| and zw |dZ| (see the module; NaN-safe)."""
-    for j in range(q):
-        _field_at(tapes, work, y0, j, n)
+    _fields_at(tapes, work, y0, q, n)
     _average_gradient(q, y0, tapes, work, n)
     res = work.res
     for a in range(q):
@@ -732,8 +735,7 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
         previous = size
     if not converged:
         return Failure.NEWTON_NO_CONVERGENCE, it, sweeps
-    for j in range(q):
-        _field_at(tapes, work, y0, j, n)
+    _fields_at(tapes, work, y0, q, n)
     for k in range(n):
         acc = 0.0
         for j in range(q):

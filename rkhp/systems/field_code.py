@@ -228,15 +228,21 @@ def derivatives_code(system, hessian: bool) -> FieldCode:
     return FieldCode("derivatives", "\n".join(lines) + "\n", n, count)
 
 
+POINTS = -1
+"""``what`` = POINTS - q (q >= 1) asks the spray's code for X at q points at once (`spray_code`)."""
+
+
 def spray_code(system) -> FieldCode:
     """The source of ``spray(u, out, what)``, the body of a numba ``cfunc`` over pointers to
     float64 (`rkhp.taylor.generated.SIGNATURE`): the frozen field of the Poisson spray X(y, p) =
-    pi(y) p (docs/theory.md §9) at y = u[0:n], p = u[n:2n]. ``what`` = 0 writes X into out[0:n];
-    ``what`` = 1 also d_y X (n x n, by rows) into out[n:n + n^2]; ``what`` = 2 also pi(y) (= d_p X,
-    by rows) into out[n + n^2:n + 2 n^2]. pi from the system's family
+    pi(y) p (docs/theory.md §9) at y = u[0:n], p = u[n:2n]. ``what`` = 1 writes X into out[0:n]
+    and d_y X (n x n, by rows) into out[n:n + n^2]; ``what`` = 2 also pi(y) (= d_p X, by rows) into
+    out[n + n^2:n + 2 n^2]; ``what`` = POINTS - q (q >= 1) writes X at the q points
+    y_j = u[(2 + j) n:(3 + j) n] into out[j n:(j + 1) n] (j < q; p = u[n:2n]): the stages of a
+    collocation in one call. pi from the system's family
     (:func:`poisson_expressions`; InputError where it has no symbolic form); each branch's common
-    subexpressions named once. ``operations`` counts those of the branch ``what`` = 0, ``branches``
-    those of each."""
+    subexpressions named once. ``operations`` counts those of X at one point, ``branches`` those of
+    X, of X with d_y X, and of the three."""
     import sympy
 
     n = system.dim
@@ -248,15 +254,18 @@ def spray_code(system) -> FieldCode:
     matrix = [sympy.Integer(0) + pi[a][b] for a in range(n) for b in range(n)]  # entries 0 as sympy numbers
     names = [str(v) for v in y + p]
     lines = ["def spray(u, out, what):", *[f"    {name} = u[{k}]" for k, name in enumerate(names)]]
-    counts = []
-    for what, exprs in enumerate((field, field + jacobian, field + jacobian + matrix)):
-        named, values, operations = _printed(y + p, exprs)
-        counts.append(operations)
-        lines.append(f"    {'if' if what == 0 else 'elif' if what == 1 else 'else'}"
-                     f"{f' what == {what}' if what < 2 else ''}:")
+    printed = [_printed(y + p, exprs) for exprs in (field, field + jacobian, field + jacobian + matrix)]
+    for what, (named, values, _) in enumerate(printed[1:], start=1):
+        lines.append(f"    {'if' if what == 1 else 'elif'} what == {what}:")
         lines += [f"        {a} = {b}" for a, b in named]
         lines += [f"        out[{k}] = {text}" for k, text in enumerate(values)]
-    return FieldCode("spray", "\n".join(lines) + "\n", n, counts[0], tuple(counts))
+    named, values, _ = printed[0]
+    lines += ["    else:", f"        for j in range({POINTS} - what):",
+              *[f"            {name} = u[{2 * n + k} + {n} * j]" for k, name in enumerate(names[:n])]]
+    lines += [f"            {a} = {b}" for a, b in named]
+    lines += [f"            out[{k} + {n} * j] = {text}" for k, text in enumerate(values)]
+    counts = tuple(operations for _, _, operations in printed)
+    return FieldCode("spray", "\n".join(lines) + "\n", n, counts[0], counts)
 
 
 def _namespace(form: str) -> dict:
