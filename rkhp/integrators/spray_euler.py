@@ -66,7 +66,10 @@ Compiled data: `SprayTapes` (X and H as plain tapes),
 `EulerWork` (work arrays of one substep), `SubstepMemory` (what each substep keeps across steps).
 `SpraySubstep` (the three, and the state); `begin` and `substep` make the direct form a substep
 provider of the driver (`rkhp.integrators.substeps`); `rkhp.integrators.driver.integrate_spray_euler`
-is the Python entry.
+is the Python entry. What every substep runs is inlined into the driver's loop: a call of a
+compiled function passes the tapes, the work arrays and the memory field by field (hundreds of
+arguments, costlier than `_theta`'s own work). What builds a chord or Newton matrix and the
+tapes' forward mode (a system without compiled code) stay functions of their own.
 """
 
 from __future__ import annotations
@@ -391,7 +394,7 @@ def _field_derivatives(y0, j, tapes, work, n, first, nd):
     gradients(tapes.field, W, nd)
 
 
-@nb.njit(**NJIT_NORC)
+@nb.njit(inline="always", **NJIT_NORC)
 def _field_jacobians(y0, tapes, work, n, J, P, both):
     """J := d_y X(y0, work.p) and, with `both`, P := pi(y0) = d_p X: compiled for the system where
     it is, else by forward mode on the field's tape (`_field_derivatives`)."""
@@ -416,7 +419,7 @@ def _field_jacobians(y0, tapes, work, n, J, P, both):
                 P[a, b] = W[o, 1 + n + b]
 
 
-@nb.njit(**NJIT_NORC)
+@nb.njit(inline="always", **NJIT_NORC)
 def _theta(y0, tapes, work, n):
     """`_norm_bound` of J = d_y X(y0, work.p) (>= |J|_2): what sets the number of nodes."""
     _field_jacobians(y0, tapes, work, n, work.hess, work.hess, False)
@@ -439,7 +442,7 @@ def _predict_p(i, y0, hs, tapes, work, memory, n):
         work.p[k] = hs * work.g[k]
 
 
-@nb.njit(**NJIT_NORC)
+@nb.njit(inline="always", **NJIT_NORC)
 def _start_stages(i, q, memory, work, n):
     """work.Z for q nodes: extrapolated from substep i's previous stages when they had q nodes,
     else the flow's Taylor polynomial Z(c) = c X0 + (c^2 / 2) J X0, X0 = P p (memory's J, P)."""
