@@ -47,12 +47,16 @@ taken from sin and cos (whose differences lose at most a few units of round-off 
 ROTATION_TERMS = 9
 PHI_SERIES = 1.0
 """Below this |w| the functions phi_1, phi_2 of `diagonal_point` are summed as the power series of
-phi_2 (PHI_TERMS terms: the next is below 2^-56 of the first) with phi_1 = 1 + w phi_2; above it
-phi_1 = expm1(w) / w and phi_2 = (phi_1 - 1) / w (at |w| = 1 the difference loses at most a
-factor 3 of round-off)."""
+phi_2 (as many terms as leave the next below 2^-56 of the first, `PHI_REACH`: PHI_TERMS at
+|w| near 1) with phi_1 = 1 + w phi_2; above it phi_1 = expm1(w) / w and phi_2 = (phi_1 - 1) / w
+(at |w| = 1 the difference loses at most a factor 3 of round-off)."""
 PHI_TERMS = 18
 PHI_TABLE = np.array([1.0 / math.factorial(m + 2) for m in range(PHI_TERMS)])
 """1 / (m + 2)!, the coefficients of phi_2's series."""
+PHI_REACH = np.array([0.0] + [(math.factorial(t + 2) * 2.0**-57) ** (1.0 / t) for t in range(1, PHI_TERMS + 1)])
+"""PHI_REACH[t]: the largest |w| at which t terms of phi_2's series leave the next,
+|w|^t / (t + 2)!, below 2^-56 of the first (1/2): 9 terms up to |w| = 0.087, 6 up to 0.0081;
+PHI_REACH[PHI_TERMS] > PHI_SERIES."""
 
 
 def _rotation_series_table() -> np.ndarray:
@@ -198,13 +202,23 @@ def rotation_jacobian(y0, form, work, D):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _phi_functions(w):
-    """(phi_1(w), phi_2(w)), phi_k(w) = sum_m w^m / (m + k)!: the series below PHI_SERIES (the
-    singularities of (e^w - 1) / w and (e^w - 1 - w) / w^2 at 0 are removable), else phi_1 =
-    expm1(w) / w and phi_2 = (phi_1 - 1) / w."""
+def _phi_terms(largest):
+    """The fewest terms of phi_2's series enough for every |w| <= largest < PHI_SERIES
+    (`PHI_REACH`)."""
+    terms = 1
+    while largest > PHI_REACH[terms]:
+        terms += 1
+    return terms
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def _phi_functions(w, terms):
+    """(phi_1(w), phi_2(w)), phi_k(w) = sum_m w^m / (m + k)!: below PHI_SERIES the series, `terms`
+    terms of phi_2's (`_phi_terms`; the singularities of (e^w - 1) / w and (e^w - 1 - w) / w^2 at
+    0 are removable), else phi_1 = expm1(w) / w and phi_2 = (phi_1 - 1) / w."""
     if abs(w) < PHI_SERIES:
         p2 = 0.0
-        for m in range(PHI_TERMS - 1, -1, -1):
+        for m in range(terms - 1, -1, -1):
             p2 = p2 * w + PHI_TABLE[m]
         return 1.0 + w * p2, p2
     p1 = math.expm1(w) / w
@@ -216,10 +230,17 @@ def diagonal_point(y0, form, work, n):
     """A diagonal algebra (see the module; form.diagonal[k] the entry of K_kk, or -1): work.dy :=
     e^-K y0 - y0 and work.xbar := psi(K) y0 in closed form from K(work.z)'s entries (work.kval);
     work.kv := phi_1(-K_kk) and work.tmp := phi_2(-K_kk) per column k (1 and 1/2 where K_kk
-    vanishes). Failure as `exp_series`."""
+    vanishes). The series of the entries below PHI_SERIES take the terms their largest needs
+    (`_phi_terms`). Failure as `exp_series`."""
     norm = _k_entries(form, work)
     if not norm < PHI_GUARD:
         return Failure.NEWTON_NON_FINITE
+    largest = 0.0
+    for k in range(n):
+        e = form.diagonal[k]
+        if e >= 0 and abs(work.kval[e]) < PHI_SERIES:
+            largest = max(largest, abs(work.kval[e]))
+    terms = _phi_terms(largest)
     p1, p2 = work.kv, work.tmp
     for k in range(n):
         p1[k] = 1.0
@@ -229,7 +250,7 @@ def diagonal_point(y0, form, work, n):
         e = form.diagonal[k]
         if e >= 0:
             w = -work.kval[e]
-            p1[k], p2[k] = _phi_functions(w)
+            p1[k], p2[k] = _phi_functions(w, terms)
             work.dy[k] = w * p1[k] * y0[k]
             work.xbar[k] = p1[k] * y0[k]
     for e in range(form.pairs.shape[0]):
