@@ -20,7 +20,14 @@ from rkhp.base.errors import InputError
 from rkhp.integrators.closed_euler import closed_form, closed_work
 from rkhp.integrators.driver import integrate_closed_euler, run
 from rkhp.integrators.failure import Failure
-from rkhp.integrators.lie_poisson_point import diagonal_point, se3_point
+from rkhp.integrators.lie_poisson_point import (
+    PHI_SERIES,
+    PHI_TERMS,
+    _phi_functions,
+    _phi_terms,
+    diagonal_point,
+    se3_point,
+)
 from rkhp.integrators.methods import integrate, resolve_method
 from rkhp.integrators.rkhp_method import integrate_rkhp as engine_integrate
 from rkhp.integrators.substeps import CLOSED, TOWER, choose
@@ -242,3 +249,23 @@ def test_a_failed_run_is_one_line_and_exit_1(run_cli):
     code, out, err = run_cli("integrate", "rigid-body", "--method", "tj4", "--h", "40", "--t-final", "120")
     assert code == 1
     assert len(err.strip().splitlines()) == 1 and "Newton" in err
+
+
+def test_phi_series_takes_the_terms_its_argument_needs():
+    """phi_1(w) = (e^w - 1) / w and phi_2(w) = (e^w - 1 - w) / w^2 summed with the terms
+    `_phi_terms` gives for |w| (PHI_REACH: the next term below 2^-56 of the first) against mpmath
+    at 50 digits: within 4 units of round-off for |w| from 1e-9 to just below PHI_SERIES, both
+    signs, while the count grows from 2 to PHI_TERMS."""
+    counts = set()
+    with mp.workdps(50):
+        for size in np.geomspace(1e-9, 0.999 * PHI_SERIES, 60):
+            terms = _phi_terms(size)
+            counts.add(terms)
+            for w in (size, -size):
+                p1, p2 = _phi_functions(w, terms)
+                x = mp.mpf(w)
+                exact1 = mp.expm1(x) / x
+                exact2 = (mp.expm1(x) - x) / x**2
+                assert abs(p1 - exact1) <= 4 * 2.0**-53 * abs(exact1), (w, terms)
+                assert abs(p2 - exact2) <= 4 * 2.0**-53 * abs(exact2), (w, terms)
+    assert min(counts) == 2 and max(counts) == PHI_TERMS
