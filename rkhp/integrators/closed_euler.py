@@ -19,10 +19,12 @@ The equation is z = G(x(z)) with G(x) = h grad H(x) (constant, lie-poisson) or x
 solved by quasi-Newton iterations z += B (G(x(z)) - z) from B = M^-1, M = I - G'(y0) x'(0)
 (x'(0) = pi(y0) / 2 for the first two families, diag(y0) lambda / 2 for log-canonical; Hess H by
 differences of the gradient, `rkhp.integrators.direct_form.hessian`), a chord matrix that
-contracts by O(h^2) an iteration, improved by Broyden's update of B from each correction and the
-change of the residual it brought (measured on RKHP Euler: 4.3 iterations a step against 6.6 for
-the plain chord iterations on the rigid body at h = 0.1, 5.8 against 8.1 on Lotka–Volterra,
-4.5 against 8.5 on the ax + b algebra).
+contracts by O(h^2) an iteration, improved in up to BROYDEN_DIMENSION dimensions by Broyden's
+update of B from each correction and the change of the residual it brought (measured on RKHP
+Euler: 4.3 iterations a step against 6.6 for the plain chord iterations on the rigid body at
+h = 0.1, 5.8 against 8.1 on Lotka–Volterra, 4.5 against 8.5 on the ax + b algebra).
+B is stored transposed, its columns contiguous: its product with a vector, the update and the
+inversion are then loops over rows the compiler vectorises (`_chord_correction`).
 B is built once per substep of a composition and kept, with its updates, across steps (rebuilt
 when its contraction grows, `REFRESH_CONTRACTION`, `rkhp.integrators.direct_form.SLOW_CONTRACTION`).
 A substep without previous solutions (the first step's, a processor's: it runs once a call) first
@@ -59,7 +61,7 @@ from ..systems import families
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
 from ..taylor.generated import call_at
-from ..taylor.linalg import lu_factor, lu_solve, max_abs
+from ..taylor.linalg import inverse_transposed, lu_factor, lu_solve, max_abs
 from ..taylor.scalar import SCALAR_CODES, polynomial_degree, shared
 from ..taylor.tape import Tape
 from .derivatives import derivatives_at
@@ -92,6 +94,11 @@ on the rigid body, 0.0004 on toda:12, 0.02 on Lotka–Volterra, tj4 at h = 0.1, 
 goes stale as the state moves along its orbit (without Broyden's update 0.1 to 0.2 on
 Lotka–Volterra after a few steps, where each iteration then gains a decade only); a rebuild
 costs 2 n gradients of H."""
+BROYDEN_DIMENSION = 8
+"""Broyden's update of B in systems of at most this dimension: it costs three products with B
+(3 n^2 multiply-adds an iteration), which beyond it cost more than the iterations they save
+(measured: the heavy top, n = 6, runs faster with it; the Toda lattices of 12 and 24 variables,
+whose closed-form point costs O(n), without)."""
 BROYDEN_FLOOR = 2.0**-30
 """Broyden's update uses a correction only above this (relative to max(1, |y0|)): below, the
 change of the residual is dominated by its rounding."""
@@ -186,8 +193,9 @@ class ChordMemory(NamedTuple):
     """What substep i of a composition keeps from one step to the next (index i first).
 
     z_hist (s, HISTORY, n): its last solutions, newest first; count (s,) int64: how many;
-    inverse (s, n, n): the inverse of its chord matrix, with Broyden's updates (with Newton's
-    method, `newton_substep`: the LU factors of its last Jacobian); ready (s,) int64:
+    inverse (s, n, n): the inverse of its chord matrix, transposed (inverse[i, c] is column c of
+    the inverse, `_chord_correction`), with Broyden's updates (with Newton's method,
+    `newton_substep`: the LU factors of its last Jacobian); ready (s,) int64:
     1 once it exists; rate (s,): the contraction of its first two iterations, last measured (1: none yet);
     refreshes (s,) int64: how many times the matrix was built in this run."""
 
@@ -335,32 +343,25 @@ def _jacobian_matrix(i, hs, form, work, memory, n):
                 H[a, b] *= x[a]
             H[a, a] += work.g[a]
     M = memory.inverse[i]
-    for a in range(n):
+    for a in range(n):  # row a of M: e_a - sum_r hs H[a, r] D[r] (rows of D: contiguous, vectorised)
         for b in range(n):
-            acc = 0.0
-            for r in range(n):
-                acc += H[a, r] * D[r, b]
-            M[a, b] = (1.0 if a == b else 0.0) - hs * acc
+            M[a, b] = 1.0 if a == b else 0.0
+        for r in range(n):
+            c = hs * H[a, r]
+            if c != 0.0:
+                for b in range(n):
+                    M[a, b] -= c * D[r, b]
 
 
 @nb.njit(**NJIT_NORC)
 def _store_inverse(i, hs, form, work, memory, n):
-    """Substep i's chord matrix (`_jacobian_matrix`) inverted in place (memory.inverse[i]), marked
-    ready. Failure.OK or SINGULAR."""
+    """Substep i's chord matrix (`_jacobian_matrix`) inverted in place (memory.inverse[i],
+    transposed: `rkhp.taylor.linalg.inverse_transposed`, work.jac its work space), marked ready.
+    Failure.OK or SINGULAR."""
     memory.refreshes[i] += 1
     _jacobian_matrix(i, hs, form, work, memory, n)
-    M, D = memory.inverse[i], work.jac
-    if not lu_factor(M, work.perm):
+    if not inverse_transposed(memory.inverse[i], work.perm, work.jac):
         return Failure.SINGULAR
-    for b in range(n):  # the inverse, column by column, into work.jac
-        for a in range(n):
-            work.res[a] = 1.0 if a == b else 0.0
-        lu_solve(M, work.perm, work.res, work.tmp)
-        for a in range(n):
-            D[a, b] = work.res[a]
-    for a in range(n):
-        for b in range(n):
-            M[a, b] = D[a, b]
     memory.ready[i] = 1
     return Failure.OK
 
@@ -396,15 +397,30 @@ def _remember_z(i, memory, work, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
+def _chord_correction(B, work, n):
+    """work.step := B work.res, B stored transposed (B[c] is column c of the inverse): the sum of
+    the columns times the residual, each a contiguous loop the compiler vectorises."""
+    for k in range(n):
+        work.step[k] = 0.0
+    for c in range(n):
+        r = work.res[c]
+        for k in range(n):
+            work.step[k] += B[c, k] * r
+
+
+@nb.njit(inline="always", **NJIT_NORC)
 def _broyden(B, work, n):
-    """Broyden's update of B ~ F'(z)^-1 (F(z) = z - G(x(z)), residual r = -F) from the last
-    correction s = work.step and the change of F, q = work.last - work.res:
-    B += (s - B q) (s^T B) / (s^T B q), skipped when s^T B q vanishes."""
-    for a in range(n):
-        acc = 0.0
-        for b in range(n):
-            acc += B[a, b] * (work.last[b] - work.res[b])
-        work.by[a] = acc
+    """Broyden's update of the inverse ~ F'(z)^-1 (F(z) = z - G(x(z)), residual r = -F), stored
+    transposed in B (`_chord_correction`), from the last correction s = work.step and the change
+    of F, q = work.last - work.res: B^-1 += u (s^T B^-1), u = (s - B^-1 q) / (s^T B^-1 q),
+    skipped when s^T B^-1 q vanishes; in the transposed store, row c gains (column c of B^-1 . s)
+    u."""
+    for k in range(n):
+        work.by[k] = 0.0
+    for c in range(n):
+        qc = work.last[c] - work.res[c]
+        for k in range(n):
+            work.by[k] += B[c, k] * qc
     den = 0.0
     for a in range(n):
         den += work.step[a] * work.by[a]
@@ -412,12 +428,12 @@ def _broyden(B, work, n):
         return
     for a in range(n):
         work.by[a] = (work.step[a] - work.by[a]) / den
-    for b in range(n):
-        sb = 0.0
+    for c in range(n):
+        v = 0.0
         for a in range(n):
-            sb += work.step[a] * B[a, b]
+            v += B[c, a] * work.step[a]
         for a in range(n):
-            B[a, b] += work.by[a] * sb
+            B[c, a] += v * work.by[a]
 
 
 @nb.njit(inline="always", **NJIT_NORC)
@@ -457,7 +473,7 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
     memory): its increment y1 - y0 into work.dy.
 
     Starts from the extrapolated z; iterates z += B r, r = G(x(z)) - z, B updated by `_broyden`
-    from the second iteration on; builds B afresh at the substep's first call, when its last
+    from the second iteration on (n <= BROYDEN_DIMENSION); builds B afresh at the substep's first call, when its last
     measured contraction exceeds REFRESH_CONTRACTION, and when an iteration contracts by more
     than SLOW_CONTRACTION (once per substep). Stops when the correction, or from the second
     iteration on its predicted successor t / (1 - t) |d| (t = RATE_MARGIN theta, theta the
@@ -493,15 +509,13 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
         _target(hs, form, work, n)
         for k in range(n):
             work.res[k] -= work.z[k]
-        if since >= 2 and previous > BROYDEN_FLOOR * scale:
+        if n <= BROYDEN_DIMENSION and since >= 2 and previous > BROYDEN_FLOOR * scale:
             _broyden(memory.inverse[i], work, n)
+        _chord_correction(memory.inverse[i], work, n)
         size = 0.0
         for k in range(n):
-            acc = 0.0
-            for b in range(n):
-                acc += memory.inverse[i, k, b] * work.res[b]
+            acc = work.step[k]
             work.last[k] = work.res[k]
-            work.step[k] = acc
             work.z[k] += acc
             if not abs(acc) <= size:
                 size = abs(acc)
