@@ -343,7 +343,7 @@ def _jacobian_matrix(i, hs, form, work, memory, n):
                 H[a, b] *= x[a]
             H[a, a] += work.g[a]
     M = memory.inverse[i]
-    for a in range(n):  # row a of M: e_a - sum_r hs H[a, r] D[r] (rows of D: contiguous, vectorised)
+    for a in range(n):  # row a of M: e_a - sum_r hs H[a, r] D[r], rows of D contiguous
         for b in range(n):
             M[a, b] = 1.0 if a == b else 0.0
         for r in range(n):
@@ -481,14 +481,14 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
     memory): its increment y1 - y0 into work.dy.
 
     Starts from the extrapolated z; iterates z += B r, r = G(x(z)) - z, B updated by `_broyden`
-    from the second iteration on (n <= BROYDEN_DIMENSION); builds B afresh at the substep's first call, when its last
-    measured contraction exceeds REFRESH_CONTRACTION, and when an iteration contracts by more
-    than SLOW_CONTRACTION (once per substep). Stops when the correction, or from the second
-    iteration on its predicted successor t / (1 - t) |d| (t = RATE_MARGIN theta, theta the
-    measured contraction: Broyden's iterations contract unevenly; without the margin, a constant
-    pi's step stopped 4e-15 off the midpoint equation), is at most solver.tol max(1, |y0|), or
-    when corrections at round-off stop halving (`rkhp.integrators.direct_form.STAGNATION`); then
-    x and y1 are taken at the final z. The first iteration predicts nothing: the previous step's
+    from the second iteration on (n <= BROYDEN_DIMENSION); builds B afresh at the substep's first
+    call, when its last measured contraction exceeds REFRESH_CONTRACTION, and when an iteration
+    contracts by more than SLOW_CONTRACTION (once per substep). Stops when the correction, or
+    from the second iteration on its predicted successor t / (1 - t) |d| (t = RATE_MARGIN theta,
+    theta the measured contraction: Broyden's iterations contract unevenly; without the margin, a
+    constant pi's step stopped 4e-15 off the midpoint equation), is at most solver.tol
+    max(1, |y0|), or when corrections at round-off stop halving
+    (`rkhp.integrators.direct_form.STAGNATION`); then x and y1 are taken at the final z. The first iteration predicts nothing: the previous step's
     first contraction, which the spray's direct form uses there, is no bound once Broyden's
     update has improved B (measured below 1e-4 on the rigid body). A substep without previous
     solutions first sweeps (`_sweeps_z`), B built and iterated only where the sweeps did not
