@@ -17,7 +17,16 @@ import numpy as np
 import pytest
 
 from rkhp.base.errors import InputError
-from rkhp.integrators.closed_euler import closed_form, closed_work
+from rkhp.integrators.closed_euler import (
+    ClosedSubstep,
+    _predict_z,
+    _remember_z,
+    chord_memory,
+    closed_form,
+    closed_work,
+    resume,
+)
+from rkhp.integrators.direct_form import HISTORY
 from rkhp.integrators.driver import integrate_closed_euler, run
 from rkhp.integrators.failure import Failure
 from rkhp.integrators.lie_poisson_point import (
@@ -243,6 +252,41 @@ def test_substeps_without_previous_solutions_converge_by_sweeps():
     assert direct.newton_iterations.sum() == 0 and sum(direct.extra["refreshes"]) == 0
     assert direct.stage_sweeps.sum() >= len(gammas)
     assert np.abs(direct.final_state - engine.final_state).max() < 1e-14 * np.abs(engine.final_state).max()
+
+
+def test_a_substep_starts_from_its_extrapolation_corrected_by_the_substep_before():
+    """Two substeps whose solutions are their steps times one function of the step index,
+    z_i(k) = hs_i f(k), f quartic: the cubic extrapolation over the last four steps errs by f's
+    fourth difference (24 a for a k^4) times hs; with substep 0's error per unit of step added,
+    substep 1 starts on its solution. A substep extrapolating from fewer solutions than the one
+    before (quadratic: off by the third difference, 108 a from k = 3) takes no correction, nor
+    the first after `resume` (the next substep does not follow the last in time)."""
+    system = get_system("rigid-body")
+    n, form = system.dim, closed_form(system)
+    work, memory = closed_work(form, n), chord_memory(2, n)
+    a, b = np.array([0.3, -0.7, 1.1]), np.array([0.5, 0.2, -0.4])
+
+    def f(k):
+        return a * k**4 + b * k
+
+    hs, y0 = (0.3, -0.2), np.array(system.x0)
+    assert HISTORY == 4
+    for i in (0, 1):
+        memory.z_hist[i] = [hs[i] * f(5 - r) for r in range(HISTORY)]
+        memory.count[i] = HISTORY
+    _predict_z(0, y0, hs[0], form, work, memory, n)
+    np.testing.assert_allclose(work.z, hs[0] * (f(6) - 24 * a), rtol=1e-13)
+    work.z[:] = hs[0] * f(6)
+    _remember_z(0, hs[0], memory, work, n)
+    _predict_z(1, y0, hs[1], form, work, memory, n)
+    np.testing.assert_allclose(work.z, hs[1] * f(6), rtol=1e-13)
+    memory.count[1] = 3
+    _predict_z(1, y0, hs[1], form, work, memory, n)
+    np.testing.assert_allclose(work.z, hs[1] * (f(6) - 108 * a), rtol=1e-13)
+    memory.count[1] = HISTORY
+    resume(ClosedSubstep(form, work, memory, work.y), y0)
+    _predict_z(1, y0, hs[1], form, work, memory, n)
+    np.testing.assert_allclose(work.z, hs[1] * (f(6) - 24 * a), rtol=1e-13)
 
 
 def test_a_failed_run_is_one_line_and_exit_1(run_cli):

@@ -33,7 +33,9 @@ B only where the sweeps slow (`rkhp.integrators.direct_form.sweep_verdict`): a m
 gradients and an n x n inverse, more than the sweeps a single substep takes; a substep that
 recurs iterates with its B, whose iterations cost an n x n product but contract by O(h^2).
 Each substep starts from z extrapolated over the same substep of the previous steps (`HISTORY`,
-as the spray's direct form, docs/general-poisson.md "The Euler step in direct form").
+as the spray's direct form, docs/general-poisson.md "The Euler step in direct form"), plus the
+error that extrapolation made on the substep just before, per unit of step (`_predict_z`,
+docs/compositions.md "The cost of a substep").
 
 e^-K y0 and psi(K) y0 are power series, or closed forms on so(3)* (Rodrigues'), se(3)* (the heavy
 top: Rodrigues' and their derivative) and the diagonal algebras (K(p) = [[D, 0], [E, 0]]: n
@@ -197,7 +199,10 @@ class ChordMemory(NamedTuple):
     the inverse, `_chord_correction`), with Broyden's updates (with Newton's method,
     `newton_substep`: the LU factors of its last Jacobian); ready (s,) int64:
     1 once it exists; rate (s,): the contraction of its first two iterations, last measured (1: none yet);
-    refreshes (s,) int64: how many times the matrix was built in this run."""
+    refreshes (s,) int64: how many times the matrix was built in this run; z_pred (n): the
+    extrapolation of the substep running (`_predict_z`); defect (n), defect_order (1,) int64:
+    the last substep's converged z less its extrapolation, divided by its step, and the number
+    of solutions that extrapolation used (0: none, after `resume`)."""
 
     z_hist: np.ndarray
     count: np.ndarray
@@ -205,6 +210,9 @@ class ChordMemory(NamedTuple):
     ready: np.ndarray
     rate: np.ndarray
     refreshes: np.ndarray
+    z_pred: np.ndarray
+    defect: np.ndarray
+    defect_order: np.ndarray
 
 
 def closed_work(form: ClosedForm, n: int) -> ClosedWork:
@@ -221,7 +229,8 @@ def closed_work(form: ClosedForm, n: int) -> ClosedWork:
 def chord_memory(s: int, n: int) -> ChordMemory:
     """The memory of s substeps in dimension n (empty: every substep starts cold)."""
     return ChordMemory(np.zeros((s, HISTORY, n)), np.zeros(s, np.int64), np.zeros((s, n, n)),
-                       np.zeros(s, np.int64), np.ones(s), np.zeros(s, np.int64))
+                       np.zeros(s, np.int64), np.ones(s), np.zeros(s, np.int64), np.zeros(n), np.zeros(n),
+                       np.zeros(1, np.int64))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -368,8 +377,14 @@ def _store_inverse(i, hs, form, work, memory, n):
 
 @nb.njit(inline="always", **NJIT_NORC)
 def _predict_z(i, y0, hs, form, work, memory, n):
-    """work.z from substep i's previous solutions (their polynomial extrapolation in the step
-    index, `rkhp.integrators.direct_form.weight`), or G(y0) without any."""
+    """work.z from substep i's previous solutions, or G(y0) without any: their polynomial
+    extrapolation in the step index (`rkhp.integrators.direct_form.weight`, kept in memory.z_pred)
+    plus hs times the defect of the substep just before (`_remember_z`) where that one
+    extrapolated from as many solutions. A substep's solution is hs times a smooth function of
+    the time, z = hs g(t + c h) (z = hs grad H(x), or x o hs grad H(x), x at a time c h into the
+    step), so the errors of the two extrapolations per unit of step are one combination of g's
+    values taken at times (c - c') h apart: the correction leaves an error O(h) times the
+    extrapolation's (docs/compositions.md "The cost of a substep")."""
     count = memory.count[i]
     if count == 0:
         for k in range(n):
@@ -378,16 +393,24 @@ def _predict_z(i, y0, hs, form, work, memory, n):
         for k in range(n):
             work.z[k] = work.res[k]
         return
+    shift = hs if memory.defect_order[0] == count else 0.0
     for k in range(n):
         acc = 0.0
         for r in range(count):
             acc += weight(count, r) * memory.z_hist[i, r, k]
-        work.z[k] = acc
+        memory.z_pred[k] = acc
+        work.z[k] = acc + shift * memory.defect[k]
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _remember_z(i, memory, work, n):
-    """Push the converged z of substep i into its history."""
+def _remember_z(i, hs, memory, work, n):
+    """Push the converged z of substep i (step hs) into its history, after keeping its
+    extrapolation's defect (z - memory.z_pred) / hs for the next substep's start (`_predict_z`)."""
+    count = memory.count[i]
+    memory.defect_order[0] = count if hs != 0.0 else 0
+    if count > 0 and hs != 0.0:
+        for k in range(n):
+            memory.defect[k] = (work.z[k] - memory.z_pred[k]) / hs
     for r in range(HISTORY - 1, 0, -1):
         for k in range(n):
             memory.z_hist[i, r, k] = memory.z_hist[i, r - 1, k]
@@ -488,11 +511,11 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
     theta the measured contraction: Broyden's iterations contract unevenly; without the margin, a
     constant pi's step stopped 4e-15 off the midpoint equation), is at most solver.tol
     max(1, |y0|), or when corrections at round-off stop halving
-    (`rkhp.integrators.direct_form.STAGNATION`); then x and y1 are taken at the final z. The first iteration predicts nothing: the previous step's
-    first contraction, which the spray's direct form uses there, is no bound once Broyden's
-    update has improved B (measured below 1e-4 on the rigid body). A substep without previous
-    solutions first sweeps (`_sweeps_z`), B built and iterated only where the sweeps did not
-    converge. Returns (Failure, iterations, sweeps)."""
+    (`rkhp.integrators.direct_form.STAGNATION`); then x and y1 are taken at the final z. The
+    first iteration predicts nothing: the previous step's first contraction, which the spray's
+    direct form uses there, is no bound once Broyden's update has improved B (measured below 1e-4
+    on the rigid body). A substep without previous solutions first sweeps (`_sweeps_z`), B built
+    and iterated only where the sweeps did not converge. Returns (Failure, iterations, sweeps)."""
     n = y0.shape[0]
     scale = max(1.0, max_abs(y0))
     _predict_z(i, y0, hs, form, work, memory, n)
@@ -555,7 +578,7 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
     cause = _point(y0, form, work, n)
     if cause != Failure.OK:
         return cause, it, sweeps
-    _remember_z(i, memory, work, n)
+    _remember_z(i, hs, memory, work, n)
     return Failure.OK, it, sweeps
 
 
@@ -625,18 +648,20 @@ def newton_substep(i, y0, hs, form, work, memory, solver):
     cause = _point(y0, form, work, n)
     if cause != Failure.OK:
         return cause, it
-    _remember_z(i, memory, work, n)
+    _remember_z(i, hs, memory, work, n)
     return Failure.OK, it
 
 
 @nb.njit(inline="always", **NJIT_NORC)
 def resume(data, y0):
     """The state set to y0 (work.y, carried as the double-double y + y_low,
-    `rkhp.integrators.direct_form.add_increment`), every substep's memory kept."""
+    `rkhp.integrators.direct_form.add_increment`), every substep's memory kept but the last
+    substep's defect (`_predict_z`: the next substep does not follow it in time)."""
     work = data.work
     for k in range(y0.shape[0]):
         work.y[k] = y0[k]
         work.y_low[k] = 0.0
+    data.memory.defect_order[0] = 0
 
 
 @nb.njit(inline="always", **NJIT_NORC)
