@@ -62,6 +62,18 @@ def test_a_method_file_is_resolved_again_when_its_content_changes(tmp_path):
     assert list(resolve_method(str(path)).tableau.b_float) == [0.5, 0.5]
 
 
+def test_a_built_in_composition_name_stands_for_it_whatever_files_exist(tmp_path, monkeypatch):
+    """A built-in composition's name is its composition even beside a file of that name (which
+    the resolver then never reads), while a built-in tableau's name gives way to a file."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "KAHAN-LI8").write_text("not a composition")
+    (tmp_path / "rk4").write_text('A = [["0"]]\nb = ["1"]\n')
+    method = resolve_method("KAHAN-LI8")
+    assert method.kind == "composition" and method.composition.substeps == 17
+    assert method is resolve_method("KAHAN-LI8")
+    assert resolve_method("rk4").tableau.stages == 1
+
+
 @pytest.mark.parametrize("name, method", [("charged-particle", "kahan-li8"), ("rigid-body", "kahan-li8"),
                                           ("rigid-body", "paper-three-stage"), ("lotka-volterra", "euler"),
                                           ("pendulum", "gauss2")])

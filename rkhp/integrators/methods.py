@@ -280,7 +280,9 @@ def resolve_method(spec) -> Method:
     A name is resolved once: the same name, and for a name that reads a file (a tableau or a
     composition file) the same text of that file, give back the same Method (the METHODS_KEPT
     most recently used are kept); the file is read again on every call, so an edited file is
-    resolved again. InputError for an empty or unknown name, or a malformed THP or scipy name.
+    resolved again. A built-in composition's name reads no file: it stands for the composition
+    whatever files exist. InputError for an empty or unknown name, or a malformed THP or scipy
+    name.
     """
     if isinstance(spec, Method):
         return spec
@@ -293,11 +295,22 @@ def resolve_method(spec) -> Method:
     spec = spec.strip()
     if not spec:
         raise InputError("empty method name")
+    if _names_builtin_composition(spec):
+        return _resolved(spec, None)
     text = _file_text(spec[len(CLASSICAL_PREFIX):] if spec.startswith(CLASSICAL_PREFIX) else spec)
     return _resolve_name(spec) if text is _UNREADABLE else _resolved(spec, text)
 
 
 _UNREADABLE = object()
+
+
+@lru_cache(maxsize=METHODS_KEPT)
+def _names_builtin_composition(spec: str) -> bool:
+    """`rkhp.tableaux.compositions.is_builtin_composition`, kept by the name (a call imports
+    nothing and reads no file)."""
+    from ..tableaux.compositions import is_builtin_composition
+
+    return is_builtin_composition(spec)
 
 
 def _file_text(name: str):
@@ -375,13 +388,21 @@ def require_steps(methods) -> tuple[Method, ...]:
     return tuple(methods)
 
 
+@lru_cache(maxsize=1)
+def _systems():
+    """The package `rkhp.systems`, imported on first use (about 0.1 s, which commands that run no
+    system never pay); later calls import nothing."""
+    from .. import systems
+
+    return systems
+
+
 def resolve_system(system, realisation: str = "symmetric", x0=None):
     """A :class:`~rkhp.systems.PoissonSystem` from a built-in name, a spec file or a system
     object (kept with its own realisation), started at ``x0`` when given."""
-    from ..systems import PoissonSystem, get_system
-
-    if not isinstance(system, PoissonSystem):
-        system = get_system(system, realisation)
+    systems = _systems()
+    if not isinstance(system, systems.PoissonSystem):
+        system = systems.get_system(system, realisation)
     if x0 is None:
         return system
     from ..systems.spec import check_start

@@ -215,22 +215,26 @@ class PoissonSystem:
 
     def in_domain(self, x) -> bool:
         x = np.asarray(x, dtype=np.float64)
-        if x.shape != (self.dim,) or not np.all(np.isfinite(x)):
+        return x.shape == (self.dim,) and self._admits(x)
+
+    def _admits(self, x: np.ndarray) -> bool:
+        """Whether a float64 vector of the system's dimension is finite and in its domain."""
+        if not np.isfinite(x).all():
             return False
-        return bool(np.all(x > 0)) if self.domain == "positive orthant" else True
+        return self.domain != "positive orthant" or bool(x.min() > 0.0)
 
     def _checked_x0(self, x0) -> np.ndarray:
         """``x0`` as a new float64 vector if it is one of the system's states (real numbers, as
         many as the dimension, finite, in the domain); InputError naming what is wrong otherwise."""
         if isinstance(x0, np.ndarray) and x0.ndim == 1 and x0.dtype.kind in "fiu":
             x0 = np.array(x0, dtype=np.float64)  # an array of reals: checked as a whole
-            if not np.all(np.isfinite(x0)):
+            if not np.isfinite(x0).all():
                 x0 = np.array(real_vector(x0, "x0"), dtype=np.float64)  # the component to name
         else:
             x0 = np.array(real_vector(x0, "x0"), dtype=np.float64)
         if x0.shape != (self.dim,):
             raise InputError(f"x0 has {x0.size} components; {self.name} has dimension {self.dim}")
-        if not self.in_domain(x0):
+        if not self._admits(x0):
             raise InputError(f"x0 = {x0.tolist()} is outside the domain ({self.domain}) of "
                              f"{self.name}")
         return x0

@@ -308,10 +308,16 @@ def builtin_compositions() -> list[str]:
     return [data.get("name", file[:-5]) for file, data in _builtin_files()]
 
 
+def is_builtin_composition(spec: str) -> bool:
+    """Whether `spec` is a built-in composition's name or alias (case-insensitive): it stands for
+    that composition whatever files exist (`load_composition`)."""
+    return spec.lower() in _composition_registry()
+
+
 def is_composition_name(spec: str) -> bool:
     """Whether `spec` names a built-in composition or a composition file: ``kind = "composition"``,
     or no ``kind`` and the key ``gamma`` without a Butcher matrix ``A`` (a tableau has A)."""
-    if spec.lower() in _composition_registry():
+    if is_builtin_composition(spec):
         return True
     path = Path(spec)
     if path.suffix.lower() in (".toml", ".json") and path.is_file():
@@ -325,9 +331,8 @@ def is_composition_name(spec: str) -> bool:
 
 def load_composition(spec: str) -> Composition:
     """A built-in composition by name or alias, or a composition file (.toml/.json)."""
-    key = spec.lower()
-    if key in _composition_registry():
-        file = _composition_registry()[key]
+    if is_builtin_composition(spec):
+        file = _composition_registry()[spec.lower()]
         return composition_from_dict(dict(_builtin_files())[file], file[:-5], f"built-in {file}")
     path = Path(spec)
     if not path.is_file():
