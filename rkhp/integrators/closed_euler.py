@@ -63,7 +63,7 @@ from ..systems import families
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
 from ..taylor.generated import call_at
-from ..taylor.linalg import inverse_transposed, lu_factor, lu_solve, max_abs
+from ..taylor.linalg import inverse_transposed, lu_factor, lu_solve, max_abs, transposed_product
 from ..taylor.scalar import SCALAR_CODES, polynomial_degree, shared
 from ..taylor.tape import Tape
 from .derivatives import derivatives_at
@@ -422,9 +422,9 @@ def _remember_z(i, hs, memory, work, n):
 @nb.njit(inline="always", **NJIT_NORC)
 def _chord_correction(B, work, n):
     """work.step := B work.res, B stored transposed (B[c] is column c of the inverse): beyond
-    BROYDEN_DIMENSION the sum of the columns times the residual, each a contiguous loop the
-    compiler vectorises; up to it n dot products, independent sums of a few terms (measured
-    faster there, where a vector is shorter than the loops' overhead)."""
+    BROYDEN_DIMENSION the sum of the columns times the residual (`transposed_product`); up to it
+    n dot products, independent sums of a few terms (measured faster there, where a vector is
+    shorter than the loops' overhead)."""
     if n <= BROYDEN_DIMENSION:
         for k in range(n):
             acc = 0.0
@@ -432,12 +432,7 @@ def _chord_correction(B, work, n):
                 acc += B[c, k] * work.res[c]
             work.step[k] = acc
         return
-    for k in range(n):
-        work.step[k] = 0.0
-    for c in range(n):
-        r = work.res[c]
-        for k in range(n):
-            work.step[k] += B[c, k] * r
+    transposed_product(B, work.res, work.step, n)
 
 
 @nb.njit(inline="always", **NJIT_NORC)

@@ -32,11 +32,11 @@ by chord iterations with the frozen Jacobian
 
 which contracts the error by O(h^2) an iteration (by O(h) the first iteration of a step, when the
 matrix was built at an earlier step: `SLOW_CONTRACTION`), inverted once (an iteration's correction is
-then one product of the inverse with the residual, `_solve`) and kept across steps for each substep of a
-composition (refreshed when the iterations contract slowly, when the number of nodes changes, and
-before iterating when the iterations a fresh matrix would save pay for it, `_worth_rebuilding`:
-the contraction of a kept matrix grows from 1e-3 just after its build to 0.02 to 0.2 as the
-state moves).
+then one product of the inverse with the residual, `rkhp.taylor.linalg.transposed_product`) and
+kept across steps for each substep of a composition (refreshed when the iterations contract
+slowly, when the number of nodes changes, and before iterating when the iterations a fresh matrix
+would save pay for it, `_worth_rebuilding`: the contraction of a kept matrix grows from 1e-3 just
+after its build to 0.02 to 0.2 as the state moves).
 Where even a fresh matrix contracts slowly, and in any substep past half its iterations, the
 matrix is the exact Jacobian at the current iterate (`_newton_matrix_p`: d_y X and pi at each
 stage, Hess H at xbar; Newton's method), taken again at each iteration until the correction nears
@@ -86,7 +86,7 @@ from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
 from ..taylor.composites import _norm_bound
 from ..taylor.generated import call_at
-from ..taylor.linalg import aligned_zeros, inverse_transposed, max_abs, padded
+from ..taylor.linalg import aligned_zeros, inverse_transposed, max_abs, padded, transposed_product
 from ..taylor.ops import SCRATCH_BASE, SPRAY
 from ..taylor.rows import subprogram_at
 from ..taylor.scalar import SCALAR_CODES, gradients, shared, values
@@ -186,11 +186,11 @@ class SubstepMemory(NamedTuple):
     increments xbar - y0 and the stage increments Z, newest first; counts (s, 2) int64: how many
     of them are valid for xbar - y0 and for Z (Z's only with the same
     number of nodes, z_nodes (s,)); nodes (s,) int64: Q of the inverted chord matrix (0: none
-    yet); inverse (s, m, padded m): its inverse, transposed (`_solve`), m = (Q + 1) n used; J, P (s, n, n): d_y X and
-    pi at the refresh point; rate (s,): the contraction of the first two iterations, last
-    measured (1: none yet); refreshes (s,) int64: how many times the matrix was built in this
-    run; order (s,) int64: how many previous solutions the next start extrapolates from at most
-    (`_remember`); built_rate (s,): the contraction measured at the first substep of the
+    yet); inverse (s, m, padded m): its inverse, transposed (`transposed_product`), m = (Q + 1) n
+    used; J, P (s, n, n): d_y X and pi at the refresh point; rate (s,): the contraction of the
+    first two iterations, last measured (1: none yet); refreshes (s,) int64: how many times the
+    matrix was built in this run; order (s,) int64: how many previous solutions the next start
+    extrapolates from at most (`_remember`); built_rate (s,): the contraction measured at the first substep of the
     matrix's last build (1: none yet); iterations (s,) int64: the chord iterations of the last
     substep (0 where the fixed-point sweeps converged)."""
 
@@ -371,7 +371,7 @@ def _hessian_times(H, J, P, k, l, n):
 @nb.njit(inline="always", **NJIT_NORC)
 def _invert(i, m, work, memory):
     """memory.inverse[i, :m, :m] (the matrix just assembled) replaced by its inverse, transposed
-    (`rkhp.taylor.linalg.inverse_transposed`, `_solve`); Failure.OK or SINGULAR."""
+    (`rkhp.taylor.linalg.inverse_transposed`, `transposed_product`); Failure.OK or SINGULAR."""
     if not inverse_transposed(memory.inverse[i, :m, :m], work.perm[:m], work.inverting[:m, :m]):
         return Failure.SINGULAR
     return Failure.OK
@@ -598,22 +598,6 @@ def _remember(i, q, memory, y0, work, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _solve(inverse, i, m, b, tmp):
-    """b[:m] := M^-1 b[:m] from the inverse of substep i's chord matrix M, stored transposed
-    (inverse[i, c] is column c of M^-1): the sum of the columns times b, each a contiguous loop
-    of fixed length m, which the compiler vectorises (the triangular solves of M's LU factors
-    are chains of dependent updates, with a division a row)."""
-    for r in range(m):
-        tmp[r] = 0.0
-    for c in range(m):
-        x = b[c]
-        for r in range(m):
-            tmp[r] += inverse[i, c, r] * x
-    for r in range(m):
-        b[r] = tmp[r]
-
-
-@nb.njit(inline="always", **NJIT_NORC)
 def _chord_iteration(i, q, y0, hs, tapes, work, memory, n, zw):
     """One chord iteration of substep i: X at the stages, the residual of (Z, p), the correction
     by the stored inverse (into work.res), applied to work.Z and work.p; returns its size, the
@@ -629,7 +613,9 @@ def _chord_iteration(i, q, y0, hs, tapes, work, memory, n, zw):
             res[a * n + k] = acc
     for k in range(n):
         res[q * n + k] = hs * work.g[k] - work.p[k]
-    _solve(memory.inverse, i, (q + 1) * n, res, work.tmp)
+    transposed_product(memory.inverse[i], res, work.tmp, (q + 1) * n)
+    for r in range((q + 1) * n):
+        res[r] = work.tmp[r]
     size = 0.0
     for a in range(q):
         for k in range(n):

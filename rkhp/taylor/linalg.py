@@ -1,7 +1,8 @@
 """Small dense linear algebra in compiled code, without allocation: the LU factorisation with
 partial pivoting of the spray kernel's Newton matrices (`rkhp.taylor.composites`) and of the
-engine's Newton solve (`rkhp.integrators.engine.newton_solve`), the explicit inverse of the spray
-direct form's chord matrices (`inverse_transposed`), and the max-norm of the integrators' stopping
+engine's Newton solve (`rkhp.integrators.engine.newton_solve`), the explicit inverse of the direct
+forms' chord matrices (`inverse_transposed`) and its product with a vector (`transposed_product`),
+and the max-norm of the integrators' stopping
 tests (`max_abs`); in Python, the allocation of work arrays on cache lines for them
 (`aligned_zeros`, `padded`)."""
 
@@ -107,6 +108,21 @@ def inverse_transposed(A, perm, X):
         for c in range(m):
             A[c, r] = X[r, c]
     return True
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def transposed_product(Bt, v, out, m):
+    """out[:m] := B v[:m] for a matrix B stored transposed (Bt[c, :m] is column c of B, as
+    `inverse_transposed` leaves an inverse): the sum of the columns times v's entries, each a
+    contiguous loop of fixed length m, which the compiler vectorises (B's rows would be strided
+    reads; the triangular solves of LU factors are chains of dependent updates, with a division a
+    row). out and v are distinct arrays. Inlined into the iterations that call it."""
+    for r in range(m):
+        out[r] = 0.0
+    for c in range(m):
+        x = v[c]
+        for r in range(m):
+            out[r] += Bt[c, r] * x
 
 
 @nb.njit(**NJIT_NORC)
