@@ -18,6 +18,7 @@ import pytest
 
 from rkhp.base.errors import InputError
 from rkhp.integrators.closed_euler import (
+    DEFECT_REACH,
     ClosedSubstep,
     _predict_z,
     _remember_z,
@@ -287,6 +288,49 @@ def test_a_substep_starts_from_its_extrapolation_corrected_by_the_substep_before
     resume(ClosedSubstep(form, work, memory, work.y), y0)
     _predict_z(1, y0, hs[1], form, work, memory, n)
     np.testing.assert_allclose(work.z, hs[1] * (f(6) - 24 * a), rtol=1e-13)
+
+
+def test_a_substep_starts_from_the_line_through_the_two_defects_before():
+    """Three substeps of steps hs_i whose solutions are hs_i g(tau) at their midpoint times tau
+    (the clock from 0) and at the same times 1, 2, 3, 4 earlier (the steps before), g quintic:
+    the cubic extrapolation errs by E(tau) per unit of step, a line in tau (g's fourth
+    difference). The first starts off by E(tau_0); the second, corrected by the first's defect
+    alone, by E(tau_1) - E(tau_0); the third, on the line through both defects, on its solution,
+    unless it lies farther than DEFECT_REACH times the two's distance in time: then it takes the
+    last defect alone, off by E(tau_2) - E(tau_1)."""
+    system = get_system("rigid-body")
+    n, form = system.dim, closed_form(system)
+    a, b = np.array([0.3, -0.7, 1.1]), np.array([0.5, 0.2, -0.4])
+    y0 = np.array(system.x0)
+
+    def g(t):
+        return a * t**5 + b * t
+
+    def E(t):
+        return sum(w * g(t - 1 - r) for w, r in zip((4, -6, 4, -1), range(4), strict=True)) - g(t)
+
+    def start_errors(hs):
+        work, memory = closed_work(form, n), chord_memory(len(hs), n)
+        times = np.cumsum((0.0,) + hs[:-1]) + 0.5 * np.array(hs)
+        errors = []
+        for i, tau in enumerate(times):
+            memory.z_hist[i] = [hs[i] * g(tau - 1 - r) for r in range(HISTORY)]
+            memory.count[i] = HISTORY
+            _predict_z(i, y0, hs[i], form, work, memory, n)
+            errors.append((work.z - hs[i] * g(tau)) / hs[i])
+            work.z[:] = hs[i] * g(tau)
+            _remember_z(i, hs[i], memory, work, n)
+        return errors, times
+
+    assert HISTORY == 4
+    errors, tau = start_errors((0.3, -0.2, 0.25))
+    np.testing.assert_allclose(tau, (0.15, 0.2, 0.225))
+    np.testing.assert_allclose(errors[0], E(tau[0]), rtol=1e-12)
+    np.testing.assert_allclose(errors[1], E(tau[1]) - E(tau[0]), rtol=1e-9)
+    assert np.abs(E(tau[1]) - E(tau[0])).max() > 1.0 and np.abs(errors[2]).max() < 1e-11
+    errors, tau = start_errors((0.3, -0.2, 1.0))
+    assert tau[2] - tau[1] > DEFECT_REACH * (tau[1] - tau[0])
+    np.testing.assert_allclose(errors[2], E(tau[2]) - E(tau[1]), rtol=1e-9)
 
 
 def test_a_failed_run_is_one_line_and_exit_1(run_cli):

@@ -101,6 +101,10 @@ BROYDEN_DIMENSION = 8
 (3 n^2 multiply-adds an iteration), which beyond it cost more than the iterations they save
 (measured: the heavy top, n = 6, runs faster with it; the Toda lattices of 12 and 24 variables,
 whose closed-form point costs O(n), without)."""
+DEFECT_REACH = 4.0
+"""A substep's start takes the line through the last two substeps' defects (`_predict_z`) only
+within this many times their distance in time from the last: further, or with the two at one
+time, the last defect alone."""
 BROYDEN_FLOOR = 2.0**-30
 """Broyden's update uses a correction only above this (relative to max(1, |y0|)): below, the
 change of the residual is dominated by its rounding."""
@@ -200,9 +204,11 @@ class ChordMemory(NamedTuple):
     `newton_substep`: the LU factors of its last Jacobian); ready (s,) int64:
     1 once it exists; rate (s,): the contraction of its first two iterations, last measured (1: none yet);
     refreshes (s,) int64: how many times the matrix was built in this run; z_pred (n): the
-    extrapolation of the substep running (`_predict_z`); defect (n), defect_order (1,) int64:
-    the last substep's converged z less its extrapolation, divided by its step, and the number
-    of solutions that extrapolation used (0: none, after `resume`)."""
+    extrapolation of the substep running (`_predict_z`); defect (2, n), defect_order (2,) int64,
+    defect_time (2,): for the last substep and the one before it, the converged z less its
+    extrapolation, divided by its step, the number of solutions that extrapolation used (0:
+    none, after `resume`) and the substep's midpoint time; clock (1,): the time at the end of
+    the last substep (from the run's start)."""
 
     z_hist: np.ndarray
     count: np.ndarray
@@ -213,6 +219,8 @@ class ChordMemory(NamedTuple):
     z_pred: np.ndarray
     defect: np.ndarray
     defect_order: np.ndarray
+    defect_time: np.ndarray
+    clock: np.ndarray
 
 
 def closed_work(form: ClosedForm, n: int) -> ClosedWork:
@@ -229,8 +237,8 @@ def closed_work(form: ClosedForm, n: int) -> ClosedWork:
 def chord_memory(s: int, n: int) -> ChordMemory:
     """The memory of s substeps in dimension n (empty: every substep starts cold)."""
     return ChordMemory(np.zeros((s, HISTORY, n)), np.zeros(s, np.int64), np.zeros((s, n, n)),
-                       np.zeros(s, np.int64), np.ones(s), np.zeros(s, np.int64), np.zeros(n), np.zeros(n),
-                       np.zeros(1, np.int64))
+                       np.zeros(s, np.int64), np.ones(s), np.zeros(s, np.int64), np.zeros(n), np.zeros((2, n)),
+                       np.zeros(2, np.int64), np.zeros(2), np.zeros(1))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -379,12 +387,15 @@ def _store_inverse(i, hs, form, work, memory, n):
 def _predict_z(i, y0, hs, form, work, memory, n):
     """work.z from substep i's previous solutions, or G(y0) without any: their polynomial
     extrapolation in the step index (`rkhp.integrators.direct_form.weight`, kept in memory.z_pred)
-    plus hs times the defect of the substep just before (`_remember_z`) where that one
-    extrapolated from as many solutions. A substep's solution is hs times a smooth function of
+    plus hs times the defect the two substeps before give at this substep's time (`_remember_z`):
+    extrapolated linearly in the time where both extrapolated from as many solutions and this
+    substep lies within DEFECT_REACH times their distance in time from the last, else the last
+    one's defect alone where that one did. A substep's solution is hs times a smooth function of
     the time, z = hs g(t + c h) (z = hs grad H(x), or x o hs grad H(x), x at a time c h into the
-    step), so the errors of the two extrapolations per unit of step are one combination of g's
-    values taken at times (c - c') h apart: the correction leaves an error O(h) times the
-    extrapolation's (docs/compositions.md "The cost of a substep")."""
+    step), so the error of its extrapolation per unit of step is one smooth function of the
+    time, E(t + c h), for every substep: the last defect leaves an error O(h) times the
+    extrapolation's, the line through the last two O(h^2) (docs/compositions.md "The cost of a
+    substep")."""
     count = memory.count[i]
     if count == 0:
         for k in range(n):
@@ -394,23 +405,37 @@ def _predict_z(i, y0, hs, form, work, memory, n):
             work.z[k] = work.res[k]
         return
     shift = hs if memory.defect_order[0] == count else 0.0
+    slope = 0.0
+    if shift != 0.0 and memory.defect_order[1] == count:
+        span = memory.defect_time[0] - memory.defect_time[1]
+        ahead = memory.clock[0] + 0.5 * hs - memory.defect_time[0]
+        if abs(ahead) <= DEFECT_REACH * abs(span):  # never with span 0
+            slope = ahead / span
     for k in range(n):
         acc = 0.0
         for r in range(count):
             acc += weight(count, r) * memory.z_hist[i, r, k]
         memory.z_pred[k] = acc
-        work.z[k] = acc + shift * memory.defect[k]
+        last = memory.defect[0, k]
+        work.z[k] = acc + shift * (last + slope * (last - memory.defect[1, k]))
 
 
 @nb.njit(inline="always", **NJIT_NORC)
 def _remember_z(i, hs, memory, work, n):
     """Push the converged z of substep i (step hs) into its history, after keeping its
-    extrapolation's defect (z - memory.z_pred) / hs for the next substep's start (`_predict_z`)."""
+    extrapolation's defect (z - memory.z_pred) / hs and its midpoint time for the next substeps'
+    starts (`_predict_z`, the defect before it kept as the second); the clock advances by hs."""
     count = memory.count[i]
+    memory.defect_order[1] = memory.defect_order[0]
+    memory.defect_time[1] = memory.defect_time[0]
     memory.defect_order[0] = count if hs != 0.0 else 0
+    memory.defect_time[0] = memory.clock[0] + 0.5 * hs
+    memory.clock[0] += hs
+    for k in range(n):
+        memory.defect[1, k] = memory.defect[0, k]
     if count > 0 and hs != 0.0:
         for k in range(n):
-            memory.defect[k] = (work.z[k] - memory.z_pred[k]) / hs
+            memory.defect[0, k] = (work.z[k] - memory.z_pred[k]) / hs
     for r in range(HISTORY - 1, 0, -1):
         for k in range(n):
             memory.z_hist[i, r, k] = memory.z_hist[i, r - 1, k]
@@ -651,12 +676,15 @@ def newton_substep(i, y0, hs, form, work, memory, solver):
 def resume(data, y0):
     """The state set to y0 (work.y, carried as the double-double y + y_low,
     `rkhp.integrators.direct_form.add_increment`), every substep's memory kept but the last
-    substep's defect (`_predict_z`: the next substep does not follow it in time)."""
+    substeps' defects (`_predict_z`: the next substep does not follow them in time) and the
+    clock, from 0 again (so that a run on memory used before rounds its times as on new)."""
     work = data.work
     for k in range(y0.shape[0]):
         work.y[k] = y0[k]
         work.y_low[k] = 0.0
     data.memory.defect_order[0] = 0
+    data.memory.defect_order[1] = 0
+    data.memory.clock[0] = 0.0
 
 
 @nb.njit(inline="always", **NJIT_NORC)
