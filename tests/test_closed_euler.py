@@ -297,7 +297,8 @@ def test_a_substep_starts_from_the_line_through_the_two_defects_before():
     difference). The first starts off by E(tau_0); the second, corrected by the first's defect
     alone, by E(tau_1) - E(tau_0); the third, on the line through both defects, on its solution,
     unless it lies farther than DEFECT_REACH times the two's distance in time: then it takes the
-    last defect alone, off by E(tau_2) - E(tau_1)."""
+    last defect alone, off by E(tau_2) - E(tau_1); so too where the two lie at one time (a step
+    and its inverse), the third at that time too: it starts on its solution."""
     system = get_system("rigid-body")
     n, form = system.dim, closed_form(system)
     a, b = np.array([0.3, -0.7, 1.1]), np.array([0.5, 0.2, -0.4])
@@ -331,6 +332,8 @@ def test_a_substep_starts_from_the_line_through_the_two_defects_before():
     errors, tau = start_errors((0.3, -0.2, 1.0))
     assert tau[2] - tau[1] > DEFECT_REACH * (tau[1] - tau[0])
     np.testing.assert_allclose(errors[2], E(tau[2]) - E(tau[1]), rtol=1e-9)
+    errors, tau = start_errors((0.3, -0.3, 0.3))  # a step and its inverse: the two at one time
+    assert tau[0] == tau[1] == tau[2] and np.abs(errors[2]).max() < 1e-11
 
 
 def test_a_failed_run_is_one_line_and_exit_1(run_cli):

@@ -409,7 +409,7 @@ def _predict_z(i, y0, hs, form, work, memory, n):
     if shift != 0.0 and memory.defect_order[1] == count:
         span = memory.defect_time[0] - memory.defect_time[1]
         ahead = memory.clock[0] + 0.5 * hs - memory.defect_time[0]
-        if abs(ahead) <= DEFECT_REACH * abs(span):  # never with span 0
+        if abs(ahead) < DEFECT_REACH * abs(span):  # never with span 0 (a step and its inverse)
             slope = ahead / span
     for k in range(n):
         acc = 0.0
