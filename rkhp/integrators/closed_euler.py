@@ -34,8 +34,8 @@ gradients and an n x n inverse, more than the sweeps a single substep takes; a s
 recurs iterates with its B, whose iterations cost an n x n product but contract by O(h^2).
 Each substep starts from z extrapolated over the same substep of the previous steps (`HISTORY`,
 as the spray's direct form, docs/general-poisson.md "The Euler step in direct form"), plus the
-error that extrapolation made on the substep just before, per unit of step (`_predict_z`,
-docs/compositions.md "The cost of a substep").
+errors that extrapolation made on the two substeps just before, per unit of step, on their line
+in time (`_predict_z`, docs/compositions.md "The cost of a substep").
 
 e^-K y0 and psi(K) y0 are power series, or closed forms on so(3)* (Rodrigues'), se(3)* (the heavy
 top: Rodrigues' and their derivative) and the diagonal algebras (K(p) = [[D, 0], [E, 0]]: n
