@@ -118,9 +118,13 @@ gradient, 2 n gradients), more but cheaper chord iterations take less time
 series), or (the diagonal algebras) the chord iterations on their closed-form point cost less than
 Newton's factorisations; and in more dimensions the Hessian's n^2 entries and its factorisation
 cost more than the iterations they save."""
-NEWTON_REFRESH = 1e-7
+NEWTON_REFRESH = 1e-4
 """`newton_substep` takes the exact Jacobian again after a correction above this (relative to
-max(1, |y0|)); below it the last one serves (its chord step contracts by about L 1e-7)."""
+max(1, |y0|)); below it the last one serves: its chord step contracts by about L |d| (L the
+quadratic constant, d the correction since the Jacobian was taken), so from an extrapolated start
+(`_predict_z`) the first Newton step leaves an error of about L |d|^2 that one or two chord
+steps take to round-off, and a second factorisation pays only after a large correction (a cold
+start; `benchmarks/substeps.py` shows the iterations and factorisations a substep)."""
 
 
 class ClosedForm(NamedTuple):
