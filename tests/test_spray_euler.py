@@ -20,7 +20,14 @@ from rkhp.base.errors import InputError
 from rkhp.integrators import integrate_midpoint, integrate_rkhp
 from rkhp.integrators.driver import integrate_spray_euler, run
 from rkhp.integrators.failure import Failure
-from rkhp.integrators.spray_euler import spray_tapes
+from rkhp.integrators.spray_euler import (
+    HISTORY,
+    _remember,
+    _start_stages,
+    euler_work,
+    spray_tapes,
+    substep_memory,
+)
 from rkhp.integrators.substeps import SPRAY, TOWER, choose
 from rkhp.studies.reference import reference
 from rkhp.systems import get_system
@@ -237,3 +244,32 @@ def test_shared_rows_are_computed_once():
     W[:4, 0] = inputs
     values(s, W)
     np.testing.assert_array_equal(W[s.outputs, 0], evaluate(t, inputs))
+
+
+def test_the_start_extrapolates_the_last_solutions_across_the_ring():
+    """Stage increments Z(k) = f(k), f cubic in the step index k, remembered for k = 0..10 (more
+    than HISTORY, so the ring of solutions wraps): the start of step 11 is f(11), exactly for an
+    extrapolation of degree 3 or more; after 7 pushes only (cubic from 7 values: the order is
+    chosen among them) it is f(7) too, and with 3 it is off by f's third difference (6 a)."""
+    system = get_system("charged-particle")
+    n, q = system.dim, 3
+    work, memory = euler_work(spray_tapes(system), n), substep_memory(1, n)
+    rng = np.random.default_rng(7)
+    a, b, c = (rng.standard_normal((q, n)) for _ in range(3))
+
+    def f(k):
+        return a * k**3 + b * k**2 + c
+
+    y0 = np.zeros(n)
+    memory.z_nodes[0] = q
+    for count, pushes, expected in ((HISTORY, 11, f(11)), (7, 7, f(7)), (3, 3, f(3) - 6 * a)):
+        memory.counts[0] = 0
+        for k in range(pushes):
+            work.Z[:q] = f(k)
+            work.xbar[:] = f(k)[0]
+            _remember(0, q, memory, y0, work, n)
+        assert memory.counts[0, 1] == count
+        memory.order[0] = HISTORY
+        work.Z[:] = np.nan
+        _start_stages(0, q, memory, work, n)
+        np.testing.assert_allclose(work.Z[:q], expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())

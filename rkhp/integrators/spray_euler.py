@@ -183,7 +183,9 @@ class SubstepMemory(NamedTuple):
     """What substep i of a composition keeps from one step to the next (index i first).
 
     x_hist (s, HISTORY, n), z_hist (s, HISTORY, MAX_NODES, n): its last solutions, the average's
-    increments xbar - y0 and the stage increments Z, newest first; counts (s, 2) int64: how many
+    increments xbar - y0 and the stage increments Z, a ring: the r-th newest in slot
+    (newest + r) mod HISTORY (`_slot`), so that a new solution moves none; newest (s,) int64:
+    the slot of the newest; counts (s, 2) int64: how many
     of them are valid for xbar - y0 and for Z (Z's only with the same
     number of nodes, z_nodes (s,)); nodes (s,) int64: Q of the inverted chord matrix (0: none
     yet); inverse (s, m, padded m): its inverse, transposed (`transposed_product`), m = (Q + 1) n
@@ -196,6 +198,7 @@ class SubstepMemory(NamedTuple):
 
     x_hist: np.ndarray
     z_hist: np.ndarray
+    newest: np.ndarray
     counts: np.ndarray
     z_nodes: np.ndarray
     nodes: np.ndarray
@@ -229,7 +232,8 @@ def substep_memory(s: int, n: int) -> SubstepMemory:
     rows start on cache lines (`rkhp.taylor.linalg.aligned_zeros`, rows padded to whole lines)."""
     m = (MAX_NODES + 1) * n
     return SubstepMemory(np.zeros((s, HISTORY, n)), np.zeros((s, HISTORY, MAX_NODES, n)),
-                         np.zeros((s, 2), np.int64), np.zeros(s, np.int64), np.zeros(s, np.int64),
+                         np.zeros(s, np.int64), np.zeros((s, 2), np.int64), np.zeros(s, np.int64),
+                         np.zeros(s, np.int64),
                          aligned_zeros((s, m, padded(m))), np.zeros((s, n, n)),
                          np.zeros((s, n, n)), np.ones(s), np.zeros(s, np.int64), np.full(s, HISTORY, np.int64),
                          np.ones(s), np.zeros(s, np.int64))
@@ -427,6 +431,14 @@ def _theta(y0, tapes, work, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
+def _slot(memory, i, r):
+    """The slot of substep i's r-th newest solution in its history (`SubstepMemory`), r < HISTORY;
+    r = HISTORY - 1 gives the oldest's, where `_remember` writes the next newest."""
+    slot = memory.newest[i] + r
+    return slot - HISTORY if slot >= HISTORY else slot
+
+
+@nb.njit(inline="always", **NJIT_NORC)
 def _predict_p(i, y0, hs, tapes, work, memory, n):
     """work.p := hs grad H(y0 + d), d the average's increment xbar - y0 extrapolated from substep
     i's previous solutions (their polynomial in the step index, `weight`; d = 0 without any)."""
@@ -435,7 +447,7 @@ def _predict_p(i, y0, hs, tapes, work, memory, n):
     for k in range(n):
         acc = 0.0
         for r in range(count):
-            acc += weight(count, r) * hist[r, k]
+            acc += weight(count, r) * hist[_slot(memory, i, r), k]
         work.xbar[k] = y0[k] + acc
     gradient(tapes, work, work.xbar, n)
     for k in range(n):
@@ -457,7 +469,7 @@ def _start_stages(i, q, memory, work, n):
             if count > 0:
                 acc = 0.0
                 for r in range(count):
-                    acc += weight(count, r) * hist[r, j, k]
+                    acc += weight(count, r) * hist[_slot(memory, i, r), j, k]
                 work.Z[j, k] = acc
             else:
                 x0 = 0.0
@@ -556,7 +568,7 @@ def _best_order(i, memory, y0, work, n):
         for k in range(n):
             acc = 0.0
             for r in range(c):
-                acc += weight(c, r) * memory.x_hist[i, r, k]
+                acc += weight(c, r) * memory.x_hist[i, _slot(memory, i, r), k]
             err = max(err, abs(acc - (work.xbar[k] - y0[k])))
         if err < best:
             best = err
@@ -580,19 +592,18 @@ def _worth_rebuilding(i, q, tapes, memory):
 
 @nb.njit(inline="always", **NJIT_NORC)
 def _remember(i, q, memory, y0, work, n):
-    """Push the converged xbar - y0 and Z of substep i into its history, after choosing how many
+    """Push the converged xbar - y0 and Z of substep i into its history (in place of the oldest:
+    `SubstepMemory`), after choosing how many
     previous solutions its next start extrapolates from: as many as would have predicted this
     xbar - y0 best (`_best_order`)."""
     memory.order[i] = _best_order(i, memory, y0, work, n)
-    for r in range(HISTORY - 1, 0, -1):
-        for k in range(n):
-            memory.x_hist[i, r, k] = memory.x_hist[i, r - 1, k]
-            for j in range(q):
-                memory.z_hist[i, r, j, k] = memory.z_hist[i, r - 1, j, k]
+    newest = _slot(memory, i, HISTORY - 1)
+    memory.newest[i] = newest
     for k in range(n):
-        memory.x_hist[i, 0, k] = work.xbar[k] - y0[k]
-        for j in range(q):
-            memory.z_hist[i, 0, j, k] = work.Z[j, k]
+        memory.x_hist[i, newest, k] = work.xbar[k] - y0[k]
+    for j in range(q):
+        for k in range(n):
+            memory.z_hist[i, newest, j, k] = work.Z[j, k]
     memory.counts[i, 0] = min(memory.counts[i, 0] + 1, HISTORY)
     memory.counts[i, 1] = min(memory.counts[i, 1] + 1, HISTORY)
 
@@ -756,6 +767,7 @@ def begin(data, y0):
     for i in range(memory.nodes.shape[0]):
         memory.counts[i, 0] = 0
         memory.counts[i, 1] = 0
+        memory.newest[i] = 0
         memory.z_nodes[i] = 0
         memory.nodes[i] = 0
         memory.rate[i] = 1.0
