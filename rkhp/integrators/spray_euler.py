@@ -44,7 +44,8 @@ the tolerance: the substeps near the largest steps the iterations converge at (|
 0.9 on the charged particle), where a matrix built at y0 contracts by 0.1 to 0.25. Each
 substep starts from its own previous solutions: the average's increment xbar - y0 and Z
 extrapolated (a polynomial in the step index) from the same substep of up to eight previous
-steps (`HISTORY`, as many as predicted the last increment best), and p = h grad H(y0 + that
+steps (`HISTORY`; of the number the last start used, one fewer and one more, the number that
+would have predicted the last increment best: `_best_order`), and p = h grad H(y0 + that
 increment), whose error is then O(h) times the extrapolation's (`_predict_p`). On a constant pi,
 J = 0 and the step is the implicit midpoint rule.
 
@@ -115,7 +116,8 @@ index of degree at most 7; the closed form keeps `rkhp.integrators.direct_form.H
 start's error falls as (h omega)^k with k solutions along an orbit of frequency omega, and at the
 contraction of a matrix kept across steps each decade less saves about one chord iteration. Where
 h omega is not small the higher differences grow instead: each substep extrapolates from as many
-as would have predicted its last solution best (`_remember`)."""
+as would have predicted its last solution best, among those its last start used and one fewer or
+more (`_best_order`)."""
 AMORTISE = 2.0
 """A substep rebuilds its chord matrix before iterating when AMORTISE times the iterations that
 would save at this step exceeds the matrix's cost in iterations (`_worth_rebuilding`): a fresh
@@ -461,17 +463,22 @@ def _start_stages(i, q, memory, work, n):
     count = min(memory.counts[i, 1], memory.order[i]) if memory.z_nodes[i] == q else 0
     hist = memory.z_hist[i]
     J, P = memory.J[i], memory.P[i]
+    if count > 0:
+        for j in range(q):
+            for k in range(n):
+                work.Z[j, k] = 0.0
+        for r in range(count):
+            w = weight(count, r)
+            row = hist[_slot(memory, i, r)]
+            for j in range(q):
+                for k in range(n):
+                    work.Z[j, k] += w * row[j, k]
     for j in range(q):
         c = 0.0
         for b in range(q):
             c += TABLE_A[q, j, b]
         for k in range(n):
-            if count > 0:
-                acc = 0.0
-                for r in range(count):
-                    acc += weight(count, r) * hist[_slot(memory, i, r), j, k]
-                work.Z[j, k] = acc
-            else:
+            if count == 0:
                 x0 = 0.0
                 jx = 0.0
                 for l in range(n):
@@ -558,12 +565,15 @@ def _sweeps(q, y0, hs, tapes, work, n, tol, stagnation, zw):
 @nb.njit(inline="always", **NJIT_NORC)
 def _best_order(i, memory, y0, work, n):
     """The number of substep i's previous solutions whose extrapolation comes closest to its
-    converged xbar - y0 (largest component of the difference); HISTORY, to let the order grow,
-    when that is all there were."""
+    converged xbar - y0 (largest component of the difference), among the number its start used
+    (`_predict_p`) and one fewer or more: the order moves by one a step, as the best does along
+    an orbit, at three extrapolations' cost rather than HISTORY's; HISTORY, to let the order
+    grow, when the best is all there were."""
     count = memory.counts[i, 0]
     best = np.inf
     chosen = count
-    for c in range(1, count + 1):
+    used = min(count, memory.order[i])
+    for c in range(max(1, used - 1), min(count, used + 1) + 1):
         err = 0.0
         for k in range(n):
             acc = 0.0
@@ -593,9 +603,8 @@ def _worth_rebuilding(i, q, tapes, memory):
 @nb.njit(inline="always", **NJIT_NORC)
 def _remember(i, q, memory, y0, work, n):
     """Push the converged xbar - y0 and Z of substep i into its history (in place of the oldest:
-    `SubstepMemory`), after choosing how many
-    previous solutions its next start extrapolates from: as many as would have predicted this
-    xbar - y0 best (`_best_order`)."""
+    `SubstepMemory`), after choosing how many previous solutions its next start extrapolates from
+    (`_best_order`)."""
     memory.order[i] = _best_order(i, memory, y0, work, n)
     newest = _slot(memory, i, HISTORY - 1)
     memory.newest[i] = newest
