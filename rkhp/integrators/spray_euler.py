@@ -69,8 +69,10 @@ Compiled data: `SprayTapes` (X and H as plain tapes),
 provider of the driver (`rkhp.integrators.substeps`); `rkhp.integrators.driver.integrate_spray_euler`
 is the Python entry. What every substep runs is inlined into the driver's loop: a call of a
 compiled function passes the tapes, the work arrays and the memory field by field (hundreds of
-arguments, costlier than `_theta`'s own work). What builds a chord or Newton matrix and the
-tapes' forward mode (a system without compiled code) stay functions of their own.
+arguments, costlier than `_theta`'s own work). What builds a chord or Newton matrix, the
+tapes' forward mode (a system without compiled code) and the start of a substep without previous
+stages (`_taylor_start`) stay functions of their own, so that the loop's compiled code holds
+what runs at every substep (`benchmarks/substeps.py` measures it).
 """
 
 from __future__ import annotations
@@ -456,13 +458,32 @@ def _predict_p(i, y0, hs, tapes, work, memory, n):
         work.p[k] = hs * work.g[k]
 
 
+@nb.njit(**NJIT_NORC)
+def _taylor_start(q, J, P, p, Z, n):
+    """Z for q nodes as the flow's Taylor polynomial Z(c) = c X0 + (c^2 / 2) J X0, X0 = P p (a
+    substep without previous stages: compiled apart from the loop, as it runs rarely)."""
+    for j in range(q):
+        c = 0.0
+        for b in range(q):
+            c += TABLE_A[q, j, b]
+        for k in range(n):
+            x0 = 0.0
+            jx = 0.0
+            for l in range(n):
+                pl = 0.0
+                for r in range(n):
+                    pl += P[l, r] * p[r]
+                x0 += P[k, l] * p[l]
+                jx += J[k, l] * pl
+            Z[j, k] = c * x0 + 0.5 * c * c * jx
+
+
 @nb.njit(inline="always", **NJIT_NORC)
 def _start_stages(i, q, memory, work, n):
     """work.Z for q nodes: extrapolated from substep i's previous stages when they had q nodes,
-    else the flow's Taylor polynomial Z(c) = c X0 + (c^2 / 2) J X0, X0 = P p (memory's J, P)."""
+    else the flow's Taylor polynomial (`_taylor_start`, memory's J and P)."""
     count = min(memory.counts[i, 1], memory.order[i]) if memory.z_nodes[i] == q else 0
     hist = memory.z_hist[i]
-    J, P = memory.J[i], memory.P[i]
     if count > 0:
         for j in range(q):
             for k in range(n):
@@ -473,22 +494,8 @@ def _start_stages(i, q, memory, work, n):
             for j in range(q):
                 for k in range(n):
                     work.Z[j, k] += w * row[j, k]
-    for j in range(q):
-        c = 0.0
-        for b in range(q):
-            c += TABLE_A[q, j, b]
-        for k in range(n):
-            if count == 0:
-                x0 = 0.0
-                jx = 0.0
-                for l in range(n):
-                    pl = 0.0
-                    for r in range(n):
-                        pl += P[l, r] * work.p[r]
-                    x0 += P[k, l] * work.p[l]
-                    jx += J[k, l] * pl
-                work.Z[j, k] = c * x0 + 0.5 * c * c * jx
-    if count == 0:
+    else:
+        _taylor_start(q, memory.J[i], memory.P[i], work.p, work.Z, n)
         memory.counts[i, 1] = 0
         memory.z_nodes[i] = q
 
