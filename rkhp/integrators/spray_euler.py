@@ -124,6 +124,10 @@ AMORTISE = 2.0
 """A substep rebuilds its chord matrix before iterating when AMORTISE times the iterations that
 would save at this step exceeds the matrix's cost in iterations (`_worth_rebuilding`): a fresh
 matrix serves the steps that follow too."""
+SPARE = 2
+"""Iterations a substep keeps for Newton's method after its chord iterations fall behind their
+measured contraction (`_out_of_reach`): from a correction at 1e-10 or below, two Newton steps
+reach round-off."""
 MAX_NODES = 12
 """Collocation nodes of the direct form at most (E_12 theta^24 <= NODE_BOUND for theta up to
 about 3.1, beyond the steps at which the chord iterations converge); a substep needing more
@@ -658,6 +662,25 @@ def _chord_iteration(i, q, y0, hs, tapes, work, memory, n, zw):
     return size
 
 
+@nb.njit(**NJIT_NORC)
+def _out_of_reach(it, since, size, theta, max_iter, floor):
+    """Whether iteration `it` of a substep, from the (max_iter // 2)-th, takes the exact Jacobian:
+    unless its corrections, contracting by the measured theta (since >= 2), would meet the stop
+    test (their predicted successor theta / (1 - theta) |d| at most `floor`, the tolerance) in
+    the iterations left but SPARE, as a kept matrix contracting by 0.1 at large steps does in a
+    few more iterations, each far cheaper than a Jacobian (docs/general-poisson.md "The Euler
+    step in direct form"). The test is made again at each iteration: a substep that falls behind
+    takes the Jacobian with SPARE iterations left for Newton's. A unit of its own, called only
+    past half the iterations, and powers by products: inlined, or with a call of pow, it changes
+    how the compiler lays out the whole loop, sweeps included."""
+    if since < 2 or not theta < 1.0:
+        return True
+    reach = size
+    for _ in range(max_iter - it - 1 - SPARE):
+        reach *= theta
+    return theta / (1.0 - theta) * reach > floor
+
+
 @nb.njit(inline="always", **NJIT_NORC)
 def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     """One Euler substep of step hs in direct form (see the module) from y0: its increment
@@ -673,8 +696,8 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
     (`_worth_rebuilding`), and when an iteration
     contracts by more than SLOW_CONTRACTION (once per substep); takes the exact Jacobian at the
     current iterate (`_newton_matrix_p`) when a fresh matrix contracts by more than that, and at
-    each iteration from the (max_iter // 2)-th while the correction exceeds max(1e3 tol,
-    REFRESH_FLOOR) max(1, |y0|).
+    each iteration from the (max_iter // 2)-th whose contraction would not meet the stop test in
+    time (`_out_of_reach`) while the correction exceeds max(1e3 tol, REFRESH_FLOOR) max(1, |y0|).
     Stops (sweeps and iterations alike) when the correction (its size as the module says: Z's
     part times min(1, theta), theta `_theta`), or its predicted successor
     theta / (1 - theta) |d| (theta the
@@ -737,7 +760,7 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
         if since >= 2 and size >= 0.5 * previous and size <= STAGNATION * scale:
             converged = True  # the corrections stagnate at round-off
             break
-        rescue = it >= max_iter // 2
+        rescue = it >= max_iter // 2 and _out_of_reach(it, since, size, theta, max_iter, tol * scale)
         if size > max(1e3 * tol, REFRESH_FLOOR) * scale and ((since >= 2 and theta > SLOW_CONTRACTION) or rescue):
             if fresh or rescue:
                 cause = _newton_matrix_p(i, q, y0, hs, tapes, work, memory, n)
