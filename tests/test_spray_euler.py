@@ -22,6 +22,7 @@ from rkhp.integrators.driver import integrate_spray_euler, run
 from rkhp.integrators.failure import Failure
 from rkhp.integrators.spray_euler import (
     HISTORY,
+    _out_of_reach,
     _remember,
     _start_stages,
     euler_work,
@@ -183,23 +184,36 @@ def test_substeps_without_previous_solutions_converge_by_sweeps():
     assert np.abs(direct.final_state - tower.final_state).max() < 1e-13
 
 
-def test_a_kept_matrix_that_contracts_finishes_without_new_jacobians():
-    """Euler at h = 0.5 on nambu (theta about 0.9, nine nodes), 400 steps: about a third of the
-    substeps leave the sweeps for the chord iterations, whose kept matrix contracts by 0.1 to
-    0.2 and needs some fifteen of them; past half its iterations a substep takes the exact
-    Jacobian only where that contraction would not meet the stop test in the iterations left
-    (two spare), so that most of them finish on the kept matrix (a Jacobian at each iteration
-    from the tenth builds 165 in this run), on the states of the same steps solved by the Taylor
-    tower (Newton on the jets, an independent solver), and the run retraces itself (RKHP Euler
-    with the symmetric realisation is symmetric, docs/theory.md §12) to round-off."""
+def test_large_steps_converge_with_few_jacobians():
+    """Euler at h = 0.8 on nambu (ten nodes), 250 steps: the sweeps contract slowly but go on
+    while a chord iteration would not gain twice their decades (the kept matrix contracts by
+    0.1 to 0.2), and past half its iterations a substep takes the exact Jacobian only where the
+    kept matrix would not meet the stop test in the iterations left: the run builds a few dozen
+    matrices at most (taking the Jacobian at each late iteration, and leaving the sweeps at a
+    contraction of 1/4, built 442), on the states of the same steps solved by the Taylor tower
+    (Newton on the jets, an independent solver), and retraces itself (RKHP Euler with the
+    symmetric realisation is symmetric, docs/theory.md §12) to round-off over the run."""
     system, euler = get_system("nambu"), load_tableau("euler")
-    direct = run(system, euler, 0.5, 400)
-    tower = run(system, euler, 0.5, 400, provider=TOWER)
-    back = run(system, euler, -0.5, 400, direct.states[-1], keep_all=False)
+    direct = run(system, euler, 0.8, 250)
+    tower = run(system, euler, 0.8, 250, provider=TOWER)
+    back = run(system, euler, -0.8, 250, direct.states[-1], keep_all=False)
     assert direct.ok and tower.ok and back.ok
-    assert direct.newton_iterations.sum() > 1000 and sum(direct.extra["refreshes"]) <= 60
+    assert sum(direct.extra["refreshes"]) <= 40
     assert np.abs(direct.states - tower.states).max() < 1e-13
     assert np.abs(back.final_state - system.x0).max() < 1e-13
+
+
+def test_late_iterations_take_the_jacobian_only_out_of_reach():
+    """`_out_of_reach` at iteration 10 of 20 (two spare), tolerance 2^-60: corrections of 1e-12
+    contracting by 0.1 meet the stop test in the 7 iterations left (0.1^7 1e-12 0.1 / 0.9 is
+    1.1e-20), by 0.5 they do not (0.5^7 1e-12 = 7.8e-15); a contraction not yet measured
+    (since < 2) or not below 1 takes the Jacobian."""
+    tol = 2.0**-60
+    assert not _out_of_reach(10, 3, 1e-12, 0.1, 20, tol)
+    assert _out_of_reach(10, 3, 1e-12, 0.5, 20, tol)
+    assert _out_of_reach(10, 1, 1e-12, 0.1, 20, tol)
+    assert _out_of_reach(10, 3, 1e-12, 1.5, 20, tol)
+    assert _out_of_reach(17, 3, 1e-12, 0.1, 20, tol)
 
 
 @pytest.mark.parametrize("name", ["charged-particle", "benchmarks/data/vortices-8.toml"])

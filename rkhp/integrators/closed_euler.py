@@ -70,6 +70,7 @@ from .derivatives import derivatives_at
 from .direct_form import (
     HISTORY,
     MAX_PICARD,
+    PICARD_RATE,
     RATE_MARGIN,
     REFRESH_FLOOR,
     SLOW_CONTRACTION,
@@ -511,7 +512,7 @@ def _sweeps_z(y0, hs, form, work, n, tol, stagnation):
             if not d <= size:
                 size = d
         sweeps += 1
-        verdict = sweep_verdict(sweeps, size, previous, tol, stagnation)
+        verdict = sweep_verdict(sweeps, size, previous, tol, stagnation, PICARD_RATE)
         if verdict == SWEEP_UNDO:
             for k in range(n):
                 work.z[k] = work.last[k]

@@ -87,14 +87,15 @@ not finite) and iterate with a chord matrix from there; iterate with a chord mat
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def sweep_verdict(sweeps, size, previous, tol, stagnation):
+def sweep_verdict(sweeps, size, previous, tol, stagnation, slow):
     """What a direct form's fixed-point sweeps do after their sweep number `sweeps` changed the
     unknowns by `size` (largest component; the sweep before by `previous`), with the stop tests
     of the chord iterations (tol and stagnation absolute): converged when the change, or its
     predicted successor theta / (1 - theta) size (theta = size / previous), is at most tol, or
     when changes at most `stagnation` stop halving; the chord iterations take over where a change
     grows (the sweep undone) or, above `stagnation` (below it the changes are round-off, not a
-    contraction), contracts by more than PICARD_RATE."""
+    contraction), contracts by more than `slow` (PICARD_RATE, or the spray's own threshold,
+    `rkhp.integrators.spray_euler.SLOW_SWEEPS`)."""
     if not size < np.inf:
         return SWEEP_UNDO
     if size <= tol or (sweeps >= 2 and size >= 0.5 * previous and size <= stagnation):
@@ -105,7 +106,7 @@ def sweep_verdict(sweeps, size, previous, tol, stagnation):
         theta = size / previous
         if theta < 0.5 and theta / (1.0 - theta) * size <= tol:
             return SWEEP_CONVERGED
-        if theta > PICARD_RATE and size > stagnation:
+        if theta > slow and size > stagnation:
             return SWEEP_SLOW
     return SWEEP_ON
 

@@ -22,7 +22,8 @@ numbers, solve first by fixed-point sweeps (`_sweeps`)
 which contract the error by O(h) a sweep (X_p = pi p is O(h): |A (x) d_y X_p| and
 |h Hess H pi / 2| are O(h)), about as fast as the chord iterations below with a kept matrix at
 the compositions' step sizes, without their linear solve; while a sweep contracts the changes
-by at most `PICARD_RATE` (`rkhp.integrators.direct_form.sweep_verdict`; a substep without
+by at most the square root of the kept matrix's last contraction, from `PICARD_RATE` to
+`SLOW_SWEEPS` (`rkhp.integrators.direct_form.sweep_verdict`; a substep without
 previous solutions, whose start is off by O(h^2) in p, first takes one sweep that is not judged:
 it carries the error of p into Z, and its change measures the start, not the contraction), else
 by chord iterations with the frozen Jacobian
@@ -77,6 +78,7 @@ what runs at every substep (`benchmarks/substeps.py` measures it).
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -97,6 +99,7 @@ from ..taylor.tape import Tape
 from .derivatives import derivatives_at, spray_at
 from .direct_form import (
     MAX_PICARD,
+    PICARD_RATE,
     RATE_MARGIN,
     REFRESH_FLOOR,
     SLOW_CONTRACTION,
@@ -124,6 +127,12 @@ AMORTISE = 2.0
 """A substep rebuilds its chord matrix before iterating when AMORTISE times the iterations that
 would save at this step exceeds the matrix's cost in iterations (`_worth_rebuilding`): a fresh
 matrix serves the steps that follow too."""
+SLOW_SWEEPS = 0.5
+"""The sweeps of a substep give way to its chord iterations when one contracts by more than the
+square root of the kept matrix's last measured contraction (a chord iteration costs about two
+sweeps: a sweep and the product with the inverse), at least
+`rkhp.integrators.direct_form.PICARD_RATE` and at most this (a substep whose matrix is unbuilt or
+contracts slowly: a sweep then gains 0.3 decades or more)."""
 SPARE = 2
 """Iterations a substep keeps for Newton's method after its chord iterations fall behind their
 measured contraction (`_out_of_reach`): from a correction at 1e-10 or below, two Newton steps
@@ -555,7 +564,7 @@ def _undo_picard(q, work, n):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def _sweeps(q, y0, hs, tapes, work, n, tol, stagnation, zw):
+def _sweeps(q, y0, hs, tapes, work, n, tol, stagnation, zw, slow):
     """Fixed-point sweeps (`_picard`) from the current (Z, p) while `sweep_verdict` lets them
     go on: returns (sweeps, whether they converged; a sweep it undoes is not counted)."""
     previous = np.inf
@@ -563,7 +572,7 @@ def _sweeps(q, y0, hs, tapes, work, n, tol, stagnation, zw):
     while sweeps < MAX_PICARD:
         size = _picard(q, y0, hs, tapes, work, n, zw)
         sweeps += 1
-        verdict = sweep_verdict(sweeps, size, previous, tol, stagnation)
+        verdict = sweep_verdict(sweeps, size, previous, tol, stagnation, slow)
         if verdict == SWEEP_UNDO:
             _undo_picard(q, work, n)
             return sweeps - 1, False
@@ -724,7 +733,8 @@ def euler_substep(i, y0, hs, tapes, work, memory, tol, max_iter):
             aligned = 1
         else:
             _undo_picard(q, work, n)
-    sweeps, converged = _sweeps(q, y0, hs, tapes, work, n, tol * scale, STAGNATION * scale, zw)
+    slow = min(SLOW_SWEEPS, max(PICARD_RATE, math.sqrt(memory.rate[i])))
+    sweeps, converged = _sweeps(q, y0, hs, tapes, work, n, tol * scale, STAGNATION * scale, zw, slow)
     sweeps += aligned
     fresh = False
     if not converged and (memory.nodes[i] != q or _worth_rebuilding(i, q, tapes, memory)):
