@@ -12,6 +12,8 @@ reference (`rkhp.studies.converge`).
 
 from __future__ import annotations
 
+import warnings
+
 import mpmath as mp
 import numpy as np
 import pytest
@@ -33,9 +35,12 @@ from rkhp.integrators.failure import Failure
 from rkhp.integrators.lie_poisson_point import (
     PHI_SERIES,
     PHI_TERMS,
+    POINT_ENTRIES,
     _phi_functions,
     _phi_terms,
     diagonal_point,
+    diagonal_point_at,
+    generated_diagonal_point,
     se3_point,
 )
 from rkhp.integrators.methods import integrate, resolve_method
@@ -45,6 +50,8 @@ from rkhp.studies.converge import converge
 from rkhp.systems import get_system
 from rkhp.systems.families import LieAlgebra, family_system
 from rkhp.tableaux.compositions import load_composition, one_step
+from rkhp.taylor import generated
+from rkhp.taylor.kernel_cache import KernelCacheWarning
 from rkhp.taylor.tape import functions as f
 
 #: a constant pi of rank 2 on R^3 (Casimir k . x, k = (1, 2, 4)) with a non-quadratic H
@@ -176,6 +183,57 @@ def _algebra(name):
     return family_system("lie-poisson", LieAlgebra(C),
                          lambda x: 0.5 * x[0] * x[0] + f.sin(x[1]) + 0.1 * x[0] * x[1] * x[n - 1],
                          name=name, x0=x0, t_final=1.0)
+
+
+@pytest.mark.parametrize("name", ["toda", "toda:12", "heisenberg", "ax+b"])
+def test_the_generated_point_is_the_interpreted_one_bit_for_bit(name):
+    """The point written out per algebra (`diagonal_point_source`) against `diagonal_point`: the
+    same values to the last bit at |K|_F from 1e-9 (phi_2's series of a few terms) through 1 and 3
+    (entries past PHI_SERIES: expm1) to past phi's guard, where both fail."""
+    system = _algebra(name) if name in ("heisenberg", "ax+b") else get_system(name)
+    n, C = system.dim, _structure(system)
+    form = closed_form(system)
+    assert form.point_at != 0
+    interpreted, generated = closed_work(form, n), closed_work(form, n)
+    rng = np.random.default_rng(11)
+    for size in (1e-9, 1e-3, 0.3, 1.0, 3.0, 6.0):
+        y0, z = rng.normal(size=n), rng.normal(size=n)
+        z *= size / np.linalg.norm(np.einsum("ijk,j->ik", C, z))
+        interpreted.z[:] = generated.z[:] = z
+        cause = diagonal_point(y0, form, interpreted, n)
+        assert generated_diagonal_point(y0, form, generated, n) == cause
+        assert cause == (Failure.OK if size < 5.0 else Failure.NEWTON_NON_FINITE)
+        if cause == Failure.OK:
+            assert np.array_equal(generated.dy, interpreted.dy) and np.array_equal(generated.xbar, interpreted.xbar)
+
+
+def test_no_point_is_generated_past_its_size():
+    """An algebra with more than POINT_ENTRIES entries of K keeps the interpreted point (address
+    0) without writing a module."""
+    entries = POINT_ENTRIES + 1
+    pairs = np.array([[k, k] for k in range(entries)], dtype=np.int64)
+    starts, cols = np.arange(entries + 1, dtype=np.int64), np.zeros(entries, dtype=np.int64)
+    assert diagonal_point_at(pairs, starts, cols, np.ones(entries), np.arange(entries), entries) == 0
+
+
+def test_a_folder_that_cannot_hold_the_point_leaves_it_interpreted(tmp_path, monkeypatch):
+    """Where the generated module cannot be written, the diagonal algebra's point is interpreted
+    (`diagonal_point`, address 0), and the run is the same as by the generated point."""
+    system = _algebra("ax+b")
+    method = resolve_method("kahan-li6")
+    compiled = method.integrate(system, 0.1, 20).raise_if_failed().final_state
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    monkeypatch.setattr(generated, "generated_folder", lambda: blocker / "generated")
+    monkeypatch.setattr("rkhp.taylor.kernel_cache._SAID", set())
+    monkeypatch.setattr(generated, "_LOADED", {})
+    with pytest.warns(KernelCacheWarning, match="interpreted instead"):
+        interpreted = closed_form(_algebra("ax+b"))
+    assert interpreted.point_at == 0 and interpreted.derivatives_at == 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", KernelCacheWarning)
+        by_structure = method.integrate(_algebra("ax+b"), 0.1, 20).raise_if_failed().final_state
+    np.testing.assert_allclose(by_structure, compiled, rtol=1e-13, atol=1e-15)
 
 
 @pytest.mark.parametrize("name", ["heisenberg", "ax+b"])

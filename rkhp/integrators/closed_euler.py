@@ -85,7 +85,16 @@ from .direct_form import (
     weight,
 )
 from .failure import Failure
-from .lie_poisson_point import diagonal_point, exp_series, rotation_jacobian, rotation_point, se3_point
+from .lie_poisson_point import (
+    POINT_CONSTANTS,
+    diagonal_point,
+    diagonal_point_at,
+    exp_series,
+    generated_diagonal_point,
+    rotation_jacobian,
+    rotation_point,
+    se3_point,
+)
 
 CONSTANT, LIE_POISSON, LOG_CANONICAL = 0, 1, 2
 """The families of `ClosedForm.kind`."""
@@ -147,7 +156,8 @@ class ClosedForm(NamedTuple):
     polynomial_degree`), and then hessian (n, n) its Hessian (else zeros); derivatives_at: the
     address of H's gradient and Hessian compiled for this system (`rkhp.integrators.derivatives`;
     the Hessian where the substeps take Newton's method on a non-quadratic H), 0 where the tape is
-    interpreted."""
+    interpreted; point_at: on a diagonal algebra the address of its generated point
+    (`rkhp.integrators.lie_poisson_point.diagonal_point_at`), else 0 (`diagonal_point` then)."""
 
     kind: int
     matrix: np.ndarray
@@ -162,6 +172,7 @@ class ClosedForm(NamedTuple):
     hessian_constant: bool
     hessian: np.ndarray
     derivatives_at: int
+    point_at: int
 
 
 class ClosedWork(NamedTuple):
@@ -176,7 +187,9 @@ class ClosedWork(NamedTuple):
     (then the correction) and lu_solve's work vector; last, step, by (n): the previous residual,
     the previous correction and a product, for Broyden's update; perm (n) int64: the row order
     of the chord matrix's factors; y, y_low (n): the state as the double-double y + y_low
-    (`begin`); derivs (n + n^2): grad H and Hess H by the compiled derivatives."""
+    (`begin`); derivs (n + n^2): grad H and Hess H by the compiled derivatives; zy (2n + constants)
+    and pt (2n + 1): the generated point's input (z, y0, `lie_poisson_point.POINT_CONSTANTS`) and
+    output (`generated_diagonal_point`)."""
 
     W: np.ndarray
     z: np.ndarray
@@ -198,6 +211,8 @@ class ClosedWork(NamedTuple):
     y: np.ndarray
     y_low: np.ndarray
     derivs: np.ndarray
+    zy: np.ndarray
+    pt: np.ndarray
 
 
 class ChordMemory(NamedTuple):
@@ -236,7 +251,8 @@ def closed_work(form: ClosedForm, n: int) -> ClosedWork:
     return ClosedWork(np.zeros((form.hamiltonian.n_slots, n + 1)), vector(), vector(), vector(), vector(), vector(),
                       vector(), np.zeros(form.pairs.shape[0]), np.zeros((n, n)), np.zeros((n, n)),
                       vector(), vector(), vector(), vector(), vector(), vector(),
-                      np.zeros(n, np.int64), vector(), vector(), np.zeros(n + n * n))
+                      np.zeros(n, np.int64), vector(), vector(), np.zeros(n + n * n),
+                      np.concatenate([np.zeros(2 * n), POINT_CONSTANTS]), np.zeros(2 * n + 1))
 
 
 def chord_memory(s: int, n: int) -> ChordMemory:
@@ -258,6 +274,8 @@ def _point(y0, form, work, n):
         return se3_point(y0, form, work)
     if form.kind == LIE_POISSON and form.rotation != 0.0:
         return rotation_point(y0, form, work)
+    if form.kind == LIE_POISSON and form.diagonal.shape[0] > 0 and form.point_at != 0:
+        return generated_diagonal_point(y0, form, work, n)
     if form.kind == LIE_POISSON and form.diagonal.shape[0] > 0:
         return diagonal_point(y0, form, work, n)
     if form.kind == LIE_POISSON:
@@ -787,8 +805,9 @@ def _read_form(system) -> ClosedForm:
     newton = (rotation != 0.0 and n == 3) or (kind != LIE_POISSON and n <= EXACT_DIMENSION)
     address = derivatives_at(system, hessian=newton and not quadratic)
     exact = newton and (quadratic or address != 0)
+    point_at = diagonal_point_at(*entries, diagonal, n) if diagonal.size else 0
     form = ClosedForm(kind, np.ascontiguousarray(matrix), *entries, tape, rotation, diagonal, exact, quadratic,
-                      np.zeros((n, n)), address)
+                      np.zeros((n, n)), address, point_at)
     if quadratic:
         _quadratic_hessian(form, closed_work(form, n), n)
     return form

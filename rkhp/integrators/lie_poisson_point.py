@@ -14,7 +14,13 @@ diagonal on them: K = [[D, 0], [E, 0]] in the split (A, the rest), D = diag(d) (
 Toda lattice in Flaschka's variables). Then K^m = [[D^m, 0], [E D^(m-1), 0]], so with a = y0 on A
 and w = -d, phi_k(w) = sum_m w^m / (m + k)! componentwise (docs/theory.md §4):
 e^-K y0 - y0 = (w phi_1(w) a, -E phi_1(w) a) and psi(K) y0 = (phi_1(w) a, y0 - E phi_2(w) a) on
-(A, the rest): closed forms of |A| exponentials (`diagonal_point`).
+(A, the rest): closed forms of |A| exponentials (`diagonal_point`). Its loops over K's sparse
+entries cost more than their arithmetic, so the same point is also written out per algebra as
+plain arithmetic, K's entries and the pairs' products unrolled and phi_2's series summed for all
+columns at once (`diagonal_point_source`), and compiled as a `cfunc` (`diagonal_point_at`,
+`rkhp.taylor.generated`, docs/engine.md "Derivatives compiled per system"), bit for bit the same
+values as `diagonal_point`, which serves where the module cannot be kept or the algebra has more
+than POINT_ENTRIES entries.
 
 On se(3)* (the heavy top), x = (M, Gamma) and K = [[hat(q), hat(r)], [0, hat(q)]] with (q, r) =
 s p: a function of a block triangular matrix with equal diagonal blocks is f(K) = [[f(hat q),
@@ -27,12 +33,15 @@ hat(r) hat(q)): closed forms in cross products (`se3_point`, docs/theory.md §4)
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
+from ..taylor import generated
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
 from ..taylor.elementary import TWO_PI
+from ..taylor.generated import call_at
 from .failure import Failure
 
 PHI_GUARD = 0.9 * TWO_PI
@@ -57,6 +66,13 @@ PHI_REACH = np.array([0.0] + [(math.factorial(t + 2) * 2.0**-57) ** (1.0 / t) fo
 """PHI_REACH[t]: the largest |w| at which t terms of phi_2's series leave the next,
 |w|^t / (t + 2)!, below 2^-56 of the first (1/2): 9 terms up to |w| = 0.087, 6 up to 0.0081;
 PHI_REACH[PHI_TERMS] > PHI_SERIES."""
+POINT_CONSTANTS = np.concatenate([PHI_TABLE, PHI_REACH])
+"""What the generated point reads after z and y0 in its input (`diagonal_point_source`)."""
+POINT_ENTRIES = 128
+"""The most entries of K whose point is generated (toda:64 has 96; its module compiles in a few
+seconds, once per machine): beyond, `diagonal_point` interprets them."""
+GENERATOR = Path(__file__).resolve()
+"""The source that writes the generated point (its content is part of the module's key)."""
 
 
 def _rotation_series_table() -> np.ndarray:
@@ -258,6 +274,77 @@ def diagonal_point(y0, form, work, n):
         if i != k:
             work.dy[i] -= work.kval[e] * p1[k] * y0[k]
             work.xbar[i] -= work.kval[e] * p2[k] * y0[k]
+    return Failure.OK
+
+
+def diagonal_point_source(pairs, starts, cols, coefs, diagonal, n: int) -> str:
+    """The body ``def point(u, out, what)`` of the generated point of a diagonal algebra whose K
+    has the entries (pairs, starts, cols, coefs) and the diagonal `diagonal` (as
+    `rkhp.integrators.closed_euler.ClosedForm`): from u = (z, y0, POINT_CONSTANTS) it writes
+    out = (e^-K y0 - y0, psi(K) y0, 0), or 1 in out[2n] beyond phi's guard; the same operations
+    in the same order as `diagonal_point`, so the same values bit for bit (phi_2's series summed
+    with the terms its largest entry needs, for all columns at once: each column's own Horner
+    chain, as `_phi_functions` sums it)."""
+    entries, table, reach = pairs.shape[0], 2 * n, 2 * n + PHI_TABLE.size
+    lines = ["def point(u, out, what):"]
+    for e in range(entries):
+        terms = "".join(f" + {float(coefs[r])!r} * u[{int(cols[r])}]" for r in range(starts[e], starts[e + 1]))
+        lines.append(f"    k{e} = 0.0{terms}")
+    lines += ["    norm = 0.0" + "".join(f" + k{e} * k{e}" for e in range(entries)),
+              f"    if not math.sqrt(norm) < {PHI_GUARD!r}:", f"        out[{2 * n}] = 1.0", "        return",
+              f"    out[{2 * n}] = 0.0", "    largest = 0.0"]
+    columns = [(k, int(diagonal[k])) for k in range(n) if diagonal[k] >= 0]
+    for k, e in columns:
+        lines += [f"    w{k} = -k{e}", f"    if abs(w{k}) < {PHI_SERIES!r}:",
+                  f"        largest = max(largest, abs(w{k}))"]
+    lines += ["    terms = 1", f"    while largest > u[{reach} + terms]:", "        terms += 1"]
+    lines += [f"    q{k} = 0.0" for k, _ in columns]
+    lines += ["    m = terms - 1", "    while m >= 0:", f"        c = u[{table} + m]"]
+    lines += [f"        q{k} = q{k} * w{k} + c" for k, _ in columns]
+    lines += ["        m -= 1"]
+    for k in range(n):
+        if diagonal[k] >= 0:
+            lines += [f"    if abs(w{k}) < {PHI_SERIES!r}:", f"        p{k} = 1.0 + w{k} * q{k}", "    else:",
+                      f"        p{k} = math.expm1(w{k}) / w{k}", f"        q{k} = (p{k} - 1.0) / w{k}",
+                      f"    d{k} = w{k} * p{k} * u[{n + k}]", f"    x{k} = p{k} * u[{n + k}]"]
+        else:
+            lines += [f"    p{k} = 1.0", f"    q{k} = 0.5", f"    d{k} = 0.0", f"    x{k} = u[{n + k}]"]
+    for e in range(entries):
+        i, k = int(pairs[e, 0]), int(pairs[e, 1])
+        if i != k:
+            lines += [f"    d{i} -= k{e} * p{k} * u[{n + k}]", f"    x{i} -= k{e} * q{k} * u[{n + k}]"]
+    for k in range(n):
+        lines += [f"    out[{k}] = d{k}", f"    out[{n + k}] = x{k}"]
+    return "\n".join(lines) + "\n"
+
+
+def diagonal_point_at(pairs, starts, cols, coefs, diagonal, n: int) -> int:
+    """The address of the generated point of a diagonal algebra (`diagonal_point_source`), its
+    module keyed by the entries, the dimension and this source; 0 beyond POINT_ENTRIES or where the
+    module cannot be kept."""
+    if pairs.shape[0] > POINT_ENTRIES:
+        return 0
+    arrays = (np.ascontiguousarray(pairs, dtype=np.int64), np.ascontiguousarray(starts, dtype=np.int64),
+              np.ascontiguousarray(cols, dtype=np.int64), np.ascontiguousarray(coefs, dtype=np.float64),
+              np.ascontiguousarray(diagonal, dtype=np.int64))
+    key = generated.key_of(b"diagonal point", *(a.tobytes() for a in arrays), f"{n}".encode(), GENERATOR.read_bytes())
+    return generated.compiled_address(key, "point", lambda: diagonal_point_source(*arrays, n))
+
+
+@nb.njit(inline="always", **NJIT_NORC)
+def generated_diagonal_point(y0, form, work, n):
+    """`diagonal_point` by the generated point at form.point_at (`diagonal_point_at`): z and y0
+    into work.zy (after them POINT_CONSTANTS, set once), the point into work.pt, then work.dy and
+    work.xbar from it. Failure as `diagonal_point`."""
+    for k in range(n):
+        work.zy[k] = work.z[k]
+        work.zy[n + k] = y0[k]
+    call_at(form.point_at, work.zy, work.pt, 0)
+    if work.pt[2 * n] != 0.0:
+        return Failure.NEWTON_NON_FINITE
+    for k in range(n):
+        work.dy[k] = work.pt[k]
+        work.xbar[k] = work.pt[n + k]
     return Failure.OK
 
 

@@ -103,8 +103,9 @@ def compiled_address(key: str, name: str, body) -> int:
             spec.loader.exec_module(module)
         except (OSError, SyntaxError, ImportError) as exc:
             sys.modules.pop(module_name(key), None)
-            say_once(f"generated {path.parent}", f"a compiled derivative cannot be kept in {path.parent} ({exc}): "
-                                                 "the tapes are interpreted instead (docs/engine.md)")
+            say_once(f"generated {path.parent}",
+                     f"a function compiled per system cannot be kept in {path.parent} ({exc}): its tape or "
+                     "structure is interpreted instead (docs/engine.md)")
             return 0
         _LOADED[key] = module
     return int(getattr(module, name).address)
