@@ -141,6 +141,9 @@ MAX_NODES = 12
 """Collocation nodes of the direct form at most (E_12 theta^24 <= NODE_BOUND for theta up to
 about 3.1, beyond the steps at which the chord iterations converge); a substep needing more
 fails with STAGES_NO_CONVERGENCE."""
+UNROLLED_NODES = 8
+"""The sweeps run with Q a constant up to this many nodes (`_picard_unrolled`; the race's settings
+take 4 and 5, `benchmarks/substeps.py`)."""
 NODE_BOUND = 2.0**-66
 """The bound on E_Q theta^(2 Q), the relative error of the average for y' = lambda y,
 |lambda| <= theta (`rkhp.taylor.collocation.average_error_constant`), that sets the number of
@@ -554,6 +557,28 @@ def _picard(q, y0, hs, tapes, work, n, zw):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
+def _picard_unrolled(q, y0, hs, tapes, work, n, zw):
+    """`_picard` with q a constant from 2 to UNROLLED_NODES (a branch per value), else as it is:
+    with q constant the loops over the stages unroll and the collocation tables' entries are
+    constants (the branch costs less than the loops' overhead on the few stages of a sweep)."""
+    if q == 2:
+        return _picard(2, y0, hs, tapes, work, n, zw)
+    if q == 3:
+        return _picard(3, y0, hs, tapes, work, n, zw)
+    if q == 4:
+        return _picard(4, y0, hs, tapes, work, n, zw)
+    if q == 5:
+        return _picard(5, y0, hs, tapes, work, n, zw)
+    if q == 6:
+        return _picard(6, y0, hs, tapes, work, n, zw)
+    if q == 7:
+        return _picard(7, y0, hs, tapes, work, n, zw)
+    if q == UNROLLED_NODES:
+        return _picard(UNROLLED_NODES, y0, hs, tapes, work, n, zw)
+    return _picard(q, y0, hs, tapes, work, n, zw)
+
+
+@nb.njit(inline="always", **NJIT_NORC)
 def _undo_picard(q, work, n):
     """(Z, p) as before the last `_picard` sweep."""
     for a in range(q):
@@ -570,7 +595,7 @@ def _sweeps(q, y0, hs, tapes, work, n, tol, stagnation, zw, slow):
     previous = np.inf
     sweeps = 0
     while sweeps < MAX_PICARD:
-        size = _picard(q, y0, hs, tapes, work, n, zw)
+        size = _picard_unrolled(q, y0, hs, tapes, work, n, zw)
         sweeps += 1
         verdict = sweep_verdict(sweeps, size, previous, tol, stagnation, slow)
         if verdict == SWEEP_UNDO:
