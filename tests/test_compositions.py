@@ -271,6 +271,13 @@ def test_an_overstated_claim_fails_and_bad_files_are_refused(run_cli, tmp_path):
         assert code == 2 and err.startswith("rkhp: error:") and len(err.strip().splitlines()) == 1, (name, err)
 
 
+@pytest.mark.parametrize("args", [["compose", "x" * 300 + ",rk4"], ["compose", "x" * 300 + ".toml,rk4"],
+                                  ["verify", "x" * 300 + ".json"]], ids=["name", "toml", "json"])
+def test_a_name_no_file_can_have_is_one_line(run_cli, args):
+    code, _, err = run_cli(*args)
+    assert code == 2 and err.startswith("rkhp: error:") and len(err.strip().splitlines()) == 1, err
+
+
 def test_negative_steps_in_the_cli(run_cli):
     code, out, _ = run_cli("integrate", "rigid-body", "--method", "tj4", "--h", "-0.1", "--format", "json")
     assert code == 0 and json.loads(out)["t_final"] == pytest.approx(-10.0)

@@ -206,6 +206,12 @@ def test_spec_file_errors(tmp_path, text, message):
         get_system(path)
 
 
+@pytest.mark.parametrize("name", ["x" * 300 + ".toml", "/".join(["x" * 200] * 30) + ".json"], ids=["name", "path"])
+def test_a_spec_file_name_no_file_can_have_is_not_found(name):
+    with pytest.raises(InputError, match="not found"):
+        get_system(name)
+
+
 def test_unknown_system_suggests():
     with pytest.raises(InputError, match="did you mean rigid-body"):
         get_system("rigid-bod")

@@ -189,6 +189,18 @@ def test_unknown_names_suggest_close_ones():
         load_tableau("nowhere/rk.toml")
 
 
+#: names that no file can have: a component longer than a file system allows (255 bytes), and a
+#: path longer than the system's limit on paths
+NO_FILE_NAMES = ["x" * 300, "x" * 300 + ".toml", "/".join(["x" * 200] * 30) + ".toml"]
+
+
+@pytest.mark.parametrize("name", NO_FILE_NAMES, ids=["name", "file", "path"])
+def test_a_name_no_file_can_have_is_bad_input(name):
+    with pytest.raises(InputError) as info:
+        load_tableau(name)
+    assert "\n" not in str(info.value)
+
+
 def test_unreadable_file(tmp_path):
     with pytest.raises(InputError, match="cannot read"):
         load_tableau(str(tmp_path))  # a directory

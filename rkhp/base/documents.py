@@ -22,12 +22,27 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import stat
 import tomllib
 from pathlib import Path
 
 from . import bounds
 from .errors import InputError
+
+
+def path_exists(path) -> bool:
+    """Whether anything (a file, a folder, a link, a broken one too) is at ``path``. A name that
+    no file can have (a component longer than the system allows, a NUL character) has nothing at
+    it: the question never raises, where `pathlib.Path.exists` raises OSError for such a name, and
+    :func:`read_text` says why such a file cannot be read."""
+    return os.path.lexists(path)
+
+
+def is_file(path) -> bool:
+    """Whether ``path`` is a regular file, links followed; False for a name that no file can have
+    (:func:`path_exists`)."""
+    return os.path.isfile(path)
 
 
 def read_text(path, what: str = "file") -> str:

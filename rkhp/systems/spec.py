@@ -65,7 +65,7 @@ def spec_text(path) -> str:
     """The text of a spec file, read safely (`rkhp.base.documents.read_text`: a regular file,
     its size bounded, UTF-8)."""
     path = Path(path)
-    if not path.exists() and not path.is_symlink():
+    if not documents.path_exists(path):
         raise InputError(f"spec file {path} not found")
     return read_text(path, "spec file")
 

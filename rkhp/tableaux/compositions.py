@@ -49,7 +49,7 @@ from pathlib import Path
 import mpmath
 
 from ..base.bounds import MAX_CLAIMED_ORDER, MAX_STAGES
-from ..base.documents import parse_document, read_text
+from ..base.documents import is_file, parse_document, read_text
 from ..base.errors import InputError
 from .files import load_tableau
 from .tableau import GivenDecimal, entry_text, is_exact, parse_entry, to_float
@@ -320,7 +320,7 @@ def is_composition_name(spec: str) -> bool:
     if is_builtin_composition(spec):
         return True
     path = Path(spec)
-    if path.suffix.lower() in (".toml", ".json") and path.is_file():
+    if path.suffix.lower() in (".toml", ".json") and is_file(path):
         try:
             data = parse_document(read_text(path), path.suffix.lower(), str(path))
         except InputError:
@@ -335,7 +335,7 @@ def load_composition(spec: str) -> Composition:
         file = _composition_registry()[spec.lower()]
         return composition_from_dict(dict(_builtin_files())[file], file[:-5], f"built-in {file}")
     path = Path(spec)
-    if not path.is_file():
+    if not is_file(path):
         raise InputError(f"no composition named {spec!r}")
     data = parse_document(read_text(path), path.suffix.lower(), str(path))
     return composition_from_dict(data, path.stem, str(path))

@@ -31,7 +31,7 @@ from pathlib import Path
 import tomli_w
 
 from ..base.bounds import MAX_CLAIMED_ORDER, MAX_STAGES
-from ..base.documents import parse_document, read_text
+from ..base.documents import is_file, parse_document, path_exists, read_text
 from ..base.errors import InputError
 from ..base.provenance import write_output
 from .tableau import Tableau, entry_text, parse_entry
@@ -103,9 +103,9 @@ def load_tableau(name_or_path) -> Tableau:
     text = str(name_or_path)
     path = Path(text)
     aliases = _alias_map()
-    if text.lower() in aliases and not path.is_file():
+    if text.lower() in aliases and not is_file(path):
         return _load_builtin(aliases[text.lower()])
-    if path.suffix.lower() in _FILE_SUFFIXES or path.exists() or "/" in text:
+    if path.suffix.lower() in _FILE_SUFFIXES or path_exists(path) or "/" in text:
         return load_file(path)
     close = difflib.get_close_matches(text.lower(), list(aliases), n=3, cutoff=0.6)
     hint = (" (did you mean " + ", ".join(sorted({aliases[c] for c in close})) + "?)"
