@@ -201,6 +201,11 @@ def test_a_name_no_file_can_have_is_bad_input(name):
     assert "\n" not in str(info.value)
 
 
+def test_an_empty_name_is_refused_as_empty():
+    with pytest.raises(InputError, match="empty tableau name"):
+        load_tableau("")
+
+
 def test_unreadable_file(tmp_path):
     with pytest.raises(InputError, match="cannot read"):
         load_tableau(str(tmp_path))  # a directory

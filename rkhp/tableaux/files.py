@@ -101,6 +101,8 @@ def load_tableau(name_or_path) -> Tableau:
     if isinstance(name_or_path, Tableau):
         return name_or_path
     text = str(name_or_path)
+    if not text.strip():  # Path("") is the current folder
+        raise InputError("empty tableau name; see `rkhp tables` for the built-in names")
     path = Path(text)
     aliases = _alias_map()
     if text.lower() in aliases and not is_file(path):
