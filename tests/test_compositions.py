@@ -467,6 +467,26 @@ def test_a_processor_must_sum_to_zero_and_fit(run_cli, tmp_path):
         load_composition(str(word))
 
 
+def test_coefficients_beyond_the_float_range_have_exact_orders():
+    """gamma_1 = -gamma_2 = 1e300: F_3's coefficient 1e900 - 1e900 + 1 is exact, the residual of the
+    general class's order 2 (F_1 F_1 and F_2, of size 1e600) is beyond the float range."""
+    huge = composition_from_dict({"gamma": ["1e300", "-1e300", "1"]}, "huge", "test")
+    symmetric, general = composition_order(huge, 2, True), composition_order(huge, 1, False)
+    assert (symmetric.order, symmetric.largest_failing) == (2, 1.0)
+    assert (general.order, general.largest_failing) == (1, float("inf"))
+    processed = composition_from_dict({"gamma": ["1"], "processor": ["1e308", "-1e308"]}, "processed", "test")
+    assert composition_order(processed, 1, False).largest_failing == float("inf")
+
+
+@pytest.mark.parametrize("data, message", [
+    ({"gamma": ["1e400", "1"]}, "coefficients sum to 1.0e[+]400, not 1"),
+    ({"gamma": ["1"], "processor": ["1e400", "1"]}, "processor's coefficients sum to 1.0e[+]400, not 0"),
+])
+def test_sums_beyond_the_float_range_are_named(data, message):
+    with pytest.raises(InputError, match=message):
+        composition_from_dict(data, "huge", "test")
+
+
 def _toml(data: dict) -> str:
     return "".join(f"{k} = [{', '.join(repr(v) for v in vs)}]\n" for k, vs in data.items())
 

@@ -48,7 +48,7 @@ from pathlib import Path
 
 import mpmath
 
-from ..base.bounds import MAX_CLAIMED_ORDER, MAX_STAGES
+from ..base.bounds import MAX_CLAIMED_ORDER, MAX_STAGES, float_or_infinity
 from ..base.documents import is_file, parse_document, read_text
 from ..base.errors import InputError
 from .files import load_tableau
@@ -164,7 +164,7 @@ class CompositionOrder:
         base_symmetric: whether the base's modified field has odd powers of h only.
         conditions: number of word conditions up to order + 1 (or checked_up_to).
         largest_failing: the largest |residual| among the words of weight order + 1 (None when
-            none was checked).
+            none was checked; inf when it is beyond the float range).
         precision: how the conditions were evaluated ("exact rationals", "60 digits", ...).
     """
 
@@ -212,10 +212,16 @@ def _mp(g):
 
 
 def _residual_sum(gamma, digits, total: int = 1):
-    if all(isinstance(g, Fraction) for g in gamma):
-        return float(sum(gamma, Fraction(0)) - total)
+    """sum(gamma) - total as an mpmath number (of any magnitude: no float overflows)."""
     with mpmath.workdps(_dps(digits)):
         return sum((_mp(g) for g in gamma), mpmath.mpf(0)) - total
+
+
+def _sum_text(residual, total: int) -> str:
+    """total + residual (:func:`_residual_sum`) as a message shows it: 17 significant digits, of
+    any magnitude."""
+    with mpmath.workdps(_dps(None)):
+        return mpmath.nstr(total + residual, 17)
 
 
 def product_coefficients(gamma, weights: tuple[int, ...], max_weight: int):
@@ -269,7 +275,7 @@ def composition_order(comp: Composition, base_order: int = 2, base_symmetric: bo
             count += len(residuals)
             worst = max(residuals, default=0)
             if worst > tol:
-                failing = float(worst)
+                failing = float_or_infinity(worst)
                 break
             order = p
     precision = "exact rationals" if exact else (f"{EXACT_DIGITS} digits" if digits is None
@@ -377,10 +383,10 @@ def composition_from_dict(data: dict, default_name: str, where: str) -> Composit
                        tuple(_text(a, where, "aliases") for a in aliases),
                        _text(data.get("notes", ""), where, "notes"), processor)
     if not comp.consistent:
-        raise InputError(f"{where}: the coefficients sum to {1 + float(_residual_sum(values, comp.digits)):.17g}, "
+        raise InputError(f"{where}: the coefficients sum to {_sum_text(_residual_sum(values, comp.digits), 1)}, "
                          "not 1: not a consistent composition")
     if abs(comp.processor_sum) > _residual_tolerance(comp.digits):
-        raise InputError(f"{where}: the processor's coefficients sum to {float(comp.processor_sum):.17g}, not 0")
+        raise InputError(f"{where}: the processor's coefficients sum to {_sum_text(comp.processor_sum, 0)}, not 0")
     return comp
 
 
