@@ -16,6 +16,7 @@ from rkhp.tableaux.compositions import (
     builtin_compositions,
     composition_from_dict,
     composition_order,
+    is_composition_name,
     letters,
     load_composition,
     verify_composition,
@@ -485,6 +486,18 @@ def test_coefficients_beyond_the_float_range_have_exact_orders():
 def test_sums_beyond_the_float_range_are_named(data, message):
     with pytest.raises(InputError, match=message):
         composition_from_dict(data, "huge", "test")
+
+
+def test_a_json_composition_file_is_a_composition(run_cli, tmp_path):
+    path = tmp_path / "halves.json"
+    path.write_text(json.dumps({"kind": "composition", "gamma": ["1/2", "1/2"]}))
+    assert is_composition_name(str(path)) and load_composition(str(path)).gamma == (Fraction(1, 2),) * 2
+    code, out, _ = run_cli("show", str(path), "--format", "json")
+    assert code == 0 and json.loads(out)["kind"] == "composition"
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"kind": "composition", "gamma": ["1"],}')
+    with pytest.raises(InputError, match=f"{bad}: JSON syntax error"):
+        load_composition(str(bad))
 
 
 def _toml(data: dict) -> str:

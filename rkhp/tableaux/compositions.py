@@ -328,7 +328,7 @@ def is_composition_name(spec: str) -> bool:
     path = Path(spec)
     if path.suffix.lower() in (".toml", ".json") and is_file(path):
         try:
-            data = parse_document(read_text(path), path.suffix.lower(), str(path))
+            data = _read_composition_file(path)
         except InputError:
             return False
         return data.get("kind") == KIND or ("kind" not in data and "gamma" in data and "A" not in data)
@@ -343,8 +343,14 @@ def load_composition(spec: str) -> Composition:
     path = Path(spec)
     if not is_file(path):
         raise InputError(f"no composition named {spec!r}")
-    data = parse_document(read_text(path), path.suffix.lower(), str(path))
-    return composition_from_dict(data, path.stem, str(path))
+    return composition_from_dict(_read_composition_file(path), path.stem, str(path))
+
+
+def _read_composition_file(path: Path):
+    """The keys of a composition file: JSON for a .json file, TOML otherwise (read safely,
+    `rkhp.base.documents`)."""
+    kind = "json" if path.suffix.lower() == ".json" else "toml"
+    return parse_document(read_text(path, "composition file"), str(path), kind)
 
 
 def composition_from_dict(data: dict, default_name: str, where: str) -> Composition:
