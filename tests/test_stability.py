@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import sympy
 
+from rkhp.base.errors import InputError, NumericalFailure
 from rkhp.integrators import integrate_rkhp
 from rkhp.systems.families import family_system
 from rkhp.tableaux.files import builtin_names, load_tableau
@@ -410,6 +411,28 @@ def test_cli_plot_and_bad_input(run_cli, tmp_path):
     assert status == 2 and err.count("\n") == 1
     status, _, err = run_cli("stability", "classical:rk4")
     assert status == 2 and "RKHP method" in err
+
+
+def _repeated_midpoint(stages: int) -> Tableau:
+    """The implicit midpoint rule written as `stages` identical uncoupled stages: A = I/2, b_i = 1/s."""
+    A = [["1/2" if i == j else 0 for j in range(stages)] for i in range(stages)]
+    return Tableau.from_arrays(A, [f"1/{stages}"] * stages, name=f"midpoint-x{stages}")
+
+
+@pytest.mark.parametrize("realisation, stages", [("symmetric", 9), ("shifted", 5)])
+def test_implicit_stages_beyond_the_bound_are_refused_before_work(realisation, stages):
+    with pytest.raises(InputError, match=f"of {stages} stages.*at most") as info:
+        analyse(_repeated_midpoint(stages), realisation=realisation)
+    assert "\n" not in str(info.value)
+    with pytest.raises(InputError, match="at most"):
+        rotation_angle(_repeated_midpoint(stages), 1.0, realisation)
+
+
+def test_a_fold_of_several_stages_at_once_is_one_clear_failure():
+    """Two stages folding together at z = 2 make the refinement's Jacobian singular there."""
+    with pytest.raises(NumericalFailure, match="near z = 1.99.*several stages fold at once") as info:
+        analyse(_repeated_midpoint(2))
+    assert "\n" not in str(info.value)
 
 
 # ----------------------------------------------------------------------------- long-time behaviour

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import mpmath
 import sympy
 
-from ...base.errors import NumericalFailure
+from ...base.errors import InputError, NumericalFailure
 from ..tableau import Tableau, to_fraction
 from .field import DIGITS, Number, Z, exact_text, tableau_field
 from .roots import exact_root
@@ -19,6 +19,22 @@ MAX_ELIMINATION_STAGES = 2
 
 #: the continuation of an implicit branch stops beyond this z (the branch then exists up to it)
 MAX_CONTINUATION_Z = 64.0
+
+#: the most stages of an implicit tableau the linear analysis follows, per realisation: each
+#: continuation step solves systems of the s (symmetric) or 3s (shifted) stage unknowns at DIGITS
+#: digits, and the fold's refinement takes up to 200 Newton steps of that many + 1 determinants;
+#: the slowest, a fold of several stages at once, takes about 10 s at 8 symmetric stages and 30 s
+#: at 4 shifted ones (docs/stability.md)
+MAX_IMPLICIT_STAGES = {"symmetric": 8, "shifted": 4}
+
+
+def check_implicit_stages(tableau: Tableau, realisation: str) -> None:
+    """InputError for an implicit tableau of more stages than MAX_IMPLICIT_STAGES[realisation],
+    before any work."""
+    most = MAX_IMPLICIT_STAGES[realisation]
+    if not tableau.is_explicit and tableau.stages > most:
+        raise InputError(f"{tableau.name}: an implicit tableau of {tableau.stages} stages; the linear analysis "
+                         f"on the {realisation} realisation follows the stages of at most {most}")
 
 
 @dataclass(frozen=True)
@@ -188,9 +204,10 @@ def _refine_fold(A, m, z):
     try:
         root = mpmath.findroot(fold_equations, [m[i] for i in range(s)] + [z], tol=mpmath.mpf(10) ** (10 - 2 * DIGITS),
                                maxsteps=200)
-    except (ValueError, ZeroDivisionError) as exc:
-        raise NumericalFailure(f"the fold of the stage fold_equations near z = {float(z):.6g} did not converge: "
-                               f"{exc}") from None
+    except (ValueError, ZeroDivisionError, TypeError):  # TypeError: mpmath's LU of an exactly singular matrix
+        raise NumericalFailure(f"the fold of the stage equations near z = {float(z):.6g} could not be refined: "
+                               "Newton on the stage equations and det J = 0 did not converge (it cannot where "
+                               "several stages fold at once, as stages repeating one another do)") from None
     return root[s]
 
 

@@ -12,7 +12,7 @@ from ...base.errors import InputError
 from ..tableau import Tableau
 from .explicit import explicit_angles, m_polynomial, poly_text, wrap_limit_explicit, wrap_limit_numeric
 from .field import Number, exact_text, tableau_field
-from .implicit import branch_point, implicit_branch, mp_tableau
+from .implicit import branch_point, check_implicit_stages, implicit_branch, mp_tableau
 from .phase import Phase, check_series_order, composition_phase, phase, phase_of
 from .shifted import (
     shifted_branch,
@@ -56,6 +56,7 @@ def analyse(tableau: Tableau, order: int = 9, realisation: str = "symmetric") ->
     if realisation not in REALISATIONS:
         raise InputError(f"unknown realisation {realisation!r} for the linear analysis; choose one of "
                          f"{', '.join(REALISATIONS)}")
+    check_implicit_stages(tableau, realisation)
     if realisation == "shifted" and tableau.is_explicit:
         trace = shifted_trace(tableau)
         F = tableau_field(tableau)
@@ -113,6 +114,7 @@ def rotation_angles(tableau: Tableau, zs, realisation: str = "symmetric") -> lis
     """`rotation_angle` at each z of the increasing ``zs``; an implicit tableau's branch (symmetric
     realisation) is continued from one z to the next, and once it has ended (past its fold) every
     later z has no solution."""
+    check_implicit_stages(tableau, realisation)
     if realisation == "shifted":
         angles = []
         for z in zs:

@@ -401,9 +401,10 @@ def _refine_shifted_fold(tableau: Tableau, u, z):
         try:
             root = mpmath.findroot(shifted_fold_equations, [mpmath.mpf(float(x)) for x in u] + [mpmath.mpf(z)],
                                    tol=mpmath.mpf(10) ** (10 - 2 * DIGITS), maxsteps=200)
-        except (ValueError, ZeroDivisionError) as exc:
-            raise NumericalFailure(f"the fold of the shifted stage shifted_fold_equations near z = {z:.6g} did not "
-                                   f"converge: {exc}") from None
+        except (ValueError, ZeroDivisionError, TypeError):  # TypeError: mpmath's LU of an exactly singular matrix
+            raise NumericalFailure(f"the fold of the shifted stage equations near z = {z:.6g} could not be refined: "
+                                   "Newton on the stage equations and det J = 0 did not converge (it cannot where "
+                                   "several stages fold at once, as stages repeating one another do)") from None
         return root[n]
 
 
