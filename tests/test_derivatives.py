@@ -22,6 +22,7 @@ from rkhp.integrators.direct_form import gradient
 from rkhp.integrators.methods import resolve_method
 from rkhp.systems import get_system
 from rkhp.systems.families import family_system
+from rkhp.systems.spec import system as spec_system
 from rkhp.taylor import generated
 from rkhp.taylor.kernel_cache import KernelCacheWarning
 from rkhp.taylor.tape import functions as f
@@ -172,13 +173,20 @@ def test_newton_takes_at_most_three_iterations_a_substep_at_the_race_steps(name,
     assert trajectory.newton_iterations.mean() / substeps <= 3.0
 
 
-@pytest.mark.parametrize("name", ["charged-particle", "nambu", "benchmarks/data/vortices-8.toml"])
+def scaled_so3(scale="1e19"):
+    """so(3) scaled by `scale`, from a spec's keys: the exact integer 10^19 is beyond int64."""
+    entries = [["0", "-x3", "x2"], ["x3", "0", "-x1"], ["-x2", "x1", "0"]]
+    return spec_system(family="general", poisson=[[f"{e}*{scale}" for e in row] for row in entries],
+                       hamiltonian="x1^2/4 + x2^2/2 + 3*x3^2/4", x0=[0.4536, 0.0, 0.8912], t_final=1e-18)
+
+
+@pytest.mark.parametrize("name", ["charged-particle", "nambu", "benchmarks/data/vortices-8.toml", "so(3) 1e19"])
 def test_the_compiled_spray_field_is_the_interpreted_one(name):
     from rkhp.integrators.methods import resolve_system
     from rkhp.integrators.spray_euler import _field_derivatives, euler_work, spray_tapes
     from rkhp.systems.field_code import POINTS
 
-    system = resolve_system(name)
+    system = scaled_so3() if name == "so(3) 1e19" else resolve_system(name)
     tapes, n = spray_tapes(system), system.dim
     address = derivatives.spray_at(system, tapes.field)
     assert address != 0

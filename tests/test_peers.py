@@ -120,6 +120,24 @@ def test_field_code_refuses_what_is_not_arithmetic():
         field_code(get_system("pendulum"), "fortran")
 
 
+def test_constants_beyond_int64_are_printed_as_their_floats():
+    """A spec's 1e19 and 1e-19 are read exactly (10^19, 1/10^19), beyond the int64 literals
+    numba types: they are printed as float64 literals, exact here, and the cfunc form compiles."""
+    import numba
+
+    x = sympy.symbols("x1 x2", real=True)
+    exprs = [sympy.Integer(10**19) * x[1], sympy.Rational(1, 10**19) * x[0] + sympy.Rational(-3, 7)]
+    code = code_of(x, exprs, "cfunc")
+    assert "10000000000000000000" not in code.source and "1e+19" in code.source
+    rhs = numba.cfunc("void(float64, CPointer(float64), CPointer(float64), CPointer(float64))")(compiled(code))
+    pointer = ctypes.POINTER(ctypes.c_double)
+    u, du, p = np.array([2.0, 3.0]), np.empty(2), np.zeros(1)
+    rhs.ctypes(0.0, u.ctypes.data_as(pointer), du.ctypes.data_as(pointer), p.ctypes.data_as(pointer))
+    assert du.tolist() == [3e19, 2e-19 - 3 / 7]
+    with pytest.raises(InputError, match="beyond the float range"):
+        code_of(x, [sympy.Integer(10) ** 400 * x[0], x[1]], "numpy")
+
+
 # ----------------------------------------------------------------------------------------------
 # the peers' end states against the rigid body's closed form (Jacobi elliptic functions)
 

@@ -137,12 +137,42 @@ def check_tree(expr) -> None:
         raise InputError(f"the vector field holds {type(node).__name__}, which has no plain-arithmetic form")
 
 
+LARGEST_LITERAL = 2**63 - 1
+"""The largest integer literal numba types (as int64; its type inference refuses a larger one,
+and a negative integer is printed as the negation of its magnitude)."""
+
+
+def _literal_fits(value: int) -> bool:
+    """Whether numba types the printed integer ``value`` (:data:`LARGEST_LITERAL`)."""
+    return abs(value) <= LARGEST_LITERAL
+
+
+def float_literal(p: int, q: int = 1) -> str:
+    """The float64 nearest p/q as a literal (Python's integer division is correctly rounded, so
+    the value is exact where p/q is a float64, as 10^19 = 2^19 5^19 is): the value a float64
+    field computes with. InputError where p/q is beyond the float range or a nonzero p/q
+    rounds to 0."""
+    try:
+        value = p / q
+    except OverflowError:
+        value = math.inf
+    if not math.isfinite(value) or (value == 0 and p != 0):
+        bound = "beyond the float range (|x| > 1.8e308)" if value else "below the float range (|x| < 4.9e-324)"
+        raise InputError(f"the vector field holds a constant {bound}, which float arithmetic cannot represent")
+    return repr(value)
+
+
 def _printer():
-    """sympy's Python printer, with a negative integer power written as a division, 1.0/(x**k):
-    numba raises ZeroDivisionError for 0.0 to a negative integer power whatever the error model,
-    and a ``cfunc`` cannot pass an exception on (it says so on stderr and leaves its outputs
-    unwritten), where the division gives inf, as the tapes do, and the substep fails with its
-    cause."""
+    """sympy's Python printer, with
+
+    - a negative integer power written as a division, 1.0/(x**k): numba raises
+      ZeroDivisionError for 0.0 to a negative integer power whatever the error model, and a
+      ``cfunc`` cannot pass an exception on (it says so on stderr and leaves its outputs
+      unwritten), where the division gives inf, as the tapes do, and the substep fails with its
+      cause;
+    - an integer, or a rational's numerator or denominator, beyond :data:`LARGEST_LITERAL`
+      written as the nearest float64 (:func:`float_literal`): a spec file's ``1e19`` is read
+      exactly as an integer (`rkhp.base.expressions`), which numba cannot type."""
     import sympy
     from sympy.printing.pycode import PythonCodePrinter
 
@@ -151,6 +181,14 @@ def _printer():
             if expr.exp.is_Integer and expr.exp < 0:
                 return f"1.0/({self._print(sympy.Pow(expr.base, -expr.exp))})"
             return super()._print_Pow(expr, rational=rational)
+
+        def _print_Integer(self, expr):
+            return super()._print_Integer(expr) if _literal_fits(expr.p) else float_literal(expr.p)
+
+        def _print_Rational(self, expr):
+            if _literal_fits(expr.p) and _literal_fits(expr.q):
+                return super()._print_Rational(expr)
+            return float_literal(expr.p, expr.q)
 
     return Printer({"fully_qualified_modules": True, "standard": "python3"})
 
