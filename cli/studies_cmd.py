@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from rkhp.base import bounds
-from rkhp.base.errors import InputError
+from rkhp.base.errors import InputError, NumericalFailure
 from rkhp.base.tables import booktabs
 from rkhp.studies.plots import check_plot_path, data_path
 from rkhp.studies.reference import KINDS as REFERENCE_KINDS
@@ -649,16 +649,29 @@ def long_time(system, methods, x0, realisation, h, steps, tolerance, plot, force
            "t_final": h * steps, "runs": runs}
     if fmt == "json":
         emit_json(doc)
-        return
+    else:
+        _render_long_time(sys_.name, h, steps, runs, plot)
+    failed = [r for r in runs if r.status != "ok"]
+    if failed:
+        raise NumericalFailure(f"{sys_.name}: " + "; ".join(f"{r.method} ({_long_setting(r)}): {r.status}"
+                                                             for r in failed))
+
+
+def _long_setting(r) -> str:
+    """A long run's setting: its step, or the rtol of a scipy method."""
+    return f"rtol {r.tolerance:g}" if r.tolerance is not None else f"h = {r.h:g}"
+
+
+def _render_long_time(system: str, h: float, steps: int, runs, plot) -> None:
     out = console()
-    out.print(f"{sys_.name}: |H(y_n) - H(y_0)| up to t = {h * steps:g} (h = {h:g}, {steps} steps)", markup=False)
+    out.print(f"{system}: |H(y_n) - H(y_0)| up to t = {h * steps:g} (h = {h:g}, {steps} steps)", markup=False)
     for r in runs:
-        what = f"rtol {r.tolerance:g}" if r.tolerance is not None else f"h = {r.h:g}"
         if r.status != "ok":
-            out.print(f"  {r.method} ({what}): {r.status}", markup=False)
+            out.print(f"  {r.method} ({_long_setting(r)}): {r.status}", markup=False)
             continue
         k = "—" if r.exponent is None else f"{r.exponent:.2f}"
         drift = "".join(f", invariant {i + 1} drift {e:.2e}" for i, e in enumerate(r.invariant_errors))
-        out.print(f"  {r.method} ({what}): final error {r.errors[-1]:.2e}, growth exponent {k}{drift}", markup=False)
+        out.print(f"  {r.method} ({_long_setting(r)}): final error {r.errors[-1]:.2e}, growth exponent {k}{drift}",
+                  markup=False)
     if plot:
         out.print(f"plot written to {plot}", markup=False)

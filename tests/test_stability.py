@@ -502,3 +502,15 @@ def test_long_time_cli(run_cli, tmp_path):
     assert status == 0 and [r["method"] for r in json.loads(out)["runs"]] == ["tj4", "kahan-li6"]
     status, _, err = run_cli("long-time", "rigid-body", "--method", "tj4,no-such-method")
     assert status == 2 and err.count("\n") == 1
+
+
+def test_a_failed_long_run_is_shown_and_gives_status_1_in_one_line(run_cli):
+    """rk4 at h = 50 on the pendulum: Newton fails at the first step; the run is in the document
+    with its failure beside DOP853's, and the command ends as a numerical failure naming it
+    (docs/exit-status.md)."""
+    status, out, err = run_cli("long-time", "pendulum", "--method", "scipy:dop853,rk4", "--h", "50",
+                               "--steps", "100", "--format", "json")
+    runs = {r["method"]: r["status"] for r in json.loads(out)["runs"]}
+    assert status == 1 and runs == {"scipy:dop853": "ok", "rk4": runs["rk4"]}
+    assert runs["rk4"].startswith("failed at step 0") and err.count("\n") == 1
+    assert err == f"rkhp: numerical failure: pendulum: rk4 (h = 50): {runs['rk4']}\n"
