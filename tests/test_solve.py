@@ -268,6 +268,17 @@ def test_hostile_event_text_is_refused_before_anything_runs():
     assert code == 2 and err.startswith("rkhp: error: --section") and len(err.splitlines()) == 1
 
 
+@pytest.mark.parametrize("text", ["x1 - 1e308*1e308", "x1 - 1e200*1e200*x2"])
+def test_a_section_not_finite_at_the_start_is_refused_in_one_line(text):
+    """A constant beyond the float range (read exactly, 10^616) gives no finite value anywhere:
+    refused at x0, as a spec file's Hamiltonian is."""
+    with pytest.raises(InputError, match="not finite at x0"):
+        rkhp.solve("pendulum", (0, 1), "euler", steps=10, events=[text])
+    code, out, err = _invoke("poincare", "pendulum", "--section", text, "--steps", "100")
+    assert code == 2 and out == "" and len(err.splitlines()) == 1
+    assert err.startswith("rkhp: error: --section: expression") and "not finite at x0" in err
+
+
 # ----------------------------------------------------------------------------------------------
 # the command line
 

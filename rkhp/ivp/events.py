@@ -21,6 +21,7 @@ import numpy as np
 
 from ..base.errors import InputError, NumericalFailure
 from ..base.expressions import parse_expression, variable_names
+from ..systems.spec import check_finite_at
 
 EPS = float(np.finfo(float).eps)
 #: the most events of one solve
@@ -34,7 +35,7 @@ class Event:
     Attributes:
         name: the expression's text, or the function's name.
         values: states of shape (m, n) and times (m,) -> g at each (m,); None for an expression
-            not read yet (:func:`event`: read when the solve knows the dimension).
+            not read yet (:func:`event`: read when the solve knows the start).
         direction: > 0 upward crossings only, < 0 downward only, 0 both.
         terminal: 0: the run goes on; k >= 1: the run ends at the k-th occurrence.
     """
@@ -56,13 +57,16 @@ def event(expression: str, direction: float = 0.0, terminal=False) -> Event:
     return Event(expression, None, _direction(direction, "event"), _terminal(terminal, "event"))
 
 
-def expression_event(text: str, dim: int, direction: float = 0.0, terminal=False, where: str = "event") -> Event:
-    """The event g(y) = 0 of an expression in x1..xn (the safe reader; InputError for anything
-    outside its grammar)."""
+def expression_event(text: str, start, direction: float = 0.0, terminal=False, where: str = "event") -> Event:
+    """The event g(y) = 0 of an expression in x1..xn, n = len(``start``) (the safe reader;
+    InputError for anything outside its grammar, or for g not finite at ``start``, the orbit's
+    first point: a constant beyond the float range, a start outside g's domain)."""
     import sympy
 
-    expr = parse_expression(text, variable_names(dim), where=where)
-    symbols = [sympy.Symbol(name, real=True) for name in variable_names(dim)]
+    names = variable_names(len(start))
+    expr = parse_expression(text, names, where=where)
+    symbols = [sympy.Symbol(name, real=True) for name in names]
+    check_finite_at([("expression", expr)], symbols, start, where, gradient=False)
     function = sympy.lambdify(symbols, expr, "numpy")
 
     def event_values(states, times):
@@ -101,8 +105,9 @@ def _terminal(value, where: str) -> int:
     raise InputError(f"{where}: terminal must be True, False or a count k >= 1 of occurrences")
 
 
-def as_events(events, dim: int) -> tuple[Event, ...]:
-    """Events from an expression, an :class:`Event`, a function g(t, y), or a list of them."""
+def as_events(events, start) -> tuple[Event, ...]:
+    """Events from an expression, an :class:`Event`, a function g(t, y), or a list of them, of an
+    orbit from ``start`` (where an expression must be finite, :func:`expression_event`)."""
     if events is None:
         return ()
     items = list(events) if isinstance(events, list | tuple) else [events]
@@ -111,11 +116,11 @@ def as_events(events, dim: int) -> tuple[Event, ...]:
     out = []
     for k, item in enumerate(items):
         if isinstance(item, Event) and item.values is None:
-            out.append(expression_event(item.name, dim, item.direction, item.terminal, where=f"event {k + 1}"))
+            out.append(expression_event(item.name, start, item.direction, item.terminal, where=f"event {k + 1}"))
         elif isinstance(item, Event):
             out.append(item)
         elif isinstance(item, str):
-            out.append(expression_event(item, dim, where=f"event {k + 1}"))
+            out.append(expression_event(item, start, where=f"event {k + 1}"))
         elif callable(item):
             out.append(function_event(item))
         else:

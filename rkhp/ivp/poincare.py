@@ -58,7 +58,7 @@ def poincare_section(system, expression: str, t_final: float | None = None, meth
     if direction not in DIRECTIONS:
         raise InputError(f"direction {direction!r}: one of {', '.join(DIRECTIONS)}")
     poisson = resolve_system(system, realisation, x0)
-    event = expression_event(expression, poisson.dim, DIRECTIONS[direction], where="--section")
+    event = expression_event(expression, poisson.x0, DIRECTIONS[direction], where="--section")
     end = poisson.t_final if t_final is None else t_final
     result = solve(poisson, (0.0, end), method, tol, steps=steps, t_eval=[end], events=[event],
                    on_plan=on_plan, on_progress=on_progress, on_candidate=on_candidate)

@@ -333,9 +333,9 @@ def solve(system, t_span=None, method=DEFAULT_METHOD, tol=None, *, steps=None, t
     up to the failure.
     """
     poisson = resolve_system(system, realisation, x0)
+    event_list = as_events(events, poisson.x0)
     chosen, planned = plan(poisson, t_span, method, tol, steps, None, on_candidate)
     span = planned.span
-    event_list = as_events(events, poisson.dim)
     times = None
     if t_eval is not None:
         times = check_output_times(t_eval, span.t0, span.t1, "t_eval")

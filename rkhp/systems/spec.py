@@ -91,14 +91,15 @@ def parse_spec_expression(text, n: int, where: str):
     return expr, tuple(sympy.Symbol(name, real=True) for name in names)
 
 
-def check_finite_at(exprs, symbols, x0, where: str) -> None:
-    """Each (label, expression) and its gradient are finite real numbers at x0 (InputError naming
-    the first that is not: a Hamiltonian or Casimir undefined or infinite at the initial point)."""
+def check_finite_at(exprs, symbols, x0, where: str, gradient: bool = True) -> None:
+    """Each (label, expression) and, with ``gradient``, its gradient are finite real numbers at x0
+    (InputError naming the first that is not: a Hamiltonian or Casimir undefined or infinite at
+    the initial point, a constant beyond the float range)."""
     import sympy
 
     point = [float(v) for v in x0]
     for label, expr in exprs:
-        values = [expr] + [sympy.diff(expr, s) for s in symbols]
+        values = [expr] + ([sympy.diff(expr, s) for s in symbols] if gradient else [])
         try:
             got = sympy.lambdify(symbols, values, "math")(*point)
         except (ValueError, OverflowError, ZeroDivisionError, TypeError) as exc:
