@@ -268,6 +268,25 @@ def test_hostile_event_text_is_refused_before_anything_runs():
     assert code == 2 and err.startswith("rkhp: error: --section") and len(err.splitlines()) == 1
 
 
+def test_a_pole_of_the_section_is_no_crossing():
+    """x1 / (x1^2 - 1) changes sign at its zero x1 = 0 and at its poles x1 = +-1, all crossed by
+    the pendulum's swing (|x1| <= 1.5): the crossings are those of x1 = 0 alone; 1/x1 has none."""
+    zeros = rkhp.poincare_section("pendulum", "x1", steps=100, direction="both")
+    section = rkhp.poincare_section("pendulum", "x1/(x1^2 - 1)", steps=100, direction="both")
+    assert section.count == zeros.count == 3
+    np.testing.assert_allclose(section.times, zeros.times, rtol=1e-12)
+    assert np.abs(section.points[:, 0]).max() < 1e-15
+    assert rkhp.poincare_section("pendulum", "1/x1", steps=100, direction="both").count == 0
+
+
+def test_a_section_undefined_along_the_orbit_is_a_numerical_failure():
+    """sqrt(x1) is NaN once the pendulum swings to x1 < 0: its crossings cannot be told."""
+    with pytest.raises(rkhp.NumericalFailure, match=r"event sqrt\(x1\): not finite at t = "):
+        rkhp.poincare_section("pendulum", "sqrt(x1)", steps=100, direction="both")
+    code, out, err = _invoke("poincare", "pendulum", "--section", "sqrt(x1)", "--steps", "100")
+    assert code == 1 and len(err.splitlines()) == 1 and "not finite at t = " in err
+
+
 @pytest.mark.parametrize("text", ["x1 - 1e308*1e308", "x1 - 1e200*1e200*x2"])
 def test_a_section_not_finite_at_the_start_is_refused_in_one_line(text):
     """A constant beyond the float range (read exactly, 10^616) gives no finite value anywhere:

@@ -7,8 +7,11 @@ grid points t_n and t_{n+1} where g changes sign (g(y_n) < 0 <= g(y_{n+1}) upwar
 g(y_{n+1}) downwards), the event time is t_n + s with s the root of phi(s) = g(Phi_s(y_n)),
 Phi_s one step of the same method of size s (as the dense output, `rkhp.ivp.dense`): Brent's
 method on s in [0, h], to round-off in t. The state there is that step, a Poisson map, so it lies
-on the leaf of y_0. ``direction`` keeps only upward (> 0) or downward (< 0) crossings; a
-``terminal`` event ends the run at its first occurrence (or at its k-th, for an integer k).
+on the leaf of y_0. A sign change where |g| grows towards the located time is a pole of g (1/x1,
+tan x1), not a zero, and no event; a value of g that is not finite at a grid point (NaN outside
+g's domain) is a NumericalFailure. ``direction`` keeps only upward (> 0) or downward (< 0)
+crossings; a ``terminal`` event ends the run at its first occurrence (or at its k-th, for an
+integer k).
 """
 
 from __future__ import annotations
@@ -148,27 +151,50 @@ class Occurrence:
 
 
 def locate(event: Event, step: Callable, t_n: float, y_n: np.ndarray, h: float, g_n: float,
-           g_next: float) -> tuple[float, np.ndarray]:
+           g_next: float) -> tuple[float, np.ndarray] | None:
     """(t, y) of the zero of g between t_n and t_n + h: Brent's method on the substep s, each value
-    g(step(y_n, s)) (module docstring). ``step(y, s)`` is one step of the method."""
+    g(step(y_n, s)) (module docstring). ``step(y, s)`` is one step of the method. None where the
+    sign change is a pole of g, not a zero (:func:`is_pole`); NumericalFailure where g is not
+    finite near it."""
     from scipy.optimize import brentq
 
     if g_next == 0.0:
-        s = h
-    else:
-        def phi(s):
-            return g_n if s == 0.0 else event.value(step(y_n, s), t_n + s)
+        return t_n + h, step(y_n, h)
 
-        low, high = (0.0, h) if h > 0 else (h, 0.0)
-        f_low, f_high = (g_n, phi(h)) if h > 0 else (phi(h), g_n)
-        if not (math.isfinite(f_low) and math.isfinite(f_high)):
-            raise NumericalFailure(f"event {event.name}: not finite near t = {t_n:.6g}")
-        if f_low * f_high > 0:  # the step recomputed lands on the other side by round-off
-            s = h
-        else:
-            xtol = 4 * EPS * max(abs(t_n), abs(h))
-            s = brentq(phi, low, high, xtol=xtol, rtol=4 * EPS)
-    return t_n + s, step(y_n, s)
+    def phi(s):
+        return g_n if s == 0.0 else event.value(step(y_n, s), t_n + s)
+
+    low, high = (0.0, h) if h > 0 else (h, 0.0)
+    f_low, f_high = (g_n, phi(h)) if h > 0 else (phi(h), g_n)
+    if not (math.isfinite(f_low) and math.isfinite(f_high)):
+        raise NumericalFailure(f"event {event.name}: not finite near t = {t_n:.6g}")
+    if f_low * f_high > 0:  # the step recomputed lands on the other side by round-off
+        return t_n + h, step(y_n, h)
+    xtol = 4 * EPS * max(abs(t_n), abs(h))
+    s = brentq(phi, low, high, xtol=xtol, rtol=4 * EPS)
+    state = step(y_n, s)
+    g = event.value(state, t_n + s)
+    if math.isnan(g):
+        raise NumericalFailure(f"event {event.name}: not finite near t = {t_n + s:.6g}")
+    return None if is_pole(g, f_low, f_high) else (t_n + s, state)
+
+
+def is_pole(g: float, g_low: float, g_high: float) -> bool:
+    """Whether the sign change of g between the values ``g_low`` and ``g_high`` is a pole, not a
+    zero: |g| at the point Brent's method converged to is no smaller than at both ends. Near a
+    zero |g| there is the slope times the tolerance in t, far below the ends; near a pole (1/x1,
+    tan x1) it grows without bound."""
+    return abs(g) >= max(abs(g_low), abs(g_high))
+
+
+def check_finite_values(event: Event, times: np.ndarray, g: np.ndarray) -> None:
+    """NumericalFailure naming the first time where the event's value ``g`` is not finite (NaN
+    outside g's domain, as sqrt(x1) for x1 < 0; inf at a pole): whether g crosses 0 there cannot
+    be told."""
+    bad = np.flatnonzero(~np.isfinite(g))
+    if bad.size:
+        raise NumericalFailure(f"event {event.name}: not finite at t = {float(times[bad[0]]):.6g} "
+                               f"(g = {float(g[bad[0]])}); its crossings cannot be told")
 
 
 def scan(events, step: Callable, times: np.ndarray, states: np.ndarray, values: list[np.ndarray],
@@ -180,10 +206,12 @@ def scan(events, step: Callable, times: np.ndarray, states: np.ndarray, values: 
     found = []
     for i, event in enumerate(events):
         g = values[i]
+        check_finite_values(event, times, g)
         for k in crossings(event, g[:-1], g[1:]):
             h = float(times[k + 1] - times[k])
-            t, y = locate(event, step, float(times[k]), states[k], h, float(g[k]), float(g[k + 1]))
-            found.append(Occurrence(i, t, y))
+            located = locate(event, step, float(times[k]), states[k], h, float(g[k]), float(g[k + 1]))
+            if located is not None:
+                found.append(Occurrence(i, *located))
     direction = 1.0 if times[-1] >= times[0] else -1.0
     found.sort(key=lambda o: direction * o.t)
     kept = []
