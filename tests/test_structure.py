@@ -178,3 +178,28 @@ def test_decide_zero():
     # too large to expand within the bound: undecided, left to the numeric check
     assert decide_zero((x1 + x2 + 1) ** 200 * (x1 - x2) ** 50 - 1) is None
     assert TOLERANCE <= 1e-8
+
+
+@pytest.mark.parametrize("c", ["1", "1e200"])
+def test_jacobi_failure_found_whatever_the_size_of_pi(c):
+    """c [[0, 1, 0], [-1, 0, e^x2], [0, -e^x2, 0]]: J_123 = c^2 e^x2, all of its terms; at
+    c = 1e200 the products of the numeric check would overflow (inf - inf) unless scaled."""
+    bad = matrix([["0", c, "0"], [f"-{c}", "0", f"{c}*exp(x2)"], ["0", f"-{c}*exp(x2)", "0"]])
+    for seconds in (10.0, None):
+        with pytest.raises(InputError, match=r"\(i, j, k\) = \(1, 2, 3\)") as info:
+            check_structure(bad, symbolic_seconds=seconds)
+        assert "\n" not in str(info.value)
+    assert "cyclic = inf" not in str(info.value) and "nan" not in str(info.value)
+
+
+@pytest.mark.parametrize("c", [1.0, 1e200])
+def test_casimir_failure_found_whatever_the_size_of_pi_and_grad_c(c):
+    """so(3)* times c: c |x|^2 is a Casimir, c e^x1 is not (grad C . pi of size c^2)."""
+    so3 = np.zeros((3, 3, 3))
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        so3[i, j, k], so3[j, i, k] = -c, c
+    pi = lie_poisson_matrix(so3)
+    check_structure(pi, casimirs=[expr(f"{c:g}*(x1^2 + x2^2 + x3^2)")], x0=[0.5, 0.0, 0.9])
+    with pytest.raises(InputError, match=r"casimir 1 .* is not a Casimir") as info:
+        check_structure(pi, casimirs=[expr(f"{c:g}*exp(x1)")], x0=[0.5, 0.0, 0.9], symbolic_seconds=None)
+    assert "\n" not in str(info.value)

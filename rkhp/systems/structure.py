@@ -20,9 +20,10 @@ How each identity is decided (:func:`decide_zero`):
    (:data:`SYMBOLIC_SECONDS`); what is left undecided is decided numerically;
 2. numerically, at seeded random points near x0 (:func:`random_points_near`): a residual passes when
    it is at most :data:`TOLERANCE` times the sum of the absolute values of its terms (the size of
-   its rounding errors). The numeric test runs on every identity first (it is cheap and finds
-   every failure that is not tiny); the symbolic one then proves the rest or finds a failure
-   below the numeric tolerance.
+   its rounding errors; the factors at each point are scaled by powers of two,
+   :data:`LARGEST_EXPONENT`, so that a large pi or grad C still gives finite products). The
+   numeric test runs on every identity first (it is cheap and finds every failure that is not
+   tiny); the symbolic one then proves the rest or finds a failure below the numeric tolerance.
 
 A structure that fails is refused with an InputError of one line naming the failing triple
 (i, j, k) (1-based) or the failing Casimir and x_i, and the residual.
@@ -30,6 +31,7 @@ A structure that fails is refused with an InputError of one line naming the fail
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from itertools import combinations
@@ -51,6 +53,12 @@ MAX_OPS = 4_000
 MAX_SIMPLIFY_OPS = 80
 #: a bound on the number of terms an expansion may produce
 MAX_EXPANDED_TERMS = 20_000
+#: the factors of the numeric check at a point (pi and its derivatives; grad C) larger than
+#: 2**LARGEST_EXPONENT are divided there by a power of two that brings them down to it: J is
+#: quadratic in pi and {C, x_i} linear in pi and in grad C, so the residuals relative to their
+#: terms are unchanged (exactly: powers of two), while products of two factors summed over three
+#: times MAX_DIMENSION terms stay below float64's largest number, 2**1024
+LARGEST_EXPONENT = 500
 
 
 @dataclass(frozen=True)
@@ -199,12 +207,37 @@ def random_points_near(x0, points: int = POINTS, seed: int = 0) -> np.ndarray:
 
 @dataclass(frozen=True)
 class _Numeric:
-    """The matrix and its derivatives at the sample points: P[m, i, j], dP[m, l, j, k] (the
-    derivative of pi_jk in x_l) and the points x[m]."""
+    """The matrix and its derivatives at the sample points, scaled at each point
+    (:func:`_scale_exponents`): pi_ij(x[m]) = P[m, i, j] 2**e[m] and the derivative of pi_jk in
+    x_l there dP[m, l, j, k] 2**e[m]."""
 
     x: np.ndarray
     P: np.ndarray
     dP: np.ndarray
+    e: np.ndarray
+
+
+def _scale_exponents(values: np.ndarray) -> np.ndarray:
+    """For finite values with one row per point (the first axis), the exponent e >= 0 of each
+    point such that its values divided by 2**e are at most 2**LARGEST_EXPONENT in size."""
+    largest = np.abs(values.reshape(values.shape[0], -1)).max(axis=1, initial=0.0)
+    return np.maximum(np.frexp(largest)[1] - LARGEST_EXPONENT, 0)
+
+
+def _scaled(values: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """Each point's values (the first axis) divided by 2**e of the point."""
+    return np.ldexp(values, -e.reshape((-1,) + (1,) * (values.ndim - 1)))
+
+
+def _unscaled_text(value: float, exponent: int, spec: str) -> str:
+    """value * 2**exponent formatted by `spec`, also beyond float64's range (then from its
+    decimal value)."""
+    try:
+        return format(math.ldexp(value, exponent), spec)
+    except OverflowError:
+        from decimal import Decimal
+
+        return format(Decimal(value) * Decimal(2) ** exponent, spec)
 
 
 def _evaluate(rows, symbols, points: np.ndarray, where: str) -> _Numeric:
@@ -234,11 +267,14 @@ def _evaluate(rows, symbols, points: np.ndarray, where: str) -> _Numeric:
     if not good.any():
         raise InputError(f"{where}: the Poisson matrix is not finite (or not real) at any of "
                          f"{m} random points near x0; cannot check the Jacobi identity")
-    return _Numeric(points[good], P[good], dP[good])
+    P, dP = P[good], dP[good]
+    e = np.maximum(_scale_exponents(P), _scale_exponents(dP))
+    return _Numeric(points[good], _scaled(P, e), _scaled(dP, e), e)
 
 
 def _jacobi_numeric(num: _Numeric):
-    """Residuals J[m, i, j, k] and the sums of the absolute values of their terms."""
+    """Residuals J[m, i, j, k] and the sums of the absolute values of their terms, both scaled by
+    2**(-2 e[m]) (:class:`_Numeric`)."""
     T = np.einsum("mil,mljk->mijk", num.P, num.dP)
     S = np.einsum("mil,mljk->mijk", np.abs(num.P), np.abs(num.dP))
     J = T + T.transpose(0, 2, 3, 1) + T.transpose(0, 3, 1, 2)
@@ -268,8 +304,9 @@ def _point_text(x: np.ndarray) -> str:
 
 
 def _casimir_numeric(casimir, symbols, num: _Numeric, where: str):
-    """{C, x_i} at the points where grad C is finite (m x n), the sums of the absolute values of
-    their terms, those points, and grad C (sympy)."""
+    """{C, x_i} at the points where grad C is finite (m x n) and the sums of the absolute values
+    of their terms, both scaled by 2**(-e) at each point, those exponents e, those points, and
+    grad C (sympy)."""
     import sympy
 
     grad = [sympy.diff(casimir, s) for s in symbols]
@@ -283,8 +320,10 @@ def _casimir_numeric(casimir, symbols, num: _Numeric, where: str):
         raise InputError(f"casimir {casimir} is not finite at any of the {m} random points near "
                          f"x0 where {where} is; cannot check it")
     g, P = g[good], num.P[good]
+    eg = _scale_exponents(g)
+    g = _scaled(g, eg)
     return (np.einsum("ml,mli->mi", g, P), np.einsum("ml,mli->mi", np.abs(g), np.abs(P)),
-            num.x[good], grad)
+            eg + num.e[good], num.x[good], grad)
 
 
 def _abridged(expr, limit: int = 160) -> str:
@@ -320,11 +359,12 @@ def check_structure(matrix, *, casimirs=(), x0=None, seed: int = 0, where: str =
         r = rel[:, i, j, k]
         m = int(np.argmax(r))
         if r[m] > TOLERANCE:
+            twice = 2 * int(num.e[m])
             raise InputError(
                 f"{where} fails the Jacobi identity at (i, j, k) = ({i + 1}, {j + 1}, {k + 1}): "
-                f"{{x{i + 1},{{x{j + 1},x{k + 1}}}}} + cyclic = {J[m, i, j, k]:.6g} at x = "
-                f"{_point_text(num.x[m])} (terms of size {scale[m, i, j, k]:.3g}; tolerance "
-                f"{TOLERANCE:g} relative)")
+                f"{{x{i + 1},{{x{j + 1},x{k + 1}}}}} + cyclic = {_unscaled_text(J[m, i, j, k], twice, '.6g')} "
+                f"at x = {_point_text(num.x[m])} (terms of size {_unscaled_text(scale[m, i, j, k], twice, '.3g')}; "
+                f"tolerance {TOLERANCE:g} relative)")
     triples = [(t, expr) for t in combinations(range(n), 3)
                if (expr := _jacobi_expression(rows, symbols, *t)) is not None]
     proved = 0
@@ -338,7 +378,7 @@ def check_structure(matrix, *, casimirs=(), x0=None, seed: int = 0, where: str =
         proved += verdict is True
     identities, proved_c = 0, 0
     for c_index, casimir in enumerate(casimirs):
-        value, size, points, grad = _casimir_numeric(casimir, symbols, num, where)
+        value, size, exponents, points, grad = _casimir_numeric(casimir, symbols, num, where)
         rc = _relative(value, size)
         for i in range(n):
             expr = _casimir_expression(grad, rows, i)
@@ -351,8 +391,9 @@ def check_structure(matrix, *, casimirs=(), x0=None, seed: int = 0, where: str =
             if verdict is None and not rc[m, i] > TOLERANCE:
                 continue
             if not verdict:
-                shown = (f"{value[m, i]:.6g} at x = {_point_text(points[m])} (terms of size "
-                         f"{size[m, i]:.3g}; tolerance {TOLERANCE:g} relative)"
+                e = int(exponents[m])
+                shown = (f"{_unscaled_text(value[m, i], e, '.6g')} at x = {_point_text(points[m])} (terms of "
+                         f"size {_unscaled_text(size[m, i], e, '.3g')}; tolerance {TOLERANCE:g} relative)"
                          if verdict is None else f"{_abridged(expr)} (exact)")
                 raise InputError(f"casimir {c_index + 1} ({_abridged(casimir, 60)}) is not a Casimir of {where}: "
                                  f"{{C, x{i + 1}}} = {shown}")
