@@ -46,6 +46,18 @@ def test_a_regular_flow_adds_nothing_to_a_failure():
     assert flow_stop(system, system.x0, 2.0) is None
 
 
+def test_a_field_not_finite_at_the_start_ends_the_probe():
+    """The pendulum at (0, 1e308): grad H overflows and the field is (inf, nan) there, so scipy's
+    first step size is NaN, whose tries never end; the probe stops on it and names grad H."""
+    import numpy as np
+
+    from rkhp.systems import get_system
+    from rkhp.systems.singular import flow_stop
+
+    stop = flow_stop(get_system("pendulum"), np.array([0.0, 1e308]), 1.0)
+    assert stop is not None and "grad H blows up" in stop
+
+
 def test_a_composition_file_without_kind_is_read_as_a_composition(run_cli, tmp_path):
     """`gamma` without `A` and without `kind`: the triple jump of Euler (Yoshida 1990, order 4)."""
     g = "1/(2 - 2^(1/3))"

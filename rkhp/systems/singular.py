@@ -4,6 +4,8 @@ this cause when the exact flow itself does not continue over the step."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 #: the probe of the exact flow over the failed step: scipy's DOP853 at these tolerances
@@ -24,6 +26,19 @@ def _vector(x) -> str:
     return "(" + ", ".join(f"{v:.6g}" for v in x) + ")"
 
 
+def _probe_field(system):
+    """The field as the probe calls it, (t, x) -> pi(x) grad H(x), raising FloatingPointError at
+    a time that is not a number: scipy's step size becomes NaN where the field is not finite at a
+    step's start (inf - inf), and its loop of tries of a step, which ends on a size too small,
+    would then not end."""
+    def field(t, v):
+        if not math.isfinite(t):
+            raise FloatingPointError("the probe's step size is not a number")
+        return system.vector_field(v)
+
+    return field
+
+
 def flow_stop(system, x, h: float) -> str | None:
     """Why the exact flow of `system` does not continue from `x` over a step of `h`, in words, or
     None when it does (or when PROBE_STEPS steps do not tell). DOP853 (PROBE_RTOL) from x over h;
@@ -35,8 +50,7 @@ def flow_stop(system, x, h: float) -> str | None:
     t, y, stopped, left = 0.0, x, False, False
     with np.errstate(all="ignore"):
         try:
-            solver = DOP853(lambda _, v: system.vector_field(v), 0.0, x, float(h), rtol=PROBE_RTOL,
-                            atol=PROBE_ATOL)
+            solver = DOP853(_probe_field(system), 0.0, x, float(h), rtol=PROBE_RTOL, atol=PROBE_ATOL)
             for _ in range(PROBE_STEPS):
                 solver.step()
                 if not (np.all(np.isfinite(solver.y)) and system.in_domain(solver.y)):
