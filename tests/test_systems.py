@@ -198,6 +198,8 @@ def test_spec_file_reproduces_builtin(tmp_path, text, suffix, builtin):
     ('family = "constant"\npoisson = [[0, 1], [-1, 0]]\nx0 = [1, 0]', "missing key"),
     ('family = "constant"\npoisson = [[0, 1], [-1, 0]]\nhamiltonian = "gamma(x1)"\n'
      'x0 = [1, 0]', "call of gamma"),
+    ('family = "log-canonical"\nlambda = [[0, 1e308], [-1e308, 0]]\nhamiltonian = "x1 + x2"\nx0 = [1, 2]',
+     r"the structure pi of bad is not finite at x0 = \[1.0, 2.0\]: entry \(1, 2\) is inf"),
 ])
 def test_spec_file_errors(tmp_path, text, message):
     path = tmp_path / "bad.toml"
@@ -282,3 +284,19 @@ def test_a_bad_start_is_refused_naming_what_is_wrong(name, given, message):
     for check in (system.start, system.with_x0):
         with pytest.raises(InputError, match=message):
             check(given)
+
+
+@pytest.mark.parametrize("name, given, message", [
+    ("pendulum", [0.0, 1e308], r"x0: hamiltonian of pendulum is not finite at x0 = \[0.0, 1e\+308\]: its value is inf"),
+    ("rigid-body", [1e154, 1e154, 1e154], "x0: casimir 1 of rigid-body is not finite"),
+    ("lotka-volterra", [1e200, 1e200, 1e200], r"x0: the structure pi of lotka-volterra is not finite"),
+])
+def test_a_start_where_the_system_overflows_is_refused(name, given, message):
+    """A start in the domain where H, grad H, a Casimir or pi is not a float64 number: no step can
+    be taken from it (and scipy's probe of the failed step would get a step size that is NaN)."""
+    from rkhp.integrators.methods import resolve_system
+
+    with pytest.raises(InputError, match=message) as info:
+        resolve_system(name, x0=given)
+    assert "\n" not in str(info.value)
+

@@ -112,13 +112,43 @@ def check_finite_at(exprs, symbols, x0, where: str, gradient: bool = True) -> No
 
 
 def check_start(system, where: str = "x0") -> None:
-    """For a system from a spec file, started elsewhere (``--x0``): the Hamiltonian and the
-    Casimirs and their gradients are finite at its x0 (:func:`check_finite_at`, no compiled code);
-    InputError otherwise. Built-in systems are finite on their domain, which ``with_x0`` checks
-    (and the engine reports non-finite values at the first step as a numerical failure)."""
+    """For a system started elsewhere (``--x0``): the Hamiltonian and the Casimirs, with the
+    gradient of H, and the structure pi are finite at its x0; InputError otherwise. A system from
+    a spec file is checked from its expressions (:func:`check_finite_at`, no compiled code),
+    another (a built-in) by its own functions (:func:`check_values_finite`)."""
     if "expressions" in system.extra:
         symbols, expressions = system.extra["expressions"]
         check_finite_at(expressions, symbols, system.x0, where)
+    else:
+        check_values_finite(system, where)
+    check_structure_finite(system, where)
+
+
+def check_values_finite(system, where: str) -> None:
+    """H, grad H and the Casimirs as ``system`` computes them (the tapes the integrators evaluate)
+    are finite at its x0 (InputError naming the first that is not: a state so large that the energy
+    overflows, where no step can be taken)."""
+    x0 = system.x0
+    with np.errstate(all="ignore"):
+        values = [("hamiltonian", "its value", system.hamiltonian(x0)),
+                  ("hamiltonian", "its gradient", system.grad_hamiltonian(x0))]
+        values += [(f"casimir {i + 1}", "its value", casimir) for i, casimir in enumerate(system.casimir_values(x0))]
+    for label, what, value in values:
+        if not np.all(np.isfinite(value)):
+            raise InputError(f"{where}: {label} of {system.name} is not finite at x0 = {x0.tolist()}: "
+                             f"{what} is {np.asarray(value).tolist()}")
+
+
+def check_structure_finite(system, where: str) -> None:
+    """pi(x0) of ``system`` is finite (InputError naming its first entry that is not: data of the
+    structure, or a state, so large that pi overflows there)."""
+    with np.errstate(all="ignore"):
+        pi = np.asarray(system.poisson(system.x0), dtype=np.float64)
+    bad = np.argwhere(~np.isfinite(pi))
+    if bad.size:
+        i, j = (int(v) for v in bad[0])
+        raise InputError(f"{where}: the structure pi of {system.name} is not finite at x0 = {system.x0.tolist()}: "
+                         f"entry ({i + 1}, {j + 1}) is {pi[i, j]}")
 
 
 def load_spec(path, realisation: str = "symmetric") -> PoissonSystem:
@@ -254,6 +284,7 @@ def system_from_keys(data: dict, where: str, default_name: str, source: str,
                                **common)
     if not system.in_domain(x0):
         raise InputError(f"{where}: x0 = {x0.tolist()} is outside the domain ({system.domain})")
+    check_structure_finite(system, where)
     expressions = [("hamiltonian", h_expr)] + [(f"casimir {i + 1}", e) for i, e in enumerate(exprs)]
     expressions += [(f"invariant {i + 1}", e) for i, e in enumerate(invariant_exprs)]
     check_finite_at(expressions, symbols, x0, where)
