@@ -75,10 +75,11 @@ class LazyGroup(click.Group):
     def main(self, *args, **kwargs):
         from rkhp.base.errors import CheckFailed, ClusterLost, InputError, NumericalFailure, WriteFailed
 
-        from .terminal import install_interrupt_handler, install_warning_line
+        from .terminal import install_interrupt_handler, install_warning_line, quiet_floating_point_warnings
 
         install_interrupt_handler()
         install_warning_line()
+        quiet_floating_point_warnings()
         kwargs["standalone_mode"] = False
         given = args[0] if args else kwargs.get("args")
         kwargs.setdefault("obj", Invocation(tuple(sys.argv[1:] if given is None else given)))

@@ -104,6 +104,22 @@ def install_warning_line() -> None:
     warnings.showwarning = show
 
 
+#: how numpy's floating-point warnings begin ("overflow encountered in multiply", "invalid value
+#: encountered in subtract", ...; numpy's and scipy's own computations alike)
+FLOATING_POINT_WARNING = r"(overflow|invalid value|divide by zero|underflow) encountered in "
+
+
+def quiet_floating_point_warnings() -> None:
+    """numpy's floating-point RuntimeWarnings (:data:`FLOATING_POINT_WARNING`) not printed: where a
+    number that is not finite matters, the command says so itself (a failed run or check in one
+    line, docs/exit-status.md; an error of inf in its output), and numpy's two lines for each
+    operation would only bury that line. rkhp's own warnings and all others are still printed
+    (:func:`install_warning_line`)."""
+    import warnings
+
+    warnings.filterwarnings("ignore", message=FLOATING_POINT_WARNING, category=RuntimeWarning)
+
+
 def ignore_late_interrupts() -> None:
     """The command has ended (its status is chosen, its output written): the interrupt signals are
     ignored from here on. The interpreter's shutdown puts back the default action of a signal

@@ -39,3 +39,16 @@ def test_bad_input_exits_2(run_cli):
     for args in (("verify", "no-such-tableau"), ("show",), ("search", "--stages", "x")):
         rc, out, err = run_cli(*args)
         assert rc == 2 and err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_numpys_floating_point_warnings_are_not_printed():
+    """The pendulum from q = 1e308: a product in the run's bookkeeping overflows (numpy warns,
+    two lines) though the run itself completes, and reports its energy error; stderr stays
+    empty. In a process of its own: a test process's warnings are pytest's."""
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "rkhp", "integrate", "pendulum", "--method", "rk4", "--steps", "10",
+                           "--x0", "1e308,0", "--format", "json"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0 and proc.stderr == ""
+    assert json.loads(proc.stdout)["energy_error"] > 0
