@@ -25,6 +25,22 @@ def test_an_x0_shorter_than_the_matrix_names_both_sizes(run_cli, tmp_path):
     assert "x0 has 7 entries but poisson is 8 x 8" in err
 
 
+def test_four_structure_constants_are_entries_not_a_matrix(run_cli, tmp_path):
+    """Four entries [i, j, k, value] are not a 4 x 4 matrix: x1 acting on span(x2, x3) by
+    [[1, 1], [1, 2]] is a 3-dimensional Lie algebra, and a fifth entry contradicting the first is
+    named as such."""
+    entries = [[1, 2, 2, 1], [1, 3, 3, 1], [1, 3, 2, 1], [1, 2, 3, 2]]
+    text = 'family = "lie-poisson"\nhamiltonian = "x1^2/2 + x2^2/2 + x3^2/2"\nx0 = [0.3, 0.2, 0.1]\n'
+    path = tmp_path / "four.toml"
+    path.write_text(text + f"structure_constants = {entries}\n")
+    code, _, err = run_cli("check", str(path), "--samples", "3")
+    assert code == 0, err
+    path.write_text(text + f"structure_constants = {entries[:3] + [[1, 2, 2, 5]]}\n")
+    code, _, err = run_cli("check", str(path), "--samples", "3")
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "[1, 2, 2, 5] contradicts an earlier entry" in err
+
+
 def test_a_run_into_a_singular_structure_says_where_pi_blows_up(run_cli, tmp_path):
     """pi = [[0, 1/x1], [-1/x1, 0]], H = -x2 from x0 = (1, 0): x1' = -1/x1, so x1^2 = 1 - 2t and pi
     blows up at t = 1/2 (the exact solution). A step of 0.1 fails on the step that reaches it, and

@@ -69,6 +69,8 @@ class PoissonFamily:
         base: (structure, sign) -> program (x, p, f) -> list of n values (alpha: +1, beta: -1).
         casimirs: structure -> (Casimir functions, their names) by default.
         symbolic: structure -> pi_ij(x1..xn) as sympy rows, or None.
+        matrix: whether the spec value is an n x n matrix, one row per entry of x0 (lie-poisson's
+            is a list of entries [i, j, k, value] instead).
     """
 
     name: str
@@ -82,6 +84,7 @@ class PoissonFamily:
     base: Callable
     casimirs: Callable
     symbolic: Callable | None = None
+    matrix: bool = True
 
 
 FAMILIES: dict[str, PoissonFamily] = {}
@@ -283,7 +286,7 @@ register_family(PoissonFamily(
     name=LIE_POISSON, spec_key="structure_constants", domain="R^n",
     read=_read_structure_constants, check=_check_lie, poisson=_lie_poisson, program=_lie_program,
     degree=lambda structure: 1, base=_lie_base, casimirs=lambda structure: ((), ()),
-    symbolic=_lie_symbolic))
+    symbolic=_lie_symbolic, matrix=False))
 
 
 # ----------------------------------------------------------------------------------------------

@@ -207,8 +207,8 @@ def _plain_value(value):
 
 
 def _square_size(value) -> int | None:
-    """n for a value that is an n x n list of lists (a matrix key), else None (the family's reader
-    then says what is wrong with it)."""
+    """n for a value that is an n x n list of lists (of a family whose key is a matrix), else None
+    (the family's reader then says what is wrong with it)."""
     if isinstance(value, list) and value and all(isinstance(row, list) and len(row) == len(value) for row in value):
         return len(value)
     return None
@@ -263,7 +263,7 @@ def system_from_keys(data: dict, where: str, default_name: str, source: str,
         raise InputError(f"{where}: family {family} needs key {needed}")
     if "hamiltonian" not in data:
         raise InputError(f"{where}: missing key hamiltonian")
-    size = _square_size(data[needed])
+    size = _square_size(data[needed]) if FAMILIES[family].matrix else None
     if size is not None and size != n:
         raise InputError(f"{where}: x0 has {n} entries but {needed} is {size} x {size}: the state has one "
                          f"entry per row of {needed}")
