@@ -72,9 +72,14 @@ def reals(check, name: str = "X1,X2,...", distinct: bool = True) -> Checked:
 
 
 def names(name: str = "NAME,...") -> Checked:
-    """A comma-separated list of names, none repeated (case-insensitive); empty text: none."""
+    """A comma-separated list of names, none empty, none repeated (case-insensitive); empty text:
+    none."""
     def read(text, label):
-        values = tuple(t.strip() for t in text.split(",") if t.strip())
+        if not text.strip():
+            return ()
+        values = tuple(t.strip() for t in text.split(","))
+        if not all(values):
+            raise InputError(f"{label}: an empty name in {bounds.shown(text)}")
         folded = [v.lower() for v in values]
         if len(set(folded)) != len(folded):
             twice = next(v for v in values if folded.count(v.lower()) > 1)

@@ -140,13 +140,16 @@ def tolerance(value, what: str = "tolerance") -> float:
 
 
 def parse_list(text: str, what: str, convert) -> tuple:
-    """A comma-separated list, each item read by `convert(item_text)` (InputError naming it)."""
+    """A comma-separated list, each item read by `convert(item_text)` (InputError naming it; an
+    empty item, as in "1,,2" or "1,2,", is refused rather than dropped)."""
     items = [t.strip() for t in str(text).split(",")]
     if not any(items):
         raise InputError(f"{what}: empty list")
     if len(items) > MAX_LIST:
         raise InputError(f"{what}: {len(items)} values; at most {MAX_LIST}")
-    return tuple(convert(t) for t in items if t)
+    if not all(items):
+        raise InputError(f"{what}: an empty value in {shown(str(text))}")
+    return tuple(convert(t) for t in items)
 
 
 MAX_INT_DIGITS = 30

@@ -322,12 +322,13 @@ PROBLEMS: dict[str, tuple[Callable, bool]] = {
 
 
 def problem_data(name: str) -> ProblemData | None:
-    """The data of a problem called ``NAME`` or ``NAME:SIZE`` (None if there is none)."""
-    base, _, size = name.partition(":")
+    """The data of a problem called ``NAME`` or ``NAME:SIZE`` (None if there is none; ``NAME:``, a
+    colon without a size, is refused)."""
+    base, colon, size = name.partition(":")
     if base not in PROBLEMS:
         return None
     make, sized = PROBLEMS[base]
-    if not size:
+    if not colon:
         return make()
     if not sized:
         raise InputError(f"{base} has no size parameter (got {name!r})")
