@@ -250,6 +250,8 @@ def _spec_cases() -> list[Case]:
         spec("x0-json-nan", jsondoc(RIGID, x0=None)[:-1] + ', "x0": [NaN, 0, 0.9]}', suffix=".json"),
         spec("x0-json-infinity", jsondoc(RIGID, x0=None)[:-1] + ', "x0": [Infinity, 0, 0.9]}', suffix=".json"),
         spec("x0-string", toml(RIGID, x0="0.4, 0, 0.9")),
+        spec("x0-json-underflow", jsondoc(RIGID, x0=None)[:-1] + ', "x0": [0.4, 1e-400, 0.9]}', suffix=".json"),
+        spec("x0-toml-underflow", "x0 = [0.4, 1e-400, 0.9]\n" + toml(RIGID, x0=None)),
         spec("x0-outside-domain", toml(LOTKA, x0=[-0.5, 1.0, 2.0])),
         spec("h-nonfinite-at-x0", toml(PENDULUM, hamiltonian="log(x1) + x2^2", x0=[-1.0, 0.0])),
         spec("h-zero-division-at-x0", toml(PENDULUM, hamiltonian="1/x1 + x2^2", x0=[0.0, 0.5])),

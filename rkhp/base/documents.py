@@ -11,7 +11,9 @@ A spec file or a tableau file comes from elsewhere, so before any parser sees it
 - JSON objects may not repeat a key, and JSON's non-standard ``NaN``/``Infinity``, numbers that
   overflow a float and integers of more than 30 digits are refused (the field readers refuse such
   integers from TOML too; TOML refuses repeated keys
-  itself; its ``nan`` and ``inf`` are refused by :func:`document_number`).
+  itself; its ``nan`` and ``inf`` are refused by :func:`document_number`);
+- a number that is not zero but rounds to 0.0 (``1e-400``: below float64's smallest, about
+  5e-324) is refused, in TOML and JSON alike, rather than read as 0.
 
 The field readers (:func:`document_number`, :func:`document_integer`, :func:`string`,
 :func:`number_list`, :func:`matrix`) refuse type confusion: a boolean is not a number (``t_final = true``), a string is
@@ -147,8 +149,21 @@ def _json_int(text: str) -> int:
     return int(text)
 
 
-def _json_float(text: str) -> float:
+#: the digits of a number's significand that make it non-zero
+NONZERO_DIGITS = frozenset("123456789")
+
+
+def _float(text: str) -> float:
+    """A float literal of a document (TOML's ``inf`` and ``nan`` included, which the field readers
+    refuse); InputError for one that is not zero but underflows to 0.0."""
     value = float(text)
+    if value == 0.0 and NONZERO_DIGITS & set(text.lower().partition("e")[0]):
+        raise InputError(f"number {text[:40]} underflows a float: it is not 0 but below 5e-324")
+    return value
+
+
+def _json_float(text: str) -> float:
+    value = _float(text)
     if not math.isfinite(value):
         raise InputError(f"number {text[:40]} overflows a float")
     return value
@@ -164,7 +179,7 @@ def parse_document(text: str, where: str, kind: str) -> dict:
             data = json.loads(text, object_pairs_hook=_unique_keys, parse_constant=_json_constant,
                               parse_int=_json_int, parse_float=_json_float)
         else:
-            data = tomllib.loads(text)
+            data = tomllib.loads(text, parse_float=_float)
     except InputError as exc:
         raise InputError(f"{where}: {exc}") from None
     except (ValueError, RecursionError) as exc:  # JSONDecodeError and TOMLDecodeError are ValueErrors
