@@ -22,17 +22,18 @@ from .render import print_table
 FORMATS = ("table", "json", "latex", "markdown")
 
 
-def _order_option(f):
+def _order_option(counted: bool):
+    """--order N, its range as the command takes it (`trees` counts further with --count)."""
+    reach = f"; up to {MAX_COUNT_ORDER} with --count" if counted else ""
     return click.option("--order", "-n", "order", type=integer(1, name="N"), required=True,
-                        help=f"Largest tree order N (1..{MAX_ENUMERATION_ORDER}; "
-                             f"up to {MAX_COUNT_ORDER} with --count).")(f)
+                        help=f"Largest tree order N (1..{MAX_ENUMERATION_ORDER}{reach}).")
 
 
 _CLASS_TREES = {"general": "T", "degenerate": "T_0", "symmetric": "T_0 (symmetric birealisations)"}
 
 
 @click.command()
-@_order_option
+@_order_option(counted=True)
 @click.option("--degenerate", is_flag=True, help="Trees of T_0 (degenerate birealisations) instead of T.")
 @click.option("--exact-order", is_flag=True, help="Only trees of order exactly N.")
 @click.option("--count", is_flag=True, help="Only the counts per order (no trees are built).")
@@ -71,7 +72,7 @@ def trees(order, degenerate, exact_order, count, fmt):
 
 
 @click.command()
-@_order_option
+@_order_option(counted=False)
 @click.option("--degenerate", is_flag=True, help="Conditions over T_0 (degeneracy condition, paper eq. (degen)).")
 @click.option("--symmetric", is_flag=True,
               help="Reduced conditions of symmetric birealisations (combinations of T_0 residuals).")

@@ -71,3 +71,18 @@ def test_index_names_are_distinct_and_do_not_use_s():
 def test_unknown_class_is_input_error():
     with pytest.raises(InputError):
         order_conditions(3, "bogus")
+
+
+def test_symmetric_conditions_past_the_shipped_order_are_refused_for_the_order_asked():
+    """The shipped relations reach order 8 (rkhp.trees.relations.MAX_SHIPPED_ORDER): asked for 12,
+    the refusal names 12 and the command that derives them, before any order is built."""
+    with pytest.raises(InputError, match=r"ship up to order 8, asked for order 12: .*--order 12 --regenerate"):
+        order_conditions(12, "symmetric")
+
+
+def test_only_trees_offers_a_count_past_the_enumeration_order(run_cli):
+    """`trees --count` reaches orders past the enumeration's; `conditions` has no --count."""
+    code, out, _ = run_cli("conditions", "--help")
+    assert code == 0 and "--count" not in out
+    code, out, _ = run_cli("trees", "--help")
+    assert code == 0 and "with --count" in " ".join(out.split())

@@ -18,7 +18,7 @@ from fractions import Fraction
 
 from ..base.errors import InputError
 from ..base.exact_text import combination_text, fraction_latex, fraction_text
-from .relations import symmetric_condition_rows
+from .relations import MAX_SHIPPED_ORDER, symmetric_condition_rows
 from .rooted import Tree, check_order, trees_of_order
 
 #: Condition classes: all trees T, the degenerate subset T_0, symmetric birealisations.
@@ -94,8 +94,13 @@ def conditions_of_order(n: int, cls: str = "general") -> tuple[OrderCondition, .
 
 
 def order_conditions(order: int, cls: str = "general", exact_order: bool = False) -> tuple[OrderCondition, ...]:
-    """All conditions of order <= ``order`` (only == ``order`` when exact_order), by order."""
+    """All conditions of order <= ``order`` (only == ``order`` when exact_order), by order; the
+    symmetric class up to the shipped order of its relations (InputError beyond it, before any
+    work)."""
     check_order(order)
+    if cls == "symmetric" and order > MAX_SHIPPED_ORDER:
+        raise InputError(f"the symmetric conditions ship up to order {MAX_SHIPPED_ORDER}, asked for order {order}: "
+                         f"derive them with `rkhp relations --order {order} --regenerate`")
     orders = [order] if exact_order else range(1, order + 1)
     return tuple(c for n in orders for c in conditions_of_order(n, cls))
 
