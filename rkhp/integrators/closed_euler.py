@@ -63,7 +63,7 @@ from ..systems import families
 from ..taylor.compiler import NJIT_NORC
 from ..taylor.compiler import numba as nb
 from ..taylor.generated import call_at
-from ..taylor.linalg import inverse_transposed, lu_factor_n, lu_solve_n, max_abs, transposed_product
+from ..taylor.linalg import inverse_transposed, lu_factor, lu_solve, max_abs, transposed_product
 from ..taylor.scalar import SCALAR_CODES, polynomial_degree, shared
 from ..taylor.tape import Tape
 from .derivatives import derivatives_at
@@ -347,7 +347,7 @@ def _exact_factors(i, y0, hs, form, work, memory, n):
     _jacobian_matrix(i, hs, form, work, memory, n)
     for k in range(n):
         work.xbar[k] = x[k]
-    if not lu_factor_n(memory.inverse[i], work.perm, n):
+    if not lu_factor(memory.inverse[i], work.perm):
         return Failure.SINGULAR
     return Failure.OK
 
@@ -626,9 +626,9 @@ def closed_substep(i, y0, hs, form, work, memory, solver):
 
 
 @nb.njit(inline="always", **NJIT_NORC)
-def newton_substep(i, y0, hs, form, work, memory, solver, n):
-    """One Euler substep of step hs in direct form from y0 (n variables) by Newton's method
-    (form.exact): its increment y1 - y0 into work.dy; returns (Failure, iterations).
+def newton_substep(i, y0, hs, form, work, memory, solver):
+    """One Euler substep of step hs in direct form from y0 by Newton's method (form.exact): its
+    increment y1 - y0 into work.dy; returns (Failure, iterations).
 
     Starts from the extrapolated z (`_predict_z`); each iteration evaluates x(z), factorises the
     exact Jacobian there (`_exact_factors`) when the last correction exceeded NEWTON_REFRESH max(1, |y0|)
@@ -639,6 +639,7 @@ def newton_substep(i, y0, hs, form, work, memory, solver, n):
     constant just measured), theta / (1 - theta) |d| (theta = RATE_MARGIN |d_k| / |d_(k-1)|)
     after a chord step; or when corrections at round-off stop halving (STAGNATION). Then x and
     y1 are taken at the final z."""
+    n = y0.shape[0]
     scale = max(1.0, max_abs(y0))
     _predict_z(i, y0, hs, form, work, memory, n)
     previous = np.inf
@@ -660,7 +661,7 @@ def newton_substep(i, y0, hs, form, work, memory, solver, n):
         _target(hs, form, work, n)
         for k in range(n):
             work.res[k] -= work.z[k]
-        lu_solve_n(memory.inverse[i], work.perm, work.res, work.tmp, n)
+        lu_solve(memory.inverse[i], work.perm, work.res, work.tmp)
         size = 0.0
         for k in range(n):
             work.z[k] += work.res[k]
@@ -724,19 +725,13 @@ def begin(data, y0):
 
 @nb.njit(inline="always", **NJIT_NORC)
 def substep(data, context, i, hs, solver):
-    """Substep i of size hs in direct form (`newton_substep` where the form is exact, with n a
-    constant on 2 and 3 variables, the rigid body's and Lotka–Volterra's: their loops unroll; else
+    """Substep i of size hs in direct form (`newton_substep` where the form is exact, else
     `closed_substep`), its increment added to the state
     without rounding it (`add_increment`); returns (Failure, iterations, sweeps)."""
     work, form = data.work, data.form
     sweeps = 0
-    n = work.y.shape[0]
-    if form.exact and n == 2:
-        cause, it = newton_substep(i, work.y, hs, form, work, data.memory, solver, 2)
-    elif form.exact and n == 3:
-        cause, it = newton_substep(i, work.y, hs, form, work, data.memory, solver, 3)
-    elif form.exact:
-        cause, it = newton_substep(i, work.y, hs, form, work, data.memory, solver, n)
+    if form.exact:
+        cause, it = newton_substep(i, work.y, hs, form, work, data.memory, solver)
     else:
         cause, it, sweeps = closed_substep(i, work.y, hs, form, work, data.memory, solver)
     if cause == Failure.OK:

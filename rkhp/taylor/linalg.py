@@ -35,11 +35,10 @@ def aligned_zeros(shape) -> np.ndarray:
     return buffer[skip: skip + size].reshape(shape)
 
 
-@nb.njit(inline="always", **NJIT_NORC)
-def lu_factor_n(A, perm, n):
-    """LU factorisation with partial pivoting in place of the leading n x n block of A (perm: the
-    row order); False if singular. Inlined: a caller that passes n as a constant gets its loops
-    unrolled (`rkhp.integrators.closed_euler.substep` on 2 and 3 variables)."""
+@nb.njit(**NJIT_NORC)
+def lu_factor(A, perm):
+    """LU factorisation with partial pivoting in place (perm: the row order); False if singular."""
+    n = A.shape[0]
     for i in range(n):
         perm[i] = i
     for c in range(n):
@@ -61,9 +60,10 @@ def lu_factor_n(A, perm, n):
     return True
 
 
-@nb.njit(inline="always", **NJIT_NORC)
-def lu_solve_n(LU, perm, b, tmp, n):
-    """b := A^-1 b from the factors of `lu_factor_n` of order n (tmp: a work vector of n)."""
+@nb.njit(**NJIT_NORC)
+def lu_solve(LU, perm, b, tmp):
+    """b := A^-1 b from the factors of `lu_factor` (tmp: a work vector as long as b)."""
+    n = LU.shape[0]
     for i in range(n):
         acc = b[perm[i]]
         for j in range(i):
@@ -76,18 +76,6 @@ def lu_solve_n(LU, perm, b, tmp, n):
         tmp[i] = acc / LU[i, i]
     for i in range(n):
         b[i] = tmp[i]
-
-
-@nb.njit(**NJIT_NORC)
-def lu_factor(A, perm):
-    """LU factorisation with partial pivoting of the square A in place (`lu_factor_n`)."""
-    return lu_factor_n(A, perm, A.shape[0])
-
-
-@nb.njit(**NJIT_NORC)
-def lu_solve(LU, perm, b, tmp):
-    """b := A^-1 b from the factors of `lu_factor` (tmp: a work vector as long as b)."""
-    lu_solve_n(LU, perm, b, tmp, LU.shape[0])
 
 
 @nb.njit(**NJIT_NORC)
