@@ -31,12 +31,12 @@ def _probe_field(system):
     a time that is not a number: scipy's step size becomes NaN where the field is not finite at a
     step's start (inf - inf), and its loop of tries of a step, which ends on a size too small,
     would then not end."""
-    def field(t, v):
+    def probe_field(t, v):
         if not math.isfinite(t):
             raise FloatingPointError("the probe's step size is not a number")
         return system.vector_field(v)
 
-    return field
+    return probe_field
 
 
 def flow_stop(system, x, h: float) -> str | None:

@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from decimal import Decimal
 from itertools import combinations
 
 import numpy as np
@@ -224,7 +225,7 @@ def _scale_exponents(values: np.ndarray) -> np.ndarray:
     return np.maximum(np.frexp(largest)[1] - LARGEST_EXPONENT, 0)
 
 
-def _scaled(values: np.ndarray, e: np.ndarray) -> np.ndarray:
+def _scaled_points(values: np.ndarray, e: np.ndarray) -> np.ndarray:
     """Each point's values (the first axis) divided by 2**e of the point."""
     return np.ldexp(values, -e.reshape((-1,) + (1,) * (values.ndim - 1)))
 
@@ -235,8 +236,6 @@ def _unscaled_text(value: float, exponent: int, spec: str) -> str:
     try:
         return format(math.ldexp(value, exponent), spec)
     except OverflowError:
-        from decimal import Decimal
-
         return format(Decimal(value) * Decimal(2) ** exponent, spec)
 
 
@@ -269,7 +268,7 @@ def _evaluate(rows, symbols, points: np.ndarray, where: str) -> _Numeric:
                          f"{m} random points near x0; cannot check the Jacobi identity")
     P, dP = P[good], dP[good]
     e = np.maximum(_scale_exponents(P), _scale_exponents(dP))
-    return _Numeric(points[good], _scaled(P, e), _scaled(dP, e), e)
+    return _Numeric(points[good], _scaled_points(P, e), _scaled_points(dP, e), e)
 
 
 def _jacobi_numeric(num: _Numeric):
@@ -321,7 +320,7 @@ def _casimir_numeric(casimir, symbols, num: _Numeric, where: str):
                          f"x0 where {where} is; cannot check it")
     g, P = g[good], num.P[good]
     eg = _scale_exponents(g)
-    g = _scaled(g, eg)
+    g = _scaled_points(g, eg)
     return (np.einsum("ml,mli->mi", g, P), np.einsum("ml,mli->mi", np.abs(g), np.abs(P)),
             eg + num.e[good], num.x[good], grad)
 
