@@ -259,8 +259,6 @@ def _spec_cases() -> list[Case]:
         spec("lambda-overflow-at-x0", toml(LOTKA, x0=[1.0, 2.0, 3.0],
                                            **{"lambda": [[0, 1e308, 1], [-1e308, 0, 1], [-1, -1, 0]]}),
              "integrate"),
-        spec("structure-check-overflow", toml(RIGID, structure_constants=[[1, 2, 3, -1e308], [2, 3, 1, -1e308],
-                                                                          [3, 1, 2, -1e308]]), status=1),
         spec("x0-json-underflow", jsondoc(RIGID, x0=None)[:-1] + ', "x0": [0.4, 1e-400, 0.9]}', suffix=".json"),
         spec("x0-toml-underflow", "x0 = [0.4, 1e-400, 0.9]\n" + toml(RIGID, x0=None)),
         spec("x0-outside-domain", toml(LOTKA, x0=[-0.5, 1.0, 2.0])),
